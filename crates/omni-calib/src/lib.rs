@@ -1,0 +1,1 @@
+//! Calibration: receiver (catadioptric camera) and transmitter (light planes).

@@ -1,0 +1,1 @@
+//! Point clouds: triangulation, merging, motion compensation, voxel grid, outlier removal, evaluation.

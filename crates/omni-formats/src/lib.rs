@@ -1,0 +1,1 @@
+//! Every omniscan file and stream record type, versioned; PLY; atomic writes.

@@ -1,0 +1,1 @@
+//! Pure geometry: rays, planes, rigid transforms, least-squares fits. No I/O.

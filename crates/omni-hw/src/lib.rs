@@ -1,0 +1,1 @@
+//! Controller protocol (framing, CRC, parsing), host client and a device emulator.

@@ -1,0 +1,1 @@
+//! Sensor models: catadioptric camera models and the polygon-mirror laser transmitter.

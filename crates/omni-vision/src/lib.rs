@@ -1,0 +1,1 @@
+//! Image processing: laser-stripe centres, checkerboard corners, image I/O.

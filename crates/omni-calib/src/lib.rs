@@ -1,1 +1,5 @@
-//! Calibration: receiver (catadioptric camera) and transmitter (light planes).
+//! Calibration for omniscan: the receiver (catadioptric camera, [`receiver`]) from checkerboard
+//! images, and the transmitter (swept light planes, [`plane`]) from two perpendicular boards.
+
+pub mod plane;
+pub mod receiver;

@@ -1,1 +1,124 @@
-//! The small CLI layer every omniscan binary shares: errors, exit codes, stdin/stdout, progress.
+//! The small CLI layer every omniscan binary shares.
+//!
+//! * [`main`] runs a tool's body and turns its outcome into the Unix conventions: errors are
+//!   printed once as `omni-x: error: …` (naming the file and record at fault) with exit code 1;
+//!   a closed downstream pipe (`| head`) is a clean exit 0; clap reports usage errors with
+//!   exit code 2 and handles `--help` and `--version`.
+//! * [`progress`] gives a progress bar that is drawn only when stderr is a terminal, so pipes
+//!   and CI logs stay clean.
+//!
+//! ```no_run
+//! fn main() -> std::process::ExitCode {
+//!     omni_cli::main("omni-example", || {
+//!         let text = std::fs::read_to_string("in.txt").map_err(|e| format!("in.txt: {e}"))?;
+//!         println!("{}", text.len());
+//!         Ok(())
+//!     })
+//! }
+//! ```
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::io::IsTerminal;
+use std::process::ExitCode;
+
+/// Exit code for success (also a closed output pipe).
+pub const EXIT_OK: u8 = 0;
+/// Exit code for a failure (bad input, I/O error, device error).
+pub const EXIT_FAILURE: u8 = 1;
+/// Exit code for a usage error (clap uses this too).
+pub const EXIT_USAGE: u8 = 2;
+
+/// A tool failure: a one-line message, already naming the file/record at fault.
+#[derive(Debug)]
+pub struct CliError {
+    message: String,
+    code: u8,
+}
+
+impl CliError {
+    /// A failure with exit code 1.
+    pub fn new(message: impl Into<String>) -> Self {
+        CliError { message: message.into(), code: EXIT_FAILURE }
+    }
+
+    /// A usage error (exit code 2), for argument combinations clap cannot check.
+    pub fn usage(message: impl Into<String>) -> Self {
+        CliError { message: message.into(), code: EXIT_USAGE }
+    }
+
+    pub fn message(&self) -> &str {
+        &self.message
+    }
+
+    /// Whether this is a write to a closed pipe.
+    pub fn is_broken_pipe(&self) -> bool {
+        self.message.to_ascii_lowercase().contains("broken pipe") || self.message.contains("os error 32")
+    }
+}
+
+impl<E: std::fmt::Display> From<E> for CliError {
+    fn from(e: E) -> Self {
+        CliError::new(e.to_string())
+    }
+}
+
+/// The result type of a tool's body.
+pub type CliResult<T = ()> = Result<T, CliError>;
+
+/// Runs `body` and maps its result to an exit code (see the crate docs).
+pub fn main(tool: &str, body: impl FnOnce() -> CliResult) -> ExitCode {
+    match body() {
+        Ok(()) => ExitCode::from(EXIT_OK),
+        Err(e) if e.is_broken_pipe() => ExitCode::from(EXIT_OK),
+        Err(e) => {
+            let msg = e.message.replace('\n', " ");
+            eprintln!("{tool}: error: {msg}");
+            ExitCode::from(e.code)
+        }
+    }
+}
+
+/// Whether stderr is an interactive terminal (progress bars are drawn only then).
+pub fn stderr_is_terminal() -> bool {
+    std::io::stderr().is_terminal()
+}
+
+/// A progress bar over `len` items (or a spinner when `len` is unknown), hidden unless stderr
+/// is a terminal.
+pub fn progress(len: Option<u64>, message: &str) -> ProgressBar {
+    let bar = match len {
+        Some(n) => ProgressBar::new(n).with_style(
+            ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} ({per_sec}, eta {eta})")
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
+        ),
+        None => ProgressBar::new_spinner().with_style(
+            ProgressStyle::with_template("{spinner} {msg} {pos} ({per_sec})")
+                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        ),
+    };
+    bar.set_message(message.to_string());
+    if stderr_is_terminal() {
+        bar.set_draw_target(ProgressDrawTarget::stderr());
+    } else {
+        bar.set_draw_target(ProgressDrawTarget::hidden());
+    }
+    bar
+}
+
+/// A warning line on stderr in the shared style.
+pub fn warn(tool: &str, message: &str) {
+    eprintln!("{tool}: warning: {message}");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn broken_pipe_is_recognised() {
+        let e: CliError = std::io::Error::from(std::io::ErrorKind::BrokenPipe).into();
+        assert!(e.is_broken_pipe());
+        assert!(!CliError::new("camera.json: field model: bad").is_broken_pipe());
+    }
+}

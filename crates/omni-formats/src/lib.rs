@@ -1,1 +1,30 @@
-//! Every omniscan file and stream record type, versioned; PLY; atomic writes.
+//! Every omniscan file and stream record type, in one place.
+//!
+//! * Description files (pretty JSON, each with `format` and `version`): [`CameraFile`]
+//!   (`camera.json`), [`ScannerFile`] (`scanner.json`), [`BoardFile`] (`board.json`) and the
+//!   simulator's scene (see [`scene`]).
+//! * The per-frame stream (JSON Lines, [`stream`]): a header record, one record per frame that
+//!   grows along the pipe (frame → stripe points → 3D points), and a final status record.
+//! * Point clouds as PLY ([`ply`]): binary little-endian or ASCII, `x y z` float plus scalars.
+//! * [`io`]: `-` for stdin/stdout and atomic writes (temporary file, then rename).
+//!
+//! Readers refuse unknown formats and versions, and every error names the file and the
+//! field, record or line at fault ([`Error`]).
+
+mod docs;
+mod error;
+pub mod io;
+pub mod ply;
+pub mod scene;
+pub mod stream;
+
+pub use docs::{BoardFile, CameraFile, CameraSpec, ScannerFile, read_doc, write_doc};
+pub use error::{Error, Result};
+
+/// A versioned document type: its `format` name and the versions this build reads.
+pub trait Versioned {
+    /// The `format` field's value, e.g. `omniscan.camera`.
+    const FORMAT: &'static str;
+    /// The version this build writes (and the only one it reads).
+    const VERSION: u32;
+}

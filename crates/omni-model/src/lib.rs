@@ -1,1 +1,21 @@
-//! Sensor models: catadioptric camera models and the polygon-mirror laser transmitter.
+//! Sensor models for omniscan.
+//!
+//! * [`CameraModel`]: the receiver, a catadioptric camera, as a map between image pixels and
+//!   world rays. Implementations: [`HyperbolicCamera`] (the exact mirror + pinhole model of
+//!   SENSOR.md, optionally with the camera off the mirror focus), and the generic calibration
+//!   models added by the calibration crate (Mei/unified, Scaramuzza polynomial).
+//! * [`Transmitter`]: the rotating polygon mirror and its line lasers, giving the world light
+//!   plane of any (mirror angle, facet, laser).
+//!
+//! Frames and units (SENSOR.md): world = receiver frame, origin at the camera's optical centre O
+//! (the mirror's lower focus), +z up along the optical axis towards the mirror; lengths in mm;
+//! angles in radians in code (degrees only in serialised parameters, named `*_deg`).
+//! Pixel coordinates: x to the right, y down, (0, 0) at the centre of the top-left pixel.
+
+mod camera;
+mod hyperbolic;
+mod transmitter;
+
+pub use camera::{CameraModel, MirrorCircle};
+pub use hyperbolic::{HyperbolicCamera, HyperbolicParams};
+pub use transmitter::{FacetError, LaserParams, LightPlane, PolygonParams, Transmitter, TransmitterParams};

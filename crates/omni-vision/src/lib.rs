@@ -1,1 +1,6 @@
-//! Image processing: laser-stripe centres, checkerboard corners, image I/O.
+//! Image processing for omniscan: laser-stripe centres ([`stripe`]), checkerboard corners
+//! ([`corners`]) and image I/O helpers ([`image_io`]).
+
+pub mod corners;
+pub mod image_io;
+pub mod stripe;

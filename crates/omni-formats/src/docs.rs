@@ -1,0 +1,263 @@
+//! Description files: camera, scanner (transmitter), checkerboard.
+
+use crate::{Error, Result, Versioned};
+use omni_model::{CameraModel, HyperbolicCamera, HyperbolicParams, Transmitter, TransmitterParams};
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The camera model stored in `camera.json`, tagged by `kind`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum CameraSpec {
+    /// The exact hyperbolic mirror + pinhole model (SENSOR.md).
+    Hyperbolic(HyperbolicParams),
+}
+
+/// Deserialises `{"kind": K, ...params}` by hand so that errors name the exact parameter
+/// (serde's internally tagged enums lose the field path).
+impl<'de> Deserialize<'de> for CameraSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        use serde::de::Error as _;
+        let mut map = serde_json::Map::<String, serde_json::Value>::deserialize(d)?;
+        let kind = map.remove("kind").ok_or_else(|| D::Error::missing_field("kind"))?;
+        let kind = kind.as_str().ok_or_else(|| D::Error::custom("field kind: expected a string"))?.to_string();
+        let rest = serde_json::Value::Object(map);
+        fn params<T: DeserializeOwned, E: serde::de::Error>(v: serde_json::Value) -> std::result::Result<T, E> {
+            serde_path_to_error::deserialize(v).map_err(|e| E::custom(format!("field {}: {}", e.path(), e.inner())))
+        }
+        match kind.as_str() {
+            "hyperbolic" => Ok(CameraSpec::Hyperbolic(params(rest)?)),
+            other => Err(D::Error::custom(format!("unknown camera model kind \"{other}\" (known: hyperbolic)"))),
+        }
+    }
+}
+
+impl CameraSpec {
+    /// Builds the usable model; the error names the invalid field.
+    pub fn build(&self) -> std::result::Result<Box<dyn CameraModel>, String> {
+        match self {
+            CameraSpec::Hyperbolic(p) => Ok(Box::new(HyperbolicCamera::new(p.clone())?)),
+        }
+    }
+}
+
+/// `camera.json`: a receiver model plus an optional calibration report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraFile {
+    pub format: String,
+    pub version: u32,
+    pub model: CameraSpec,
+    /// Free-form calibration report (residuals, uncertainties, images used).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub report: Option<serde_json::Value>,
+}
+
+impl Versioned for CameraFile {
+    const FORMAT: &'static str = "omniscan.camera";
+    const VERSION: u32 = 1;
+}
+
+impl CameraFile {
+    pub fn new(model: CameraSpec) -> Self {
+        CameraFile { format: Self::FORMAT.into(), version: Self::VERSION, model, report: None }
+    }
+
+    /// Reads and validates `camera.json`, returning the usable model.
+    pub fn load(path: &Path) -> Result<(CameraFile, Box<dyn CameraModel>)> {
+        let file: CameraFile = read_doc(path)?;
+        let model = file.model.build().map_err(|m| Error::new(path.display().to_string(), "field model", m))?;
+        Ok((file, model))
+    }
+}
+
+/// `scanner.json`: the transmitter model plus an optional calibration report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScannerFile {
+    pub format: String,
+    pub version: u32,
+    pub transmitter: TransmitterParams,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub report: Option<serde_json::Value>,
+}
+
+impl Versioned for ScannerFile {
+    const FORMAT: &'static str = "omniscan.scanner";
+    const VERSION: u32 = 1;
+}
+
+impl ScannerFile {
+    pub fn new(transmitter: TransmitterParams) -> Self {
+        ScannerFile { format: Self::FORMAT.into(), version: Self::VERSION, transmitter, report: None }
+    }
+
+    /// Reads and validates `scanner.json`, returning the usable model.
+    pub fn load(path: &Path) -> Result<(ScannerFile, Transmitter)> {
+        let file: ScannerFile = read_doc(path)?;
+        let model = Transmitter::new(file.transmitter.clone())
+            .map_err(|m| Error::new(path.display().to_string(), "field transmitter", m))?;
+        Ok((file, model))
+    }
+}
+
+/// `board.json`: a planar checkerboard.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoardFile {
+    pub format: String,
+    pub version: u32,
+    /// Inner corners along the board's x (columns).
+    pub inner_cols: u32,
+    /// Inner corners along the board's y (rows).
+    pub inner_rows: u32,
+    /// Square side (mm).
+    pub square_mm: f64,
+    /// White margin around the outer squares (mm).
+    #[serde(default)]
+    pub margin_mm: f64,
+}
+
+impl Versioned for BoardFile {
+    const FORMAT: &'static str = "omniscan.board";
+    const VERSION: u32 = 1;
+}
+
+impl BoardFile {
+    pub fn new(inner_cols: u32, inner_rows: u32, square_mm: f64) -> Self {
+        BoardFile {
+            format: Self::FORMAT.into(),
+            version: Self::VERSION,
+            inner_cols,
+            inner_rows,
+            square_mm,
+            margin_mm: square_mm,
+        }
+    }
+
+    /// Checks the board is usable; the message names the field.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if self.inner_cols < 2 || self.inner_rows < 2 {
+            return Err(format!(
+                "inner_cols and inner_rows must be at least 2, got {} × {}",
+                self.inner_cols, self.inner_rows
+            ));
+        }
+        if !(self.square_mm.is_finite() && self.square_mm > 0.0) {
+            return Err(format!("square_mm must be positive, got {}", self.square_mm));
+        }
+        if !(self.margin_mm.is_finite() && self.margin_mm >= 0.0) {
+            return Err(format!("margin_mm must be non-negative, got {}", self.margin_mm));
+        }
+        Ok(())
+    }
+}
+
+/// Parses a versioned JSON document from text, checking `format` and `version` first so that a
+/// file of the wrong kind or a newer version gets a clear message rather than a field error.
+pub fn parse_doc<T: DeserializeOwned + Versioned>(text: &[u8], source_name: &str) -> Result<T> {
+    let value: serde_json::Value = serde_json::from_slice(text).map_err(|e| {
+        Error::new(source_name, format!("line {} column {}", e.line(), e.column()), format!("invalid JSON: {e}"))
+    })?;
+    check_header(&value, T::FORMAT, T::VERSION, source_name)?;
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let path = e.path().to_string();
+        Error::new(
+            source_name,
+            if path == "." { String::new() } else { format!("field {path}") },
+            e.into_inner().to_string(),
+        )
+    })
+}
+
+/// Checks a JSON object's `format` and `version` fields.
+pub(crate) fn check_header(value: &serde_json::Value, format: &str, version: u32, source_name: &str) -> Result<()> {
+    let obj = value.as_object().ok_or_else(|| Error::new(source_name, "", "expected a JSON object"))?;
+    match obj.get("format").and_then(|f| f.as_str()) {
+        None => return Err(Error::new(source_name, "field format", format!("missing (expected \"{format}\")"))),
+        Some(f) if f != format => {
+            return Err(Error::new(source_name, "field format", format!("is \"{f}\", expected \"{format}\"")));
+        }
+        _ => {}
+    }
+    match obj.get("version").and_then(|v| v.as_u64()) {
+        None => Err(Error::new(source_name, "field version", "missing or not an integer")),
+        Some(v) if v != version as u64 => Err(Error::new(
+            source_name,
+            "field version",
+            format!("unsupported version {v} (this build reads version {version})"),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Reads a versioned JSON document from a file (`-` = stdin).
+pub fn read_doc<T: DeserializeOwned + Versioned>(path: &Path) -> Result<T> {
+    let bytes = crate::io::read_all(path)?;
+    parse_doc(&bytes, &crate::io::display_name(path, "stdin"))
+}
+
+/// Writes a document as pretty JSON, atomically (`-` = stdout).
+pub fn write_doc<T: Serialize>(path: &Path, doc: &T) -> Result<()> {
+    crate::io::write_atomic(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, doc).map_err(std::io::Error::other)?;
+        w.write_all(b"\n")
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera_json() -> serde_json::Value {
+        serde_json::to_value(CameraFile::new(CameraSpec::Hyperbolic(HyperbolicParams::paper()))).unwrap()
+    }
+
+    fn parse(v: &serde_json::Value) -> Result<CameraFile> {
+        parse_doc(&serde_json::to_vec(v).unwrap(), "camera.json")
+    }
+
+    #[test]
+    fn camera_round_trips() {
+        let v = camera_json();
+        assert_eq!(v["model"]["kind"], "hyperbolic");
+        let f = parse(&v).unwrap();
+        assert_eq!(serde_json::to_value(&f).unwrap(), v);
+    }
+
+    #[test]
+    fn wrong_version_missing_field_and_nan_are_named() {
+        let mut v = camera_json();
+        v["version"] = 2.into();
+        let e = parse(&v).unwrap_err().to_string();
+        assert!(e.contains("unsupported version 2"), "{e}");
+
+        let mut v = camera_json();
+        v["model"].as_object_mut().unwrap().remove("a_mm");
+        let e = parse(&v).unwrap_err().to_string();
+        assert!(e.contains("a_mm"), "{e}");
+
+        let text = serde_json::to_string(&camera_json()).unwrap().replace("\"fx_px\":1950.0", "\"fx_px\":NaN");
+        let e = parse_doc::<CameraFile>(text.as_bytes(), "camera.json").unwrap_err().to_string();
+        assert!(e.starts_with("camera.json: line 1"), "{e}");
+
+        let mut v = camera_json();
+        v["model"]["fx_px"] = serde_json::Value::Null;
+        let e = parse(&v).unwrap_err().to_string();
+        assert!(e.contains("fx_px"), "{e}");
+
+        let mut v = camera_json();
+        v["format"] = "omniscan.scanner".into();
+        assert!(parse(&v).unwrap_err().to_string().contains("expected \"omniscan.camera\""));
+    }
+
+    #[test]
+    fn invalid_values_are_refused_with_field_name() {
+        let mut v = camera_json();
+        v["model"]["rim_radius_mm"] = (-1.0).into();
+        let f = parse(&v).unwrap();
+        let e = f.model.build().unwrap_err();
+        assert!(e.contains("rim_radius_mm"), "{e}");
+    }
+}

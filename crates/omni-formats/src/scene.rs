@@ -1,0 +1,1 @@
+//! Scene description for the simulator (in progress).

@@ -1,0 +1,408 @@
+//! The per-frame stream that flows between the tools: JSON Lines, one record per line.
+//!
+//! ```text
+//! {"type":"header","format":"omniscan.stream","version":1,...}
+//! {"type":"frame","seq":0,"path":"frames/000000.png","alpha_deg":0.5,"facet":0,...}
+//! {"type":"frame","seq":1,...,"stripe":[[u,v,intensity,width,quality],...]}
+//! {"type":"frame","seq":2,...,"points":[[x,y,z,laser,range,stripe_index],...]}
+//! {"type":"status","frames":3,"frames_missing":0,"complete":true,...}
+//! ```
+//! Each tool adds its part to a frame record and passes every other field through untouched
+//! (unknown fields are kept in `extra`). Point arrays are compact arrays of numbers.
+
+use crate::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::io::{BufRead, Write};
+
+/// The stream's `format` name and version.
+pub const STREAM_FORMAT: &str = "omniscan.stream";
+pub const STREAM_VERSION: u32 = 1;
+
+/// One line of the stream.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase")]
+pub enum Record {
+    Header(Header),
+    Frame(Box<Frame>),
+    Status(Status),
+    /// A per-frame failure reported with `--keep-going`.
+    Error(FrameError),
+}
+
+/// First record: what the stream is and what produced it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    pub format: String,
+    pub version: u32,
+    /// Tools that have processed the stream, in order, e.g. `omni-trigger 0.1.0`.
+    #[serde(default)]
+    pub producers: Vec<String>,
+    /// Directory that relative frame paths are resolved against (default: the current one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames_dir: Option<String>,
+    /// Sensor files the stream was made with, if known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scanner: Option<String>,
+    #[serde(flatten)]
+    pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
+impl Header {
+    pub fn new(producer: &str) -> Self {
+        Header {
+            format: STREAM_FORMAT.into(),
+            version: STREAM_VERSION,
+            producers: vec![producer.into()],
+            frames_dir: None,
+            camera: None,
+            scanner: None,
+            extra: Default::default(),
+        }
+    }
+}
+
+/// A stripe centre found in a frame: serialised as `[u, v, intensity, width, quality]`.
+/// `u`, `v` are pixel coordinates (x right, y down, centre of top-left pixel = 0);
+/// intensity is the peak (0–255 for 8-bit frames, 0–65535 for 16-bit); width in px;
+/// quality is a bit set of [`quality`] flags (0 = good).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(from = "[f64; 5]", into = "[f64; 5]")]
+pub struct StripePoint {
+    pub u: f64,
+    pub v: f64,
+    pub intensity: f64,
+    pub width: f64,
+    pub quality: u32,
+}
+
+/// Quality flags of a stripe point.
+pub mod quality {
+    /// Part of the profile was saturated; the centre is the plateau's centre.
+    pub const SATURATED: u32 = 1;
+    /// Low peak-to-threshold contrast.
+    pub const WEAK: u32 = 2;
+    /// Width near the accepted bounds.
+    pub const WIDTH_MARGINAL: u32 = 4;
+}
+
+impl From<[f64; 5]> for StripePoint {
+    fn from(a: [f64; 5]) -> Self {
+        StripePoint { u: a[0], v: a[1], intensity: a[2], width: a[3], quality: a[4] as u32 }
+    }
+}
+impl From<StripePoint> for [f64; 5] {
+    fn from(p: StripePoint) -> Self {
+        [p.u, p.v, p.intensity, p.width, p.quality as f64]
+    }
+}
+
+/// A triangulated point: serialised as `[x, y, z, laser, range, stripe_index]` (mm, world
+/// frame; range = distance from the viewpoint; stripe_index indexes the frame's `stripe`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(from = "[f64; 6]", into = "[f64; 6]")]
+pub struct Point {
+    pub xyz: [f64; 3],
+    pub laser: u32,
+    pub range: f64,
+    pub stripe_index: u32,
+}
+
+impl From<[f64; 6]> for Point {
+    fn from(a: [f64; 6]) -> Self {
+        Point { xyz: [a[0], a[1], a[2]], laser: a[3] as u32, range: a[4], stripe_index: a[5] as u32 }
+    }
+}
+impl From<Point> for [f64; 6] {
+    fn from(p: Point) -> Self {
+        [p.xyz[0], p.xyz[1], p.xyz[2], p.laser as f64, p.range, p.stripe_index as f64]
+    }
+}
+
+/// One frame of the scan, growing along the pipe.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Frame {
+    /// Frame sequence number (0-based, increasing; gaps mean lost frames).
+    pub seq: u64,
+    /// Image file (PNG 8/16-bit); relative paths are resolved against the header's `frames_dir`.
+    pub path: String,
+    /// Mirror angle within the facet (degrees).
+    pub alpha_deg: f64,
+    /// Facet facing laser 0.
+    pub facet: u32,
+    /// Polygon revolution counter.
+    #[serde(default)]
+    pub revolution: u64,
+    /// Raw encoder count, if known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub encoder: Option<u64>,
+    /// Controller timestamp of the trigger (µs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timestamp_us: Option<u64>,
+    /// Lasers that were on (empty = a laser-off/ambient frame).
+    #[serde(default = "all_lasers")]
+    pub lasers: Vec<u32>,
+    /// A laser-off frame of the same view for ambient subtraction.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ambient_path: Option<String>,
+    /// Stripe centres (added by omni-ridge).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stripe: Option<Vec<StripePoint>>,
+    /// 3D points (added by omni-triangulate).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points: Option<Vec<Point>>,
+    /// Any other fields, passed through untouched.
+    #[serde(flatten)]
+    pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
+fn all_lasers() -> Vec<u32> {
+    vec![0, 1]
+}
+
+impl Frame {
+    /// A frame record with no stripe or points yet.
+    pub fn new(seq: u64, path: impl Into<String>, alpha_deg: f64, facet: u32) -> Self {
+        Frame {
+            seq,
+            path: path.into(),
+            alpha_deg,
+            facet,
+            revolution: 0,
+            encoder: None,
+            timestamp_us: None,
+            lasers: all_lasers(),
+            ambient_path: None,
+            stripe: None,
+            points: None,
+            extra: Default::default(),
+        }
+    }
+
+    /// Checks numbers are finite; the message names the field.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if !self.alpha_deg.is_finite() {
+            return Err("field alpha_deg: not a finite number".into());
+        }
+        if let Some(s) = &self.stripe {
+            for (i, p) in s.iter().enumerate() {
+                if !(p.u.is_finite() && p.v.is_finite() && p.intensity.is_finite() && p.width.is_finite()) {
+                    return Err(format!("field stripe[{i}]: not a finite number"));
+                }
+            }
+        }
+        if let Some(pts) = &self.points {
+            for (i, p) in pts.iter().enumerate() {
+                if !(p.xyz.iter().all(|x| x.is_finite()) && p.range.is_finite()) {
+                    return Err(format!("field points[{i}]: not a finite number"));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The frame's image path resolved against the stream's frames directory.
+    pub fn resolve_path(&self, frames_dir: Option<&str>, path: &str) -> std::path::PathBuf {
+        let p = std::path::Path::new(path);
+        match frames_dir {
+            Some(d) if p.is_relative() => std::path::Path::new(d).join(p),
+            _ => p.to_path_buf(),
+        }
+    }
+}
+
+/// Last record: whether the stream is complete and what was lost.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Status {
+    /// Frame records written.
+    pub frames: u64,
+    /// Frames known to be missing (lost triggers or frames).
+    #[serde(default)]
+    pub frames_missing: u64,
+    /// Frames that failed and were skipped (with `--keep-going`).
+    #[serde(default)]
+    pub frames_failed: u64,
+    /// Whether the producer finished normally.
+    pub complete: bool,
+    /// Human-readable problems, one per entry.
+    #[serde(default)]
+    pub errors: Vec<String>,
+    #[serde(flatten)]
+    pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
+/// A per-frame error record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameError {
+    pub seq: u64,
+    #[serde(default)]
+    pub path: String,
+    pub message: String,
+}
+
+/// Serde loses field paths inside flattened structs; re-check the typed array fields one by one
+/// so the message names e.g. `stripe[3]`.
+fn locate_frame_error(v: &serde_json::Value) -> Option<String> {
+    fn probe<T: serde::de::DeserializeOwned>(v: &serde_json::Value, key: &str) -> Option<String> {
+        let field = v.get(key)?;
+        serde_path_to_error::deserialize::<_, T>(field.clone())
+            .err()
+            .map(|e| format!("field {key}{}: {}", e.path().to_string().trim_start_matches('.'), e.inner()))
+    }
+    if v.get("type")?.as_str()? != "frame" {
+        return None;
+    }
+    probe::<Vec<StripePoint>>(v, "stripe")
+        .or_else(|| probe::<Vec<Point>>(v, "points"))
+        .or_else(|| probe::<Vec<u32>>(v, "lasers"))
+}
+
+/// Reads records line by line; errors name the source and the line.
+pub struct StreamReader<R> {
+    reader: R,
+    name: String,
+    line_no: usize,
+    buf: String,
+}
+
+impl<R: BufRead> StreamReader<R> {
+    pub fn new(reader: R, name: impl Into<String>) -> Self {
+        StreamReader { reader, name: name.into(), line_no: 0, buf: String::new() }
+    }
+
+    /// The line number of the last record read (1-based).
+    pub fn line(&self) -> usize {
+        self.line_no
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The next record, `Ok(None)` at the end. Blank lines are skipped. A header with another
+    /// format or an unknown version is refused.
+    pub fn next_record(&mut self) -> Result<Option<Record>> {
+        loop {
+            self.buf.clear();
+            let n = self.reader.read_line(&mut self.buf).map_err(|e| Error::io(&self.name, &e))?;
+            if n == 0 {
+                return Ok(None);
+            }
+            self.line_no += 1;
+            let line = self.buf.trim();
+            if line.is_empty() {
+                continue;
+            }
+            let loc = format!("line {}", self.line_no);
+            let value: serde_json::Value =
+                serde_json::from_str(line).map_err(|e| Error::new(&self.name, &loc, format!("invalid JSON: {e}")))?;
+            if value.get("type").and_then(|t| t.as_str()) == Some("header") {
+                crate::docs::check_header(&value, STREAM_FORMAT, STREAM_VERSION, &self.name)
+                    .map_err(|e| Error::new(&self.name, format!("{loc}, {}", e.location), e.message))?;
+            }
+            let probe = value.clone();
+            let record: Record = serde_path_to_error::deserialize(value).map_err(|e| {
+                let path = e.path().to_string();
+                let loc = if path == "." { loc.clone() } else { format!("{loc}, field {path}") };
+                match locate_frame_error(&probe) {
+                    Some(field_err) => Error::new(&self.name, &loc, field_err),
+                    None => Error::new(&self.name, loc, e.into_inner().to_string()),
+                }
+            })?;
+            if let Record::Frame(f) = &record {
+                f.validate().map_err(|m| Error::new(&self.name, format!("{loc} (frame {})", f.seq), m))?;
+            }
+            return Ok(Some(record));
+        }
+    }
+}
+
+impl<R: BufRead> Iterator for StreamReader<R> {
+    type Item = Result<Record>;
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_record().transpose()
+    }
+}
+
+/// Writes records, one per line, flushing after each so a pipe downstream starts at once.
+pub struct StreamWriter<W: Write> {
+    writer: W,
+    name: String,
+    /// Flush after every record (for live pipes); off for bulk files.
+    pub flush_each: bool,
+}
+
+impl<W: Write> StreamWriter<W> {
+    pub fn new(writer: W, name: impl Into<String>) -> Self {
+        StreamWriter { writer, name: name.into(), flush_each: true }
+    }
+
+    pub fn write(&mut self, record: &Record) -> Result<()> {
+        let io = |e: std::io::Error| Error::io(&self.name, &e);
+        serde_json::to_writer(&mut self.writer, record).map_err(|e| Error::new(&self.name, "", e.to_string()))?;
+        self.writer.write_all(b"\n").map_err(io)?;
+        if self.flush_each {
+            self.writer.flush().map_err(io)?;
+        }
+        Ok(())
+    }
+
+    pub fn flush(&mut self) -> Result<()> {
+        self.writer.flush().map_err(|e| Error::io(&self.name, &e))
+    }
+
+    pub fn into_inner(self) -> W {
+        self.writer
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn records_round_trip_and_keep_unknown_fields() {
+        let mut f = Frame::new(3, "f.png", 12.5, 4);
+        f.stripe = Some(vec![StripePoint { u: 1.5, v: 2.25, intensity: 200.0, width: 3.0, quality: 0 }]);
+        f.extra.insert("exposure_us".into(), 500.into());
+        let recs = vec![
+            Record::Header(Header::new("test")),
+            Record::Frame(Box::new(f)),
+            Record::Status(Status {
+                frames: 1,
+                frames_missing: 0,
+                frames_failed: 0,
+                complete: true,
+                errors: vec![],
+                extra: Default::default(),
+            }),
+        ];
+        let mut w = StreamWriter::new(Vec::new(), "mem");
+        for r in &recs {
+            w.write(r).unwrap();
+        }
+        let text = String::from_utf8(w.into_inner()).unwrap();
+        assert!(text.contains("\"stripe\":[[1.5,2.25,200.0,3.0,0.0]]"), "{text}");
+        assert!(text.contains("\"exposure_us\":500"));
+        let back: Vec<Record> = StreamReader::new(text.as_bytes(), "mem").map(|r| r.unwrap()).collect();
+        assert_eq!(back, recs);
+    }
+
+    #[test]
+    fn bad_lines_are_named() {
+        let text = "{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":9}\n";
+        let e = StreamReader::new(text.as_bytes(), "s.jsonl").next().unwrap().unwrap_err().to_string();
+        assert!(e.contains("s.jsonl: line 1") && e.contains("unsupported version 9"), "{e}");
+        let text = "\n{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"facet\":0}\n";
+        let e = StreamReader::new(text.as_bytes(), "s.jsonl").next().unwrap().unwrap_err().to_string();
+        assert!(e.contains("line 2") && e.contains("alpha_deg"), "{e}");
+        let text = "{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"alpha_deg\":1,\"facet\":0,\"stripe\":[[1,2]]}\n";
+        let e = StreamReader::new(text.as_bytes(), "s.jsonl").next().unwrap().unwrap_err().to_string();
+        assert!(e.contains("stripe"), "{e}");
+        let text =
+            "{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"alpha_deg\":1,\"facet\":0,\"stripe\":[[1,2,3,4,0]]\n";
+        let e = StreamReader::new(text.as_bytes(), "s.jsonl").next().unwrap().unwrap_err().to_string();
+        assert!(e.contains("invalid JSON"), "{e}");
+    }
+}

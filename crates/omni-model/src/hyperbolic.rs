@@ -1,0 +1,359 @@
+//! The exact hyperbolic catadioptric camera (SENSOR.md, paper §2.3.2).
+//!
+//! Mirror: (z − c)²/a² − (x² + y²)/b² = 1, c = √(a² + b²), sheet z ≥ c + a; foci O = (0,0,0)
+//! (the camera centre when ideal) and F = (0,0,2c), the single effective viewpoint.
+//! Pinhole camera at O looking up +z: u = fx·X/Z, v = fy·Y/Z around the principal point.
+//!
+//! With `camera_offset_mm`/`camera_tilt_deg` non-zero the camera sits off the focus: the model
+//! becomes non-central, rays are traced exactly (refraction-free mirror reflection), and
+//! projection is solved by Gauss–Newton on the pixel.
+
+use crate::camera::{CameraModel, MirrorCircle};
+use omni_geom::{Point3, Ray, Rotation3, Vector2, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Parameters of the hyperbolic camera (what `camera.json` stores for kind `hyperbolic`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HyperbolicParams {
+    /// Mirror semi-axis a (mm).
+    pub a_mm: f64,
+    /// Mirror semi-axis b (mm).
+    pub b_mm: f64,
+    /// Focal length along x (px).
+    pub fx_px: f64,
+    /// Focal length along y (px).
+    pub fy_px: f64,
+    /// Principal point x (px).
+    pub cx_px: f64,
+    /// Principal point y (px).
+    pub cy_px: f64,
+    pub width: u32,
+    pub height: u32,
+    /// Mirror rim radius (mm): the largest mirror radius that reflects the scene.
+    pub rim_radius_mm: f64,
+    /// Mirror radius (mm) below which the camera sees itself (blind centre).
+    #[serde(default)]
+    pub inner_radius_mm: f64,
+    /// Camera centre relative to the mirror's lower focus (mm, world frame); zero when ideal.
+    #[serde(default)]
+    pub camera_offset_mm: [f64; 3],
+    /// Camera tilt about world x then y (degrees); zero when ideal.
+    #[serde(default)]
+    pub camera_tilt_deg: [f64; 2],
+}
+
+impl HyperbolicParams {
+    /// The paper's mirror (a² = 1248.2060 mm², b² = 351.7940 mm², so c = 40 mm) with our
+    /// choice of lens: 1024 × 1024 px, f = 1950 px (a 10.7 mm lens on 5.5 µm pixels), rim
+    /// radius 25 mm so the rim fills the image (≈ 493 px), blind centre radius 4 mm.
+    pub fn paper() -> Self {
+        HyperbolicParams {
+            a_mm: 1248.2060f64.sqrt(),
+            b_mm: 351.7940f64.sqrt(),
+            fx_px: 1950.0,
+            fy_px: 1950.0,
+            cx_px: 511.5,
+            cy_px: 511.5,
+            width: 1024,
+            height: 1024,
+            rim_radius_mm: 25.0,
+            inner_radius_mm: 4.0,
+            camera_offset_mm: [0.0; 3],
+            camera_tilt_deg: [0.0; 2],
+        }
+    }
+
+    /// Checks that every parameter is finite and physically meaningful; names the field at fault.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = [
+            ("a_mm", self.a_mm),
+            ("b_mm", self.b_mm),
+            ("fx_px", self.fx_px),
+            ("fy_px", self.fy_px),
+            ("rim_radius_mm", self.rim_radius_mm),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} must be a positive number, got {v}"));
+            }
+        }
+        let finite = [
+            ("cx_px", self.cx_px),
+            ("cy_px", self.cy_px),
+            ("inner_radius_mm", self.inner_radius_mm),
+            ("camera_offset_mm[0]", self.camera_offset_mm[0]),
+            ("camera_offset_mm[1]", self.camera_offset_mm[1]),
+            ("camera_offset_mm[2]", self.camera_offset_mm[2]),
+            ("camera_tilt_deg[0]", self.camera_tilt_deg[0]),
+            ("camera_tilt_deg[1]", self.camera_tilt_deg[1]),
+        ];
+        for (name, v) in finite {
+            if !v.is_finite() {
+                return Err(format!("{name} must be finite, got {v}"));
+            }
+        }
+        if self.width == 0 || self.height == 0 {
+            return Err("width and height must be positive".into());
+        }
+        if !(self.inner_radius_mm >= 0.0 && self.inner_radius_mm < self.rim_radius_mm) {
+            return Err("inner_radius_mm must be in [0, rim_radius_mm)".into());
+        }
+        Ok(())
+    }
+}
+
+/// The hyperbolic catadioptric camera, ready to use.
+#[derive(Debug, Clone)]
+pub struct HyperbolicCamera {
+    params: HyperbolicParams,
+    a: f64,
+    b2: f64,
+    c: f64,
+    /// Camera centre (world) and rotation camera → world.
+    centre: Point3<f64>,
+    rot: Rotation3<f64>,
+    ideal: bool,
+}
+
+impl HyperbolicCamera {
+    /// Builds the camera; fails with the name of an invalid field.
+    pub fn new(params: HyperbolicParams) -> Result<Self, String> {
+        params.validate()?;
+        let a = params.a_mm;
+        let b2 = params.b_mm * params.b_mm;
+        let c = (a * a + b2).sqrt();
+        let [tx, ty] = params.camera_tilt_deg;
+        let rot = Rotation3::from_axis_angle(&Vector3::y_axis(), ty.to_radians())
+            * Rotation3::from_axis_angle(&Vector3::x_axis(), tx.to_radians());
+        let centre = Point3::from(Vector3::from(params.camera_offset_mm));
+        let ideal = params.camera_offset_mm == [0.0; 3] && params.camera_tilt_deg == [0.0; 2];
+        Ok(HyperbolicCamera { params, a, b2, c, centre, rot, ideal })
+    }
+
+    pub fn params(&self) -> &HyperbolicParams {
+        &self.params
+    }
+
+    /// The single effective viewpoint F = (0, 0, 2c) (mm). Exact only for the ideal build.
+    pub fn viewpoint(&self) -> Point3<f64> {
+        Point3::new(0.0, 0.0, 2.0 * self.c)
+    }
+
+    /// Mirror height z (mm) at radius r (mm) on the used sheet.
+    pub fn mirror_z(&self, r: f64) -> f64 {
+        self.c + self.a * (1.0 + r * r / self.b2).sqrt()
+    }
+
+    fn radius_ok(&self, m: &Point3<f64>) -> bool {
+        let r = m.x.hypot(m.y);
+        r <= self.params.rim_radius_mm && r >= self.params.inner_radius_mm
+    }
+
+    /// Camera-frame direction of a pixel (not normalised).
+    fn pixel_dir(&self, px: &Vector2<f64>) -> Vector3<f64> {
+        let p = &self.params;
+        self.rot * Vector3::new((px.x - p.cx_px) / p.fx_px, (px.y - p.cy_px) / p.fy_px, 1.0)
+    }
+
+    /// Where the camera ray from `origin` along `d` first meets the used mirror sheet.
+    fn hit_mirror(&self, origin: &Point3<f64>, d: &Vector3<f64>) -> Option<Point3<f64>> {
+        // (z − c)²/a² − (x² + y²)/b² = 1 along origin + s·d.
+        let a2 = self.a * self.a;
+        let oz = origin.z - self.c;
+        let qa = d.z * d.z / a2 - (d.x * d.x + d.y * d.y) / self.b2;
+        let qb = 2.0 * (oz * d.z / a2 - (origin.x * d.x + origin.y * d.y) / self.b2);
+        let qc = oz * oz / a2 - (origin.x * origin.x + origin.y * origin.y) / self.b2 - 1.0;
+        let roots = solve_quadratic(qa, qb, qc)?;
+        roots
+            .into_iter()
+            .filter(|s| *s > 0.0)
+            .map(|s| origin + d * s)
+            .filter(|m| m.z - self.c >= self.a * (1.0 - 1e-12))
+            .min_by(|m1, m2| (m1 - origin).norm().total_cmp(&(m2 - origin).norm()))
+    }
+
+    /// Outward mirror normal (unit) at a mirror point.
+    fn mirror_normal(&self, m: &Point3<f64>) -> Vector3<f64> {
+        Vector3::new(-m.x / self.b2, -m.y / self.b2, (m.z - self.c) / (self.a * self.a)).normalize()
+    }
+
+    fn ideal_project(&self, p: &Point3<f64>) -> Option<Vector2<f64>> {
+        let f = self.viewpoint();
+        let d = (p - f).try_normalize(1e-300)?;
+        // Distance from F to the mirror along d (focal property): t = b²/(a − c·dz).
+        let denom = self.a - self.c * d.z;
+        if denom <= 0.0 {
+            return None;
+        }
+        let t = self.b2 / denom;
+        if (p - f).norm() <= t {
+            return None; // the point is between the viewpoint and the mirror
+        }
+        let m = f + d * t;
+        if !self.radius_ok(&m) || m.z <= 0.0 {
+            return None;
+        }
+        let q = &self.params;
+        Some(Vector2::new(q.cx_px + q.fx_px * m.x / m.z, q.cy_px + q.fy_px * m.y / m.z))
+    }
+
+    /// Gauss–Newton on the pixel so that its traced ray passes through `p` (non-central case).
+    fn general_project(&self, p: &Point3<f64>) -> Option<Vector2<f64>> {
+        let mut px = self.ideal_project(p).or_else(|| {
+            let c = self.mirror_circle();
+            let d = Vector2::new(p.x, p.y).try_normalize(1e-300)?;
+            Some(c.centre + d * 0.5 * (c.inner_radius + c.outer_radius))
+        })?;
+        let residual = |px: &Vector2<f64>| -> Option<Vector2<f64>> {
+            let ray = self.trace(px)?;
+            let w = (p - ray.origin).normalize();
+            let (e1, e2) = omni_geom::fit::orthonormal_basis(&ray.dir);
+            Some(Vector2::new(w.dot(&e1), w.dot(&e2)))
+        };
+        let h = 1e-4;
+        for _ in 0..30 {
+            let r0 = residual(&px)?;
+            let rx = residual(&(px + Vector2::new(h, 0.0)))?;
+            let ry = residual(&(px + Vector2::new(0.0, h)))?;
+            let j = nalgebra::Matrix2::from_columns(&[(rx - r0) / h, (ry - r0) / h]);
+            let step = j.try_inverse()? * r0;
+            px -= step;
+            if step.norm() < 1e-12 {
+                break;
+            }
+        }
+        let ray = self.trace(&px)?;
+        let along = (p - ray.origin).dot(&ray.dir);
+        (along > 0.0 && ray.distance_to_line(p) < 1e-6 * along.max(1.0)).then_some(px)
+    }
+
+    /// Exact reflection of the pixel's camera ray off the mirror.
+    fn trace(&self, px: &Vector2<f64>) -> Option<Ray> {
+        let d = self.pixel_dir(px);
+        let m = self.hit_mirror(&self.centre, &d)?;
+        if !self.radius_ok(&m) {
+            return None;
+        }
+        let n = self.mirror_normal(&m);
+        let dn = d.normalize();
+        let r = dn - n * (2.0 * dn.dot(&n));
+        Some(Ray::new(m, r))
+    }
+}
+
+fn solve_quadratic(a: f64, b: f64, c: f64) -> Option<[f64; 2]> {
+    if a.abs() < 1e-300 {
+        return (b.abs() > 1e-300).then(|| [-c / b, -c / b]);
+    }
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return None;
+    }
+    // Numerically stable form.
+    let q = -0.5 * (b + b.signum() * disc.sqrt());
+    let r1 = q / a;
+    let r2 = if q != 0.0 { c / q } else { r1 };
+    Some([r1, r2])
+}
+
+impl CameraModel for HyperbolicCamera {
+    fn image_size(&self) -> (u32, u32) {
+        (self.params.width, self.params.height)
+    }
+
+    fn pixel_to_ray(&self, px: &Vector2<f64>) -> Option<Ray> {
+        if !self.in_image(px) || !px.x.is_finite() || !px.y.is_finite() {
+            return None;
+        }
+        if !self.ideal {
+            return self.trace(px);
+        }
+        // Closed form (SENSOR.md): β = atan(l/f), |OM| = b²/(c·cosβ − a), ray from F through M.
+        let p = &self.params;
+        let u = (px.x - p.cx_px) / p.fx_px;
+        let v = (px.y - p.cy_px) / p.fy_px;
+        let l = u.hypot(v);
+        let cos_b = 1.0 / (1.0 + l * l).sqrt();
+        let sin_b = l * cos_b;
+        let denom = self.c * cos_b - self.a;
+        if denom <= 0.0 {
+            return None;
+        }
+        let om = self.b2 / denom;
+        let m = if l > 0.0 {
+            Point3::new(om * sin_b * u / l, om * sin_b * v / l, om * cos_b)
+        } else {
+            Point3::new(0.0, 0.0, om)
+        };
+        if !self.radius_ok(&m) {
+            return None;
+        }
+        let f = self.viewpoint();
+        Some(Ray::new(f, m - f))
+    }
+
+    fn point_to_pixel(&self, p: &Point3<f64>) -> Option<Vector2<f64>> {
+        if !p.coords.iter().all(|x| x.is_finite()) {
+            return None;
+        }
+        let px = if self.ideal { self.ideal_project(p) } else { self.general_project(p) }?;
+        self.in_image(&px).then_some(px)
+    }
+
+    fn mirror_circle(&self) -> MirrorCircle {
+        let p = &self.params;
+        let f = 0.5 * (p.fx_px + p.fy_px);
+        let r_img = |r: f64| f * r / (self.mirror_z(r) - p.camera_offset_mm[2]);
+        MirrorCircle {
+            centre: Vector2::new(
+                p.cx_px - f * p.camera_offset_mm[0] / self.mirror_z(0.0),
+                p.cy_px - f * p.camera_offset_mm[1] / self.mirror_z(0.0),
+            ),
+            inner_radius: r_img(p.inner_radius_mm),
+            outer_radius: r_img(p.rim_radius_mm),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_mirror_has_c_40() {
+        let cam = HyperbolicCamera::new(HyperbolicParams::paper()).unwrap();
+        assert!((cam.c - 40.0).abs() < 1e-12);
+        // Horizon maps to mirror radius b²/a ≈ 9.96 mm.
+        let px = cam.point_to_pixel(&Point3::new(1000.0, 0.0, 80.0)).unwrap();
+        let r_px = px.x - 511.5;
+        let r_mm = 351.794 / 1248.206f64.sqrt();
+        assert!((r_px - 1950.0 * r_mm / 80.0).abs() < 1e-9, "{r_px}");
+    }
+
+    #[test]
+    fn ideal_closed_form_agrees_with_traced_reflection() {
+        let cam = HyperbolicCamera::new(HyperbolicParams::paper()).unwrap();
+        for &(x, y) in &[(700.0, 511.5), (300.0, 222.0), (512.0, 900.0), (811.0, 640.0)] {
+            let px = Vector2::new(x, y);
+            let a = cam.pixel_to_ray(&px).unwrap();
+            let b = cam.trace(&px).unwrap();
+            assert!(a.dir.dot(&b.dir) > 1.0 - 1e-14);
+            assert!(b.distance_to_line(&a.origin) < 1e-9);
+        }
+    }
+
+    #[test]
+    fn off_focus_camera_round_trips() {
+        let mut p = HyperbolicParams::paper();
+        p.camera_offset_mm = [0.3, -0.2, 0.5];
+        p.camera_tilt_deg = [0.2, -0.1];
+        let cam = HyperbolicCamera::new(p).unwrap();
+        for &(x, y) in &[(700.0, 511.5), (300.0, 222.0), (512.0, 900.0)] {
+            let px = Vector2::new(x, y);
+            let ray = cam.pixel_to_ray(&px).unwrap();
+            let back = cam.point_to_pixel(&ray.at(800.0)).unwrap();
+            assert!((back - px).norm() < 1e-7, "{px} -> {back}");
+        }
+    }
+}

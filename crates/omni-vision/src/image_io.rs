@@ -1,1 +1,227 @@
-//! (in progress)
+//! Image I/O helpers: frames on disk (PNG 8/16-bit, JPEG) to a grey buffer, and PNG output.
+//!
+//! Every error is an [`omni_formats::Error`] naming the file, so a tool can print it as is:
+//! `frames/000012.png: truncated or corrupt image: …`.
+//!
+//! ```no_run
+//! let img = omni_vision::image_io::load_gray(std::path::Path::new("frames/000000.png")).unwrap();
+//! println!("{}x{} px, {}-bit, max {}", img.width, img.height, img.bit_depth, img.max_value());
+//! ```
+
+use omni_formats::Error;
+use std::path::Path;
+
+/// A single-channel image. Samples are stored as `u16` whatever the file's depth; `bit_depth`
+/// says which range they use (8 → 0–255, 16 → 0–65535). Row-major, `data[y * width + x]`,
+/// pixel (0, 0) is the top-left one.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GrayImage {
+    pub width: u32,
+    pub height: u32,
+    /// 8 or 16.
+    pub bit_depth: u8,
+    pub data: Vec<u16>,
+}
+
+impl GrayImage {
+    /// An all-zero image.
+    pub fn new(width: u32, height: u32, bit_depth: u8) -> Self {
+        GrayImage { width, height, bit_depth, data: vec![0; width as usize * height as usize] }
+    }
+
+    /// The largest value a sample can take (255 or 65535): the saturation level.
+    pub fn max_value(&self) -> u16 {
+        if self.bit_depth <= 8 { 255 } else { u16::MAX }
+    }
+
+    /// The sample at column `x`, row `y` (panics outside the image).
+    pub fn get(&self, x: u32, y: u32) -> u16 {
+        self.data[y as usize * self.width as usize + x as usize]
+    }
+
+    /// The samples as `f32` in the file's own units (no rescaling).
+    pub fn to_f32(&self) -> Vec<f32> {
+        self.data.iter().map(|&v| v as f32).collect()
+    }
+
+    /// The samples as `u8` (16-bit images are scaled down by 257); for 8-bit pipelines.
+    pub fn to_u8(&self) -> Vec<u8> {
+        if self.bit_depth <= 8 {
+            self.data.iter().map(|&v| v.min(255) as u8).collect()
+        } else {
+            self.data.iter().map(|&v| (v / 257) as u8).collect()
+        }
+    }
+
+    /// Subtracts `other` (e.g. a laser-off frame) sample by sample, clamping at 0.
+    /// The error message says how the sizes differ.
+    pub fn subtract_saturating(&mut self, other: &GrayImage) -> Result<(), String> {
+        if (self.width, self.height) != (other.width, other.height) {
+            return Err(format!(
+                "size {}x{} differs from the frame's {}x{}",
+                other.width, other.height, self.width, self.height
+            ));
+        }
+        for (a, &b) in self.data.iter_mut().zip(&other.data) {
+            *a = a.saturating_sub(b);
+        }
+        Ok(())
+    }
+}
+
+/// Loads a PNG (8- or 16-bit, grey or colour) or JPEG file as a grey image. Colour images are
+/// converted to luma. Missing, truncated, corrupt and non-image files give an error naming the
+/// file.
+pub fn load_gray(path: &Path) -> Result<GrayImage, Error> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path.display().to_string(), &e))?;
+    decode_gray(&bytes, &path.display().to_string())
+}
+
+/// Decodes an in-memory PNG/JPEG file; `name` is used in error messages.
+pub fn decode_gray(bytes: &[u8], name: &str) -> Result<GrayImage, Error> {
+    if bytes.is_empty() {
+        return Err(Error::new(name, "", "empty file, not an image"));
+    }
+    let format = image::guess_format(bytes)
+        .map_err(|_| Error::new(name, "", "not a PNG or JPEG image (unrecognised file signature)"))?;
+    let dynamic = image::load_from_memory_with_format(bytes, format)
+        .map_err(|e| Error::new(name, "", format!("truncated or corrupt image: {e}")))?;
+    Ok(from_dynamic(dynamic))
+}
+
+fn from_dynamic(dynamic: image::DynamicImage) -> GrayImage {
+    use image::DynamicImage as D;
+    let (width, height) = (dynamic.width(), dynamic.height());
+    match dynamic {
+        D::ImageLuma8(g) => {
+            GrayImage { width, height, bit_depth: 8, data: g.into_raw().into_iter().map(u16::from).collect() }
+        }
+        D::ImageLuma16(g) => GrayImage { width, height, bit_depth: 16, data: g.into_raw() },
+        D::ImageRgb16(_) | D::ImageRgba16(_) | D::ImageLumaA16(_) => {
+            GrayImage { width, height, bit_depth: 16, data: dynamic.to_luma16().into_raw() }
+        }
+        other => {
+            let g = other.to_luma8();
+            GrayImage { width, height, bit_depth: 8, data: g.into_raw().into_iter().map(u16::from).collect() }
+        }
+    }
+}
+
+/// Writes an RGB8 image (`rgb.len() == 3 * width * height`) as PNG, atomically.
+pub fn write_rgb_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), Error> {
+    omni_formats::io::write_atomic(path, |w| {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        image::write_buffer_with_format(
+            &mut buf,
+            rgb,
+            width,
+            height,
+            image::ExtendedColorType::Rgb8,
+            image::ImageFormat::Png,
+        )
+        .map_err(std::io::Error::other)?;
+        w.write_all(buf.get_ref())
+    })
+}
+
+/// Writes a grey image as PNG (8- or 16-bit as its `bit_depth` says), atomically.
+pub fn write_gray_png(path: &Path, img: &GrayImage) -> Result<(), Error> {
+    omni_formats::io::write_atomic(path, |w| {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        if img.bit_depth <= 8 {
+            let bytes: Vec<u8> = img.data.iter().map(|&v| v.min(255) as u8).collect();
+            image::write_buffer_with_format(
+                &mut buf,
+                &bytes,
+                img.width,
+                img.height,
+                image::ExtendedColorType::L8,
+                image::ImageFormat::Png,
+            )
+        } else {
+            let bytes: Vec<u8> = img.data.iter().flat_map(|v| v.to_ne_bytes()).collect();
+            image::write_buffer_with_format(
+                &mut buf,
+                &bytes,
+                img.width,
+                img.height,
+                image::ExtendedColorType::L16,
+                image::ImageFormat::Png,
+            )
+        }
+        .map_err(std::io::Error::other)?;
+        w.write_all(buf.get_ref())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(bit_depth: u8) -> GrayImage {
+        let mut img = GrayImage::new(7, 5, bit_depth);
+        for (i, v) in img.data.iter_mut().enumerate() {
+            *v = if bit_depth == 8 { (i * 7) as u16 } else { (i * 1800) as u16 };
+        }
+        img
+    }
+
+    #[test]
+    fn png_8_and_16_bit_round_trip_exactly() {
+        let dir = tempfile::tempdir().unwrap();
+        for depth in [8, 16] {
+            let img = ramp(depth);
+            let p = dir.path().join(format!("r{depth}.png"));
+            write_gray_png(&p, &img).unwrap();
+            assert_eq!(load_gray(&p).unwrap(), img);
+        }
+    }
+
+    #[test]
+    fn jpeg_and_colour_load_as_grey() {
+        let dir = tempfile::tempdir().unwrap();
+        let rgb: Vec<u8> = (0..16 * 8).flat_map(|_| [100u8, 100, 100]).collect();
+        let p = dir.path().join("c.png");
+        write_rgb_png(&p, 16, 8, &rgb).unwrap();
+        let g = load_gray(&p).unwrap();
+        assert_eq!((g.width, g.height, g.bit_depth), (16, 8, 8));
+        assert!(g.data.iter().all(|&v| v == 100));
+        let jp = dir.path().join("c.jpg");
+        image::save_buffer(&jp, &rgb, 16, 8, image::ExtendedColorType::Rgb8).unwrap();
+        let g = load_gray(&jp).unwrap();
+        assert!(g.data.iter().all(|&v| (v as i32 - 100).abs() <= 2), "{:?}", g.data);
+    }
+
+    #[test]
+    fn bad_files_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = dir.path().join("missing.png");
+        let e = load_gray(&missing).unwrap_err().to_string();
+        assert!(e.contains("missing.png"), "{e}");
+        let text = dir.path().join("text.png");
+        std::fs::write(&text, "hello").unwrap();
+        let e = load_gray(&text).unwrap_err().to_string();
+        assert!(e.contains("text.png") && e.contains("not a PNG"), "{e}");
+        let good = dir.path().join("g.png");
+        write_gray_png(&good, &ramp(8)).unwrap();
+        let bytes = std::fs::read(&good).unwrap();
+        let cut = dir.path().join("cut.png");
+        std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+        let e = load_gray(&cut).unwrap_err().to_string();
+        assert!(e.contains("cut.png") && e.contains("truncated"), "{e}");
+        let empty = dir.path().join("empty.png");
+        std::fs::write(&empty, "").unwrap();
+        assert!(load_gray(&empty).unwrap_err().to_string().contains("empty.png"));
+    }
+
+    #[test]
+    fn subtraction_clamps_and_checks_size() {
+        let mut a = ramp(8);
+        let b = GrayImage { data: vec![10; a.data.len()], ..a.clone() };
+        a.subtract_saturating(&b).unwrap();
+        assert_eq!(a.data[0], 0);
+        assert_eq!(a.data[3], 11);
+        let small = GrayImage::new(3, 3, 8);
+        assert!(a.subtract_saturating(&small).unwrap_err().contains("3x3"));
+    }
+}

@@ -15,6 +15,7 @@ mod docs;
 mod error;
 pub mod io;
 pub mod ply;
+pub mod rig;
 pub mod scene;
 pub mod stream;
 

@@ -1,1 +1,29 @@
-//! Point clouds: triangulation, merging, motion compensation, voxel grid, outlier removal, evaluation.
+//! Point clouds for omniscan: triangulation, merging, motion compensation, voxel grid, outlier
+//! removal and evaluation against primitives.
+//!
+//! * [`triangulate`]: stripe pixels → 3D points (ray ∩ light plane, laser assignment, grazing
+//!   threshold); [`triangulate::intersect_ray`] is the per-point kernel.
+//! * [`cloud`]: triangulated frames → a [`PointCloud`] with the standard scalar fields.
+//! * [`filter`]: voxel-grid downsampling and Open3D-compatible statistical / radius outlier
+//!   removal, cropping; [`kdtree`] is the neighbour search behind them.
+//! * [`motion`]: poses interpolated from odometry (slerp + lerp) for a moving sensor.
+//! * [`fit`]: RANSAC + least-squares plane, sphere, cylinder and cone fits and error statistics.
+//!
+//! Lengths are millimetres (world = receiver frame of SENSOR.md), angles radians in code.
+//!
+//! ```
+//! use omni_cloud::filter::{radius_outlier_mask, statistical_outlier_mask};
+//! let pts = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [40.0, 40.0, 40.0]];
+//! assert_eq!(radius_outlier_mask(&pts, 2, 1.5).unwrap(), vec![true, true, true, true, false]);
+//! assert_eq!(statistical_outlier_mask(&pts, 3, 1.0).unwrap().iter().filter(|k| **k).count(), 4);
+//! ```
+
+pub mod cloud;
+pub mod filter;
+pub mod fit;
+pub mod kdtree;
+pub mod motion;
+pub mod rng;
+pub mod triangulate;
+
+pub use omni_formats::ply::PointCloud;

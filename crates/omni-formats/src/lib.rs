@@ -14,6 +14,7 @@
 mod docs;
 mod error;
 pub mod io;
+pub mod odometry;
 pub mod ply;
 pub mod rig;
 pub mod scene;

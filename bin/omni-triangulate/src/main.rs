@@ -1,1 +1,169 @@
-fn main() {}
+//! omni-triangulate: stripe stream → 3D points (stream with `points` added, or PLY).
+
+use clap::Parser;
+use omni_cli::CliError;
+use omni_cloud::cloud::{append_frame_points, empty_point_cloud};
+use omni_cloud::triangulate::{DEFAULT_MIN_INCIDENCE_DEG, Rejections, Triangulator};
+use omni_formats::ply::{Encoding, PointCloud, write_ply};
+use omni_formats::stream::{Header, Record, StreamReader, StreamWriter};
+use omni_formats::{CameraFile, ScannerFile};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+const PRODUCER: &str = concat!("omni-triangulate ", env!("CARGO_PKG_VERSION"));
+
+#[derive(Parser, Debug)]
+#[command(
+    version,
+    about = "Triangulate stripe points: each stripe pixel's ray meets its frame's laser light plane.",
+    long_about = "Reads the stripe stream written by omni-ridge (JSON Lines), intersects every stripe \
+pixel's ray (from camera.json) with the light plane of each laser that was on in that frame (from \
+scanner.json), and keeps the intersection that is in front of the viewpoint and lit by that laser. \
+Rays meeting the plane at less than --min-incidence-deg are refused: the range error grows as \
+1/sin(angle). Writes the stream with a `points` array added to each frame \
+([x, y, z, laser, range, stripe_index], mm, world = receiver frame), or a PLY point cloud.",
+    after_help = "Examples:\n  \
+omni-ridge scan.jsonl | omni-triangulate --camera camera.json --scanner scanner.json > points.jsonl\n  \
+omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl -o cloud.ply\n  \
+omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl -o points.jsonl --ply cloud.ply\n\n\
+PLY scalar fields: intensity, scalar_frame, scalar_laser, scalar_alpha_deg, scalar_range (mm), scalar_u, scalar_v (px).\n\
+Exit codes: 0 ok, 1 bad input or I/O error (nothing half-written), 2 usage error."
+)]
+struct Args {
+    /// Receiver model (camera.json).
+    #[arg(long)]
+    camera: PathBuf,
+    /// Transmitter model (scanner.json).
+    #[arg(long)]
+    scanner: PathBuf,
+    /// Stripe stream (JSON Lines); `-` = stdin.
+    #[arg(default_value = "-")]
+    input: PathBuf,
+    /// Output: a stream (`-` = stdout, default) or, if the name ends in `.ply`, a PLY cloud.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Also (or only, without -o) write the points as a PLY cloud.
+    #[arg(long)]
+    ply: Option<PathBuf>,
+    /// Write PLY as ASCII instead of binary little-endian.
+    #[arg(long)]
+    ascii: bool,
+    /// Smallest accepted angle between a ray and the light plane (degrees).
+    #[arg(long, default_value_t = DEFAULT_MIN_INCIDENCE_DEG)]
+    min_incidence_deg: f64,
+}
+
+fn is_ply(p: &Path) -> bool {
+    p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
+}
+
+fn main() -> std::process::ExitCode {
+    omni_cli::main("omni-triangulate", || {
+        let args = Args::parse();
+        let (_, camera) = CameraFile::load(&args.camera)?;
+        let (_, transmitter) = ScannerFile::load(&args.scanner)?;
+        let tri = Triangulator::new(camera.as_ref(), &transmitter, args.min_incidence_deg).map_err(CliError::usage)?;
+        let (stream_out, mut ply_out) = match (&args.output, &args.ply) {
+            (Some(o), p) if is_ply(o) => {
+                if p.is_some() {
+                    return Err(CliError::usage("-o names a PLY file; give --ply only with a stream output"));
+                }
+                (None, Some(o.clone()))
+            }
+            (Some(o), p) => (Some(o.clone()), p.clone()),
+            (None, Some(p)) => (None, Some(p.clone())),
+            (None, None) => (Some(PathBuf::from("-")), None),
+        };
+        let mut cloud = ply_out.as_ref().map(|_| empty_point_cloud());
+        let input = omni_formats::io::open_input(&args.input)?;
+        let name = omni_formats::io::display_name(&args.input, "stdin");
+        let mut run = Run { tri: &tri, args: &args, cloud: cloud.as_mut(), rejections: Rejections::default() };
+        match &stream_out {
+            Some(path) => {
+                // The closure's error only aborts the atomic write; the message is kept here.
+                let mut failure = None;
+                let out_name = omni_formats::io::display_name(path, "stdout");
+                let written = omni_formats::io::write_atomic(path, |w| {
+                    run.process(input, &name, Some((w, &out_name))).map_err(|m| {
+                        failure = Some(m);
+                        std::io::Error::other("aborted")
+                    })
+                });
+                if let Some(m) = failure {
+                    return Err(CliError::new(m));
+                }
+                written?;
+            }
+            None => run.process(input, &name, None).map_err(CliError::new)?,
+        }
+        if let (Some(path), Some(cloud)) = (ply_out.take(), cloud) {
+            let enc = if args.ascii { Encoding::Ascii } else { Encoding::BinaryLittleEndian };
+            write_ply(&path, &cloud, enc)?;
+        }
+        Ok(())
+    })
+}
+
+struct Run<'a> {
+    tri: &'a Triangulator<'a>,
+    args: &'a Args,
+    cloud: Option<&'a mut PointCloud>,
+    rejections: Rejections,
+}
+
+impl Run<'_> {
+    /// Reads every record, triangulates frames, writes records to `out` (writer and its name)
+    /// if any. The error is the one-line message naming the file and record at fault.
+    fn process(
+        &mut self,
+        input: Box<dyn std::io::BufRead>,
+        name: &str,
+        out: Option<(&mut dyn Write, &str)>,
+    ) -> Result<(), String> {
+        let fail = |m: String| m;
+        let mut reader = StreamReader::new(input, name);
+        let mut writer = out.map(|(w, n)| StreamWriter::new(w, n));
+        let mut first = true;
+        while let Some(record) = reader.next_record().map_err(|e| fail(e.to_string()))? {
+            let record = match record {
+                Record::Header(h) => Record::Header(self.header(h)),
+                Record::Frame(mut frame) => {
+                    let loc = format!("{name}: line {} (frame {})", reader.line(), frame.seq);
+                    let res = self.tri.triangulate_frame(&frame).map_err(|m| fail(format!("{loc}: {m}")))?;
+                    self.rejections.add(&res.rejections);
+                    frame.points = Some(res.points);
+                    if let Some(cloud) = self.cloud.as_deref_mut() {
+                        append_frame_points(cloud, &frame, None, &|_| true).map_err(|m| fail(format!("{loc}: {m}")))?;
+                    }
+                    Record::Frame(frame)
+                }
+                other => other,
+            };
+            if let Some(w) = writer.as_mut() {
+                if first && !matches!(record, Record::Header(_)) {
+                    w.write(&Record::Header(self.header(Header::new("unknown")))).map_err(|e| fail(e.to_string()))?;
+                }
+                w.write(&record).map_err(|e| fail(e.to_string()))?;
+            }
+            first = false;
+        }
+        if let Some(w) = writer.as_mut() {
+            if first {
+                w.write(&Record::Header(self.header(Header::new("unknown")))).map_err(|e| fail(e.to_string()))?;
+            }
+            w.flush().map_err(|e| fail(e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    fn header(&self, mut h: Header) -> Header {
+        if h.producers == ["unknown"] {
+            h.producers.clear();
+        }
+        h.producers.push(PRODUCER.into());
+        h.camera = Some(self.args.camera.display().to_string());
+        h.scanner = Some(self.args.scanner.display().to_string());
+        h.extra.insert("min_incidence_deg".into(), self.args.min_incidence_deg.into());
+        h
+    }
+}

@@ -39,11 +39,22 @@ impl std::str::FromStr for ShapeKind {
 pub enum Shape {
     /// Normal oriented towards the world origin.
     Plane(Plane),
-    Sphere { center: Point3<f64>, radius: f64 },
+    Sphere {
+        center: Point3<f64>,
+        radius: f64,
+    },
     /// Infinite cylinder.
-    Cylinder { axis_point: Point3<f64>, axis: Unit<Vector3<f64>>, radius: f64 },
+    Cylinder {
+        axis_point: Point3<f64>,
+        axis: Unit<Vector3<f64>>,
+        radius: f64,
+    },
     /// Infinite single-nappe cone: apex, unit axis pointing into the cone, half-angle (radians).
-    Cone { apex: Point3<f64>, axis: Unit<Vector3<f64>>, half_angle: f64 },
+    Cone {
+        apex: Point3<f64>,
+        axis: Unit<Vector3<f64>>,
+        half_angle: f64,
+    },
 }
 
 impl Shape {
@@ -381,10 +392,8 @@ mod tests {
                 Point3::new(x, y, 0.1 * x + 500.0 + rng.normal() * sigma)
             })
             .collect();
-        let truth_plane = towards_origin(Plane::from_point_normal(
-            &Point3::new(0.0, 0.0, 500.0),
-            &Vector3::new(-0.1, 0.0, 1.0),
-        ));
+        let truth_plane =
+            towards_origin(Plane::from_point_normal(&Point3::new(0.0, 0.0, 500.0), &Vector3::new(-0.1, 0.0, 1.0)));
         let f = fit_shape(ShapeKind::Plane, &with_outliers(plane_pts, &mut rng), &FitOptions::default()).unwrap();
         let Shape::Plane(p) = f.shape else { panic!() };
         assert!(p.normal.dot(&truth_plane.normal) > 1.0 - 1e-5 && (p.offset - truth_plane.offset).abs() < 0.1);
@@ -393,7 +402,8 @@ mod tests {
         let sphere_pts: Vec<_> = (0..800)
             .map(|_| {
                 let (th, ph) = (2.5 + rng.uniform() * 1.2, rng.uniform() - 0.5);
-                centre + Vector3::new(th.cos() * ph.cos(), th.sin() * ph.cos(), ph.sin()) * (75.0 + rng.normal() * sigma)
+                centre
+                    + Vector3::new(th.cos() * ph.cos(), th.sin() * ph.cos(), ph.sin()) * (75.0 + rng.normal() * sigma)
             })
             .collect();
         let f = fit_shape(ShapeKind::Sphere, &with_outliers(sphere_pts, &mut rng), &FitOptions::default()).unwrap();

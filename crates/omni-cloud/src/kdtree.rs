@@ -186,8 +186,7 @@ mod tests {
         let tree = KdTree::build(&pts);
         let mut out = Vec::new();
         for q in pts.iter().step_by(37).chain([[50.0, 25.0, 5.0], [-10.0, 0.0, 0.0]].iter()) {
-            let mut brute: Vec<f64> =
-                pts.iter().map(|p| sq(p[0] - q[0]) + sq(p[1] - q[1]) + sq(p[2] - q[2])).collect();
+            let mut brute: Vec<f64> = pts.iter().map(|p| sq(p[0] - q[0]) + sq(p[1] - q[1]) + sq(p[2] - q[2])).collect();
             brute.sort_by(f64::total_cmp);
             tree.knn(q, 9, &mut out);
             let got: Vec<f64> = out.iter().map(|e| e.0).collect();

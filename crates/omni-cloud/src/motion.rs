@@ -7,8 +7,8 @@
 //! than the allowed maximum, are errors: extrapolating or bridging a gap would silently warp
 //! the cloud.
 
-use omni_formats::odometry::PoseSample;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use omni_formats::odometry::PoseSample;
 
 /// Interpolated trajectory over strictly increasing timestamps (µs).
 #[derive(Debug, Clone)]

@@ -193,10 +193,9 @@ impl<'a> Triangulator<'a> {
                         self.transmitter.num_lasers()
                     ));
                 }
-                let lp = self
-                    .transmitter
-                    .light_plane(alpha, frame.facet, j as usize)
-                    .ok_or_else(|| format!("laser {j}: no light plane at alpha {}° facet {}", frame.alpha_deg, frame.facet))?;
+                let lp = self.transmitter.light_plane(alpha, frame.facet, j as usize).ok_or_else(|| {
+                    format!("laser {j}: no light plane at alpha {}° facet {}", frame.alpha_deg, frame.facet)
+                })?;
                 Ok(LaserPlane::new(j, &lp))
             })
             .collect()

@@ -1,0 +1,138 @@
+//! The real binary on a small exact stream made with the paper sensor models.
+
+use omni_formats::stream::{Frame, Record, StreamReader, StreamWriter, StripePoint};
+use omni_formats::{CameraFile, CameraSpec, ScannerFile, write_doc};
+use omni_geom::Point3;
+use omni_model::{CameraModel, HyperbolicCamera, HyperbolicParams, Transmitter, TransmitterParams};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_omni-triangulate");
+
+struct Fixture {
+    dir: tempfile::TempDir,
+    truth: Vec<Vec<Point3<f64>>>,
+}
+
+impl Fixture {
+    fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+}
+
+/// camera.json, scanner.json and a 3-frame stripe stream whose pixels are exact projections of
+/// lit points on laser 0's light plane.
+fn fixture() -> Fixture {
+    let dir = tempfile::tempdir().unwrap();
+    write_doc(&dir.path().join("camera.json"), &CameraFile::new(CameraSpec::Hyperbolic(HyperbolicParams::paper())))
+        .unwrap();
+    write_doc(&dir.path().join("scanner.json"), &ScannerFile::new(TransmitterParams::paper())).unwrap();
+    let cam = HyperbolicCamera::new(HyperbolicParams::paper()).unwrap();
+    let tx = Transmitter::new(TransmitterParams::paper()).unwrap();
+    let mut truth = Vec::new();
+    let mut text = Vec::new();
+    {
+        let mut w = StreamWriter::new(&mut text, "mem");
+        w.write(&Record::Header(omni_formats::stream::Header::new("test"))).unwrap();
+        for (seq, alpha) in [(0u64, 5.0f64), (1, 15.0), (2, 25.0)] {
+            let lp = tx.light_plane(alpha.to_radians(), 0, 0).unwrap();
+            let across = lp.plane.normal.cross(&lp.out_dir).normalize();
+            let mut f = Frame::new(seq, format!("{seq}.png"), alpha, 0);
+            let mut stripe = Vec::new();
+            let mut pts = Vec::new();
+            for i in 0..10 {
+                let p = lp.facet_point
+                    + lp.out_dir.into_inner() * (400.0 + 60.0 * i as f64)
+                    + across * (i as f64 * 30.0 - 150.0);
+                let px = cam.point_to_pixel(&p).unwrap();
+                stripe.push(StripePoint { u: px.x, v: px.y, intensity: 100.0 + i as f64, width: 3.0, quality: 0 });
+                pts.push(p);
+            }
+            f.stripe = Some(stripe);
+            f.extra.insert("exposure_us".into(), 500.into());
+            w.write(&Record::Frame(Box::new(f))).unwrap();
+            truth.push(pts);
+        }
+    }
+    std::fs::write(dir.path().join("ridges.jsonl"), text).unwrap();
+    Fixture { dir, truth }
+}
+
+fn run(dir: &Path, args: &[&str]) -> Output {
+    Command::new(BIN).current_dir(dir).args(args).output().unwrap()
+}
+
+#[test]
+fn writes_the_stream_with_points_and_keeps_other_fields() {
+    let fx = fixture();
+    let out = run(fx.dir.path(), &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let records: Vec<Record> = StreamReader::new(out.stdout.as_slice(), "out").map(|r| r.unwrap()).collect();
+    let Record::Header(h) = &records[0] else { panic!("no header") };
+    assert_eq!(h.producers.len(), 2);
+    assert!(h.producers[1].starts_with("omni-triangulate"));
+    let mut n = 0;
+    for (r, truth) in records[1..].iter().zip(&fx.truth) {
+        let Record::Frame(f) = r else { panic!() };
+        assert_eq!(f.extra.get("exposure_us"), Some(&500.into()));
+        let pts = f.points.as_ref().unwrap();
+        assert_eq!(pts.len(), truth.len());
+        for p in pts {
+            assert!((Point3::from(p.xyz) - truth[p.stripe_index as usize]).norm() < 1e-9);
+            assert_eq!(p.laser, 0);
+            n += 1;
+        }
+    }
+    assert_eq!(n, 30);
+}
+
+#[test]
+fn writes_ply_with_scalar_fields() {
+    let fx = fixture();
+    let out =
+        run(fx.dir.path(), &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "-o", "c.ply"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.stdout.is_empty());
+    let cloud = omni_formats::ply::read_ply(&fx.path("c.ply")).unwrap();
+    assert_eq!(cloud.len(), 30);
+    for name in
+        ["intensity", "scalar_frame", "scalar_laser", "scalar_alpha_deg", "scalar_range", "scalar_u", "scalar_v"]
+    {
+        assert!(cloud.scalar(name).is_some(), "{name}");
+    }
+    assert_eq!(cloud.scalar("scalar_alpha_deg").unwrap()[29], 25.0);
+    assert_eq!(cloud.scalar("intensity").unwrap()[11], 101.0);
+    // Float PLY: positions to float precision.
+    let p = cloud.positions[0];
+    assert!((Point3::from(p) - fx.truth[0][0]).norm() < 1e-3);
+}
+
+#[test]
+fn bad_input_fails_with_one_line_and_leaves_no_output() {
+    let fx = fixture();
+    let frame_without_stripe = "{\"type\":\"frame\",\"seq\":7,\"path\":\"a.png\",\"alpha_deg\":3,\"facet\":0}\n";
+    std::fs::write(fx.path("nostripe.jsonl"), frame_without_stripe).unwrap();
+    let nan =
+        "{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"alpha_deg\":3,\"facet\":0,\"stripe\":[[NaN,1,1,1,0]]}\n";
+    std::fs::write(fx.path("nan.jsonl"), nan).unwrap();
+    for (input, expect) in [("nostripe.jsonl", "frame 7"), ("nan.jsonl", "line 1"), ("missing.jsonl", "missing.jsonl")]
+    {
+        let out = run(
+            fx.dir.path(),
+            &["--camera", "camera.json", "--scanner", "scanner.json", input, "-o", "out.jsonl", "--ply", "c.ply"],
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains(input) && err.contains(expect) && err.lines().count() == 1, "{err}");
+        assert!(!fx.path("out.jsonl").exists() && !fx.path("c.ply").exists());
+    }
+    let out = run(fx.dir.path(), &["--camera", "nope.json", "--scanner", "scanner.json", "ridges.jsonl"]);
+    assert_eq!(out.status.code(), Some(1));
+    let out =
+        run(fx.dir.path(), &["--camera", "camera.json", "--scanner", "scanner.json", "--min-incidence-deg", "95"]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = run(fx.dir.path(), &["--bogus"]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = run(fx.dir.path(), &["--help"]);
+    assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("Examples"));
+}

@@ -1,1 +1,289 @@
-//! (in progress)
+//! Transmitter calibration: the swept light planes, from laser stripes on boards of known pose.
+//!
+//! Pipeline ([`calibrate_planes`]), following SENSOR.md "Calibration" and "Beyond the paper":
+//! 1. Board poses in the world frame, from the calibrated camera ([`estimate_board_pose`]: a
+//!    generic-camera PnP on corner pixels) or given.
+//! 2. Each stripe pixel's ray meets the nearest board whose outline it crosses
+//!    ([`locate_on_boards`]) → 3D points on two crossing lines per frame (mm, world frame).
+//! 3. Points are split between the lasers with the initial model (a point belongs to the laser
+//!    whose reflected fan lights it), and each (frame, laser) gets its own robust plane
+//!    ([`fit_frame_plane`]); frames that cannot fix a plane are refused with the reason.
+//! 4. The physical transmitter (polygon axis, encoder zero, per-facet errors, each laser's fan
+//!    plane) is fitted to all points at once ([`fit_transmitter`]); its gauge conventions are
+//!    documented in [`model`]. The per-frame planes stay in the report as a check.
+//!
+//! ```no_run
+//! # use omni_calib::plane::*;
+//! # fn run(camera: &dyn omni_model::CameraModel, boards: &[PlacedBoard], frames: &[FrameStripes]) {
+//! let initial = omni_model::TransmitterParams::paper();
+//! let cal = calibrate_planes(camera, boards, frames, &initial, &PlaneCalibOptions::default()).unwrap();
+//! let table = light_plane_table(&cal.transmitter, &[0.0, 1.0, 2.0], 0, None).unwrap();
+//! # }
+//! ```
+
+pub mod model;
+mod observe;
+mod pose;
+mod table;
+#[cfg(test)]
+pub(crate) mod testkit;
+#[cfg(test)]
+mod tests;
+
+pub use model::{Estimate, ModelFit, ModelFitOptions, Observation, fit_transmitter};
+pub use observe::{
+    BoardPoint, FramePlane, FramePlaneOptions, FrameStripes, PlacedBoard, fit_frame_plane, locate_on_boards,
+    robust_sigma,
+};
+pub use pose::{BoardPoseFit, estimate_board_pose};
+pub use table::{TableRow, light_plane_table, parse_alpha_range};
+
+use nalgebra::Point3;
+use omni_model::{CameraModel, Transmitter, TransmitterParams};
+use serde::Serialize;
+
+/// Settings of the whole light-plane calibration.
+#[derive(Debug, Clone, Copy)]
+pub struct PlaneCalibOptions {
+    pub frame: FramePlaneOptions,
+    pub model: ModelFitOptions,
+    /// Fewest board points a (frame, laser) needs to be used at all.
+    pub min_points_per_frame: usize,
+    /// Rays meeting a board at |cos incidence| below this are ignored (grazing).
+    pub min_cos: f64,
+}
+
+impl Default for PlaneCalibOptions {
+    fn default() -> Self {
+        PlaneCalibOptions {
+            frame: FramePlaneOptions::default(),
+            model: ModelFitOptions::default(),
+            min_points_per_frame: 20,
+            min_cos: 0.05,
+        }
+    }
+}
+
+/// The per-frame check of one (frame, laser).
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameReport {
+    pub seq: u64,
+    pub alpha_deg: f64,
+    pub facet: u32,
+    pub laser: usize,
+    /// Board points assigned to this laser.
+    pub points: usize,
+    /// The frame's own plane `normal · x = offset_mm` (world frame), if the points fix one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plane_normal: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plane_offset_mm: Option<f64>,
+    /// RMS distance of the inliers to the frame's own plane (mm).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plane_rms_mm: Option<f64>,
+    /// Why the frame has no plane of its own (its points still enter the model fit).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plane_refused: Option<String>,
+    /// RMS distance of its points to the fitted model's plane (mm).
+    pub model_rms_mm: f64,
+    /// Angle between the frame's own plane and the model's (degrees).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model_angle_deg: Option<f64>,
+}
+
+/// A frame (or one laser of it) left out of the calibration.
+#[derive(Debug, Clone, Serialize)]
+pub struct Rejection {
+    pub seq: u64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub laser: Option<usize>,
+    pub reason: String,
+}
+
+/// The physical model fit, for the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct ModelReport {
+    pub residual_rms_mm: f64,
+    pub points_used: usize,
+    pub outliers_rejected: usize,
+    pub iterations: usize,
+    pub converged: bool,
+    pub parameters: Vec<Estimate>,
+    pub fixed: Vec<String>,
+    pub gauge: Vec<String>,
+}
+
+/// What `scanner.json`'s `report` holds.
+#[derive(Debug, Clone, Serialize)]
+pub struct PlaneReport {
+    pub frames_total: usize,
+    /// (frame, laser) pairs used in the model fit.
+    pub observations_used: usize,
+    /// RMS over the frames' own planes of their inlier distances (mm).
+    pub frame_plane_rms_mm: f64,
+    pub model: ModelReport,
+    pub frames: Vec<FrameReport>,
+    pub rejected: Vec<Rejection>,
+}
+
+/// The calibrated transmitter and its report.
+#[derive(Debug, Clone)]
+pub struct PlaneCalibration {
+    pub transmitter: TransmitterParams,
+    pub report: PlaneReport,
+}
+
+/// The gauge conventions of the fit, as stated in the report.
+pub const GAUGE_NOTES: [&str; 4] = [
+    "facet pitch errors have zero mean over the observed facets; their common part is the encoder zero",
+    "zero_dir is the initial zero_dir projected perpendicular to the fitted axis",
+    "the axis point moves only perpendicular to the initial axis",
+    "laser apex and direction are the initial ones projected onto the fitted fan plane",
+];
+
+/// Checks every frame lies inside the model: facet index below n, α within one facet [0, 2θ],
+/// a placement that has boards. The error names the frame.
+pub fn check_frames(tx: &Transmitter, boards: &[PlacedBoard], frames: &[FrameStripes]) -> Result<(), String> {
+    let span = tx.facet_angle();
+    for f in frames {
+        if f.facet >= tx.num_facets() {
+            return Err(format!("frame {}: facet {} is not in the model ({} facets)", f.seq, f.facet, tx.num_facets()));
+        }
+        if !(f.alpha_rad >= -1e-9 && f.alpha_rad <= span + 1e-9) {
+            return Err(format!(
+                "frame {}: alpha_deg {} is outside the model's facet range [0, {}]",
+                f.seq,
+                f.alpha_rad.to_degrees(),
+                span.to_degrees()
+            ));
+        }
+        if !boards.iter().any(|b| b.placement == f.placement) {
+            return Err(format!("frame {}: no rig board has placement {}", f.seq, f.placement));
+        }
+    }
+    Ok(())
+}
+
+/// Splits a frame's board points between its lit lasers using the initial model: a point goes to
+/// the laser whose fan lights it (nearest plane if several or none do).
+fn assign_lasers(tx: &Transmitter, frame: &FrameStripes, points: &[observe::BoardPoint]) -> Vec<(usize, Vec<usize>)> {
+    let lasers: Vec<usize> =
+        frame.lasers.iter().map(|&l| l as usize).filter(|&l| l < tx.num_lasers()).collect::<Vec<_>>();
+    let planes: Vec<_> = lasers.iter().map(|&l| tx.light_plane(frame.alpha_rad, frame.facet, l)).collect();
+    let mut groups: Vec<(usize, Vec<usize>)> = lasers.iter().map(|&l| (l, vec![])).collect();
+    for (i, p) in points.iter().enumerate() {
+        let score = |k: usize| -> (bool, f64) {
+            match &planes[k] {
+                Some(lp) => (lp.lights(&p.point), lp.plane.signed_distance(&p.point).abs()),
+                None => (false, f64::INFINITY),
+            }
+        };
+        let best = (0..lasers.len()).min_by(|&a, &b| {
+            let (la, da) = score(a);
+            let (lb, db) = score(b);
+            lb.cmp(&la).then(da.total_cmp(&db))
+        });
+        if let Some(k) = best {
+            groups[k].1.push(i);
+        }
+    }
+    groups
+}
+
+/// Calibrates the light planes from stripe frames on posed boards (see the module docs).
+/// Fails, with a message naming the frame, for frames outside the model, and when no frame is
+/// usable; individual unusable frames are listed in the report's `rejected`.
+pub fn calibrate_planes(
+    camera: &dyn CameraModel,
+    boards: &[PlacedBoard],
+    frames: &[FrameStripes],
+    initial: &TransmitterParams,
+    opts: &PlaneCalibOptions,
+) -> Result<PlaneCalibration, String> {
+    let tx0 = Transmitter::new(initial.clone()).map_err(|e| format!("initial transmitter: {e}"))?;
+    check_frames(&tx0, boards, frames)?;
+    let mut rejected = vec![];
+    let mut observations = vec![];
+    let mut own_planes: Vec<(FrameReport, Option<FramePlane>)> = vec![];
+    for frame in frames {
+        if frame.lasers.is_empty() {
+            continue; // an ambient (laser-off) frame
+        }
+        let (points, _missed) = locate_on_boards(camera, boards, frame, opts.min_cos);
+        for (laser, idx) in assign_lasers(&tx0, frame, &points) {
+            if idx.len() < opts.min_points_per_frame {
+                // A laser whose stripe misses the boards entirely is normal (it lights the other side).
+                if !idx.is_empty() || tx0.num_lasers() == 1 {
+                    rejected.push(Rejection {
+                        seq: frame.seq,
+                        laser: Some(laser),
+                        reason: format!(
+                            "too few stripe points on the boards: {} (need {})",
+                            idx.len(),
+                            opts.min_points_per_frame
+                        ),
+                    });
+                }
+                continue;
+            }
+            let pts: Vec<observe::BoardPoint> = idx.iter().map(|&i| points[i]).collect();
+            let own = fit_frame_plane(&pts, boards.len(), &opts.frame);
+            let used: Vec<Point3<f64>> = match &own {
+                Ok(fp) => pts.iter().zip(&fp.inliers).filter(|(_, k)| **k).map(|(p, _)| p.point).collect(),
+                Err(_) => pts.iter().map(|p| p.point).collect(),
+            };
+            let report = FrameReport {
+                seq: frame.seq,
+                alpha_deg: frame.alpha_rad.to_degrees(),
+                facet: frame.facet,
+                laser,
+                points: pts.len(),
+                plane_normal: own.as_ref().ok().map(|f| f.plane.normal.into_inner().into()),
+                plane_offset_mm: own.as_ref().ok().map(|f| f.plane.offset),
+                plane_rms_mm: own.as_ref().ok().map(|f| f.rms_mm),
+                plane_refused: own.as_ref().err().cloned(),
+                model_rms_mm: f64::NAN,
+                model_angle_deg: None,
+            };
+            own_planes.push((report, own.ok()));
+            observations.push(Observation { alpha_rad: frame.alpha_rad, facet: frame.facet, laser, points: used });
+        }
+    }
+    if observations.is_empty() {
+        let why = rejected.first().map(|r| format!(" (e.g. frame {}: {})", r.seq, r.reason)).unwrap_or_default();
+        return Err(format!("no usable frame: no stripe fell on the boards{why}"));
+    }
+    let fit = fit_transmitter(initial, &observations, &opts.model)?;
+    let tx = Transmitter::new(fit.params.clone())?;
+    let mut frames_out = Vec::with_capacity(own_planes.len());
+    let (mut ss, mut n) = (0.0, 0usize);
+    for ((mut report, own), rms) in own_planes.into_iter().zip(&fit.observation_rms_mm) {
+        report.model_rms_mm = *rms;
+        if let Some(own) = own {
+            ss += own.rms_mm.powi(2) * own.inliers.iter().filter(|k| **k).count() as f64;
+            n += own.inliers.iter().filter(|k| **k).count();
+            if let Some(lp) = tx.light_plane(report.alpha_deg.to_radians(), report.facet, report.laser) {
+                report.model_angle_deg = Some(lp.plane.angle_to(&own.plane).to_degrees());
+            }
+        }
+        frames_out.push(report);
+    }
+    let report = PlaneReport {
+        frames_total: frames.len(),
+        observations_used: observations.len(),
+        frame_plane_rms_mm: (ss / n.max(1) as f64).sqrt(),
+        model: ModelReport {
+            residual_rms_mm: fit.rms_mm,
+            points_used: fit.points_used,
+            outliers_rejected: fit.outliers,
+            iterations: fit.iterations,
+            converged: fit.converged,
+            parameters: fit.estimates,
+            fixed: fit.fixed,
+            gauge: GAUGE_NOTES.iter().map(|s| s.to_string()).collect(),
+        },
+        frames: frames_out,
+        rejected,
+    };
+    Ok(PlaneCalibration { transmitter: fit.params, report })
+}

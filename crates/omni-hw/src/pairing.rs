@@ -1,1 +1,527 @@
+//! Pairing trigger events with camera frames.
+//!
+//! Frames are matched to triggers **by order and checked by timestamps**: the controller stamps
+//! each trigger with its own clock, the host maps that clock onto its own (the smallest observed
+//! "received − stamped" difference, i.e. clock offset plus the fastest transport), and each frame
+//! carries a host-clock timestamp from its [`FrameSource`] (for [`DirFrameSource`], the file's
+//! modification time). A frame is paired with the pending trigger whose expected frame time
+//! (trigger time + estimated latency) is nearest, and only if it lies within a tolerance of
+//! `tolerance_fraction` × the gap to the neighbouring scheduled trigger — lost events included,
+//! because the [`Schedule`] places every sequence number. So a frame can never be shifted onto a
+//! neighbouring angle: it pairs with its own trigger or is reported as unmatched. Triggers whose
+//! frame never comes are reported missing after `frame_timeout_us`, or as soon as a later frame
+//! arrives (cameras deliver in order).
 
+use crate::message::TriggerEvent;
+use crate::schedule::Schedule;
+use omni_formats::stream::Frame;
+use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+
+/// A complete image file from the camera.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CapturedFrame {
+    pub path: PathBuf,
+    /// The path as written into the manifest (relative to the frames directory).
+    pub name: String,
+    /// Host-clock timestamp (µs since the Unix epoch) of the exposure or of the file.
+    pub time_us: i64,
+}
+
+/// Where frames come from. A GenICam/Aravis camera would implement this too; pairing only sees
+/// [`CapturedFrame`]s.
+pub trait FrameSource {
+    /// Frames that became complete since the previous call, oldest first.
+    fn poll(&mut self) -> std::io::Result<Vec<CapturedFrame>>;
+    /// A short description for messages, e.g. the directory.
+    fn describe(&self) -> String;
+}
+
+/// Image files appearing in a directory, written by the camera's software.
+///
+/// Files present when the source is created are ignored (stale frames of an earlier run must
+/// never pair). Hidden files (`.name`, the usual temporary names) and non-image extensions are
+/// ignored; a file is reported once its size is non-zero and unchanged between two polls, so a
+/// frame still being written is not read half-done. Its timestamp is the modification time.
+pub struct DirFrameSource {
+    dir: PathBuf,
+    known: HashSet<OsString>,
+    sizes: HashMap<OsString, u64>,
+}
+
+const IMAGE_EXTENSIONS: [&str; 7] = ["png", "jpg", "jpeg", "tif", "tiff", "pgm", "bmp"];
+
+impl DirFrameSource {
+    /// Watches `dir` (created if missing).
+    pub fn new(dir: &Path) -> std::io::Result<Self> {
+        std::fs::create_dir_all(dir)?;
+        let mut src = DirFrameSource { dir: dir.to_path_buf(), known: HashSet::new(), sizes: HashMap::new() };
+        for entry in std::fs::read_dir(dir)? {
+            src.known.insert(entry?.file_name());
+        }
+        Ok(src)
+    }
+
+    fn is_image(name: &OsString) -> bool {
+        let name = name.to_string_lossy();
+        !name.starts_with('.')
+            && Path::new(name.as_ref())
+                .extension()
+                .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_string_lossy().to_ascii_lowercase().as_str()))
+    }
+}
+
+impl FrameSource for DirFrameSource {
+    fn poll(&mut self) -> std::io::Result<Vec<CapturedFrame>> {
+        let mut out = Vec::new();
+        for entry in std::fs::read_dir(&self.dir)? {
+            let entry = entry?;
+            let name = entry.file_name();
+            if self.known.contains(&name) || !Self::is_image(&name) {
+                continue;
+            }
+            // The file may vanish or change between listing and stat: just look again next time.
+            let Ok(meta) = entry.metadata() else { continue };
+            let len = meta.len();
+            if len == 0 || self.sizes.get(&name) != Some(&len) {
+                self.sizes.insert(name, len);
+                continue;
+            }
+            let time_us = meta
+                .modified()
+                .ok()
+                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                .map(|d| d.as_micros() as i64)
+                .unwrap_or_else(crate::client::host_time_us);
+            self.sizes.remove(&name);
+            out.push(CapturedFrame { path: entry.path(), name: name.to_string_lossy().into_owned(), time_us });
+            self.known.insert(name);
+        }
+        out.sort_by(|a, b| (a.time_us, &a.name).cmp(&(b.time_us, &b.name)));
+        Ok(out)
+    }
+
+    fn describe(&self) -> String {
+        self.dir.display().to_string()
+    }
+}
+
+/// Tolerances of the pairing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PairOptions {
+    /// A trigger without a frame this long after its expected frame time is missing (µs).
+    pub frame_timeout_us: i64,
+    /// Initial estimate of frame timestamp − trigger time (µs); refined as frames pair. 0 when
+    /// the camera stamps frames with their exposure time.
+    pub latency_us: i64,
+    /// How long a new frame waits for its trigger event to arrive (µs).
+    pub event_grace_us: i64,
+    /// A frame must lie within this fraction of the gap to the neighbouring trigger (< 0.5).
+    pub tolerance_fraction: f64,
+}
+
+impl Default for PairOptions {
+    fn default() -> Self {
+        PairOptions { frame_timeout_us: 2_000_000, latency_us: 0, event_grace_us: 200_000, tolerance_fraction: 0.4 }
+    }
+}
+
+/// What the pairing concluded, in the order it concluded it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PairEvent {
+    /// A frame with its trigger: a manifest record.
+    Paired(Box<Frame>),
+    /// A trigger that fired but whose frame never came.
+    FrameMissing { seq: u64, facet: u32, alpha_deg: f64, reason: String },
+    /// Trigger events that were sent but never arrived (a sequence gap).
+    EventsLost { first_seq: u64, count: u64 },
+    /// A frame that no received trigger accounts for (not written to the manifest).
+    FrameUnmatched { path: String, reason: String },
+    /// An event contradicting the schedule (dropped, never paired).
+    BadEvent(String),
+}
+
+/// Counters of the pairing.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PairStats {
+    pub triggers: u64,
+    pub paired: u64,
+    pub frames_missing: u64,
+    pub events_lost: u64,
+    pub events_duplicated: u64,
+    pub frames_unmatched: u64,
+    pub bad_events: u64,
+}
+
+impl PairStats {
+    /// Triggers without a frame in the manifest: lost events and frames that never came.
+    pub fn missing_total(&self) -> u64 {
+        self.frames_missing + self.events_lost
+    }
+}
+
+struct PendingFrame {
+    frame: CapturedFrame,
+    detected_us: i64,
+}
+
+/// The pairing state machine. All times are host-clock µs ([`crate::host_time_us`]) passed in
+/// by the caller, so it is deterministic under test.
+pub struct Pairer {
+    schedule: Schedule,
+    options: PairOptions,
+    us_per_count: f64,
+    clock_offset_us: Option<i64>,
+    latency_us: f64,
+    next_seq: u64,
+    pending: BTreeMap<u64, TriggerEvent>,
+    frames: VecDeque<PendingFrame>,
+    ambient: HashMap<(u32, u64), String>,
+    newest_trigger_time: Option<i64>,
+    pub stats: PairStats,
+}
+
+impl Pairer {
+    /// `rpm`: the motor speed the controller runs at (its `STS` line).
+    pub fn new(schedule: Schedule, rpm: f64, options: PairOptions) -> Self {
+        let us_per_count = 60e6 / (rpm.max(1e-9) * schedule.counts_per_rev as f64);
+        Pairer {
+            schedule,
+            latency_us: options.latency_us as f64,
+            options,
+            us_per_count,
+            clock_offset_us: None,
+            next_seq: 0,
+            pending: BTreeMap::new(),
+            frames: VecDeque::new(),
+            ambient: HashMap::new(),
+            newest_trigger_time: None,
+            stats: PairStats::default(),
+        }
+    }
+
+    /// Nothing is waiting: every received trigger and frame has been accounted for.
+    pub fn is_idle(&self) -> bool {
+        self.pending.is_empty() && self.frames.is_empty()
+    }
+
+    /// Sequence number of the next expected event (= events accounted for).
+    pub fn next_seq(&self) -> u64 {
+        self.next_seq
+    }
+
+    /// A trigger event received at host time `received_us`.
+    pub fn on_trigger(&mut self, ev: TriggerEvent, received_us: i64) -> Vec<PairEvent> {
+        let mut out = Vec::new();
+        if let Err(e) = self.schedule.check(&ev) {
+            self.stats.bad_events += 1;
+            out.push(PairEvent::BadEvent(e));
+            return out;
+        }
+        if ev.seq < self.next_seq {
+            self.stats.events_duplicated += 1;
+            return out;
+        }
+        out.extend(self.lose_events_before(ev.seq));
+        let offset = received_us - ev.t_us as i64;
+        self.clock_offset_us = Some(self.clock_offset_us.map_or(offset, |o| o.min(offset)));
+        self.stats.triggers += 1;
+        self.next_seq = ev.seq + 1;
+        self.pending.insert(ev.seq, ev);
+        self.newest_trigger_time = self.pending.values().last().map(|e| self.frame_time(e));
+        out
+    }
+
+    fn lose_events_before(&mut self, seq: u64) -> Option<PairEvent> {
+        (seq > self.next_seq).then(|| {
+            let count = seq - self.next_seq;
+            self.stats.events_lost += count;
+            let first_seq = self.next_seq;
+            self.next_seq = seq;
+            PairEvent::EventsLost { first_seq, count }
+        })
+    }
+
+    /// The controller reported the run's total trigger count: events beyond the last received
+    /// one are lost.
+    pub fn on_run_end(&mut self, fired: u64) -> Vec<PairEvent> {
+        self.lose_events_before(fired).into_iter().collect()
+    }
+
+    /// A new frame, first seen at host time `now_us`.
+    pub fn on_frame(&mut self, frame: CapturedFrame, now_us: i64) {
+        self.frames.push_back(PendingFrame { frame, detected_us: now_us });
+    }
+
+    /// Expected host-clock time of trigger `ev`'s frame.
+    fn frame_time(&self, ev: &TriggerEvent) -> i64 {
+        ev.t_us as i64 + self.clock_offset_us.unwrap_or(0) + self.latency_us.round() as i64
+    }
+
+    /// Half-width of the window around trigger `seq`'s expected frame time (µs).
+    fn tolerance_us(&self, seq: u64) -> f64 {
+        let here = self.schedule.position(seq);
+        let next_gap = self.schedule.position(seq + 1) - here;
+        let gap = if seq > 0 { next_gap.min(here - self.schedule.position(seq - 1)) } else { next_gap };
+        self.options.tolerance_fraction * gap as f64 * self.us_per_count
+    }
+
+    /// Pairs the frames that are ready and expires overdue triggers. Call it often.
+    pub fn tick(&mut self, now_us: i64) -> Vec<PairEvent> {
+        let mut out = Vec::new();
+        while let Some(f) = self.frames.front() {
+            let trigger_seen = self.newest_trigger_time.is_some_and(|t| t >= f.frame.time_us);
+            if !trigger_seen && now_us - f.detected_us < self.options.event_grace_us {
+                break;
+            }
+            let f = self.frames.pop_front().map(|f| f.frame);
+            if let Some(f) = f {
+                out.extend(self.match_frame(f));
+            }
+        }
+        let overdue: Vec<u64> = self
+            .pending
+            .values()
+            .filter(|e| now_us - self.frame_time(e) > self.options.frame_timeout_us)
+            .map(|e| e.seq)
+            .collect();
+        for seq in overdue {
+            let reason = format!("no frame within {} ms of the trigger", self.options.frame_timeout_us / 1000);
+            out.extend(self.declare_missing(seq, reason));
+        }
+        out
+    }
+
+    /// Ends the pairing: every waiting frame is matched now, every unpaired trigger is missing.
+    pub fn drain(&mut self) -> Vec<PairEvent> {
+        let mut out = Vec::new();
+        while let Some(f) = self.frames.pop_front() {
+            out.extend(self.match_frame(f.frame));
+        }
+        let left: Vec<u64> = self.pending.keys().copied().collect();
+        for seq in left {
+            out.extend(self.declare_missing(seq, "no frame before the scan ended".into()));
+        }
+        out
+    }
+
+    fn declare_missing(&mut self, seq: u64, reason: String) -> Option<PairEvent> {
+        let ev = self.pending.remove(&seq)?;
+        self.stats.frames_missing += 1;
+        Some(PairEvent::FrameMissing { seq, facet: ev.facet, alpha_deg: self.schedule.alpha_deg(ev.encoder), reason })
+    }
+
+    fn match_frame(&mut self, frame: CapturedFrame) -> Vec<PairEvent> {
+        let mut out = Vec::new();
+        let best = self
+            .pending
+            .values()
+            .map(|e| (e.seq, (frame.time_us - self.frame_time(e)) as f64))
+            .min_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
+        let Some((seq, error_us)) = best.filter(|(seq, err)| err.abs() <= self.tolerance_us(*seq)) else {
+            self.stats.frames_unmatched += 1;
+            let reason = match best {
+                Some((seq, err)) => format!(
+                    "its timestamp is {:.1} ms from the nearest pending trigger (seq {seq}), beyond the ±{:.1} ms window",
+                    err / 1000.0,
+                    self.tolerance_us(seq) / 1000.0
+                ),
+                None => "no pending trigger (its event was lost or it came too late)".into(),
+            };
+            out.push(PairEvent::FrameUnmatched { path: frame.name, reason });
+            return out;
+        };
+        let earlier: Vec<u64> = self.pending.range(..seq).map(|(s, _)| *s).collect();
+        for s in earlier {
+            out.extend(self.declare_missing(s, "a later frame arrived first".into()));
+        }
+        // Track slow drifts of the latency; a single frame moves the estimate by a third at most.
+        self.latency_us += 0.3 * error_us;
+        if let Some(ev) = self.pending.remove(&seq) {
+            self.stats.paired += 1;
+            out.push(PairEvent::Paired(Box::new(self.record(&ev, frame.name))));
+        }
+        out
+    }
+
+    fn record(&mut self, ev: &TriggerEvent, path: String) -> Frame {
+        let mut f = Frame::new(ev.seq, path.clone(), self.schedule.alpha_deg(ev.encoder), ev.facet);
+        f.revolution = ev.revolution;
+        f.encoder = Some(ev.encoder as u64);
+        f.timestamp_us = Some(ev.t_us);
+        f.lasers = ev.lasers.clone();
+        if self.schedule.ambient {
+            let key = |rev: u64| (ev.encoder, rev);
+            if ev.lasers.is_empty() {
+                self.ambient.insert(key(ev.revolution), path);
+            } else if ev.revolution > 0 {
+                f.ambient_path = self.ambient.remove(&key(ev.revolution - 1));
+            }
+        }
+        f
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 36000 counts/rev, facets 0 and 6, angles 0°, 10°, 20°; at 83.33 rpm one count is 20 µs,
+    /// so neighbouring triggers are ≥ 20 ms apart and the window is ±8 ms.
+    fn schedule(ambient: bool) -> Schedule {
+        Schedule {
+            counts_per_rev: 36000,
+            facets_total: 12,
+            facets: vec![0, 6],
+            counts: vec![0, 1000, 2000],
+            lasers: vec![0, 1],
+            ambient,
+        }
+    }
+    const RPM: f64 = 60e6 / (20.0 * 36000.0);
+    const OFFSET: i64 = 1_700_000_000_000_000;
+
+    fn event(s: &Schedule, seq: u64) -> TriggerEvent {
+        let e = s.expected(seq);
+        TriggerEvent {
+            seq,
+            encoder: e.encoder,
+            facet: e.facet,
+            revolution: e.revolution,
+            t_us: 1000 + s.position(seq) * 20,
+            lasers: e.lasers,
+        }
+    }
+
+    fn frame(name: &str, time_us: i64) -> CapturedFrame {
+        CapturedFrame { path: PathBuf::from(name), name: name.into(), time_us }
+    }
+
+    /// Feeds events (received 300 µs after firing) and frames (stamped `latency` after firing,
+    /// seen 5 ms later), in time order; returns everything the pairer said.
+    fn run(s: &Schedule, events: &[u64], frames: &[(u64, i64)], fired: u64) -> (Vec<PairEvent>, PairStats) {
+        let mut p = Pairer::new(s.clone(), RPM, PairOptions::default());
+        let mut timeline: Vec<(i64, Result<TriggerEvent, CapturedFrame>)> = Vec::new();
+        for &seq in events {
+            let ev = event(s, seq);
+            timeline.push((ev.t_us as i64 + OFFSET + 300, Ok(ev)));
+        }
+        for &(seq, latency) in frames {
+            let t = event(s, seq).t_us as i64 + OFFSET + latency;
+            timeline.push((t + 5000, Err(frame(&format!("f{seq}.png"), t))));
+        }
+        timeline.sort_by_key(|(t, _)| *t);
+        let mut out = Vec::new();
+        let mut now = 0;
+        for (t, item) in timeline {
+            now = t;
+            match item {
+                Ok(ev) => out.extend(p.on_trigger(ev, t)),
+                Err(f) => p.on_frame(f, t),
+            }
+            out.extend(p.tick(now));
+        }
+        out.extend(p.on_run_end(fired));
+        out.extend(p.tick(now + 10_000_000));
+        out.extend(p.drain());
+        (out, p.stats)
+    }
+
+    fn paired(out: &[PairEvent]) -> Vec<(u64, String, f64, u32)> {
+        out.iter()
+            .filter_map(|e| match e {
+                PairEvent::Paired(f) => Some((f.seq, f.path.clone(), f.alpha_deg, f.facet)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn clean_run_pairs_every_frame_with_its_own_angle() {
+        let s = schedule(false);
+        let all: Vec<u64> = (0..12).collect();
+        let frames: Vec<(u64, i64)> = all.iter().map(|&q| (q, 1500)).collect();
+        let (out, stats) = run(&s, &all, &frames, 12);
+        let p = paired(&out);
+        assert_eq!(p.len(), 12);
+        for (seq, path, alpha, facet) in p {
+            let e = s.expected(seq);
+            assert_eq!(path, format!("f{seq}.png"));
+            assert_eq!(facet, e.facet);
+            assert!((alpha - e.count_in_facet as f64 * 0.01).abs() < 1e-12);
+        }
+        assert_eq!(stats.missing_total(), 0);
+        assert_eq!(stats.frames_unmatched, 0);
+    }
+
+    #[test]
+    fn a_missed_frame_is_reported_and_the_next_frame_is_not_shifted() {
+        let s = schedule(false);
+        let all: Vec<u64> = (0..12).collect();
+        let frames: Vec<(u64, i64)> = all.iter().filter(|&&q| q != 4).map(|&q| (q, 0)).collect();
+        let (out, stats) = run(&s, &all, &frames, 12);
+        assert!(paired(&out).iter().all(|(seq, path, _, _)| *path == format!("f{seq}.png")));
+        assert_eq!(paired(&out).len(), 11);
+        assert!(out.iter().any(|e| matches!(e, PairEvent::FrameMissing { seq: 4, .. })));
+        assert_eq!(stats.frames_missing, 1);
+    }
+
+    #[test]
+    fn a_lost_event_leaves_its_frame_unmatched_never_paired_with_a_neighbour() {
+        let s = schedule(false);
+        let events: Vec<u64> = (0..12).filter(|&q| q != 5 && q != 11).collect();
+        let frames: Vec<(u64, i64)> = (0..12).map(|q| (q, 0)).collect();
+        let (out, stats) = run(&s, &events, &frames, 12);
+        let p = paired(&out);
+        assert_eq!(p.len(), 10);
+        assert!(p.iter().all(|(seq, path, _, _)| *path == format!("f{seq}.png")));
+        assert_eq!(stats.events_lost, 2, "seq 5 (gap) and seq 11 (tail, from DONE)");
+        assert_eq!(stats.frames_unmatched, 2);
+    }
+
+    #[test]
+    fn duplicated_and_contradictory_events_are_dropped() {
+        let s = schedule(false);
+        let mut p = Pairer::new(s.clone(), RPM, PairOptions::default());
+        assert!(p.on_trigger(event(&s, 0), OFFSET).is_empty());
+        assert!(p.on_trigger(event(&s, 0), OFFSET).is_empty());
+        let mut wrong = event(&s, 1);
+        wrong.encoder += 1;
+        assert!(matches!(p.on_trigger(wrong, OFFSET)[0], PairEvent::BadEvent(_)));
+        assert_eq!((p.stats.events_duplicated, p.stats.bad_events, p.stats.triggers), (1, 1, 1));
+    }
+
+    #[test]
+    fn latency_jitter_within_the_window_pairs_and_beyond_it_is_refused() {
+        let s = schedule(false);
+        let all: Vec<u64> = (0..6).collect();
+        // ±6 ms jitter around 3 ms latency: inside the ±8 ms window once the estimate settles.
+        let frames: Vec<(u64, i64)> =
+            all.iter().map(|&q| (q, if q % 2 == 0 { 3000 + 5000 } else { 3000 - 5000 })).collect();
+        let (out, _) = run(&s, &all, &frames, 6);
+        assert_eq!(paired(&out).len(), 6);
+        // A frame 12 ms late sits between triggers (window ±8 ms): unmatched, not guessed.
+        let (out, stats) = run(&s, &all, &[(0, 0), (1, 0), (2, 12_000)], 6);
+        assert_eq!(paired(&out).len(), 2);
+        assert_eq!(stats.frames_unmatched, 1);
+    }
+
+    #[test]
+    fn laser_frames_point_at_the_ambient_frame_of_the_previous_revolution() {
+        let s = schedule(true);
+        let all: Vec<u64> = (0..12).collect();
+        let frames: Vec<(u64, i64)> = all.iter().map(|&q| (q, 0)).collect();
+        let (out, _) = run(&s, &all, &frames, 12);
+        let recs: Vec<&Frame> =
+            out.iter().filter_map(|e| if let PairEvent::Paired(f) = e { Some(f.as_ref()) } else { None }).collect();
+        assert_eq!(recs.len(), 12);
+        for f in &recs[..6] {
+            assert!(f.lasers.is_empty() && f.ambient_path.is_none());
+        }
+        for f in &recs[6..] {
+            assert_eq!(f.lasers, vec![0, 1]);
+            assert_eq!(f.ambient_path.as_deref(), Some(format!("f{}.png", f.seq - 6).as_str()));
+        }
+    }
+}

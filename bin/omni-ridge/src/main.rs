@@ -1,1 +1,125 @@
-fn main() {}
+//! omni-ridge: sub-pixel laser-stripe centres for every frame of an omniscan stream.
+
+mod pipeline;
+
+use clap::Parser;
+use omni_cli::{CliError, CliResult};
+use omni_vision::stripe::{Method, RidgeParams};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+const AFTER_HELP: &str = "\
+Each frame record's image (path resolved against the header's frames_dir) is loaded, its laser-off
+frame (ambient_path) subtracted if present, and sampled radially from the mirror centre inside the
+mirror annulus (from --camera; without it: the image centre and the largest inscribed circle).
+Every stripe segment crossing a ray gives one point [u, v, peak intensity, width px, quality flags]
+in the record's `stripe` field; other records and fields pass through untouched.
+
+Methods: centroid (the paper's threshold + intensity centroid, Eq. 16), windowed (centroid with the
+threshold subtracted, the default), gauss (log-parabola fit), blais-rioux, hessian (Steger).
+Saturated stripes are always located at the centre of the saturated plateau.
+
+Examples:
+  omni-sim scan --scene room.json | omni-ridge --camera camera.json | omni-triangulate ...
+  omni-ridge scan.jsonl -o ridges.jsonl --camera camera.json --method gauss --threshold 40
+  omni-ridge scan.jsonl -o ridges.jsonl --overlay check/ --keep-going";
+
+/// Finds the laser stripe's sub-pixel centres in every frame of a stream.
+#[derive(Parser, Debug)]
+#[command(version, about, after_help = AFTER_HELP)]
+struct Args {
+    /// Input stream (JSON Lines); `-` for stdin.
+    #[arg(default_value = "-")]
+    input: PathBuf,
+    /// Output stream; `-` for stdout. Files are written atomically.
+    #[arg(short, long, default_value = "-")]
+    output: PathBuf,
+    /// camera.json: gives the mirror centre, the valid annulus and the expected frame size.
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    /// Stripe-centre estimator.
+    #[arg(long, default_value = "windowed", value_parser = parse_method)]
+    method: Method,
+    /// Intensity threshold in the frame's units (0–255 or 0–65535) [default: 12 % of full scale].
+    #[arg(long)]
+    threshold: Option<f64>,
+    /// Narrowest accepted stripe (px, threshold crossing to crossing along the ray).
+    #[arg(long, default_value_t = 2.0)]
+    min_width: f64,
+    /// Widest accepted stripe (px); wider segments are glints or ambient light.
+    #[arg(long, default_value_t = 12.0)]
+    max_width: f64,
+    /// Scale (px) of the Gaussian derivatives of the hessian method.
+    #[arg(long, default_value_t = 1.5)]
+    hessian_sigma: f64,
+    /// Write each frame with its detected centres drawn as DIR/<seq>.png.
+    #[arg(long, value_name = "DIR")]
+    overlay: Option<PathBuf>,
+    /// On a bad frame, write an error record and go on (exit code 1 at the end).
+    #[arg(long)]
+    keep_going: bool,
+    /// Worker threads (0: one per core).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+}
+
+fn parse_method(s: &str) -> Result<Method, String> {
+    s.parse()
+}
+
+fn main() -> ExitCode {
+    omni_cli::main("omni-ridge", || {
+        let args = Args::parse();
+        let params = RidgeParams {
+            method: args.method,
+            threshold: args.threshold,
+            min_width: args.min_width,
+            max_width: args.max_width,
+            hessian_sigma: args.hessian_sigma,
+        };
+        params.validate().map_err(CliError::usage)?;
+        let camera = match &args.camera {
+            Some(path) => Some(omni_formats::CameraFile::load(path)?.1),
+            None => None,
+        };
+        if let Some(dir) = &args.overlay {
+            std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        }
+        let threads = if args.threads == 0 {
+            std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+        } else {
+            args.threads
+        };
+        let config = pipeline::Config {
+            params,
+            camera,
+            overlay: args.overlay,
+            keep_going: args.keep_going,
+            threads,
+            producer: format!("omni-ridge {}", env!("CARGO_PKG_VERSION")),
+        };
+        run(&args.input, &args.output, config)
+    })
+}
+
+fn run(input: &std::path::Path, output: &std::path::Path, config: pipeline::Config) -> CliResult {
+    let reader = pipeline::open_reader(input)?;
+    let input_name = omni_formats::io::display_name(input, "stdin");
+    if output == std::path::Path::new("-") {
+        let stdout = std::io::stdout();
+        return pipeline::run(reader, &input_name, stdout.lock(), "stdout", config);
+    }
+    let out_name = output.display().to_string();
+    let mut outcome: CliResult = Ok(());
+    let written = omni_formats::io::write_atomic(output, |w| {
+        outcome = pipeline::run(reader, &input_name, w, &out_name, config);
+        match &outcome {
+            // Per-frame failures with --keep-going still leave a complete output stream.
+            Err(e) if !pipeline::is_keep_going_summary(e) => Err(std::io::Error::other(e.message().to_string())),
+            _ => Ok(()),
+        }
+    });
+    outcome?;
+    written?;
+    Ok(())
+}

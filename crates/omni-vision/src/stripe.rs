@@ -1,1 +1,604 @@
-//! (in progress)
+//! Sub-pixel laser-stripe centres in omnidirectional frames.
+//!
+//! In an omnidirectional image the stripe runs roughly around the mirror centre, so "across the
+//! stripe" is radial: the detector samples each frame along rays from the mirror centre
+//! ([`omni_model::MirrorCircle`] of the camera, or the image centre), restricted to the valid
+//! mirror annulus. There are `ceil(2π · outer_radius)` rays, so that neighbouring rays are at
+//! most 1 px apart at the rim, and every stripe segment crossing a ray gives one point on it.
+//!
+//! Speed: resampling the whole annulus radially would touch more samples than the image has
+//! pixels. Instead a fast row scan first finds the pixels above the threshold, marks the rays
+//! (and radii) passing through them, and only those short stretches of rays are resampled
+//! (bilinear, [`SAMPLE_STEP_PX`] steps) and searched for segments above the threshold. Each
+//! segment whose width lies within the bounds is handed to the selected [`Method`]:
+//!
+//! * [`Method::Centroid`] — the paper's baseline (Eq. 16): threshold, then intensity centroid;
+//! * [`Method::Windowed`] — centroid with the threshold subtracted from the weights;
+//! * [`Method::Gauss`] — 3-point log-parabola (Gaussian) peak fit;
+//! * [`Method::BlaisRioux`] — Blais–Rioux 4th-order derivative zero crossing;
+//! * [`Method::Hessian`] — Steger's line detector (Hessian of the Gaussian-smoothed image)
+//!   evaluated only in a band around the coarse (windowed-centroid) centre, and intersected
+//!   with the ray.
+//!
+//! Saturated segments (a sample at the saturation level) are always located at the centre of
+//! the saturated plateau and flagged [`quality::SATURATED`].
+//!
+//! ```
+//! use omni_vision::stripe::{Method, RidgeDetector, RidgeParams};
+//! use omni_vision::image_io::GrayImage;
+//! // A 64×64 frame with a bright ring of radius 20 px around the image centre.
+//! let mut img = GrayImage::new(64, 64, 8);
+//! for y in 0..64 { for x in 0..64 {
+//!     let r = ((x as f64 - 31.5).powi(2) + (y as f64 - 31.5).powi(2)).sqrt();
+//!     img.data[y * 64 + x] = (200.0 * (-(r - 20.0).powi(2) / 2.0).exp()) as u16;
+//! }}
+//! let det = RidgeDetector::for_image_centre(64, 64, RidgeParams { method: Method::Gauss, ..Default::default() });
+//! let points = det.detect(&img);
+//! assert!(points.len() > 100);
+//! for p in &points {
+//!     let r = ((p.u - 31.5).powi(2) + (p.v - 31.5).powi(2)).sqrt();
+//!     assert!((r - 20.0).abs() < 0.05);
+//! }
+//! ```
+
+mod estimators;
+mod frames;
+mod overlay;
+mod steger;
+
+pub use estimators::Segment;
+pub use frames::{check_size, frame_points, load_frame_image};
+pub use omni_formats::stream::{StripePoint, quality};
+pub use overlay::draw_overlay;
+
+use crate::image_io::GrayImage;
+use omni_model::MirrorCircle;
+use std::f64::consts::TAU;
+
+/// Spacing of the samples along a ray (px). Half a pixel keeps the resampled profile close to
+/// the continuous one for stripes a few pixels wide.
+pub const SAMPLE_STEP_PX: f64 = 0.5;
+
+/// The stripe-centre estimator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Method {
+    /// The paper's threshold + intensity centroid (Eq. 16).
+    Centroid,
+    /// Centroid with the threshold subtracted from the weights.
+    #[default]
+    Windowed,
+    /// Gaussian (3-point log-parabola) peak fit.
+    Gauss,
+    /// Blais–Rioux derivative-filter zero crossing.
+    BlaisRioux,
+    /// Steger's Hessian line detector in a band around the coarse centre.
+    Hessian,
+}
+
+impl Method {
+    /// All methods, for benchmarks and comparisons.
+    pub const ALL: [Method; 5] =
+        [Method::Centroid, Method::Windowed, Method::Gauss, Method::BlaisRioux, Method::Hessian];
+
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Centroid => "centroid",
+            Method::Windowed => "windowed",
+            Method::Gauss => "gauss",
+            Method::BlaisRioux => "blais-rioux",
+            Method::Hessian => "hessian",
+        }
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("unknown method \"{s}\" (known: centroid, windowed, gauss, blais-rioux, hessian)"))
+    }
+}
+
+/// Detector settings. Intensities are in the frame's own units (0–255 for 8-bit frames,
+/// 0–65535 for 16-bit ones); lengths in px.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RidgeParams {
+    pub method: Method,
+    /// Samples brighter than this belong to a stripe. `None`: 12 % of full scale (30 of 255).
+    pub threshold: Option<f64>,
+    /// Segments narrower than this (threshold crossing to crossing, along the ray) are noise.
+    pub min_width: f64,
+    /// Segments wider than this are glints, ambient blobs or stripes nearly along the ray.
+    pub max_width: f64,
+    /// Scale (px) of the Gaussian derivatives of [`Method::Hessian`].
+    pub hessian_sigma: f64,
+}
+
+impl Default for RidgeParams {
+    fn default() -> Self {
+        RidgeParams { method: Method::Windowed, threshold: None, min_width: 2.0, max_width: 12.0, hessian_sigma: 1.5 }
+    }
+}
+
+impl RidgeParams {
+    /// The threshold for a frame whose samples saturate at `max_value`.
+    pub fn threshold_for(&self, max_value: f64) -> f64 {
+        self.threshold.unwrap_or(0.12 * max_value)
+    }
+
+    /// Checks the settings; the message names the bad one.
+    pub fn validate(&self) -> Result<(), String> {
+        if let Some(t) = self.threshold
+            && !(t.is_finite() && t >= 0.0)
+        {
+            return Err(format!("threshold must be a finite number ≥ 0, got {t}"));
+        }
+        if !(self.min_width.is_finite() && self.min_width >= 0.0) {
+            return Err(format!("min-width must be ≥ 0, got {}", self.min_width));
+        }
+        if !(self.max_width.is_finite() && self.max_width > self.min_width) {
+            return Err(format!("max-width must be > min-width ({}), got {}", self.min_width, self.max_width));
+        }
+        if !(self.hessian_sigma.is_finite() && self.hessian_sigma >= 0.5 && self.hessian_sigma <= 8.0) {
+            return Err(format!("hessian sigma must be in [0.5, 8] px, got {}", self.hessian_sigma));
+        }
+        Ok(())
+    }
+}
+
+/// A sample type the detector reads directly: 8- or 16-bit.
+pub trait Pixel: Copy + Send + Sync + PartialOrd {
+    fn to_f32(self) -> f32;
+    /// The threshold as this type (values strictly above it are candidates).
+    fn from_threshold(t: f64) -> Self;
+}
+
+impl Pixel for u8 {
+    fn to_f32(self) -> f32 {
+        self as f32
+    }
+    fn from_threshold(t: f64) -> Self {
+        t.floor().clamp(0.0, 255.0) as u8
+    }
+}
+
+impl Pixel for u16 {
+    fn to_f32(self) -> f32 {
+        self as f32
+    }
+    fn from_threshold(t: f64) -> Self {
+        t.floor().clamp(0.0, 65535.0) as u16
+    }
+}
+
+/// A borrowed single-channel frame.
+#[derive(Debug, Clone, Copy)]
+pub struct Frame<'a, P> {
+    pub width: u32,
+    pub height: u32,
+    pub data: &'a [P],
+    /// Saturation level (255 for 8-bit, 65535 for 16-bit frames).
+    pub max_value: f64,
+}
+
+impl<P: Pixel> Frame<'_, P> {
+    #[inline]
+    fn at(&self, x: usize, y: usize) -> f32 {
+        self.data[y * self.width as usize + x].to_f32()
+    }
+
+    /// Bilinear sample at (x, y) px, or `None` if its 2×2 neighbourhood leaves the image.
+    #[inline]
+    fn bilinear(&self, x: f64, y: f64) -> Option<f32> {
+        let (x0, y0) = (x.floor(), y.floor());
+        if x0 < 0.0 || y0 < 0.0 || x0 + 1.0 >= self.width as f64 || y0 + 1.0 >= self.height as f64 {
+            return None;
+        }
+        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        let (xi, yi) = (x0 as usize, y0 as usize);
+        let w = self.width as usize;
+        let i = yi * w + xi;
+        let d = self.data;
+        let top = d[i].to_f32() + fx * (d[i + 1].to_f32() - d[i].to_f32());
+        let bottom = d[i + w].to_f32() + fx * (d[i + w + 1].to_f32() - d[i + w].to_f32());
+        Some(top + fy * (bottom - top))
+    }
+}
+
+/// The sampling geometry of one image size and mirror annulus, plus settings. Build once per
+/// camera and reuse for every frame; [`RidgeDetector::detect_frame`] is safe to call from many
+/// threads at once.
+#[derive(Debug, Clone)]
+pub struct RidgeDetector {
+    params: RidgeParams,
+    width: u32,
+    height: u32,
+    /// Mirror centre (px).
+    cx: f64,
+    cy: f64,
+    /// Annulus radii (px).
+    r_in: f64,
+    r_out: f64,
+    /// Unit direction of each ray.
+    dirs: Vec<(f64, f64)>,
+    /// 64-bit words per ray in the radius bitmap.
+    words_per_ray: usize,
+    steger: steger::Kernels,
+}
+
+/// Per-call working memory (reuse it across frames on one thread to avoid allocations).
+#[derive(Debug, Default)]
+pub struct Scratch {
+    /// For each ray, a bitmap of the 1-px radius bins holding a pixel above the threshold.
+    bits: Vec<u64>,
+    /// Rays with at least one bit set, to clear and visit only those.
+    touched: Vec<u32>,
+    profile: Vec<f32>,
+}
+
+impl RidgeDetector {
+    /// A detector for `width`×`height` frames sampled from `circle`'s centre within its annulus
+    /// (clipped to the image).
+    pub fn new(width: u32, height: u32, circle: MirrorCircle, params: RidgeParams) -> Self {
+        let (cx, cy) = (circle.centre.x, circle.centre.y);
+        let r_in = circle.inner_radius.max(2.0);
+        // The rays never need to go past the farthest image corner.
+        let corner = [(0.0, 0.0), (width as f64, 0.0), (0.0, height as f64), (width as f64, height as f64)]
+            .iter()
+            .map(|&(x, y)| (x - cx).hypot(y - cy))
+            .fold(0.0, f64::max);
+        let r_out = circle.outer_radius.min(corner).max(r_in + 1.0);
+        let n_rays = (TAU * r_out).ceil().max(8.0) as usize;
+        let dirs = (0..n_rays).map(|i| (TAU * i as f64 / n_rays as f64).sin_cos()).map(|(s, c)| (c, s)).collect();
+        let words_per_ray = (r_out as usize + 2).div_ceil(64);
+        let steger = steger::Kernels::new(params.hessian_sigma);
+        RidgeDetector { params, width, height, cx, cy, r_in, r_out, dirs, words_per_ray, steger }
+    }
+
+    /// A detector sampling from the image centre, over the largest circle inside the image.
+    pub fn for_image_centre(width: u32, height: u32, params: RidgeParams) -> Self {
+        let centre = omni_geom::Vector2::new((width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0);
+        let outer_radius = (width.min(height) as f64 - 1.0) / 2.0;
+        Self::new(width, height, MirrorCircle { centre, inner_radius: 0.0, outer_radius }, params)
+    }
+
+    pub fn params(&self) -> &RidgeParams {
+        &self.params
+    }
+
+    /// The image size the detector was built for.
+    pub fn image_size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// Number of sampling rays (one per ≤ 1 px of rim).
+    pub fn ray_count(&self) -> usize {
+        self.dirs.len()
+    }
+
+    /// Stripe centres of a loaded frame (any bit depth).
+    pub fn detect(&self, img: &GrayImage) -> Vec<StripePoint> {
+        let frame = Frame { width: img.width, height: img.height, data: &img.data, max_value: img.max_value() as f64 };
+        self.detect_frame(&frame, &mut Scratch::default())
+    }
+
+    /// Stripe centres of a frame, in ray order (azimuth from +x towards +y), then by radius.
+    /// Panics if the frame's size is not the detector's (check [`Self::image_size`] first).
+    pub fn detect_frame<P: Pixel>(&self, frame: &Frame<'_, P>, scratch: &mut Scratch) -> Vec<StripePoint> {
+        assert_eq!((frame.width, frame.height), (self.width, self.height), "frame size differs from the detector's");
+        assert_eq!(frame.data.len(), self.width as usize * self.height as usize, "frame buffer has the wrong length");
+        let threshold = self.params.threshold_for(frame.max_value);
+        self.mark_candidates(frame, threshold, scratch);
+        let mut out = Vec::new();
+        // Points of ray `rays[i].0` are `out[rays[i].1..rays[i + 1].1]`.
+        let mut rays: Vec<(u32, usize)> = Vec::new();
+        let mut touched = std::mem::take(&mut scratch.touched);
+        touched.sort_unstable();
+        for &ray in &touched {
+            rays.push((ray, out.len()));
+            self.scan_ray(frame, ray as usize, threshold, scratch, &mut out);
+            let w = self.words_per_ray;
+            scratch.bits[ray as usize * w..(ray as usize + 1) * w].fill(0);
+        }
+        touched.clear();
+        scratch.touched = touched;
+        self.drop_isolated(out, &rays)
+    }
+
+    /// Keeps only points with a neighbour on the stripe [`MIN_STRIPE_ARC_PX`] away (on either
+    /// side, across rays): a hot pixel or a speck of noise covers only the rays within 1 px of
+    /// it, a stripe runs on.
+    fn drop_isolated(&self, out: Vec<StripePoint>, rays: &[(u32, usize)]) -> Vec<StripePoint> {
+        let n = self.dirs.len();
+        let mut range_of: std::collections::HashMap<u32, (usize, usize)> = Default::default();
+        for (i, &(ray, start)) in rays.iter().enumerate() {
+            let end = rays.get(i + 1).map_or(out.len(), |r| r.1);
+            if end > start {
+                range_of.insert(ray, (start, end));
+            }
+        }
+        let radius = |p: &StripePoint| (p.u - self.cx).hypot(p.v - self.cy);
+        // Largest radial step between neighbours on a stripe crossing the rays at 60°.
+        let max_dr = MIN_STRIPE_ARC_PX * 3f64.sqrt() + 1.0;
+        let has_neighbour = |ray: u32, r: f64, k: i64| {
+            let other = (ray as i64 + k).rem_euclid(n as i64) as u32;
+            range_of.get(&other).is_some_and(|&(a, b)| out[a..b].iter().any(|q| (radius(q) - r).abs() <= max_dr))
+        };
+        let mut kept = Vec::with_capacity(out.len());
+        for &(ray, start) in rays {
+            let Some(&(a, b)) = range_of.get(&ray) else { continue };
+            debug_assert_eq!(a, start);
+            for p in &out[a..b] {
+                let r = radius(p);
+                // Rays are 2π·r/n px apart at radius r.
+                let k = (MIN_STRIPE_ARC_PX * n as f64 / (TAU * r)).ceil().max(1.0) as i64;
+                if has_neighbour(ray, r, k) || has_neighbour(ray, r, -k) {
+                    kept.push(*p);
+                }
+            }
+        }
+        kept
+    }
+
+    /// Row scan: every pixel above the threshold inside the annulus marks its radius bin on the
+    /// rays passing within 1 px of it.
+    fn mark_candidates<P: Pixel>(&self, frame: &Frame<'_, P>, threshold: f64, scratch: &mut Scratch) {
+        let n = self.dirs.len();
+        scratch.bits.resize(n * self.words_per_ray, 0);
+        let t = P::from_threshold(threshold);
+        let w = self.width as usize;
+        let y_lo = (self.cy - self.r_out).floor().max(0.0) as usize;
+        let y_hi = ((self.cy + self.r_out).ceil() as usize).min(self.height as usize - 1);
+        let rays_per_rad = n as f64 / TAU;
+        for y in y_lo..=y_hi {
+            let dy = y as f64 - self.cy;
+            let half = (self.r_out * self.r_out - dy * dy).max(0.0).sqrt();
+            let x_lo = (self.cx - half).floor().max(0.0) as usize;
+            let x_hi = ((self.cx + half).ceil() as usize).min(w - 1);
+            if x_lo > x_hi {
+                continue;
+            }
+            let row = &frame.data[y * w + x_lo..=y * w + x_hi];
+            // Skip dark 16-pixel blocks with one comparison per pixel and no branches.
+            for (ci, chunk) in row.chunks(16).enumerate() {
+                if !chunk.iter().fold(false, |any, &p| any | (p > t)) {
+                    continue;
+                }
+                for (k, &p) in chunk.iter().enumerate() {
+                    if p > t {
+                        let x = x_lo + ci * 16 + k;
+                        self.mark_pixel(x as f64 - self.cx, dy, rays_per_rad, scratch);
+                    }
+                }
+            }
+        }
+    }
+
+    #[inline]
+    fn mark_pixel(&self, dx: f64, dy: f64, rays_per_rad: f64, scratch: &mut Scratch) {
+        let r = (dx * dx + dy * dy).sqrt();
+        if r < self.r_in || r > self.r_out {
+            return;
+        }
+        let n = self.dirs.len() as i64;
+        let phi = fast_atan2(dy, dx);
+        let centre = phi * rays_per_rad;
+        // Rays within 1 px of the pixel centre (covers the pixel and the atan2 approximation).
+        let span = rays_per_rad / r.max(1.0);
+        let (lo, hi) = ((centre - span).floor() as i64, (centre + span).ceil() as i64);
+        let bin = r as usize;
+        let (word, bit) = (bin / 64, 1u64 << (bin % 64));
+        for i in lo..=hi {
+            let ray = i.rem_euclid(n) as usize;
+            let idx = ray * self.words_per_ray;
+            if scratch.bits[idx..idx + self.words_per_ray].iter().all(|&b| b == 0) {
+                scratch.touched.push(ray as u32);
+            }
+            scratch.bits[idx + word] |= bit;
+        }
+    }
+
+    /// Resamples the marked stretches of one ray and turns each valid segment into a point.
+    fn scan_ray<P: Pixel>(
+        &self,
+        frame: &Frame<'_, P>,
+        ray: usize,
+        threshold: f64,
+        scratch: &mut Scratch,
+        out: &mut Vec<StripePoint>,
+    ) {
+        let bits = &scratch.bits[ray * self.words_per_ray..(ray + 1) * self.words_per_ray];
+        // Padding so that segments (≤ max_width) and the estimators' neighbours are inside.
+        let pad = (self.params.max_width * 0.5 + 4.0).ceil() as usize;
+        let mut stretches: Vec<(usize, usize)> = Vec::new();
+        for (wi, &word) in bits.iter().enumerate() {
+            let mut m = word;
+            while m != 0 {
+                let b = wi * 64 + m.trailing_zeros() as usize;
+                m &= m - 1;
+                let (lo, hi) = (b.saturating_sub(pad), b + 1 + pad);
+                match stretches.last_mut() {
+                    Some(last) if lo <= last.1 => last.1 = last.1.max(hi),
+                    _ => stretches.push((lo, hi)),
+                }
+            }
+        }
+        for (lo, hi) in stretches {
+            let r0 = (lo as f64).max(self.r_in);
+            let r1 = (hi as f64).min(self.r_out);
+            if r1 - r0 < 2.0 {
+                continue;
+            }
+            self.scan_stretch(frame, ray, r0, r1, threshold, &mut scratch.profile, out);
+        }
+    }
+
+    /// Samples the ray from radius `r0` to `r1` and emits a point per accepted segment.
+    fn scan_stretch<P: Pixel>(
+        &self,
+        frame: &Frame<'_, P>,
+        ray: usize,
+        r0: f64,
+        r1: f64,
+        threshold: f64,
+        profile: &mut Vec<f32>,
+        out: &mut Vec<StripePoint>,
+    ) {
+        let (dx, dy) = self.dirs[ray];
+        let n = ((r1 - r0) / SAMPLE_STEP_PX) as usize + 1;
+        profile.clear();
+        for k in 0..n {
+            let r = r0 + k as f64 * SAMPLE_STEP_PX;
+            // Outside the image counts as dark; a segment touching it is rejected below.
+            profile.push(frame.bilinear(self.cx + r * dx, self.cy + r * dy).unwrap_or(f32::NAN));
+        }
+        let t = threshold as f32;
+        let mut k = 0;
+        while k < n {
+            if !(profile[k] > t) {
+                k += 1;
+                continue;
+            }
+            let start = k;
+            let mut peak = k;
+            while k < n && profile[k] > t {
+                if profile[k] > profile[peak] {
+                    peak = k;
+                }
+                k += 1;
+            }
+            let seg = Segment { start, end: k, peak };
+            // A segment cut by the stretch's ends (annulus or image border) is incomplete.
+            if start == 0 || k == n || profile[start - 1].is_nan() || profile[k].is_nan() {
+                continue;
+            }
+            if let Some(p) = self.segment_point(frame, ray, r0, profile, &seg, t) {
+                out.push(p);
+            }
+        }
+    }
+
+    /// The centre of one segment along the ray, or `None` if it is too narrow/wide or the fit
+    /// fails.
+    fn segment_point<P: Pixel>(
+        &self,
+        frame: &Frame<'_, P>,
+        ray: usize,
+        r0: f64,
+        p: &[f32],
+        seg: &Segment,
+        t: f32,
+    ) -> Option<StripePoint> {
+        let (a, b) = estimators::crossings(p, seg, t)?;
+        let width = (b - a) * SAMPLE_STEP_PX;
+        let (min_w, max_w) = (self.params.min_width, self.params.max_width);
+        if width < min_w || width > max_w {
+            return None;
+        }
+        let peak = p[seg.peak];
+        let sat = frame.max_value as f32;
+        let mut quality = 0;
+        let index = if peak >= sat - 0.5 {
+            quality |= quality::SATURATED;
+            estimators::plateau_centre(p, seg, t, sat)?
+        } else {
+            match self.params.method {
+                Method::Centroid => estimators::centroid(p, seg)?,
+                Method::Windowed | Method::Hessian => estimators::windowed_centroid(p, seg, t)?,
+                Method::Gauss => estimators::gaussian(p, seg)?,
+                Method::BlaisRioux => estimators::blais_rioux(p, seg)?,
+            }
+        };
+        let (dx, dy) = self.dirs[ray];
+        let mut r = r0 + index * SAMPLE_STEP_PX;
+        if !self.is_ridge_centre(frame, self.cx + r * dx, self.cy + r * dy, peak) {
+            return None;
+        }
+        let (ra, rb) = (r0 + a * SAMPLE_STEP_PX, r0 + b * SAMPLE_STEP_PX);
+        if !self.edge_faces_ray(frame, ra, (dx, dy)) || !self.edge_faces_ray(frame, rb, (dx, dy)) {
+            return None;
+        }
+        if self.params.method == Method::Hessian && quality & quality::SATURATED == 0 {
+            r = self.steger.refine_along_ray(frame, (self.cx, self.cy), (dx, dy), r)?;
+        }
+        if peak < 3.0 * t {
+            quality |= quality::WEAK;
+        }
+        if width < 1.2 * min_w || width > 0.8 * max_w {
+            quality |= quality::WIDTH_MARGINAL;
+        }
+        Some(StripePoint { u: self.cx + r * dx, v: self.cy + r * dy, intensity: peak as f64, width, quality })
+    }
+    /// Whether the image is flat (gradient ≈ 0) at a found centre, as on a ridge's centreline.
+    /// A ray that only grazes the edge of a bright blob (a glint, an ambient patch) also gives a
+    /// short segment, but there the gradient is as steep as the blob's edge: reject those.
+    fn is_ridge_centre<P: Pixel>(&self, frame: &Frame<'_, P>, x: f64, y: f64, peak: f32) -> bool {
+        let sample = |x: f64, y: f64| frame.bilinear(x, y);
+        let (Some(l), Some(r), Some(u), Some(d)) =
+            (sample(x - 1.0, y), sample(x + 1.0, y), sample(x, y - 1.0), sample(x, y + 1.0))
+        else {
+            return false;
+        };
+        let gradient = (0.5 * (r - l)).hypot(0.5 * (d - u));
+        gradient <= MAX_CENTRE_GRADIENT * peak
+    }
+    /// Whether the intensity edge at radius `r` on the ray crosses the ray at more than
+    /// [`MIN_EDGE_ANGLE_DEG`] (its gradient has a component along the ray). A stripe's edges run
+    /// beside its centreline, so they face the ray unless the stripe is nearly radial; a ray
+    /// grazing a bright blob (a glint wider than the ray's segment) meets edges running along it.
+    fn edge_faces_ray<P: Pixel>(&self, frame: &Frame<'_, P>, r: f64, dir: (f64, f64)) -> bool {
+        let (x, y) = (self.cx + r * dir.0, self.cy + r * dir.1);
+        let sample = |x: f64, y: f64| frame.bilinear(x, y);
+        let (Some(l), Some(rt), Some(u), Some(d)) =
+            (sample(x - 1.0, y), sample(x + 1.0, y), sample(x, y - 1.0), sample(x, y + 1.0))
+        else {
+            return false;
+        };
+        let (gx, gy) = ((rt - l) as f64, (d - u) as f64);
+        let along = (gx * dir.0 + gy * dir.1).abs();
+        along >= MIN_EDGE_ANGLE_DEG.to_radians().sin() * gx.hypot(gy)
+    }
+}
+
+/// Smallest angle (degrees) between a stripe edge and the sampling ray (see
+/// `edge_faces_ray`): stripes crossing the ray more obliquely than 90° − 30° are not measured
+/// on that ray.
+pub const MIN_EDGE_ANGLE_DEG: f64 = 30.0;
+
+/// Arc length (px) over which a stripe must continue on at least one side of a point.
+pub const MIN_STRIPE_ARC_PX: f64 = 2.5;
+
+/// The largest gradient (per px, relative to the peak) accepted at a stripe centre; a
+/// Gaussian stripe of σ = 1.5 px measured 0.3 px off its centre has 0.13.
+pub const MAX_CENTRE_GRADIENT: f32 = 0.25;
+
+/// atan2 in [0, 2π) with an error below 1e-5 rad (a 7th-order odd polynomial of the octant
+/// ratio): the candidate scan only needs to know which rays pass near a pixel.
+#[inline]
+fn fast_atan2(y: f64, x: f64) -> f64 {
+    let (ax, ay) = (x.abs(), y.abs());
+    let (num, den, swap) = if ay > ax { (ax, ay, true) } else { (ay, ax, false) };
+    if den == 0.0 {
+        return 0.0;
+    }
+    let z = num / den;
+    let z2 = z * z;
+    // Minimax coefficients for atan on [0, 1].
+    let mut a = z * (0.999_866_0 + z2 * (-0.330_299_5 + z2 * (0.180_141_0 + z2 * (-0.085_133_0 + z2 * 0.020_835_1))));
+    if swap {
+        a = std::f64::consts::FRAC_PI_2 - a;
+    }
+    if x < 0.0 {
+        a = std::f64::consts::PI - a;
+    }
+    if y < 0.0 {
+        a = TAU - a;
+    }
+    if a >= TAU { 0.0 } else { a }
+}
+
+#[cfg(test)]
+mod tests;

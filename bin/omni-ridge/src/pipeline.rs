@@ -1,0 +1,271 @@
+//! The streaming pipeline: a reader thread, a pool of frame workers and an in-order writer.
+//!
+//! At most `window` records are in flight between reading and writing (a token is taken per
+//! record read and returned per record written), so memory stays bounded however long the
+//! stream is, while frames are processed in parallel and written in input order, each flushed
+//! at once.
+
+use omni_cli::{CliError, CliResult};
+use omni_formats::stream::{FrameError, Record, StreamReader, StreamWriter};
+use omni_model::CameraModel;
+use omni_vision::image_io::{GrayImage, write_rgb_png};
+use omni_vision::stripe::{self, RidgeDetector, RidgeParams};
+use std::collections::BTreeMap;
+use std::io::{BufRead, Write};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::sync::{Arc, Mutex, OnceLock};
+
+/// Everything the workers need.
+pub struct Config {
+    pub params: RidgeParams,
+    pub camera: Option<Box<dyn CameraModel>>,
+    pub overlay: Option<PathBuf>,
+    pub keep_going: bool,
+    pub threads: usize,
+    /// Appended to the header's producers.
+    pub producer: String,
+}
+
+/// The prefix of the error returned after a `--keep-going` run with failed frames.
+const KEEP_GOING_SUMMARY: &str = "frames failed";
+
+/// Whether `e` is the end-of-run summary of a `--keep-going` run (the output is complete).
+pub fn is_keep_going_summary(e: &CliError) -> bool {
+    e.message().contains(KEEP_GOING_SUMMARY)
+}
+
+/// Opens the input stream (a file, or stdin for `-`) as a sendable reader.
+pub fn open_reader(path: &Path) -> CliResult<Box<dyn BufRead + Send>> {
+    if path == Path::new("-") {
+        return Ok(Box::new(std::io::BufReader::with_capacity(1 << 16, std::io::stdin())));
+    }
+    let f = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(Box::new(std::io::BufReader::with_capacity(1 << 16, f)))
+}
+
+/// A record on its way through the pipe: its position, and the frames directory in force.
+struct Job {
+    index: usize,
+    record: Record,
+    frames_dir: Option<String>,
+}
+
+/// A worker's answer: the finished record, or a failure naming the frame.
+type Outcome = (usize, Result<Record, FrameError>);
+
+/// Frames are checked against the camera's size; without a camera the first frame fixes the
+/// size and the detector samples from the image centre.
+struct Detectors {
+    params: RidgeParams,
+    camera: Option<RidgeDetector>,
+    from_first_frame: OnceLock<RidgeDetector>,
+}
+
+impl Detectors {
+    fn for_image(&self, img: &GrayImage) -> Result<(&RidgeDetector, &'static str), String> {
+        match &self.camera {
+            Some(d) => Ok((d, "the camera's image")),
+            None => Ok((
+                self.from_first_frame
+                    .get_or_init(|| RidgeDetector::for_image_centre(img.width, img.height, self.params)),
+                "the first frame",
+            )),
+        }
+    }
+}
+
+/// Runs the whole stream from `reader` to `writer`.
+pub fn run(
+    reader: Box<dyn BufRead + Send>,
+    input_name: &str,
+    writer: impl Write,
+    output_name: &str,
+    config: Config,
+) -> CliResult {
+    let camera_detector = config.camera.as_ref().map(|cam| {
+        let (w, h) = cam.image_size();
+        RidgeDetector::new(w, h, cam.mirror_circle(), config.params)
+    });
+    let detectors =
+        Arc::new(Detectors { params: config.params, camera: camera_detector, from_first_frame: OnceLock::new() });
+    let threads = config.threads.max(1);
+    let window = 2 * threads + 2;
+    let (token_tx, token_rx) = sync_channel::<()>(window);
+    for _ in 0..window {
+        token_tx.send(()).map_err(|e| e.to_string())?;
+    }
+    let (job_tx, job_rx) = sync_channel::<Job>(window);
+    let (out_tx, out_rx) = sync_channel::<Outcome>(window);
+    // The reader reports a fatal input error (bad JSON, empty stream) at the position it occurred.
+    let read_error: Arc<Mutex<Option<(usize, String)>>> = Arc::default();
+    spawn_reader(
+        reader,
+        input_name.to_string(),
+        config.producer.clone(),
+        token_rx,
+        job_tx,
+        out_tx.clone(),
+        read_error.clone(),
+    );
+    let job_rx = Arc::new(Mutex::new(job_rx));
+    let overlay = config.overlay.clone().map(Arc::new);
+    for _ in 0..threads {
+        let (job_rx, out_tx, detectors, overlay) = (job_rx.clone(), out_tx.clone(), detectors.clone(), overlay.clone());
+        std::thread::spawn(move || worker(&job_rx, &out_tx, &detectors, overlay.as_deref().map(|p| p.as_path())));
+    }
+    drop(out_tx);
+    write_in_order(out_rx, token_tx, writer, output_name, config.keep_going, &read_error)
+}
+
+fn spawn_reader(
+    reader: Box<dyn BufRead + Send>,
+    name: String,
+    producer: String,
+    tokens: Receiver<()>,
+    jobs: SyncSender<Job>,
+    direct: SyncSender<Outcome>,
+    read_error: Arc<Mutex<Option<(usize, String)>>>,
+) {
+    std::thread::spawn(move || {
+        let mut stream = StreamReader::new(reader, name.clone());
+        let mut frames_dir: Option<String> = None;
+        let mut index = 0;
+        loop {
+            // Wait until the writer has room for one more record in flight.
+            if tokens.recv().is_err() {
+                return;
+            }
+            let record = match stream.next_record() {
+                Ok(Some(r)) => r,
+                Ok(None) if index == 0 => {
+                    *read_error.lock().unwrap_or_else(|e| e.into_inner()) =
+                        Some((0, format!("{name}: empty stream (no header, no frames)")));
+                    return;
+                }
+                Ok(None) => return,
+                Err(e) => {
+                    *read_error.lock().unwrap_or_else(|e| e.into_inner()) = Some((index, e.to_string()));
+                    return;
+                }
+            };
+            let record = match record {
+                Record::Header(mut h) => {
+                    frames_dir = h.frames_dir.clone();
+                    h.producers.push(producer.clone());
+                    // Headers go straight to the writer: nothing to compute.
+                    if direct.send((index, Ok(Record::Header(h)))).is_err() {
+                        return;
+                    }
+                    index += 1;
+                    continue;
+                }
+                other => other,
+            };
+            if jobs.send(Job { index, record, frames_dir: frames_dir.clone() }).is_err() {
+                return;
+            }
+            index += 1;
+        }
+    });
+}
+
+fn worker(jobs: &Mutex<Receiver<Job>>, out: &SyncSender<Outcome>, detectors: &Detectors, overlay: Option<&Path>) {
+    loop {
+        let job = {
+            let rx = jobs.lock().unwrap_or_else(|e| e.into_inner());
+            match rx.recv() {
+                Ok(j) => j,
+                Err(_) => return,
+            }
+        };
+        let result = match job.record {
+            Record::Frame(mut frame) => {
+                match process_frame(&mut frame, job.frames_dir.as_deref(), detectors, overlay) {
+                    Ok(()) => Ok(Record::Frame(frame)),
+                    Err(message) => Err(FrameError { seq: frame.seq, path: frame.path.clone(), message }),
+                }
+            }
+            other => Ok(other),
+        };
+        if out.send((job.index, result)).is_err() {
+            return;
+        }
+    }
+}
+
+/// Fills `frame.stripe`; laser-off frames (no laser on) get an empty stripe.
+fn process_frame(
+    frame: &mut omni_formats::stream::Frame,
+    frames_dir: Option<&str>,
+    detectors: &Detectors,
+    overlay: Option<&Path>,
+) -> Result<(), String> {
+    if frame.lasers.is_empty() {
+        frame.stripe = Some(Vec::new());
+        return Ok(());
+    }
+    let img = stripe::load_frame_image(frame, frames_dir)?;
+    let (detector, what) = detectors.for_image(&img)?;
+    let path = frame.resolve_path(frames_dir, &frame.path);
+    let points = stripe::frame_points(&img, detector, what).map_err(|m| format!("{}: {m}", path.display()))?;
+    if let Some(dir) = overlay {
+        let rgb = stripe::draw_overlay(&img, &points);
+        write_rgb_png(&dir.join(format!("{:06}.png", frame.seq)), img.width, img.height, &rgb)
+            .map_err(|e| e.to_string())?;
+    }
+    frame.stripe = Some(points);
+    Ok(())
+}
+
+/// Writes outcomes in input order, returning a token per record written.
+fn write_in_order(
+    outcomes: Receiver<Outcome>,
+    tokens: SyncSender<()>,
+    writer: impl Write,
+    output_name: &str,
+    keep_going: bool,
+    read_error: &Mutex<Option<(usize, String)>>,
+) -> CliResult {
+    let mut out = StreamWriter::new(writer, output_name);
+    let mut pending: BTreeMap<usize, Result<Record, FrameError>> = BTreeMap::new();
+    let mut next = 0;
+    let mut failures: Vec<String> = Vec::new();
+    let progress = omni_cli::progress(None, "frames");
+    for (index, result) in outcomes {
+        pending.insert(index, result);
+        while let Some(result) = pending.remove(&next) {
+            let record = match result {
+                Ok(Record::Status(mut status)) if !failures.is_empty() => {
+                    status.frames_failed += failures.len() as u64;
+                    status.errors.extend(failures.iter().cloned());
+                    Record::Status(status)
+                }
+                Ok(record) => record,
+                Err(fe) => {
+                    let message = format!("frame {}: {}", fe.seq, fe.message);
+                    if !keep_going {
+                        return Err(CliError::new(message));
+                    }
+                    omni_cli::warn("omni-ridge", &message);
+                    failures.push(message.clone());
+                    Record::Error(FrameError { message, ..fe })
+                }
+            };
+            out.write(&record)?;
+            progress.inc(1);
+            next += 1;
+            // The reader may have stopped already; a missing receiver is not an error here.
+            let _ = tokens.send(());
+        }
+    }
+    progress.finish_and_clear();
+    out.flush()?;
+    if let Some((_, message)) = read_error.lock().unwrap_or_else(|e| e.into_inner()).take() {
+        return Err(CliError::new(message));
+    }
+    if !failures.is_empty() {
+        return Err(CliError::new(format!("{} {KEEP_GOING_SUMMARY} (see the error records)", failures.len())));
+    }
+    Ok(())
+}

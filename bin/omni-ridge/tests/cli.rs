@@ -1,0 +1,253 @@
+//! The real omni-ridge binary on small synthetic streams: rings of known radius drawn around
+//! the image centre, written as PNG frames next to a JSON Lines stream.
+
+use omni_formats::stream::{Frame, Header, Record, Status, StreamReader, StreamWriter};
+use omni_vision::image_io::{GrayImage, write_gray_png};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+
+const BIN: &str = env!("CARGO_BIN_EXE_omni-ridge");
+const SIZE: u32 = 128;
+const CENTRE: f64 = 63.5;
+
+/// A ring of radius `radius` px (Gaussian profile σ = 1.5 px, peak `peak`) plus `extra(x, y)`.
+fn ring(radius: f64, peak: f64, extra: impl Fn(f64, f64) -> f64) -> GrayImage {
+    let mut img = GrayImage::new(SIZE, SIZE, 8);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            let (fx, fy) = (x as f64, y as f64);
+            let d = (fx - CENTRE).hypot(fy - CENTRE) - radius;
+            let v = peak * (-d * d / 4.5).exp() + extra(fx, fy);
+            img.data[(y * SIZE + x) as usize] = v.round().clamp(0.0, 255.0) as u16;
+        }
+    }
+    img
+}
+
+fn header(frames_dir: &Path) -> Record {
+    let mut h = Header::new("test 1.0");
+    h.frames_dir = Some(frames_dir.display().to_string());
+    Record::Header(h)
+}
+
+fn frame(seq: u64, path: &str) -> Record {
+    let mut f = Frame::new(seq, path, 0.5 * seq as f64, 0);
+    f.extra.insert("exposure_us".into(), 800.into());
+    Record::Frame(Box::new(f))
+}
+
+fn status(frames: u64) -> Record {
+    Record::Status(Status {
+        frames,
+        frames_missing: 0,
+        frames_failed: 0,
+        complete: true,
+        errors: vec![],
+        extra: Default::default(),
+    })
+}
+
+fn stream_text(records: &[Record]) -> String {
+    let mut w = StreamWriter::new(Vec::new(), "mem");
+    for r in records {
+        w.write(r).unwrap();
+    }
+    String::from_utf8(w.into_inner()).unwrap()
+}
+
+/// Three frames with rings of radius 30, 40, 50 px, and the stream describing them.
+fn scene(dir: &Path) -> String {
+    for (i, r) in [30.0, 40.0, 50.0].iter().enumerate() {
+        write_gray_png(&dir.join(format!("f{i}.png")), &ring(*r, 180.0, |_, _| 0.0)).unwrap();
+    }
+    let mut recs = vec![header(dir)];
+    recs.extend((0..3).map(|i| frame(i, &format!("f{i}.png"))));
+    recs.push(status(3));
+    stream_text(&recs)
+}
+
+fn run(args: &[&str], stdin: &str) -> Output {
+    let mut child = Command::new(BIN)
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(stdin.as_bytes()).unwrap();
+    child.wait_with_output().unwrap()
+}
+
+fn records(text: &[u8]) -> Vec<Record> {
+    StreamReader::new(text, "out").map(|r| r.unwrap()).collect()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn stdin_to_stdout_finds_the_rings_and_passes_everything_else_through() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(&["--method", "gauss"], &scene(dir.path()));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let recs = records(&out.stdout);
+    assert_eq!(recs.len(), 5);
+    let Record::Header(h) = &recs[0] else { panic!("no header first") };
+    assert_eq!(h.producers[0], "test 1.0");
+    assert!(h.producers[1].starts_with("omni-ridge "), "{:?}", h.producers);
+    for (i, radius) in [30.0, 40.0, 50.0].iter().enumerate() {
+        let Record::Frame(f) = &recs[i + 1] else { panic!("record {} is not a frame", i + 1) };
+        assert_eq!(f.seq, i as u64);
+        assert_eq!(f.extra["exposure_us"], 800);
+        let pts = f.stripe.as_ref().unwrap();
+        // One point per ray: ⌈2π·63.5⌉ = 399 rays around the inscribed circle.
+        assert!(pts.len() >= 390, "frame {i}: {} points", pts.len());
+        let worst = pts.iter().map(|p| ((p.u - CENTRE).hypot(p.v - CENTRE) - radius).abs()).fold(0.0, f64::max);
+        assert!(worst < 0.05, "frame {i}: worst radial error {worst} px");
+        let odd = pts.iter().find(|p| (p.intensity - 180.0).abs() > 10.0 || p.width < 4.0 || p.width > 8.0);
+        assert!(odd.is_none(), "{odd:?}");
+    }
+    assert_eq!(recs[4], status(3));
+}
+
+#[test]
+fn output_is_the_same_for_any_thread_count_and_file_output_is_identical() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = scene(dir.path());
+    let one = run(&["--threads", "1"], &text);
+    let four = run(&["--threads", "4"], &text);
+    assert!(one.status.success() && four.status.success());
+    assert_eq!(one.stdout, four.stdout);
+    let path = dir.path().join("out.jsonl");
+    let file = run(&["-", "-o", path.to_str().unwrap(), "--overlay", dir.path().join("ov").to_str().unwrap()], &text);
+    assert!(file.status.success(), "{}", stderr(&file));
+    assert_eq!(std::fs::read(&path).unwrap(), one.stdout);
+    for i in 0..3 {
+        let ov = omni_vision::image_io::load_gray(&dir.path().join(format!("ov/{i:06}.png"))).unwrap();
+        assert_eq!((ov.width, ov.height), (SIZE, SIZE));
+    }
+}
+
+#[test]
+fn laser_off_frame_removes_ambient_light() {
+    let dir = tempfile::tempdir().unwrap();
+    // A lamp: a bright, gently sloped patch that crosses the threshold around the ring.
+    let lamp = |x: f64, y: f64| 70.0 * (-((x - 90.0).powi(2) + (y - 70.0).powi(2)) / 800.0).exp();
+    write_gray_png(&dir.path().join("on.png"), &ring(40.0, 150.0, lamp)).unwrap();
+    write_gray_png(&dir.path().join("off.png"), &ring(40.0, 0.0, lamp)).unwrap();
+    let Record::Frame(mut f) = frame(0, "on.png") else { unreachable!() };
+    f.ambient_path = Some("off.png".into());
+    let text = stream_text(&[header(dir.path()), Record::Frame(f.clone())]);
+    let out = run(&[], &text);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let Record::Frame(g) = &records(&out.stdout)[1] else { panic!() };
+    let pts = g.stripe.as_ref().unwrap();
+    assert!(pts.len() >= 390);
+    let worst = pts.iter().map(|p| ((p.u - CENTRE).hypot(p.v - CENTRE) - 40.0).abs()).fold(0.0, f64::max);
+    assert!(worst < 0.05, "worst {worst}");
+    // Without the laser-off frame the lamp biases the centres towards itself.
+    f.ambient_path = None;
+    let out = run(&[], &stream_text(&[header(dir.path()), Record::Frame(f)]));
+    let Record::Frame(g) = &records(&out.stdout)[1] else { panic!() };
+    let worst = g.stripe.as_ref().unwrap().iter().map(|p| ((p.u - CENTRE).hypot(p.v - CENTRE) - 40.0).abs());
+    assert!(worst.fold(0.0, f64::max) > 0.1);
+}
+
+#[test]
+fn bad_frames_are_named_and_stop_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = scene(dir.path());
+    std::fs::write(dir.path().join("text.png"), "not an image").unwrap();
+    let bytes = std::fs::read(dir.path().join("f0.png")).unwrap();
+    std::fs::write(dir.path().join("cut.png"), &bytes[..bytes.len() / 3]).unwrap();
+    for (file, expect) in [("missing.png", "missing.png"), ("text.png", "not a PNG"), ("cut.png", "truncated")] {
+        let text = good.replace("f1.png", file);
+        let out_path = dir.path().join("out.jsonl");
+        let out = run(&["-o", out_path.to_str().unwrap()], &text);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{file}: {err}");
+        assert!(err.contains("frame 1") && err.contains(expect) && err.lines().count() == 1, "{file}: {err}");
+        assert!(!out_path.exists(), "{file}: half-written output left behind");
+    }
+}
+
+#[test]
+fn keep_going_writes_error_records_and_fails_at_the_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = scene(dir.path()).replace("f1.png", "missing.png");
+    let out = run(&["--keep-going"], &text);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let recs = records(&out.stdout);
+    assert_eq!(recs.len(), 5);
+    let Record::Error(e) = &recs[2] else { panic!("{:?}", recs[2]) };
+    assert!(e.seq == 1 && e.message.contains("missing.png"), "{e:?}");
+    assert!(matches!(&recs[3], Record::Frame(f) if f.stripe.as_ref().is_some_and(|s| s.len() > 390)));
+    let Record::Status(s) = &recs[4] else { panic!() };
+    assert_eq!(s.frames_failed, 1);
+    assert!(stderr(&out).contains("1 frames failed"));
+}
+
+#[test]
+fn frames_of_another_size_than_the_camera_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = scene(dir.path());
+    let mut params = omni_model::HyperbolicParams::paper();
+    (params.width, params.height, params.cx_px, params.cy_px) = (160, 128, 79.5, 63.5);
+    params.fx_px = 243.75;
+    params.fy_px = 243.75;
+    let cam = dir.path().join("camera.json");
+    omni_formats::write_doc(&cam, &omni_formats::CameraFile::new(omni_formats::CameraSpec::Hyperbolic(params)))
+        .unwrap();
+    let out = run(&["--camera", cam.to_str().unwrap()], &text);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(err.contains("frame 0") && err.contains("128x128") && err.contains("160x128"), "{err}");
+}
+
+#[test]
+fn empty_and_malformed_streams_are_errors() {
+    let out = run(&[], "");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("empty stream"), "{}", stderr(&out));
+    let dir = tempfile::tempdir().unwrap();
+    let text = scene(dir.path());
+    let broken: String = text.lines().take(2).map(|l| format!("{l}\n")).collect::<String>() + "{\"type\": \"frame\",\n";
+    let out = run(&[], &broken);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("stdin: line 3"), "{}", stderr(&out));
+    // The records before the bad line were written.
+    assert_eq!(records(&out.stdout).len(), 2);
+}
+
+#[test]
+fn closed_downstream_pipe_is_a_clean_exit() {
+    let dir = tempfile::tempdir().unwrap();
+    write_gray_png(&dir.path().join("f.png"), &ring(40.0, 180.0, |_, _| 0.0)).unwrap();
+    let mut recs = vec![header(dir.path())];
+    recs.extend((0..300).map(|i| frame(i, "f.png")));
+    let input = dir.path().join("in.jsonl");
+    std::fs::write(&input, stream_text(&recs)).unwrap();
+    let mut child = Command::new(BIN).arg(&input).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut first).unwrap();
+    // The reader (and with it the pipe) is dropped here, like `| head -1`.
+    assert!(first.contains("header"));
+    let status = child.wait().unwrap();
+    let mut err = String::new();
+    child.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+    assert_eq!(status.code(), Some(0), "{err}");
+}
+
+#[test]
+fn help_teaches_and_bad_usage_exits_2() {
+    let out = Command::new(BIN).arg("--help").output().unwrap();
+    assert!(out.status.success());
+    let help = String::from_utf8_lossy(&out.stdout);
+    assert!(help.contains("Examples") && help.contains("blais-rioux"));
+    let out = Command::new(BIN).args(["--method", "median"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let out = run(&["--min-width", "5", "--max-width", "3"], "");
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+}

@@ -1,0 +1,277 @@
+//! Synthetic frames with analytic stripes (known centres) and noise; errors are measured along
+//! the sampling ray, as the distance from the detected point to the true centreline.
+
+use super::*;
+use omni_geom::Vector2;
+
+/// A small deterministic generator (xorshift64*) with Gaussian samples (Box–Muller), so the
+/// tests need no random-number crate and give the same numbers on every run.
+struct Rng(u64);
+
+impl Rng {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+    fn gauss(&mut self) -> f64 {
+        let (a, b) = (self.uniform(), self.uniform());
+        (-2.0 * a.ln()).sqrt() * (TAU * b).cos()
+    }
+}
+
+/// Renders `intensity(x, y)` averaged over 4×4 points inside each pixel (a camera integrates
+/// over the pixel), plus Gaussian noise of `noise` DN, rounded and clipped to the bit depth.
+fn render(w: u32, h: u32, bit_depth: u8, noise: f64, seed: u64, intensity: impl Fn(f64, f64) -> f64) -> GrayImage {
+    let mut img = GrayImage::new(w, h, bit_depth);
+    let max = img.max_value() as f64;
+    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    for y in 0..h {
+        for x in 0..w {
+            let mut s = 0.0;
+            for j in 0..4 {
+                for i in 0..4 {
+                    s += intensity(x as f64 - 0.375 + 0.25 * i as f64, y as f64 - 0.375 + 0.25 * j as f64);
+                }
+            }
+            let v = s / 16.0 + noise * rng.gauss();
+            img.data[(y * w + x) as usize] = v.round().clamp(0.0, max) as u16;
+        }
+    }
+    img
+}
+
+fn gaussian_line(d: f64, sigma: f64, peak: f64) -> f64 {
+    peak * (-d * d / (2.0 * sigma * sigma)).exp()
+}
+
+const W: u32 = 240;
+const H: u32 = 232;
+/// Mirror centre deliberately off the image centre and off the pixel grid.
+const CX: f64 = 121.3;
+const CY: f64 = 114.6;
+
+fn circle() -> MirrorCircle {
+    MirrorCircle { centre: Vector2::new(CX, CY), inner_radius: 20.0, outer_radius: 110.0 }
+}
+
+fn detector(method: Method) -> RidgeDetector {
+    RidgeDetector::new(W, H, circle(), RidgeParams { method, ..Default::default() })
+}
+
+/// Polar angle (rad, [0, 2π)) and radius (px) of a point about the mirror centre.
+fn polar(p: &StripePoint) -> (f64, f64) {
+    let (dx, dy) = (p.u - CX, p.v - CY);
+    (dy.atan2(dx).rem_euclid(TAU), dx.hypot(dy))
+}
+
+/// RMS and mean of the errors.
+fn rms_bias(errors: &[f64]) -> (f64, f64) {
+    let n = errors.len() as f64;
+    let mean = errors.iter().sum::<f64>() / n;
+    let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
+    (rms, mean)
+}
+
+/// A ring of radius ρc(φ) = 60 + 8·sin(3φ): a closed curve that crosses the rays obliquely
+/// (up to 22°). The perpendicular distance to it is ≈ (ρ − ρc)·cos γ with tan γ = ρc'/ρc.
+fn wavy_radius(phi: f64) -> f64 {
+    60.0 + 8.0 * (3.0 * phi).sin()
+}
+
+fn wavy_frame(peak: f64, noise: f64, seed: u64) -> GrayImage {
+    render(W, H, 8, noise, seed, |x, y| {
+        let (dx, dy) = (x - CX, y - CY);
+        let phi = dy.atan2(dx);
+        let rc = wavy_radius(phi);
+        let slope = 24.0 * (3.0 * phi).cos() / rc;
+        let d = (dx.hypot(dy) - rc) / (1.0 + slope * slope).sqrt();
+        gaussian_line(d, 1.4, peak)
+    })
+}
+
+fn wavy_errors(points: &[StripePoint]) -> Vec<f64> {
+    points
+        .iter()
+        .map(|p| {
+            let (phi, r) = polar(p);
+            r - wavy_radius(phi)
+        })
+        .collect()
+}
+
+#[test]
+fn ring_every_estimator_meets_its_accuracy_with_noise() {
+    let img = render(W, H, 8, 2.0, 1, |x, y| gaussian_line((x - CX).hypot(y - CY) - 70.0, 1.5, 180.0));
+    for method in Method::ALL {
+        let pts = detector(method).detect(&img);
+        // One point per ray crossing the ring.
+        assert!(pts.len() as f64 > 0.97 * detector(method).ray_count() as f64, "{method:?}: {} points", pts.len());
+        let errs: Vec<f64> = pts.iter().map(|p| polar(p).1 - 70.0).collect();
+        let (rms, bias) = rms_bias(&errs);
+        eprintln!("ring σ=1.5 peak=180 noise=2: {:<12} rms {rms:.4} px, bias {bias:+.4} px", method.name());
+        let (rms_max, bias_max) = if method == Method::Centroid { (0.12, 0.05) } else { (0.05, 0.02) };
+        assert!(rms <= rms_max && bias.abs() <= bias_max, "{method:?}: rms {rms} bias {bias}");
+    }
+}
+
+#[test]
+fn oblique_wavy_stripe_is_measured_along_the_ray() {
+    let img = wavy_frame(160.0, 2.0, 2);
+    for method in Method::ALL {
+        let pts = detector(method).detect(&img);
+        let (rms, bias) = rms_bias(&wavy_errors(&pts));
+        eprintln!("wavy ring: {:<12} rms {rms:.4} px, bias {bias:+.4} px, {} points", method.name(), pts.len());
+        let rms_max = if method == Method::Centroid { 0.15 } else { 0.06 };
+        assert!(rms <= rms_max && bias.abs() <= 0.03, "{method:?}: rms {rms} bias {bias}");
+        assert!(pts.len() > 600, "{method:?}: {} points", pts.len());
+    }
+}
+
+#[test]
+fn accuracy_is_uniform_around_the_image() {
+    let img = wavy_frame(160.0, 2.0, 3);
+    let pts = detector(Method::Gauss).detect(&img);
+    let errs = wavy_errors(&pts);
+    let (overall, _) = rms_bias(&errs);
+    let mut worst: f64 = 0.0;
+    for sector in 0..12 {
+        let sel: Vec<f64> = pts
+            .iter()
+            .zip(&errs)
+            .filter(|(p, _)| (polar(p).0 / (TAU / 12.0)) as usize == sector)
+            .map(|(_, &e)| e)
+            .collect();
+        assert!(sel.len() > 30, "sector {sector}: {} points", sel.len());
+        worst = worst.max(rms_bias(&sel).0);
+    }
+    eprintln!("30° sectors: overall rms {overall:.4} px, worst sector {worst:.4} px");
+    assert!(worst <= 1.5 * overall, "worst {worst} overall {overall}");
+}
+
+#[test]
+fn straight_stripe_across_the_annulus_is_found_where_rays_cross_it() {
+    // The line n·(x − C) = 60 px with n at 30° (a chord, crossing the rays at up to 60°).
+    let (nx, ny) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+    let c = CX * nx + CY * ny + 60.0;
+    let img = render(W, H, 8, 2.0, 4, |x, y| gaussian_line(x * nx + y * ny - c, 1.3, 200.0));
+    let pts = detector(Method::Gauss).detect(&img);
+    let errs: Vec<f64> = pts
+        .iter()
+        .map(|p| {
+            // Distance along the ray from the point to the line: signed distance / cos(angle).
+            let (dx, dy) = ((p.u - CX), (p.v - CY));
+            let r = dx.hypot(dy);
+            let cos = (dx * nx + dy * ny) / r;
+            (p.u * nx + p.v * ny - c) / cos
+        })
+        .collect();
+    let (rms, bias) = rms_bias(&errs);
+    eprintln!("straight chord: rms {rms:.4} px, bias {bias:+.4} px, {} points", pts.len());
+    // The chord spans 2·acos(60/110) = 114° of azimuth: about 218 rays.
+    assert!(pts.len() > 200, "{} points", pts.len());
+    assert!(rms <= 0.06 && bias.abs() <= 0.02, "rms {rms} bias {bias}");
+}
+
+#[test]
+fn two_stripes_on_one_ray_are_both_reported() {
+    let img = render(W, H, 8, 2.0, 5, |x, y| {
+        let r = (x - CX).hypot(y - CY);
+        gaussian_line(r - 45.0, 1.4, 150.0) + gaussian_line(r - 90.0, 1.4, 150.0)
+    });
+    let det = detector(Method::Windowed);
+    let pts = det.detect(&img);
+    let inner = pts.iter().filter(|p| (polar(p).1 - 45.0).abs() < 0.2).count();
+    let outer = pts.iter().filter(|p| (polar(p).1 - 90.0).abs() < 0.2).count();
+    assert!(inner as f64 > 0.97 * det.ray_count() as f64, "inner {inner}");
+    assert!(outer as f64 > 0.97 * det.ray_count() as f64, "outer {outer}");
+    assert_eq!(inner + outer, pts.len(), "no point away from the two rings");
+}
+
+#[test]
+fn saturated_stripe_is_located_at_the_plateau_centre() {
+    let img = render(W, H, 8, 2.0, 6, |x, y| gaussian_line((x - CX).hypot(y - CY) - 70.0, 1.6, 1200.0));
+    for method in Method::ALL {
+        let pts = detector(method).detect(&img);
+        assert!(pts.iter().all(|p| p.quality & quality::SATURATED != 0));
+        let (rms, bias) = rms_bias(&pts.iter().map(|p| polar(p).1 - 70.0).collect::<Vec<_>>());
+        eprintln!("saturated ring: {:<12} rms {rms:.4} px, bias {bias:+.4} px", method.name());
+        assert!(rms <= 0.1 && bias.abs() <= 0.03, "{method:?}: rms {rms} bias {bias}");
+    }
+}
+
+#[test]
+fn weak_stripe_is_found_and_flagged() {
+    let img = render(W, H, 8, 2.0, 7, |x, y| gaussian_line((x - CX).hypot(y - CY) - 70.0, 1.5, 60.0));
+    let det = detector(Method::Gauss);
+    let pts = det.detect(&img);
+    let (rms, bias) = rms_bias(&pts.iter().map(|p| polar(p).1 - 70.0).collect::<Vec<_>>());
+    eprintln!("weak ring (peak 60): rms {rms:.4} px, bias {bias:+.4} px, {} points", pts.len());
+    assert!(pts.len() as f64 > 0.97 * det.ray_count() as f64);
+    assert!(rms <= 0.1 && bias.abs() <= 0.03, "rms {rms} bias {bias}");
+    assert!(pts.iter().all(|p| p.quality & quality::WEAK != 0));
+}
+
+#[test]
+fn glints_noise_and_pixels_outside_the_annulus_are_rejected() {
+    let img = render(W, H, 8, 3.0, 8, |x, y| {
+        let r = (x - CX).hypot(y - CY);
+        // A wide specular glint (disc of radius 15 px), a ring inside the blind centre and
+        // one beyond the rim.
+        let glint = if (x - 150.0).hypot(y - 150.0) < 15.0 { 250.0 } else { 0.0 };
+        glint + gaussian_line(r - 12.0, 1.5, 200.0) + gaussian_line(r - 114.0, 1.5, 200.0)
+    });
+    let mut img = img;
+    // Isolated hot pixels.
+    for k in 0..40 {
+        let (x, y) = (30 + (k * 37) % 180, 30 + (k * 53) % 170);
+        img.data[y * W as usize + x] = 255;
+    }
+    let pts = detector(Method::Windowed).detect(&img);
+    assert!(pts.is_empty(), "{} false points, first {:?}", pts.len(), pts.first());
+}
+
+#[test]
+fn sixteen_bit_frames_give_the_same_centres() {
+    let f = |x: f64, y: f64| gaussian_line((x - CX).hypot(y - CY) - 70.0, 1.5, 180.0);
+    let img8 = render(W, H, 8, 0.0, 9, f);
+    let img16 = render(W, H, 16, 0.0, 9, |x, y| 257.0 * f(x, y));
+    let det = detector(Method::Gauss);
+    let (a, b) = (det.detect(&img8), det.detect(&img16));
+    assert!((a.len() as i64 - b.len() as i64).abs() <= 2, "{} vs {}", a.len(), b.len());
+    let (ra, _) = rms_bias(&a.iter().map(|p| polar(p).1 - 70.0).collect::<Vec<_>>());
+    let (rb, _) = rms_bias(&b.iter().map(|p| polar(p).1 - 70.0).collect::<Vec<_>>());
+    assert!(ra < 0.02 && rb < 0.02, "8-bit {ra}, 16-bit {rb}");
+    // 16-bit intensities are in 16-bit units.
+    assert!(b.iter().all(|p| p.intensity > 255.0));
+}
+
+#[test]
+fn u8_and_u16_buffers_agree_exactly() {
+    let img = render(W, H, 8, 2.0, 10, |x, y| gaussian_line((x - CX).hypot(y - CY) - 70.0, 1.5, 180.0));
+    let bytes = img.to_u8();
+    let det = detector(Method::Windowed);
+    let f8 = Frame { width: W, height: H, data: &bytes, max_value: 255.0 };
+    let a = det.detect_frame(&f8, &mut Scratch::default());
+    assert_eq!(a, det.detect(&img));
+}
+
+#[test]
+fn fast_atan2_is_accurate() {
+    for i in 0..3600 {
+        let a = i as f64 * TAU / 3600.0 + 1e-3;
+        let (s, c) = a.sin_cos();
+        let got = fast_atan2(3.0 * s, 3.0 * c);
+        let d = (got - a.rem_euclid(TAU) + TAU / 2.0).rem_euclid(TAU) - TAU / 2.0;
+        assert!(d.abs() < 2e-5, "angle {a}: {got}");
+    }
+}
+
+#[test]
+fn methods_parse_from_their_names() {
+    for m in Method::ALL {
+        assert_eq!(m.name().parse::<Method>().unwrap(), m);
+    }
+    assert!("median".parse::<Method>().unwrap_err().contains("blais-rioux"));
+}

@@ -1,0 +1,203 @@
+//! Checkerboard images for receiver calibration and the two-perpendicular-boards rig for
+//! transmitter calibration.
+//!
+//! Board frame (OpenCV convention, as in [`omni_formats::scene::Shape::Checkerboard`]): origin at
+//! the top-left inner corner, x along the columns, y along the rows (down), z into the board
+//! (the printed face looks to −z). Corner `i` is at column `i % inner_cols`, row
+//! `i / inner_cols`, at (col · square, row · square, 0) mm. A pose maps board → world.
+
+use crate::frame::Frame16;
+use crate::render::{RenderOptions, render_ambient_frame};
+use crate::rng::SplitMix64;
+use crate::scene::{Scene, board_corners};
+use crate::sensor::Sensor;
+use nalgebra::Translation3;
+use omni_formats::BoardFile;
+use omni_formats::scene::{SceneFile, SceneObject, Shape};
+use omni_geom::{Isometry3, Matrix3, Point3, Rotation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// A board pose as written to JSON: world point = rotation · board point + translation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BoardPose {
+    /// Rotation matrix, row-major (board → world).
+    pub rotation: [[f64; 3]; 3],
+    /// Board origin (top-left inner corner) in the world (mm).
+    pub translation_mm: [f64; 3],
+}
+
+impl BoardPose {
+    pub fn from_isometry(iso: &Isometry3<f64>) -> Self {
+        let m = iso.rotation.to_rotation_matrix().into_inner();
+        let t = iso.translation.vector;
+        BoardPose { rotation: [0, 1, 2].map(|r| [m[(r, 0)], m[(r, 1)], m[(r, 2)]]), translation_mm: [t.x, t.y, t.z] }
+    }
+
+    pub fn isometry(&self) -> Isometry3<f64> {
+        let m = Matrix3::from_fn(|r, c| self.rotation[r][c]);
+        let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&m));
+        Isometry3::from_parts(Translation3::from(Vector3::from(self.translation_mm)), rot)
+    }
+}
+
+/// The scene object of a board at a pose (white albedo 0.85, black 0.05).
+pub fn board_object(board: &BoardFile, pose: &Isometry3<f64>) -> SceneObject {
+    let s = board.square_mm;
+    let centre =
+        pose * Point3::new((board.inner_cols as f64 - 1.0) * s / 2.0, (board.inner_rows as f64 - 1.0) * s / 2.0, 0.0);
+    let normal = pose.transform_vector(&-Vector3::z());
+    let up = pose.transform_vector(&-Vector3::y());
+    SceneObject {
+        name: Some("checkerboard".into()),
+        albedo: 0.85,
+        shape: Shape::Checkerboard {
+            centre_mm: centre.coords.into(),
+            normal: normal.into(),
+            up: up.into(),
+            square_mm: s,
+            inner_cols: board.inner_cols,
+            inner_rows: board.inner_rows,
+            margin_mm: board.margin_mm,
+            dark_albedo: 0.05,
+        },
+    }
+}
+
+/// Ground-truth pixels of a board's inner corners (row-major), `None` where the corner is not
+/// visible (outside the mirror or image, the board's back towards the camera, or hidden).
+pub fn corner_pixels(
+    sensor: &Sensor,
+    scene: &Scene,
+    pose: &Isometry3<f64>,
+    board: &BoardFile,
+) -> Vec<Option<[f64; 2]>> {
+    let front = pose.transform_vector(&-Vector3::z());
+    board_corners(board.inner_cols, board.inner_rows, board.square_mm)
+        .iter()
+        .map(|c| {
+            let p = pose * c;
+            let px = sensor.camera.point_to_pixel(&p)?;
+            let ray = sensor.camera.pixel_to_ray(&px)?;
+            if ray.dir.dot(&front) >= 0.0 {
+                return None;
+            }
+            let hit = scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY)?;
+            ((hit.point - p).norm() < 1e-3).then_some([px.x, px.y])
+        })
+        .collect()
+}
+
+/// Renders one checkerboard (ambient light only) and its corners' true pixels.
+///
+/// Panics if the board or the options are invalid (check them with `validate` first).
+pub fn render_board_image(
+    sensor: &Sensor,
+    board_pose: &Isometry3<f64>,
+    board: &BoardFile,
+    opts: &RenderOptions,
+) -> (Frame16, Vec<Option<[f64; 2]>>) {
+    let scene = Scene::from_file(SceneFile::new(vec![board_object(board, board_pose)])).expect("valid board");
+    let image = render_ambient_frame(sensor, &scene, opts);
+    (image, corner_pixels(sensor, &scene, board_pose, board))
+}
+
+/// `count` random board poses around the sensor: azimuth uniform over 360°, 300–900 mm from the
+/// camera axis, elevation (seen from the viewpoint) between −50° and +30°, facing the viewpoint
+/// within ±45° of tilt and any roll. Poses whose board shows no corner are drawn again (up to
+/// 1000 tries each; then an error). Some boards are partly out of view, by design.
+pub fn random_board_poses(
+    sensor: &Sensor,
+    board: &BoardFile,
+    count: usize,
+    seed: u64,
+) -> Result<Vec<Isometry3<f64>>, String> {
+    board.validate()?;
+    let mut rng = SplitMix64::stream(seed, 0xB0A2D);
+    let mut poses = Vec::with_capacity(count);
+    for i in 0..count {
+        let pose = (0..1000)
+            .map(|_| random_pose(&mut rng, board))
+            .find(|pose| {
+                let scene = Scene::from_file(SceneFile::new(vec![board_object(board, pose)])).expect("valid board");
+                corner_pixels(sensor, &scene, pose, board).iter().any(Option::is_some)
+            })
+            .ok_or_else(|| format!("board {i}: no pose with a visible corner found in 1000 draws"))?;
+        poses.push(pose);
+    }
+    Ok(poses)
+}
+
+fn random_pose(rng: &mut SplitMix64, board: &BoardFile) -> Isometry3<f64> {
+    let azimuth = rng.uniform() * std::f64::consts::TAU;
+    let dist = 300.0 + 600.0 * rng.uniform();
+    let elevation = (-50.0 + 80.0 * rng.uniform()).to_radians();
+    let viewpoint = Point3::new(0.0, 0.0, 80.0);
+    let centre = Point3::new(dist * azimuth.cos(), dist * azimuth.sin(), viewpoint.z + dist * elevation.tan());
+    // Board z (into the board) points away from the viewpoint, then tilted and rolled.
+    let z = (centre - viewpoint).normalize();
+    let facing = UnitQuaternion::rotation_between(&Vector3::z(), &z).unwrap_or_else(UnitQuaternion::identity);
+    let roll = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rng.uniform() * std::f64::consts::TAU);
+    let tilt_axis = Vector3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, 0.0);
+    let tilt = UnitQuaternion::from_scaled_axis(tilt_axis.normalize() * (45.0 * rng.uniform()).to_radians());
+    let rot = facing * tilt * roll;
+    let s = board.square_mm;
+    let half = Vector3::new((board.inner_cols as f64 - 1.0) * s / 2.0, (board.inner_rows as f64 - 1.0) * s / 2.0, 0.0);
+    // Place the board's centre (not its first corner) at `centre`.
+    Isometry3::from_parts(Translation3::from(centre.coords - rot * half), rot)
+}
+
+/// The two-perpendicular-boards rig for transmitter calibration: two copies of a board standing
+/// vertically on the +x side like an open book facing the sensor (a concave right angle), the
+/// spine (their shared vertical edge, 2 mm gap) at (560, 0) mm, both centred at z = −50 mm, so
+/// that laser 0's light planes of mid-range mirror angles cross both boards.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rig {
+    pub board: BoardFile,
+    /// Board → world poses: [left board (y > 0), right board (y < 0)] seen from the sensor.
+    pub poses: [Isometry3<f64>; 2],
+}
+
+impl Rig {
+    /// The standard rig for a board (see the type's docs).
+    pub fn standard(board: &BoardFile) -> Rig {
+        let s = board.square_mm;
+        let width = (board.inner_cols as f64 + 1.0) * s + 2.0 * board.margin_mm;
+        let spine = Vector3::new(560.0, 0.0, -50.0);
+        let r2 = std::f64::consts::FRAC_1_SQRT_2;
+        let pose = |normal: Vector3<f64>, right: Vector3<f64>, centre: Vector3<f64>| {
+            // Board axes: x = right, y = down, z = −normal.
+            let rot = Rotation3::from_basis_unchecked(&[right, -Vector3::z(), -normal]);
+            let rot = UnitQuaternion::from_rotation_matrix(&rot);
+            let half =
+                Vector3::new((board.inner_cols as f64 - 1.0) * s / 2.0, (board.inner_rows as f64 - 1.0) * s / 2.0, 0.0);
+            Isometry3::from_parts(Translation3::from(centre - rot * half), rot)
+        };
+        let (na, ra) = (Vector3::new(-r2, -r2, 0.0), Vector3::new(r2, -r2, 0.0));
+        let (nb, rb) = (Vector3::new(-r2, r2, 0.0), Vector3::new(-r2, -r2, 0.0));
+        let gap = 1.0;
+        let left = pose(na, ra, spine - ra * (width / 2.0 + gap));
+        let right = pose(nb, rb, spine + rb * (width / 2.0 + gap));
+        Rig { board: board.clone(), poses: [left, right] }
+    }
+
+    /// The rig as a scene (two checkerboards).
+    pub fn scene(&self) -> SceneFile {
+        let objects = self.poses.iter().map(|p| board_object(&self.board, p)).collect();
+        SceneFile {
+            description: Some("two perpendicular checkerboards (transmitter calibration rig)".into()),
+            ..SceneFile::new(objects)
+        }
+    }
+}
+
+/// Renders the rig's ambient "pose" image (lasers off) and both boards' true corner pixels.
+pub fn render_rig_pose_image(
+    sensor: &Sensor,
+    rig: &Rig,
+    opts: &RenderOptions,
+) -> (Frame16, [Vec<Option<[f64; 2]>>; 2]) {
+    let scene = Scene::from_file(rig.scene()).expect("valid rig");
+    let image = render_ambient_frame(sensor, &scene, opts);
+    let corners = [0, 1].map(|i| corner_pixels(sensor, &scene, &rig.poses[i], &rig.board));
+    (image, corners)
+}

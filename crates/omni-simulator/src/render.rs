@@ -1,0 +1,425 @@
+//! Image formation: exact camera rays, adaptive supersampling, the laser sheet's Gaussian
+//! profile, shadows, ambient light, optical blur, sensor noise and quantisation.
+//!
+//! The pipeline of one frame:
+//! 1. For every pixel *corner* cast the camera ray ([`CameraModel::pixel_to_ray`]) and record
+//!    what it hits and on which side of each light plane. A pixel whose corners disagree (an
+//!    object or checkerboard edge, the mirror rim, a light plane crossing it) or lie within
+//!    4 σ of a light plane is supersampled on an `n × n` grid; any other pixel takes one
+//!    sample at its centre.
+//! 2. Each sample shades the first hit: `albedo · (ambient_e + Σ laser)` electrons, where a
+//!    light plane contributes `laser_strength · cos(incidence) · g(d) / (π r)`: `g` the normalised
+//!    Gaussian of the distance `d` (mm) from the plane (σ = FWHM / 2.3548), `1/(π r)` the spreading
+//!    of the 180° fan at distance `r` from its (virtual) apex. A point gets laser light only if it is
+//!    on the lit half-plane, faces the laser and nothing blocks the path from the facet to it.
+//! 3. The electron image is blurred with a Gaussian PSF, then photon noise (Poisson), read noise
+//!    (Gaussian), saturation at the full well, gamma and quantisation to the bit depth are applied.
+
+use crate::frame::Frame16;
+use crate::rng::{SplitMix64, mix};
+use crate::scene::Scene;
+use crate::sensor::Sensor;
+use omni_geom::{Point3, Vector2, Vector3};
+use omni_model::LightPlane;
+use rayon::prelude::*;
+
+/// Rendering parameters. `Default` is a real industrial 8-bit monochrome camera (full well
+/// 10 000 e⁻, read noise 6 e⁻, 8 bits over the full well, gamma 1, PSF σ 0.7 px) and a real
+/// line laser (sheet FWHM 0.5 mm; strength so that the stripe on the matte paper bench plane at
+/// 500 mm peaks at about 190 of 255 including ambient) in a dim lab (ambient: a white surface
+/// collects 2 000 e⁻, ≈ 51 of 255).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderOptions {
+    /// Samples per axis for pixels near a stripe or an edge (n × n samples).
+    pub supersample: u32,
+    /// Standard deviation of the Gaussian optical blur (px); 0 = none.
+    pub psf_sigma_px: f64,
+    /// Full width at half maximum of the laser sheet's Gaussian profile across the light
+    /// plane (mm).
+    pub beam_fwhm_mm: f64,
+    /// Electrons a pixel collects from a white Lambertian surface lit head-on by the laser
+    /// with a fan-normalised irradiance of 1 mm⁻² (the whole fan's power on 1 mm²). Lumps laser
+    /// power, exposure, aperture and quantum efficiency.
+    pub laser_strength: f64,
+    /// Electrons a pixel collects from a white (albedo 1) surface under the ambient light.
+    pub ambient_e: f64,
+    /// Full-well capacity (e⁻): saturation, and the signal that maps to the largest value.
+    pub full_well_e: f64,
+    /// Read noise (e⁻ rms).
+    pub read_noise_e: f64,
+    /// Output gamma (1 = linear).
+    pub gamma: f64,
+    /// 8 or 16.
+    pub bit_depth: u8,
+    /// Photon and read noise on/off (off: a noiseless but still blurred, saturated, quantised frame).
+    pub noise: bool,
+    /// Noise seed; each frame derives its own stream from it and its mirror angle and facet.
+    pub seed: u64,
+    /// Polygon turn during the exposure (degrees); the stripe is integrated over
+    /// [α − m/2, α + m/2]. 0 = a still mirror.
+    pub motion_blur_deg: f64,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            supersample: 8,
+            psf_sigma_px: 0.7,
+            beam_fwhm_mm: 0.5,
+            laser_strength: DEFAULT_LASER_STRENGTH,
+            ambient_e: 2000.0,
+            full_well_e: 10_000.0,
+            read_noise_e: 6.0,
+            gamma: 1.0,
+            bit_depth: 8,
+            noise: true,
+            seed: 0,
+            motion_blur_deg: 0.0,
+        }
+    }
+}
+
+/// See [`RenderOptions::laser_strength`]; chosen so that the default stripe peaks at about 190
+/// of 255 on the paper bench plane (measured by a test).
+pub const DEFAULT_LASER_STRENGTH: f64 = 6.0e7;
+
+impl RenderOptions {
+    /// The defaults without photon and read noise.
+    pub fn noiseless() -> Self {
+        RenderOptions { noise: false, ..Default::default() }
+    }
+
+    /// Checks values; the message names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let non_negative = [
+            ("psf_sigma_px", self.psf_sigma_px),
+            ("laser_strength", self.laser_strength),
+            ("ambient_e", self.ambient_e),
+            ("read_noise_e", self.read_noise_e),
+            ("motion_blur_deg", self.motion_blur_deg),
+        ];
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{name} must be a non-negative number, got {v}"));
+            }
+        }
+        for (name, v) in [("beam_fwhm_mm", self.beam_fwhm_mm), ("full_well_e", self.full_well_e), ("gamma", self.gamma)]
+        {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} must be a positive number, got {v}"));
+            }
+        }
+        if !(1..=16).contains(&self.supersample) {
+            return Err(format!("supersample must be in 1..=16, got {}", self.supersample));
+        }
+        if self.bit_depth != 8 && self.bit_depth != 16 {
+            return Err(format!("bit_depth must be 8 or 16, got {}", self.bit_depth));
+        }
+        Ok(())
+    }
+
+    fn beam_sigma(&self) -> f64 {
+        self.beam_fwhm_mm / (8.0 * 2f64.ln()).sqrt()
+    }
+}
+
+/// One light plane contributing to a frame, with its weight (motion blur splits a laser into
+/// several planes).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Slice {
+    pub lp: LightPlane,
+    pub weight: f64,
+}
+
+/// The light planes of the given lasers at mirror angle `alpha` (radians), spread over the
+/// motion-blur range. Lasers whose central ray misses the facet are skipped.
+pub(crate) fn light_slices(
+    sensor: &Sensor,
+    alpha: f64,
+    facet: u32,
+    lasers: &[u32],
+    opts: &RenderOptions,
+) -> Vec<Slice> {
+    let blur = opts.motion_blur_deg.to_radians();
+    let steps = if blur > 0.0 { ((opts.motion_blur_deg / 0.02).ceil() as usize).clamp(2, 32) } else { 1 };
+    let mut out = Vec::new();
+    for &laser in lasers {
+        for k in 0..steps {
+            let a = alpha + blur * ((k as f64 + 0.5) / steps as f64 - 0.5);
+            if let Some(lp) = sensor.transmitter.light_plane(a, facet, laser as usize).filter(|lp| lp.on_facet) {
+                out.push(Slice { lp, weight: 1.0 / steps as f64 });
+            }
+        }
+    }
+    out
+}
+
+/// Shading context for one frame.
+struct Shader<'a> {
+    scene: &'a Scene,
+    slices: &'a [Slice],
+    sigma: f64,
+    opts: &'a RenderOptions,
+}
+
+/// What a camera ray at a pixel corner sees, for deciding where to supersample.
+#[derive(Clone, Copy, PartialEq)]
+struct CornerKey {
+    /// Object index · 4 + pattern, or `u32::MAX` for no scene (outside the mirror, no hit).
+    surface: u32,
+    /// Bit i set if the hit is on the positive side of slice i's plane.
+    sides: u64,
+    /// Whether the hit lies within 4 σ of any light plane.
+    near: bool,
+}
+
+impl Shader<'_> {
+    fn corner(&self, camera: &dyn omni_model::CameraModel, px: Vector2<f64>) -> CornerKey {
+        let none = CornerKey { surface: u32::MAX, sides: 0, near: false };
+        let Some(ray) = camera.pixel_to_ray(&px) else { return none };
+        let Some(hit) = self.scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY) else { return none };
+        let mut sides = 0u64;
+        let mut near = false;
+        for (i, s) in self.slices.iter().enumerate().take(64) {
+            let d = s.lp.plane.signed_distance(&hit.point);
+            sides |= u64::from(d > 0.0) << i;
+            near |= d.abs() < 4.0 * self.sigma;
+        }
+        CornerKey { surface: hit.object as u32 * 4 + hit.pattern as u32, sides, near }
+    }
+
+    /// Electrons collected from the scene point seen along a camera ray.
+    fn radiance(&self, origin: &Point3<f64>, dir: &Vector3<f64>) -> f64 {
+        let Some(hit) = self.scene.cast(origin, dir, 1e-6, f64::INFINITY) else { return 0.0 };
+        let mut e = self.opts.ambient_e;
+        for s in self.slices {
+            e += s.weight * self.laser_irradiance(&s.lp, &hit.point, &hit.normal, dir);
+        }
+        hit.albedo * e
+    }
+
+    /// Laser signal (e⁻ for albedo 1) of one light plane at a surface point seen along `view`.
+    fn laser_irradiance(&self, lp: &LightPlane, p: &Point3<f64>, n: &Vector3<f64>, view: &Vector3<f64>) -> f64 {
+        let d = lp.plane.signed_distance(p);
+        if d.abs() > 6.0 * self.sigma || !lp.lights(p) {
+            return 0.0;
+        }
+        let to_p = p - lp.virtual_source;
+        let r = to_p.norm();
+        let u = to_p / r;
+        // The light must arrive on the side the camera looks at (thin two-sided objects).
+        if u.dot(n) * view.dot(n) <= 0.0 {
+            return 0.0;
+        }
+        if !self.path_is_clear(lp, p, &u) {
+            return 0.0;
+        }
+        let cos_inc = u.dot(n).abs();
+        let gauss = (-0.5 * (d / self.sigma).powi(2)).exp() / (self.sigma * (2.0 * std::f64::consts::PI).sqrt());
+        self.opts.laser_strength * cos_inc * gauss / (std::f64::consts::PI * r)
+    }
+
+    /// Whether the reflected ray from the facet to `p` is unobstructed (laser shadows).
+    fn path_is_clear(&self, lp: &LightPlane, p: &Point3<f64>, u: &Vector3<f64>) -> bool {
+        let start = facet_exit(lp, u);
+        !self.scene.occluded(&start, p, 1e-5)
+    }
+}
+
+/// Where the reflected ray along `u` (from the virtual source) leaves the facet.
+pub(crate) fn facet_exit(lp: &LightPlane, u: &Vector3<f64>) -> Point3<f64> {
+    let denom = lp.facet.normal.dot(u);
+    if denom.abs() < 1e-12 {
+        return lp.facet_point;
+    }
+    let t = -lp.facet.signed_distance(&lp.virtual_source) / denom;
+    lp.virtual_source + u * t.max(0.0)
+}
+
+/// Renders the noiseless electron image (before blur) with adaptive supersampling.
+fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &RenderOptions) -> Vec<f64> {
+    let camera = sensor.camera.as_ref();
+    let (w, h) = camera.image_size();
+    let shader = Shader { scene, slices, sigma: opts.beam_sigma(), opts };
+    let cw = w as usize + 1;
+    let corners: Vec<CornerKey> = (0..=h)
+        .into_par_iter()
+        .flat_map_iter(|cy| {
+            let shader = &shader;
+            (0..=w).map(move |cx| shader.corner(camera, Vector2::new(cx as f64 - 0.5, cy as f64 - 0.5)))
+        })
+        .collect();
+    let n = opts.supersample.max(1);
+    let mut out = vec![0.0; (w * h) as usize];
+    out.par_chunks_mut(w as usize).enumerate().for_each(|(y, row)| {
+        for (x, value) in row.iter_mut().enumerate() {
+            let c = [
+                corners[y * cw + x],
+                corners[y * cw + x + 1],
+                corners[(y + 1) * cw + x],
+                corners[(y + 1) * cw + x + 1],
+            ];
+            let uniform = c.iter().all(|k| k.surface == c[0].surface && k.sides == c[0].sides && !k.near);
+            if uniform && c[0].surface == u32::MAX {
+                continue;
+            }
+            let samples = if uniform { 1 } else { n };
+            *value = pixel_mean(&shader, camera, x as f64, y as f64, samples);
+        }
+    });
+    out
+}
+
+/// Mean signal over an `n × n` grid of samples inside pixel (x, y).
+fn pixel_mean(shader: &Shader, camera: &dyn omni_model::CameraModel, x: f64, y: f64, n: u32) -> f64 {
+    let mut sum = 0.0;
+    for j in 0..n {
+        for i in 0..n {
+            let px = Vector2::new(x + (i as f64 + 0.5) / n as f64 - 0.5, y + (j as f64 + 0.5) / n as f64 - 0.5);
+            if let Some(ray) = camera.pixel_to_ray(&px) {
+                sum += shader.radiance(&ray.origin, &ray.dir);
+            }
+        }
+    }
+    sum / (n * n) as f64
+}
+
+/// Separable Gaussian blur (σ in px), edges clamped.
+fn blur(img: &[f64], w: usize, h: usize, sigma: f64) -> Vec<f64> {
+    if sigma <= 0.0 {
+        return img.to_vec();
+    }
+    let radius = (3.5 * sigma).ceil() as isize;
+    let kernel: Vec<f64> = (-radius..=radius).map(|i| (-0.5 * (i as f64 / sigma).powi(2)).exp()).collect();
+    let norm: f64 = kernel.iter().sum();
+    let kernel: Vec<f64> = kernel.iter().map(|k| k / norm).collect();
+    let clamp = |v: isize, max: usize| v.clamp(0, max as isize - 1) as usize;
+    let mut tmp = vec![0.0; w * h];
+    tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, out) in row.iter_mut().enumerate() {
+            *out = kernel
+                .iter()
+                .enumerate()
+                .map(|(k, kv)| kv * img[y * w + clamp(x as isize + k as isize - radius, w)])
+                .sum();
+        }
+    });
+    let mut out = vec![0.0; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, o) in row.iter_mut().enumerate() {
+            *o = kernel
+                .iter()
+                .enumerate()
+                .map(|(k, kv)| kv * tmp[clamp(y as isize + k as isize - radius, h) * w + x])
+                .sum();
+        }
+    });
+    out
+}
+
+/// Photon and read noise, saturation, gamma and quantisation.
+fn digitise(electrons: &[f64], w: usize, opts: &RenderOptions, frame_seed: u64) -> Vec<u16> {
+    let max = if opts.bit_depth == 8 { 255.0 } else { 65535.0 };
+    let mut out = vec![0u16; electrons.len()];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let mut rng = SplitMix64::stream(frame_seed, y as u64);
+        for (x, o) in row.iter_mut().enumerate() {
+            let mut e = electrons[y * w + x];
+            if opts.noise {
+                e = rng.poisson(e) + opts.read_noise_e * rng.normal();
+            }
+            let level = (e / opts.full_well_e).clamp(0.0, 1.0).powf(1.0 / opts.gamma);
+            *o = (level * max).round() as u16;
+        }
+    });
+    out
+}
+
+fn finish(sensor: &Sensor, electrons: Vec<f64>, opts: &RenderOptions, frame_seed: u64) -> Frame16 {
+    let (w, h) = sensor.camera.image_size();
+    let blurred = blur(&electrons, w as usize, h as usize, opts.psf_sigma_px);
+    Frame16 { width: w, height: h, data: digitise(&blurred, w as usize, opts, frame_seed), bit_depth: opts.bit_depth }
+}
+
+/// The noise seed of one frame: the user's seed mixed with what identifies the frame, so that
+/// the frames of a scan get independent noise yet each is reproducible.
+fn frame_seed(seed: u64, alpha: f64, facet: u32, lasers: &[u32]) -> u64 {
+    let mut s = mix(seed ^ 0x5EED) ^ mix(alpha.to_bits()) ^ mix(0xFACE_0000 + facet as u64);
+    for l in lasers {
+        s = mix(s ^ (1 + *l as u64));
+    }
+    s
+}
+
+/// A stripe point of the ground truth: on the scene surface, exactly on the light plane, lit,
+/// visible, and its exact pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthPoint {
+    /// World point (mm).
+    pub xyz: [f64; 3],
+    /// Its pixel (x right, y down, top-left pixel centre = (0, 0)).
+    pub pixel: [f64; 2],
+    /// Which laser drew it.
+    pub laser: u32,
+}
+
+/// A rendered laser frame with its ground truth.
+#[derive(Debug, Clone)]
+pub struct LaserFrame {
+    /// The image (values in 0..=255 for 8-bit frames).
+    pub image: Frame16,
+    /// Dense samples (≤ 0.25 px apart) along each visible stripe curve, laser by laser, ordered
+    /// along the curve; split into curves with [`crate::truth_polylines`].
+    pub truth: Vec<TruthPoint>,
+}
+
+/// Renders the frame taken at mirror angle `alpha` (radians, within the facet) with laser 0 on
+/// facet `facet` and the given lasers on, with its ground truth (always the still mirror at
+/// `alpha`, also under motion blur).
+///
+/// Panics if `opts` is invalid (see [`RenderOptions::validate`]).
+pub fn render_laser_frame(
+    sensor: &Sensor,
+    scene: &Scene,
+    alpha_rad: f64,
+    facet: u32,
+    lasers: &[u32],
+    opts: &RenderOptions,
+) -> LaserFrame {
+    if let Err(e) = opts.validate() {
+        panic!("invalid RenderOptions: {e}");
+    }
+    let slices = light_slices(sensor, alpha_rad, facet, lasers, opts);
+    let electrons = render_electrons(sensor, scene, &slices, opts);
+    let image = finish(sensor, electrons, opts, frame_seed(opts.seed, alpha_rad, facet, lasers));
+    let truth = crate::truth::stripe_truth(sensor, scene, alpha_rad, facet, lasers);
+    LaserFrame { image, truth }
+}
+
+/// Renders the frame with all lasers off (ambient light only).
+///
+/// Panics if `opts` is invalid (see [`RenderOptions::validate`]).
+pub fn render_ambient_frame(sensor: &Sensor, scene: &Scene, opts: &RenderOptions) -> Frame16 {
+    if let Err(e) = opts.validate() {
+        panic!("invalid RenderOptions: {e}");
+    }
+    let electrons = render_electrons(sensor, scene, &[], opts);
+    finish(sensor, electrons, opts, frame_seed(opts.seed, f64::NAN, u32::MAX, &[]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blur_preserves_sum_and_spreads_as_sigma() {
+        let (w, h) = (41, 41);
+        let mut img = vec![0.0; w * h];
+        img[20 * w + 20] = 1000.0;
+        let b = blur(&img, w, h, 1.5);
+        assert!((b.iter().sum::<f64>() - 1000.0).abs() < 1e-6);
+        let var: f64 = (0..w).map(|x| b[20 * w + x] * ((x as f64 - 20.0).powi(2))).sum::<f64>()
+            / (0..w).map(|x| b[20 * w + x]).sum::<f64>();
+        assert!((var.sqrt() - 1.5).abs() < 0.02, "σ = {}", var.sqrt());
+    }
+}

@@ -1,0 +1,91 @@
+//! A small self-contained deterministic PRNG (SplitMix64), so that rendered noise does not
+//! depend on the version of any random-number crate.
+
+/// SplitMix64 (Steele, Lea & Flood 2014): 64-bit state, passes BigCrush, trivially seedable.
+#[derive(Debug, Clone)]
+pub struct SplitMix64(u64);
+
+impl SplitMix64 {
+    pub fn new(seed: u64) -> Self {
+        SplitMix64(seed)
+    }
+
+    /// A generator for a sub-stream `key` of `seed` (e.g. one image row), decorrelated by hashing.
+    pub fn stream(seed: u64, key: u64) -> Self {
+        SplitMix64(mix(seed ^ mix(key.wrapping_add(0x9E37_79B9_7F4A_7C15))))
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        mix(self.0)
+    }
+
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+
+    /// Standard normal (Box–Muller; one value per call).
+    pub fn normal(&mut self) -> f64 {
+        let u1 = 1.0 - self.uniform(); // (0, 1]
+        let u2 = self.uniform();
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+
+    /// Poisson with mean `lambda`: exact (Knuth) below 40, normal approximation above, where
+    /// the two are indistinguishable at the precision of an image sensor.
+    pub fn poisson(&mut self, lambda: f64) -> f64 {
+        if !(lambda > 0.0) {
+            return 0.0;
+        }
+        if lambda < 40.0 {
+            let limit = (-lambda).exp();
+            let mut k = 0.0;
+            let mut p = self.uniform();
+            while p > limit {
+                k += 1.0;
+                p *= self.uniform();
+            }
+            k
+        } else {
+            (lambda + lambda.sqrt() * self.normal()).round().max(0.0)
+        }
+    }
+}
+
+/// The SplitMix64 output function.
+pub fn mix(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn moments_match_the_distributions() {
+        let mut r = SplitMix64::new(7);
+        let n = 200_000;
+        let (mut s, mut s2) = (0.0, 0.0);
+        for _ in 0..n {
+            let x = r.normal();
+            s += x;
+            s2 += x * x;
+        }
+        assert!((s / n as f64).abs() < 0.01 && (s2 / n as f64 - 1.0).abs() < 0.01);
+        for lambda in [3.0, 25.0, 400.0] {
+            let (mut s, mut s2) = (0.0, 0.0);
+            for _ in 0..n {
+                let x = r.poisson(lambda);
+                s += x;
+                s2 += x * x;
+            }
+            let mean = s / n as f64;
+            let var = s2 / n as f64 - mean * mean;
+            assert!((mean / lambda - 1.0).abs() < 0.01, "mean {mean} for {lambda}");
+            assert!((var / lambda - 1.0).abs() < 0.03, "var {var} for {lambda}");
+        }
+    }
+}

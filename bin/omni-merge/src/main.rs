@@ -1,1 +1,216 @@
-fn main() {}
+//! omni-merge: point streams and PLY clouds → one cleaned PLY cloud.
+
+use clap::Parser;
+use omni_cli::CliError;
+use omni_cloud::filter::CropBox;
+use omni_cloud::merge::{MergeOptions, Merger};
+use omni_cloud::motion::Trajectory;
+use omni_formats::ply::{Encoding, write_ply};
+use omni_formats::stream::{Record, StreamReader};
+use std::path::{Path, PathBuf};
+
+#[derive(Parser, Debug)]
+#[command(
+    version,
+    about = "Merge point streams and PLY clouds into one cloud: poses, crop, voxel grid, outlier removal.",
+    long_about = "Reads triangulated point streams (JSON Lines from omni-triangulate; `-` = stdin) and PLY \
+clouds (by the .ply extension), optionally moves each frame by the sensor pose interpolated from an \
+odometry file at the frame's timestamp_us (slerp + lerp), then crops, voxel-downsamples and removes \
+outliers, in that order, and writes one PLY cloud.\n\n\
+Outlier removal matches Open3D: --statistical K,STD_RATIO is remove_statistical_outlier(nb_neighbors=K, \
+std_ratio): mean distance to the K nearest points counting the point itself, kept if below \
+mean + STD_RATIO·std over the cloud. --radius R,MIN_POINTS is remove_radius_outlier(nb_points=MIN_POINTS, \
+radius=R): kept if more than MIN_POINTS points (the point itself included) lie strictly within R.",
+    after_help = "Examples:\n  \
+omni-merge points.jsonl -o cloud.ply\n  \
+omni-merge --voxel 1.0 --statistical 20,2.0 a.jsonl b.jsonl old.ply -o room.ply\n  \
+omni-merge --poses odometry.jsonl --crop-range 100,3000 walk.jsonl -o walk.ply\n  \
+omni-triangulate ... | omni-merge --radius 5,4 - -o cloud.ply --ascii\n\n\
+Voxels are anchored at the world origin and the output is ordered by voxel index (deterministic).\n\
+Exit codes: 0 ok, 1 bad input or I/O error (nothing half-written), 2 usage error."
+)]
+struct Args {
+    /// Inputs: point streams (`-` = stdin) or PLY files (*.ply).
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
+    /// Output PLY (`-` = stdout).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Write ASCII PLY instead of binary little-endian.
+    #[arg(long)]
+    ascii: bool,
+    /// Odometry (JSON Lines poses with timestamps) to place each frame in the world.
+    #[arg(long)]
+    poses: Option<PathBuf>,
+    /// Longest odometry gap (ms) that may be interpolated across.
+    #[arg(long, default_value_t = 100.0)]
+    max_pose_gap_ms: f64,
+    /// Voxel edge length (mm): one centroid per occupied voxel.
+    #[arg(long, value_name = "SIZE")]
+    voxel: Option<f64>,
+    /// Statistical outlier removal: K neighbours, STD_RATIO.
+    #[arg(long, value_name = "K,STD_RATIO")]
+    statistical: Option<String>,
+    /// Radius outlier removal: radius R (mm), MIN_POINTS other points.
+    #[arg(long, value_name = "R,MIN_POINTS")]
+    radius: Option<String>,
+    /// Keep points inside the box (mm, world frame).
+    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX")]
+    crop_box: Option<String>,
+    /// Keep points measured at a range (distance from the viewpoint, mm) in [MIN, MAX].
+    #[arg(long, value_name = "MIN,MAX")]
+    crop_range: Option<String>,
+    /// Print the point counts of each stage to stderr as JSON.
+    #[arg(long)]
+    stats: bool,
+}
+
+/// Parses `n` comma-separated numbers for option `opt`.
+fn numbers(opt: &str, s: &str, n: usize) -> Result<Vec<f64>, CliError> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| CliError::usage(format!("--{opt}: expected {n} comma-separated numbers, got {s:?}")))?;
+    if v.len() != n || !v.iter().all(|x| x.is_finite()) {
+        return Err(CliError::usage(format!("--{opt}: expected {n} comma-separated numbers, got {s:?}")));
+    }
+    Ok(v)
+}
+
+fn count(opt: &str, x: f64) -> Result<usize, CliError> {
+    if x >= 1.0 && x.fract() == 0.0 && x < 1e9 {
+        Ok(x as usize)
+    } else {
+        Err(CliError::usage(format!("--{opt}: the count must be a positive integer, got {x}")))
+    }
+}
+
+fn options(args: &Args) -> Result<MergeOptions, CliError> {
+    let statistical = match &args.statistical {
+        Some(s) => {
+            let v = numbers("statistical", s, 2)?;
+            Some((count("statistical", v[0])?, v[1]))
+        }
+        None => None,
+    };
+    let radius = match &args.radius {
+        Some(s) => {
+            let v = numbers("radius", s, 2)?;
+            Some((count("radius", v[1])?, v[0]))
+        }
+        None => None,
+    };
+    let crop_box = match &args.crop_box {
+        Some(s) => {
+            let v = numbers("crop-box", s, 6)?;
+            Some(CropBox::new([v[0], v[1], v[2]], [v[3], v[4], v[5]]).map_err(CliError::usage)?)
+        }
+        None => None,
+    };
+    let crop_range = match &args.crop_range {
+        Some(s) => {
+            let v = numbers("crop-range", s, 2)?;
+            Some((v[0], v[1]))
+        }
+        None => None,
+    };
+    if let Some((_, r)) = statistical
+        && !(r > 0.0)
+    {
+        return Err(CliError::usage("--statistical: STD_RATIO must be positive"));
+    }
+    if let Some((_, r)) = radius
+        && !(r > 0.0)
+    {
+        return Err(CliError::usage("--radius: R must be positive"));
+    }
+    Ok(MergeOptions { voxel: args.voxel, statistical, radius, crop_box, crop_range })
+}
+
+fn is_ply(p: &Path) -> bool {
+    p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
+}
+
+fn main() -> std::process::ExitCode {
+    omni_cli::main("omni-merge", || {
+        let args = Args::parse();
+        let opts = options(&args)?;
+        if args.inputs.iter().filter(|p| p.as_os_str() == "-").count() > 1 {
+            return Err(CliError::usage("stdin (`-`) can be given only once"));
+        }
+        if !(args.max_pose_gap_ms >= 0.0 && args.max_pose_gap_ms.is_finite()) {
+            return Err(CliError::usage("--max-pose-gap-ms must be a non-negative number"));
+        }
+        let trajectory = match &args.poses {
+            Some(p) => {
+                let samples = omni_formats::odometry::read_odometry(p)?;
+                let gap_us = (args.max_pose_gap_ms * 1000.0).round() as u64;
+                Some(Trajectory::new(&samples, gap_us).map_err(|m| format!("{}: {m}", p.display()))?)
+            }
+            None => None,
+        };
+        let mut merger = Merger::new(opts).map_err(CliError::usage)?;
+        for input in &args.inputs {
+            let name = omni_formats::io::display_name(input, "stdin");
+            if is_ply(input) {
+                if trajectory.is_some() {
+                    return Err(CliError::new(format!(
+                        "{name}: --poses needs point streams (a PLY cloud has no frame timestamps)"
+                    )));
+                }
+                add_ply(&mut merger, input, &name)?;
+            } else {
+                add_stream(&mut merger, input, &name, trajectory.as_ref())?;
+            }
+        }
+        let (cloud, stats) = merger.finish()?;
+        if cloud.is_empty() {
+            omni_cli::warn("omni-merge", "no points left after cropping and filtering; writing an empty cloud");
+        }
+        let enc = if args.ascii { Encoding::Ascii } else { Encoding::BinaryLittleEndian };
+        write_ply(&args.output, &cloud, enc)?;
+        if args.stats {
+            eprintln!("{}", serde_json::to_string(&stats).unwrap_or_default());
+        }
+        Ok(())
+    })
+}
+
+fn add_ply(merger: &mut Merger, path: &Path, name: &str) -> Result<(), CliError> {
+    let merger = std::cell::RefCell::new(merger);
+    omni_cloud::ply_stream::for_each_vertex(
+        path,
+        &mut |names, n| {
+            if n == 0 {
+                return Err(format!("{name}: the PLY has no vertices"));
+            }
+            merger.borrow_mut().begin_input(names).map_err(|m| format!("{name}: {m}"))
+        },
+        &mut |p, s| merger.borrow_mut().add(p, s).map_err(|m| format!("{name}: {m}")),
+    )?;
+    Ok(())
+}
+
+fn add_stream(merger: &mut Merger, path: &Path, name: &str, traj: Option<&Trajectory>) -> Result<(), CliError> {
+    let mut reader = StreamReader::new(omni_formats::io::open_input(path)?, name);
+    merger.begin_stream_input().map_err(|m| format!("{name}: {m}"))?;
+    let mut frames = 0u64;
+    while let Some(record) = reader.next_record()? {
+        let Record::Frame(frame) = record else { continue };
+        let loc = format!("{name}: line {} (frame {})", reader.line(), frame.seq);
+        let pose = match traj {
+            Some(t) => {
+                let ts = frame.timestamp_us.ok_or_else(|| format!("{loc}: no timestamp_us, needed with --poses"))?;
+                Some(t.pose_at(ts).map_err(|m| format!("{loc}: {m}"))?)
+            }
+            None => None,
+        };
+        merger.add_frame(&frame, pose.as_ref()).map_err(|m| format!("{loc}: {m}"))?;
+        frames += 1;
+    }
+    if frames == 0 {
+        return Err(CliError::new(format!("{name}: no frame records")));
+    }
+    Ok(())
+}

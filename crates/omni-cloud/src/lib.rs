@@ -6,6 +6,8 @@
 //! * [`cloud`]: triangulated frames → a [`PointCloud`] with the standard scalar fields.
 //! * [`filter`]: voxel-grid downsampling and Open3D-compatible statistical / radius outlier
 //!   removal, cropping; [`kdtree`] is the neighbour search behind them.
+//! * [`merge`]: many inputs → one cloud (pose, crop, voxel, outliers) with bounded memory;
+//!   [`ply_stream`] visits PLY vertices without loading the file.
 //! * [`motion`]: poses interpolated from odometry (slerp + lerp) for a moving sensor.
 //! * [`fit`]: RANSAC + least-squares plane, sphere, cylinder and cone fits and error statistics.
 //!
@@ -22,7 +24,9 @@ pub mod cloud;
 pub mod filter;
 pub mod fit;
 pub mod kdtree;
+pub mod merge;
 pub mod motion;
+pub mod ply_stream;
 pub mod rng;
 pub mod triangulate;
 

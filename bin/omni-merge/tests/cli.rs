@@ -1,0 +1,188 @@
+//! The real omni-merge binary on small synthetic streams, PLY files and odometry.
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use omni_cloud::filter::{radius_outlier_mask, statistical_outlier_mask};
+use omni_cloud::rng::Rng;
+use omni_formats::odometry::{PoseSample, write_odometry};
+use omni_formats::ply::{Encoding, PointCloud, ScalarField, read_ply, write_ply};
+use omni_formats::stream::{Frame, Header, Point, Record, StreamWriter, StripePoint};
+use std::path::Path;
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_omni-merge");
+
+fn run(dir: &Path, args: &[&str]) -> Output {
+    Command::new(BIN).current_dir(dir).args(args).output().unwrap()
+}
+
+fn ok(out: &Output) {
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// A point stream, one frame per element of `frames` (sensor-frame points, timestamp).
+fn write_stream(path: &Path, frames: &[(Vec<[f64; 3]>, Option<u64>)]) {
+    let mut w = StreamWriter::new(std::fs::File::create(path).unwrap(), "test");
+    w.write(&Record::Header(Header::new("test"))).unwrap();
+    for (seq, (pts, ts)) in frames.iter().enumerate() {
+        let mut f = Frame::new(seq as u64, "x.png", 10.0, 0);
+        f.timestamp_us = *ts;
+        f.stripe = Some(
+            pts.iter()
+                .enumerate()
+                .map(|(i, _)| StripePoint { u: i as f64, v: 1.0, intensity: 50.0, width: 2.0, quality: 0 })
+                .collect(),
+        );
+        f.points = Some(
+            pts.iter()
+                .enumerate()
+                .map(|(i, p)| Point { xyz: *p, laser: 0, range: Vector3::from(*p).norm(), stripe_index: i as u32 })
+                .collect(),
+        );
+        w.write(&Record::Frame(Box::new(f))).unwrap();
+    }
+}
+
+fn plane_with_outliers(rng: &mut Rng, n: usize, outliers: usize) -> Vec<[f64; 3]> {
+    let mut pts: Vec<[f64; 3]> =
+        (0..n).map(|_| [rng.uniform() * 200.0, rng.uniform() * 200.0, 800.0 + rng.normal() * 0.3]).collect();
+    for _ in 0..outliers {
+        pts.push([rng.uniform() * 200.0, rng.uniform() * 200.0, 820.0 + rng.uniform() * 100.0]);
+    }
+    pts
+}
+
+#[test]
+fn merges_streams_and_ply_and_matches_the_library_filters() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rng = Rng::new(1);
+    let a = plane_with_outliers(&mut rng, 1500, 30);
+    let b = plane_with_outliers(&mut rng, 1500, 30);
+    write_stream(&dir.path().join("a.jsonl"), &[(a[..800].to_vec(), None), (a[800..].to_vec(), None)]);
+    let ply = PointCloud {
+        positions: b.clone(),
+        scalars: omni_cloud::cloud::POINT_SCALARS
+            .iter()
+            .map(|n| ScalarField { name: n.to_string(), values: vec![1.0; b.len()] })
+            .collect(),
+    };
+    write_ply(&dir.path().join("b.ply"), &ply, Encoding::BinaryLittleEndian).unwrap();
+    ok(&run(dir.path(), &["a.jsonl", "b.ply", "-o", "all.ply"]));
+    let all = read_ply(&dir.path().join("all.ply")).unwrap();
+    assert_eq!(all.len(), a.len() + b.len());
+    assert_eq!(all.scalars.len(), 7);
+
+    let both: Vec<[f64; 3]> = a.iter().chain(&b).copied().collect();
+    ok(&run(dir.path(), &["a.jsonl", "b.ply", "-o", "sor.ply", "--statistical", "12,1.5"]));
+    let sor = read_ply(&dir.path().join("sor.ply")).unwrap();
+    let mask = statistical_outlier_mask(&both, 12, 1.5).unwrap();
+    assert_eq!(sor.len(), mask.iter().filter(|k| **k).count());
+    assert!(sor.positions.iter().all(|p| p[2] < 815.0), "a planted outlier survived");
+
+    ok(&run(dir.path(), &["a.jsonl", "b.ply", "-o", "ror.ply", "--radius", "8,3", "--ascii"]));
+    let ror = read_ply(&dir.path().join("ror.ply")).unwrap();
+    let mask = radius_outlier_mask(&both, 3, 8.0).unwrap();
+    assert_eq!(ror.len(), mask.iter().filter(|k| **k).count());
+
+    ok(&run(dir.path(), &["a.jsonl", "b.ply", "-o", "vox.ply", "--voxel", "10", "--crop-box", "0,0,790,100,200,810"]));
+    let vox = read_ply(&dir.path().join("vox.ply")).unwrap();
+    // The plane z ≈ 800 over x ∈ [0, 100], y ∈ [0, 200] fills 10 × 20 voxels of the z = 790..800
+    // and 800..810 layers; every centroid lies inside the box.
+    assert!(vox.len() > 200 && vox.len() <= 400, "{}", vox.len());
+    assert!(vox.positions.iter().all(|p| p[0] <= 100.0 && (790.0..=810.0).contains(&p[2])));
+    // Deterministic: the same run gives the same bytes.
+    ok(&run(dir.path(), &["a.jsonl", "b.ply", "-o", "vox2.ply", "--voxel", "10", "--crop-box", "0,0,790,100,200,810"]));
+    assert_eq!(std::fs::read(dir.path().join("vox.ply")).unwrap(), std::fs::read(dir.path().join("vox2.ply")).unwrap());
+
+    ok(&run(dir.path(), &["a.jsonl", "-o", "near.ply", "--crop-range", "0,850"]));
+    let near = read_ply(&dir.path().join("near.ply")).unwrap();
+    let expect = a.iter().filter(|p| Vector3::from(**p).norm() <= 850.0).count();
+    assert_eq!(near.len(), expect);
+}
+
+#[test]
+fn poses_put_a_moving_sensors_slices_into_one_world_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    // The sensor drives along x at 0.5 mm/ms while yawing at 0.2 °/ms; odometry every 10 ms.
+    let pose = |t_us: u64| {
+        let t = t_us as f64 / 1000.0;
+        Isometry3::from_parts(
+            Translation3::new(0.5 * t, 0.0, 0.0),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), (0.2 * t).to_radians()),
+        )
+    };
+    let samples: Vec<PoseSample> = (0..=20)
+        .map(|i| {
+            let p = pose(i * 10_000);
+            let q = p.rotation;
+            PoseSample {
+                t_us: i * 10_000,
+                translation_mm: p.translation.vector.into(),
+                quaternion_wxyz: [q.w, q.i, q.j, q.k],
+            }
+        })
+        .collect();
+    write_odometry(&dir.path().join("odo.jsonl"), &samples).unwrap();
+    let world: Vec<Point3<f64>> =
+        (0..200).map(|i| Point3::new(1000.0 + i as f64, 300.0 - 2.0 * i as f64, 50.0)).collect();
+    let frames: Vec<(Vec<[f64; 3]>, Option<u64>)> = (0..10)
+        .map(|k| {
+            let t = 3_000 + k * 17_000;
+            let inv = pose(t).inverse();
+            (world[k as usize * 20..(k as usize + 1) * 20].iter().map(|w| (inv * w).coords.into()).collect(), Some(t))
+        })
+        .collect();
+    write_stream(&dir.path().join("walk.jsonl"), &frames);
+    ok(&run(dir.path(), &["--poses", "odo.jsonl", "walk.jsonl", "-o", "walk.ply"]));
+    let cloud = read_ply(&dir.path().join("walk.ply")).unwrap();
+    assert_eq!(cloud.len(), 200);
+    let worst = cloud.positions.iter().zip(&world).map(|(p, w)| (Point3::from(*p) - w).norm()).fold(0.0, f64::max);
+    assert!(worst < 1e-3, "worst {worst} mm");
+    // Without poses the slices stay where the moving sensor saw them: far apart.
+    ok(&run(dir.path(), &["walk.jsonl", "-o", "raw.ply"]));
+    let raw = read_ply(&dir.path().join("raw.ply")).unwrap();
+    let worst = raw.positions.iter().zip(&world).map(|(p, w)| (Point3::from(*p) - w).norm()).fold(0.0, f64::max);
+    assert!(worst > 50.0);
+}
+
+#[test]
+fn bad_inputs_fail_cleanly_without_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write_stream(&d.join("s.jsonl"), &[(vec![[1.0, 2.0, 3.0]; 5], Some(5_000))]);
+    let header = "{\"type\":\"header\",\"format\":\"omniscan.odometry\",\"version\":1}\n";
+    let sample = |t: u64| format!("{{\"t_us\":{t},\"translation_mm\":[0,0,0],\"quaternion_wxyz\":[1,0,0,0]}}\n");
+    std::fs::write(d.join("unsorted.jsonl"), format!("{header}{}{}", sample(9_000), sample(1_000))).unwrap();
+    std::fs::write(d.join("gap.jsonl"), format!("{header}{}{}", sample(0), sample(900_000))).unwrap();
+    std::fs::write(
+        d.join("empty.ply"),
+        "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n",
+    )
+    .unwrap();
+    std::fs::write(d.join("nan.ply"), "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\nnan 1 2\n").unwrap();
+    std::fs::write(
+        d.join("nopoints.jsonl"),
+        "{\"type\":\"frame\",\"seq\":4,\"path\":\"a.png\",\"alpha_deg\":3,\"facet\":0,\"stripe\":[]}\n",
+    )
+    .unwrap();
+    let cases: [(&[&str], &str); 6] = [
+        (&["--poses", "unsorted.jsonl", "s.jsonl"], "line 3"),
+        (&["--poses", "gap.jsonl", "s.jsonl"], "gap"),
+        (&["empty.ply"], "no vertices"),
+        (&["nan.ply"], "vertex 0"),
+        (&["nopoints.jsonl"], "frame 4"),
+        (&["s.jsonl", "missing.jsonl"], "missing.jsonl"),
+    ];
+    for (args, expect) in cases {
+        let mut all = args.to_vec();
+        all.extend(["-o", "out.ply"]);
+        let out = run(d, &all);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains(expect) && err.lines().count() == 1, "{args:?}: {err}");
+        assert!(!d.join("out.ply").exists());
+    }
+    for bad in [&["s.jsonl", "-o", "o.ply", "--statistical", "0,2"][..], &["s.jsonl", "-o", "o.ply", "--radius", "x"]] {
+        assert_eq!(run(d, bad).status.code(), Some(2));
+    }
+    assert_eq!(run(d, &["s.jsonl"]).status.code(), Some(2));
+}

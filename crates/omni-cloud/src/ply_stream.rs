@@ -74,6 +74,13 @@ enum Format {
     BinaryBe,
 }
 
+/// Called once per file with the scalar names (header order, without x y z) and vertex count.
+pub type HeaderFn<'a> = dyn FnMut(&[String], usize) -> Result<(), String> + 'a;
+/// Called per vertex with its position and scalars.
+pub type PointFn<'a> = dyn FnMut(&[f64; 3], &[f32]) -> Result<(), String> + 'a;
+/// An element as declared: name, count, properties (`None` for list properties).
+type Element = (String, usize, Vec<Option<(String, Kind)>>);
+
 /// The vertex layout of a PLY header when the streaming path applies.
 struct Layout {
     format: Format,
@@ -96,7 +103,7 @@ fn read_header(r: &mut dyn BufRead, name: &str) -> Result<Option<Layout>, String
         return Err(format!("{name}: header: not a PLY file"));
     }
     let mut format = None;
-    let mut elements: Vec<(String, usize, Vec<Option<(String, Kind)>>)> = Vec::new();
+    let mut elements: Vec<Element> = Vec::new();
     loop {
         let l = next(&mut line)?;
         let t: Vec<&str> = l.split_whitespace().collect();
@@ -148,11 +155,7 @@ fn read_header(r: &mut dyn BufRead, name: &str) -> Result<Option<Layout>, String
 /// Visits every vertex of a PLY file: first `on_header(scalar names, vertex count)`, then
 /// `on_point(xyz, scalars)` per vertex, scalars in header order without x y z. Non-finite
 /// coordinates and truncation are errors naming the file and vertex.
-pub fn for_each_vertex(
-    path: &Path,
-    on_header: &mut dyn FnMut(&[String], usize) -> Result<(), String>,
-    on_point: &mut dyn FnMut(&[f64; 3], &[f32]) -> Result<(), String>,
-) -> Result<(), String> {
+pub fn for_each_vertex(path: &Path, on_header: &mut HeaderFn, on_point: &mut PointFn) -> Result<(), String> {
     let name = omni_formats::io::display_name(path, "stdin");
     let mut input = omni_formats::io::open_input(path).map_err(|e| e.to_string())?;
     let Some(layout) = read_header(&mut input, &name)? else {
@@ -233,11 +236,7 @@ fn read_full(r: &mut dyn Read, buf: &mut [u8]) -> Result<(), usize> {
 }
 
 /// General layouts: load with the full reader, then visit.
-fn for_each_vertex_loaded(
-    path: &Path,
-    on_header: &mut dyn FnMut(&[String], usize) -> Result<(), String>,
-    on_point: &mut dyn FnMut(&[f64; 3], &[f32]) -> Result<(), String>,
-) -> Result<(), String> {
+fn for_each_vertex_loaded(path: &Path, on_header: &mut HeaderFn, on_point: &mut PointFn) -> Result<(), String> {
     let cloud = read_ply(path).map_err(|e| e.to_string())?;
     let names: Vec<String> = cloud.scalars.iter().map(|s| s.name.clone()).collect();
     on_header(&names, cloud.len())?;

@@ -21,12 +21,12 @@
 //! # }
 //! ```
 
+pub mod inputs;
 pub mod model;
 mod observe;
 mod pose;
+pub mod synth;
 mod table;
-#[cfg(test)]
-pub(crate) mod testkit;
 #[cfg(test)]
 mod tests;
 

@@ -58,9 +58,7 @@ impl RigBoard {
     /// Inner corner positions in board coordinates (mm), row by row (index = j·cols + i).
     pub fn corners_mm(&self) -> Vec<[f64; 2]> {
         let s = self.square_mm;
-        (0..self.inner_rows)
-            .flat_map(|j| (0..self.inner_cols).map(move |i| [i as f64 * s, j as f64 * s]))
-            .collect()
+        (0..self.inner_rows).flat_map(|j| (0..self.inner_cols).map(move |i| [i as f64 * s, j as f64 * s])).collect()
     }
 }
 

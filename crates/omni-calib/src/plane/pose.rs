@@ -173,7 +173,7 @@ impl Problem for PoseProblem<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plane::testkit::{Rng, paper_camera};
+    use crate::plane::synth::{Rng, paper_camera};
 
     #[test]
     fn recovers_a_board_pose_from_noisy_corners() {

@@ -1,7 +1,7 @@
 //! End-to-end tests of the light-plane calibration on exact synthetic geometry (true camera,
 //! board poses estimated from noisy corners, stripe pixels with noise).
 
-use super::testkit::*;
+use super::synth::*;
 use super::*;
 use omni_model::{FacetError, TransmitterParams};
 

@@ -1,6 +1,7 @@
-//! Exact synthetic geometry for the light-plane calibration tests: the paper camera, a rig of two
-//! perpendicular boards, corner pixels and stripe pixels (light plane ∩ board, projected through
-//! the true camera) with Gaussian pixel noise from a seeded generator.
+//! Exact synthetic geometry for testing and benchmarking the light-plane calibration without
+//! rendering: the paper camera, a rig of two perpendicular boards, corner pixels and stripe
+//! pixels (light plane ∩ board, projected through the true camera) with Gaussian pixel noise
+//! from a seeded generator. (The rendered equivalent is `omni_simulator`'s rig.)
 
 use super::{FrameStripes, PlacedBoard};
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};

@@ -1,0 +1,163 @@
+//! Runs the real omni-calib-plane binary on a small synthetic rig (exact geometry, true camera,
+//! pixel noise) and on broken inputs.
+
+use omni_calib::plane::PlacedBoard;
+use omni_calib::plane::synth::{Rng, corner_pixels, paper_camera, stripe_frame, two_board_rig};
+use omni_formats::rig::{BoardCorners, BoardCornersFile, RigFile};
+use omni_formats::stream::{Frame, Header, Record, StreamWriter, StripePoint};
+use omni_formats::{CameraFile, CameraSpec, ScannerFile};
+use omni_model::{HyperbolicParams, Transmitter, TransmitterParams};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_omni-calib-plane");
+
+fn run(args: &[&str]) -> Output {
+    Command::new(BIN).args(args).output().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Writes camera.json, rig.json, corners.json and stripes.jsonl (facet 0, α = 0…30° every 1°)
+/// for the paper build into `dir`; `alpha_override` replaces the angle of frame 3.
+fn dataset(dir: &Path, alpha_override: Option<f64>) -> [PathBuf; 4] {
+    let camera = paper_camera();
+    let truth = Transmitter::new(TransmitterParams::paper()).unwrap();
+    let mut rng = Rng::new(11);
+    let rig = two_board_rig(550.0);
+    let mut corners = vec![];
+    for (board, pose) in &rig {
+        let (pts, px) = corner_pixels(&camera, board, pose, 0.1, &mut rng);
+        let c = pts
+            .iter()
+            .zip(&px)
+            .map(|(b, p)| [(b[0] / board.square_mm).round(), (b[1] / board.square_mm).round(), p[0], p[1]])
+            .collect();
+        corners.push(BoardCorners { board: board.name.clone(), corners: c });
+    }
+    let placed: Vec<PlacedBoard> = rig.iter().map(|(b, p)| PlacedBoard::new(b, *p)).collect();
+    let paths = ["camera.json", "rig.json", "corners.json", "stripes.jsonl"].map(|n| dir.join(n));
+    let write = |p: &Path, v: serde_json::Value| std::fs::write(p, serde_json::to_vec_pretty(&v).unwrap()).unwrap();
+    write(&paths[0], serde_json::to_value(CameraFile::new(CameraSpec::Hyperbolic(HyperbolicParams::paper()))).unwrap());
+    write(&paths[1], serde_json::to_value(RigFile::new(rig.iter().map(|(b, _)| b.clone()).collect())).unwrap());
+    write(&paths[2], serde_json::to_value(BoardCornersFile::new(corners)).unwrap());
+    let mut w = StreamWriter::new(Vec::new(), "mem");
+    w.write(&Record::Header(Header::new("test"))).unwrap();
+    for i in 0..=30u64 {
+        let s = stripe_frame(&camera, &truth, &placed, i, i as f64, 0, 0.15, 2.0, &mut rng);
+        let alpha = if i == 3 { alpha_override.unwrap_or(i as f64) } else { i as f64 };
+        let mut f = Frame::new(i, format!("{i:06}.png"), alpha, 0);
+        f.stripe = Some(
+            s.pixels
+                .iter()
+                .map(|p| StripePoint { u: p[0], v: p[1], intensity: 200.0, width: 3.0, quality: 0 })
+                .collect(),
+        );
+        w.write(&Record::Frame(Box::new(f))).unwrap();
+    }
+    std::fs::write(&paths[3], w.into_inner()).unwrap();
+    paths
+}
+
+fn fit_args<'a>(p: &'a [PathBuf; 4], out: &'a Path) -> Vec<&'a str> {
+    vec![
+        "fit",
+        "--camera",
+        p[0].to_str().unwrap(),
+        "--rig",
+        p[1].to_str().unwrap(),
+        "--board-corners",
+        p[2].to_str().unwrap(),
+        "--stripes",
+        p[3].to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]
+}
+
+#[test]
+fn fit_writes_a_scanner_whose_planes_match_the_truth_and_table_prints_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let paths = dataset(dir.path(), None);
+    let out = dir.path().join("scanner.json");
+    let o = run(&fit_args(&paths, &out));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (file, fitted) = ScannerFile::load(&out).unwrap();
+    let report = file.report.unwrap();
+    assert!(report["model"]["residual_rms_mm"].as_f64().unwrap() < 1.0, "{report}");
+    assert_eq!(report["boards"].as_array().unwrap().len(), 2);
+    assert!(report["model"]["parameters"].as_array().unwrap().iter().all(|p| p["std"].is_number()));
+    // Frames at the ends of the sweep cross one board only: reported, not silently dropped.
+    let refused = report["frames"].as_array().unwrap().iter().filter(|f| f["plane_refused"].is_string()).count();
+    let with_plane = report["frames"].as_array().unwrap().iter().filter(|f| f["plane_rms_mm"].is_number()).count();
+    assert!(with_plane >= 20, "{with_plane} frames with planes, {refused} refused");
+    let truth = Transmitter::new(TransmitterParams::paper()).unwrap();
+    for a in [5.0f64, 15.0, 25.0] {
+        let t = truth.light_plane(a.to_radians(), 0, 0).unwrap().plane;
+        let m = fitted.light_plane(a.to_radians(), 0, 0).unwrap().plane;
+        // Board poses from 0.1 px corners limit the accuracy to a few hundredths of a degree.
+        assert!(t.angle_to(&m).to_degrees() < 0.1, "α {a}: {}°", t.angle_to(&m).to_degrees());
+    }
+    let o = run(&["table", "--scanner", out.to_str().unwrap(), "--alpha", "0:30:15", "--laser", "0"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert_eq!(text.lines().count(), 4, "{text}");
+    assert!(text.lines().next().unwrap().contains("intercept_mm"));
+    let o = run(&["table", "--scanner", out.to_str().unwrap(), "--alpha", "15", "--json"]);
+    let rows: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(rows.as_array().unwrap().len(), 2);
+    let slope = rows[0]["slope"].as_f64().unwrap();
+    assert!(slope.abs() < 2e-3, "laser 0 plane at α = 15° is level: slope {slope}");
+}
+
+#[test]
+fn bad_inputs_fail_cleanly_without_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scanner.json");
+
+    // A frame angle outside the facet's range.
+    let paths = dataset(dir.path(), Some(42.0));
+    let o = run(&fit_args(&paths, &out));
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("frame 3") && stderr(&o).contains("outside"), "{}", stderr(&o));
+    assert!(!out.exists());
+
+    // camera.json of an unknown version.
+    let paths = dataset(dir.path(), None);
+    let text = std::fs::read_to_string(&paths[0]).unwrap().replace("\"version\": 1", "\"version\": 7");
+    std::fs::write(&paths[0], text).unwrap();
+    let o = run(&fit_args(&paths, &out));
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("camera.json") && stderr(&o).contains("unsupported version 7"), "{}", stderr(&o));
+    assert!(!out.exists());
+
+    // A rig board the corners file does not mention: board not found.
+    let paths = dataset(dir.path(), None);
+    let text = std::fs::read_to_string(&paths[1]).unwrap().replace("\"right\"", "\"far\"");
+    std::fs::write(&paths[1], text).unwrap();
+    let o = run(&fit_args(&paths, &out));
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("corners.json") && stderr(&o).contains("right"), "{}", stderr(&o));
+    assert!(!out.exists());
+
+    // Stripes that miss the boards (all pixels in the blind centre): too few points everywhere.
+    let paths = dataset(dir.path(), None);
+    let mut w = StreamWriter::new(Vec::new(), "mem");
+    for i in 0..5u64 {
+        let mut f = Frame::new(i, "f.png", 10.0, 0);
+        f.stripe = Some(vec![StripePoint { u: 511.5, v: 511.5, intensity: 9.0, width: 2.0, quality: 0 }; 30]);
+        w.write(&Record::Frame(Box::new(f))).unwrap();
+    }
+    std::fs::write(&paths[3], w.into_inner()).unwrap();
+    let o = run(&fit_args(&paths, &out));
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("no usable frame"), "{}", stderr(&o));
+    assert!(!out.exists());
+
+    // A usage error.
+    let o = run(&["table", "--scanner", "x.json", "--alpha", "5:1:1"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--alpha"), "{}", stderr(&o));
+}

@@ -1,1 +1,225 @@
-fn main() {}
+//! omni-eval: accuracy of a point cloud — primitive fits or comparison with a scene's truth.
+
+use clap::{Parser, Subcommand};
+use omni_cli::CliError;
+use omni_cloud::eval::{ObjectReport, compare_with_scene};
+use omni_cloud::filter::CropBox;
+use omni_cloud::fit::{ErrorStats, FitOptions, Shape, ShapeKind, fit_shape};
+use omni_formats::read_doc;
+use omni_formats::scene::SceneFile;
+use omni_geom::Point3;
+use std::path::{Path, PathBuf};
+
+#[derive(Parser, Debug)]
+#[command(
+    version,
+    about = "Measure a point cloud's accuracy: fit a primitive, or compare with a scene's true surfaces.",
+    after_help = "Examples:\n  \
+omni-eval fit --shape sphere --radius 50 --centre 500,0,0 sphere.ply\n  \
+omni-eval fit --shape plane --crop 400,-200,-150,600,200,150 --json plane.ply\n  \
+omni-eval compare --scene scene.json cloud.ply\n\n\
+Errors are signed distances (mm) to the surface, positive outside the object (for a plane: towards \
+the sensor). Statistics: mean signed error, standard deviation (n-1), RMS, max |error|.\n\
+Exit codes: 0 ok, 1 bad input, 2 usage error."
+)]
+struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Fit a primitive (RANSAC, then least squares on the inliers) and report the residuals.
+    Fit {
+        /// plane, sphere, cylinder or cone.
+        #[arg(long)]
+        shape: ShapeKind,
+        /// Use only points inside this box (mm).
+        #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX")]
+        crop: Option<String>,
+        /// RANSAC inlier threshold (mm); statistics are over the inliers.
+        #[arg(long, default_value_t = 2.0)]
+        inlier_mm: f64,
+        /// RANSAC hypotheses (cylinder and cone use at most 24).
+        #[arg(long, default_value_t = 200)]
+        iterations: usize,
+        /// Random seed (same seed, same result).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Nominal radius (mm), to report the fitted radius error.
+        #[arg(long)]
+        radius: Option<f64>,
+        /// Nominal sphere centre (mm), to report the centre distance error.
+        #[arg(long, value_name = "X,Y,Z")]
+        centre: Option<String>,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// The cloud (PLY; `-` = stdin).
+        cloud: PathBuf,
+    },
+    /// Signed distances to the true surfaces of a scene.json, per object.
+    Compare {
+        /// The scene the cloud was measured in.
+        #[arg(long)]
+        scene: PathBuf,
+        /// Points farther than this from every surface are counted as stray, not measured (mm).
+        #[arg(long, default_value_t = 20.0)]
+        max_distance_mm: f64,
+        /// Inlier threshold of the radius/centre fits (mm).
+        #[arg(long, default_value_t = 2.0)]
+        inlier_mm: f64,
+        #[arg(long)]
+        json: bool,
+        cloud: PathBuf,
+    },
+}
+
+fn numbers(opt: &str, s: &str, n: usize) -> Result<Vec<f64>, CliError> {
+    let v: Vec<f64> = s.split(',').filter_map(|t| t.trim().parse::<f64>().ok()).collect();
+    if v.len() != n || s.split(',').count() != n || !v.iter().all(|x| x.is_finite()) {
+        return Err(CliError::usage(format!("--{opt}: expected {n} comma-separated numbers, got {s:?}")));
+    }
+    Ok(v)
+}
+
+/// The cloud's positions (inside `crop` if given); an empty cloud is an error.
+fn load_points(path: &Path, crop: Option<&CropBox>) -> Result<Vec<Point3<f64>>, CliError> {
+    let name = omni_formats::io::display_name(path, "stdin");
+    let mut pts = Vec::new();
+    omni_cloud::ply_stream::for_each_vertex(
+        path,
+        &mut |_, n| if n == 0 { Err(format!("{name}: the PLY has no vertices")) } else { Ok(()) },
+        &mut |p, _| {
+            if crop.is_none_or(|b| b.contains(p)) {
+                pts.push(Point3::from(*p));
+            }
+            Ok(())
+        },
+    )?;
+    if pts.is_empty() {
+        return Err(CliError::new(format!("{name}: no points inside the crop box")));
+    }
+    Ok(pts)
+}
+
+fn main() -> std::process::ExitCode {
+    omni_cli::main("omni-eval", || match Args::parse().command {
+        Command::Fit { shape, crop, inlier_mm, iterations, seed, radius, centre, json, cloud } => {
+            let crop = match crop {
+                Some(s) => {
+                    let v = numbers("crop", &s, 6)?;
+                    Some(CropBox::new([v[0], v[1], v[2]], [v[3], v[4], v[5]]).map_err(CliError::usage)?)
+                }
+                None => None,
+            };
+            let centre = centre.map(|s| numbers("centre", &s, 3)).transpose()?.map(|v| Point3::new(v[0], v[1], v[2]));
+            if !(inlier_mm > 0.0) {
+                return Err(CliError::usage("--inlier-mm must be positive"));
+            }
+            let pts = load_points(&cloud, crop.as_ref())?;
+            let name = omni_formats::io::display_name(&cloud, "stdin");
+            let opts = FitOptions { inlier_mm, iterations, seed };
+            let fit = fit_shape(shape, &pts, &opts).map_err(|m| format!("{name}: {m}"))?;
+            let inl: Vec<f64> =
+                pts.iter().zip(&fit.inliers).filter(|(_, k)| **k).map(|(p, _)| fit.shape.signed_distance(p)).collect();
+            let stats = ErrorStats::from_errors(&inl).ok_or_else(|| format!("{name}: no inliers"))?;
+            let radius_error = radius.zip(fit.shape.radius()).map(|(nominal, r)| r - nominal);
+            let centre_error = match (centre, fit.shape) {
+                (Some(c), Shape::Sphere { center, .. }) => Some((center - c).norm()),
+                _ => None,
+            };
+            print_fit(&fit.shape, pts.len(), &stats, radius_error, centre_error, json);
+            Ok(())
+        }
+        Command::Compare { scene, max_distance_mm, inlier_mm, json, cloud } => {
+            let scene_file: SceneFile = read_doc(&scene)?;
+            let pts = load_points(&cloud, None)?;
+            let opts = FitOptions { inlier_mm, ..FitOptions::default() };
+            let (reports, stray) = compare_with_scene(&scene_file, &pts, max_distance_mm, &opts)
+                .map_err(|m| format!("{}: {m}", scene.display()))?;
+            print_compare(&reports, pts.len(), stray, json);
+            Ok(())
+        }
+    })
+}
+
+fn shape_json(s: &Shape) -> serde_json::Value {
+    let v3 = |p: &[f64]| serde_json::json!([p[0], p[1], p[2]]);
+    match s {
+        Shape::Plane(p) => {
+            serde_json::json!({"type": "plane", "normal": v3(p.normal.as_slice()), "offset_mm": p.offset})
+        }
+        Shape::Sphere { center, radius } => {
+            serde_json::json!({"type": "sphere", "centre_mm": v3(center.coords.as_slice()), "radius_mm": radius})
+        }
+        Shape::Cylinder { axis_point, axis, radius } => serde_json::json!({"type": "cylinder",
+            "axis_point_mm": v3(axis_point.coords.as_slice()), "axis": v3(axis.as_slice()), "radius_mm": radius}),
+        Shape::Cone { apex, axis, half_angle } => serde_json::json!({"type": "cone",
+            "apex_mm": v3(apex.coords.as_slice()), "axis": v3(axis.as_slice()), "half_angle_deg": half_angle.to_degrees()}),
+    }
+}
+
+fn print_fit(shape: &Shape, n: usize, e: &ErrorStats, radius_err: Option<f64>, centre_err: Option<f64>, json: bool) {
+    if json {
+        let mut v = serde_json::json!({"shape": shape_json(shape), "points": n, "inliers": e.count, "errors": e});
+        if let Some(r) = radius_err {
+            v["radius_error_mm"] = r.into();
+        }
+        if let Some(c) = centre_err {
+            v["centre_error_mm"] = c.into();
+        }
+        println!("{v}");
+        return;
+    }
+    let v = shape_json(shape);
+    println!("shape               {}", v["type"].as_str().unwrap_or("?"));
+    if let Some(obj) = v.as_object() {
+        for (k, val) in obj.iter().filter(|(k, _)| k.as_str() != "type") {
+            println!("{k:<20}{val}");
+        }
+    }
+    println!("points              {n} ({} inliers, {:.1} %)", e.count, 100.0 * e.count as f64 / n as f64);
+    print_stats(e);
+    if let Some(r) = radius_err {
+        println!("radius error        {r:+.4} mm");
+    }
+    if let Some(c) = centre_err {
+        println!("centre error        {c:.4} mm");
+    }
+}
+
+fn print_stats(e: &ErrorStats) {
+    println!("mean signed error   {:+.4} mm", e.mean);
+    println!("standard deviation  {:.4} mm", e.std_dev);
+    println!("rms                 {:.4} mm", e.rms);
+    println!("max |error|         {:.4} mm", e.max_abs);
+}
+
+fn print_compare(reports: &[ObjectReport], n: usize, stray: usize, json: bool) {
+    if json {
+        println!("{}", serde_json::json!({"points": n, "stray_points": stray, "objects": reports}));
+        return;
+    }
+    println!(
+        "{:<14}{:<10}{:>8}{:>11}{:>10}{:>10}{:>10}{:>12}{:>12}",
+        "object", "kind", "points", "mean mm", "std mm", "rms mm", "max mm", "radius err", "centre err"
+    );
+    let opt = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:+.4}"));
+    for r in reports {
+        let e = &r.errors;
+        println!(
+            "{:<14}{:<10}{:>8}{:>+11.4}{:>10.4}{:>10.4}{:>10.4}{:>12}{:>12}",
+            r.name,
+            r.kind,
+            e.count,
+            e.mean,
+            e.std_dev,
+            e.rms,
+            e.max_abs,
+            opt(r.radius_error_mm),
+            opt(r.centre_error_mm)
+        );
+    }
+    println!("{n} points, {stray} farther than the distance limit from every surface");
+}

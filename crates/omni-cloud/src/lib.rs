@@ -9,6 +9,7 @@
 //! * [`merge`]: many inputs → one cloud (pose, crop, voxel, outliers) with bounded memory;
 //!   [`ply_stream`] visits PLY vertices without loading the file.
 //! * [`motion`]: poses interpolated from odometry (slerp + lerp) for a moving sensor.
+//! * [`eval`]: signed distances to a scene's true surfaces, per object.
 //! * [`fit`]: RANSAC + least-squares plane, sphere, cylinder and cone fits and error statistics.
 //!
 //! Lengths are millimetres (world = receiver frame of SENSOR.md), angles radians in code.
@@ -21,6 +22,7 @@
 //! ```
 
 pub mod cloud;
+pub mod eval;
 pub mod filter;
 pub mod fit;
 pub mod kdtree;

@@ -1,0 +1,129 @@
+//! The real omni-eval binary on synthetic clouds with known noise and bias.
+
+use omni_cloud::rng::Rng;
+use omni_formats::ply::{Encoding, PointCloud, write_ply};
+use omni_formats::scene::{SceneFile, SceneObject, Shape};
+use omni_formats::write_doc;
+use std::path::Path;
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_omni-eval");
+
+fn run(dir: &Path, args: &[&str]) -> Output {
+    Command::new(BIN).current_dir(dir).args(args).output().unwrap()
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Sphere r = 50 at (500, 0, 0) seen from the origin side, radial noise σ = 0.3 mm, bias +0.1 mm;
+/// plus a plane patch x = 700 facing −x with σ = 0.2 mm; plus 30 stray points.
+fn write_fixture(dir: &Path) {
+    let mut rng = Rng::new(3);
+    let mut pts = Vec::new();
+    for _ in 0..3000 {
+        let (th, ph) = (std::f64::consts::PI + (rng.uniform() - 0.5) * 2.0, (rng.uniform() - 0.5) * 1.6);
+        let r = 50.0 + 0.1 + rng.normal() * 0.3;
+        pts.push([500.0 + r * th.cos() * ph.cos(), r * th.sin() * ph.cos(), r * ph.sin()]);
+    }
+    for _ in 0..2000 {
+        pts.push([700.0 - rng.normal() * 0.2, 150.0 + rng.uniform() * 100.0, rng.uniform() * 100.0 - 50.0]);
+    }
+    for i in 0..30 {
+        pts.push([300.0 + i as f64, -300.0, 200.0]);
+    }
+    let cloud = PointCloud { positions: pts, scalars: vec![] };
+    write_ply(&dir.join("c.ply"), &cloud, Encoding::BinaryLittleEndian).unwrap();
+    let scene = SceneFile::new(vec![
+        SceneObject::new(Shape::Sphere { centre_mm: [500.0, 0.0, 0.0], radius_mm: 50.0 }).named("ball"),
+        SceneObject::new(Shape::Rectangle {
+            centre_mm: [700.0, 200.0, 0.0],
+            normal: [-1.0, 0.0, 0.0],
+            up: [0.0, 0.0, 1.0],
+            width_mm: 200.0,
+            height_mm: 200.0,
+        })
+        .named("wall"),
+    ]);
+    write_doc(&dir.join("scene.json"), &scene).unwrap();
+}
+
+#[test]
+fn fit_reports_radius_centre_and_residuals() {
+    let dir = tempfile::tempdir().unwrap();
+    write_fixture(dir.path());
+    let v = json(&run(
+        dir.path(),
+        &[
+            "fit",
+            "--shape",
+            "sphere",
+            "--crop",
+            "400,-100,-100,600,100,100",
+            "--radius",
+            "50",
+            "--centre",
+            "500,0,0",
+            "--json",
+            "c.ply",
+        ],
+    ));
+    let r = v["radius_error_mm"].as_f64().unwrap();
+    assert!((r - 0.1).abs() < 0.05, "radius error {r}");
+    assert!(v["centre_error_mm"].as_f64().unwrap() < 0.1);
+    let std = v["errors"]["std_dev"].as_f64().unwrap();
+    assert!((std - 0.3).abs() < 0.02, "σ {std}");
+    assert!(v["errors"]["mean"].as_f64().unwrap().abs() < 0.02);
+    let v =
+        json(&run(dir.path(), &["fit", "--shape", "plane", "--crop", "650,100,-100,750,300,100", "--json", "c.ply"]));
+    assert!((v["errors"]["std_dev"].as_f64().unwrap() - 0.2).abs() < 0.02);
+    assert_eq!(v["inliers"].as_u64(), Some(2000));
+    // The table form names the measures.
+    let out = run(dir.path(), &["fit", "--shape", "sphere", "--crop", "400,-100,-100,600,100,100", "c.ply"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("mean signed error") && text.contains("standard deviation"), "{text}");
+}
+
+#[test]
+fn compare_measures_bias_and_noise_per_object() {
+    let dir = tempfile::tempdir().unwrap();
+    write_fixture(dir.path());
+    let v = json(&run(dir.path(), &["compare", "--scene", "scene.json", "--json", "c.ply"]));
+    assert_eq!(v["stray_points"].as_u64(), Some(30));
+    let objects = v["objects"].as_array().unwrap();
+    let ball = objects.iter().find(|o| o["name"] == "ball").unwrap();
+    let mean = ball["errors"]["mean"].as_f64().unwrap();
+    let std = ball["errors"]["std_dev"].as_f64().unwrap();
+    assert!((mean - 0.1).abs() < 0.02 && (std - 0.3).abs() < 0.02, "{mean} {std}");
+    assert!((ball["radius_error_mm"].as_f64().unwrap() - 0.1).abs() < 0.05);
+    let wall = objects.iter().find(|o| o["name"] == "wall").unwrap();
+    assert!((wall["errors"]["std_dev"].as_f64().unwrap() - 0.2).abs() < 0.02);
+    assert_eq!(wall["errors"]["count"].as_u64(), Some(2000));
+    let out = run(dir.path(), &["compare", "--scene", "scene.json", "c.ply"]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("ball"));
+}
+
+#[test]
+fn bad_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write_fixture(d);
+    std::fs::write(
+        d.join("empty.ply"),
+        "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n",
+    )
+    .unwrap();
+    let out = run(d, &["fit", "--shape", "plane", "empty.ply"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.code() == Some(1) && err.contains("empty.ply") && err.contains("no vertices"), "{err}");
+    std::fs::write(d.join("bad.json"), "{\"format\":\"omniscan.scene\",\"version\":1}").unwrap();
+    let out = run(d, &["compare", "--scene", "bad.json", "c.ply"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.code() == Some(1) && err.contains("bad.json") && err.contains("objects"), "{err}");
+    assert_eq!(run(d, &["fit", "--shape", "torus", "c.ply"]).status.code(), Some(2));
+    assert_eq!(run(d, &["fit", "--shape", "plane", "--crop", "1,2", "c.ply"]).status.code(), Some(2));
+    let out = run(d, &["fit", "--shape", "sphere", "--crop", "0,0,0,1,1,1", "c.ply"]);
+    assert_eq!(out.status.code(), Some(1));
+}

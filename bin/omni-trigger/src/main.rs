@@ -1,1 +1,440 @@
-fn main() {}
+//! `omni-trigger`: talk to the polygon-mirror trigger controller, capture a scan, or emulate one.
+
+mod render;
+
+use clap::{Args, Parser, Subcommand};
+use omni_cli::{CliError, CliResult};
+use omni_formats::stream::{Header, Record, StreamWriter};
+use omni_hw::emulator::{BlankRenderer, EmulatorOptions, Faults, FrameRenderer, ServeEnd, VirtualCamera, serve};
+use omni_hw::pairing::{DirFrameSource, PairEvent, PairOptions};
+use omni_hw::scan::{ScanConfig, StopWhen, configure, expected_triggers, failed_status, run_scan};
+use omni_hw::schedule::AngleSpec;
+use omni_hw::{Client, ClientOptions, DeviceInfo};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+const TOOL: &str = "omni-trigger";
+
+#[derive(Parser)]
+#[command(
+    name = "omni-trigger",
+    version,
+    about = "Talk to the polygon-mirror trigger controller: describe it, capture a scan manifest, or emulate one.",
+    long_about = "Talk to the polygon-mirror trigger controller over a serial port (protocol: docs/PROTOCOL.md).\n\
+        `scan` configures and runs the controller and pairs every trigger with the camera frame that \
+        appears for it in the frames directory, writing the scan manifest (JSON Lines) as it goes. \
+        `emulate` is a virtual controller + camera on a pseudo-terminal, for testing without hardware.",
+    after_help = "Examples:\n  \
+        omni-trigger info --port /dev/ttyACM0\n  \
+        omni-trigger scan --port /dev/ttyACM0 --frames frames/ --angles 0:30:0.5 --revolutions 1 > scan.jsonl\n  \
+        omni-trigger scan --port /dev/ttyACM0 --frames frames/ --angles 5,10,15 --facets 0,6 --laser-off | omni-ridge\n  \
+        PORT=$(omni-trigger emulate --frames frames/ --width 256 &) ...   (see `omni-trigger emulate --help`)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    Info(InfoArgs),
+    Scan(ScanArgs),
+    Emulate(EmulateArgs),
+}
+
+#[derive(Args)]
+struct PortArgs {
+    /// Serial device of the controller, e.g. /dev/ttyACM0 (or the path `emulate` printed).
+    #[arg(long)]
+    port: String,
+    /// Baud rate (ignored by USB CDC devices and pseudo-terminals).
+    #[arg(long, default_value_t = 115_200)]
+    baud: u32,
+}
+
+/// Handshake with the controller and print its description.
+#[derive(Args)]
+#[command(after_help = "Example:\n  omni-trigger info --port /dev/ttyACM0 --json")]
+struct InfoArgs {
+    #[command(flatten)]
+    port: PortArgs,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Configure, arm and run the controller; pair triggers with frames; write the manifest.
+#[derive(Args)]
+#[command(after_help = "The manifest (omniscan.stream JSON Lines) starts with a header, has one frame record per \
+    paired frame (seq = trigger sequence number, alpha_deg from the encoder count that fired, facet, revolution, \
+    encoder, timestamp_us, lasers) written and flushed as it arrives, and ends with a status record (frames, \
+    frames_missing, complete, errors) — also when the scan fails. A frame is paired only if its timestamp \
+    (file modification time) falls in its trigger's window; otherwise it is reported, never shifted to a \
+    neighbouring angle. With --laser-off, even revolutions fire with all lasers off and each laser frame's \
+    ambient_path names the laser-off frame taken one revolution earlier at the same encoder count.\n\n\
+    Examples:\n  \
+    omni-trigger scan --port /dev/ttyACM0 --frames frames/ --angles 0:30:0.5 --revolutions 2 -o scan.jsonl\n  \
+    omni-trigger scan --port /dev/ttyACM0 --frames frames/ --angles 2.5,15,27.5 --facets 0 --duration 10")]
+struct ScanArgs {
+    #[command(flatten)]
+    port: PortArgs,
+    /// Directory the camera software writes frames into (files already there are ignored).
+    #[arg(long)]
+    frames: PathBuf,
+    /// Trigger angles within a facet in degrees: start:stop:step (stop excluded) or a list a,b,c.
+    #[arg(long, default_value = "0:30:0.5")]
+    angles: String,
+    /// Facets that trigger: `all` or a list, e.g. 0,6.
+    #[arg(long, default_value = "all")]
+    facets: String,
+    /// Lasers on in laser frames, e.g. 0 or 0,1 (default: all).
+    #[arg(long, value_delimiter = ',')]
+    lasers: Option<Vec<u32>>,
+    /// Interleave laser-off (ambient) revolutions.
+    #[arg(long)]
+    laser_off: bool,
+    /// Laser revolutions to scan.
+    #[arg(long, conflicts_with = "duration")]
+    revolutions: Option<u64>,
+    /// Scan for this many seconds instead (then STOP).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Motor speed in rev/min (0 = the fastest the controller's trigger rate allows).
+    #[arg(long, default_value_t = 0.0)]
+    rpm: f64,
+    /// A trigger without a frame after this long is reported missing (ms).
+    #[arg(long, default_value_t = 2000)]
+    frame_timeout_ms: u64,
+    /// Expected frame timestamp minus trigger time (ms): 0 if the camera stamps exposure time.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    latency_ms: f64,
+    /// Manifest output (`-` = stdout). Written as it goes, so a failed scan keeps what it got.
+    #[arg(short, long, default_value = "-")]
+    output: PathBuf,
+}
+
+/// A virtual controller + camera on a pseudo-terminal (prints the device path first).
+#[derive(Args)]
+#[command(after_help = "The first line on stdout is the pseudo-terminal to pass as --port. The emulator serves \
+    until killed or until the host closes the port (--persist: keep serving). Each trigger the host configures \
+    fires the virtual camera, which renders the frame through omni-simulator (or a blank image with \
+    --camera-mode blank) into --frames; the trigger rate is limited to what the camera can render. \
+    --truth writes which trigger and true angle each frame shows (JSON Lines).\n\n\
+    Examples:\n  \
+    omni-trigger emulate --frames frames/ --width 256 --scene scene.json\n  \
+    omni-trigger emulate --frames frames/ --camera-mode blank --bad-crc 0.05 --drop-events 0.02 --disconnect-after 40")]
+struct EmulateArgs {
+    /// Directory the virtual camera writes frames into.
+    #[arg(long)]
+    frames: PathBuf,
+    /// Receiver model (camera.json); default: the paper's camera scaled to --width.
+    #[arg(long, requires = "scanner")]
+    camera: Option<PathBuf>,
+    /// Transmitter model (scanner.json); default: the paper's transmitter.
+    #[arg(long, requires = "camera")]
+    scanner: Option<PathBuf>,
+    /// Scene to render (scene.json); default: the paper bench plane.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Image width = height of the default (paper) camera, px.
+    #[arg(long, default_value_t = 1024, conflicts_with = "camera")]
+    width: u32,
+    /// `render` through omni-simulator, or `blank` (grey frames, for timing tests).
+    #[arg(long, default_value = "render", value_parser = ["render", "blank"])]
+    camera_mode: String,
+    /// Trigger rate limit (Hz) announced to the host; default: measured render speed / 2.5.
+    #[arg(long)]
+    max_rate_hz: Option<f64>,
+    /// Render noise seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Write the ground truth of every frame (JSON Lines) here.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// Keep serving after the host disconnects.
+    #[arg(long)]
+    persist: bool,
+    /// Fault: probability of random garbage bytes before a line.
+    #[arg(long, default_value_t = 0.0)]
+    garbage: f64,
+    /// Fault: probability of a wrong checksum on a line.
+    #[arg(long, default_value_t = 0.0)]
+    bad_crc: f64,
+    /// Fault: probability that a trigger event is not sent.
+    #[arg(long, default_value_t = 0.0)]
+    drop_events: f64,
+    /// Fault: probability that a trigger event is sent twice.
+    #[arg(long, default_value_t = 0.0)]
+    dup_events: f64,
+    /// Fault: extra camera time per frame (ms), so it misses triggers.
+    #[arg(long, default_value_t = 0)]
+    slow_camera_ms: u64,
+    /// Fault: close the port after this many triggers (an unplugged cable).
+    #[arg(long)]
+    disconnect_after: Option<u64>,
+    /// Seed of the fault generator.
+    #[arg(long, default_value_t = 1)]
+    fault_seed: u64,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    omni_cli::main(TOOL, || match cli.command {
+        Cmd::Info(a) => info(a),
+        Cmd::Scan(a) => scan(a),
+        Cmd::Emulate(a) => emulate(a),
+    })
+}
+
+fn open_client(p: &PortArgs) -> CliResult<Client<serialport::TTYPort>> {
+    let port = serialport::new(&p.port, p.baud)
+        .timeout(Duration::from_millis(20))
+        .open_native()
+        .map_err(|e| CliError::new(format!("{}: cannot open: {e}", p.port)))?;
+    let _ = serialport::SerialPort::clear(&port, serialport::ClearBuffer::All);
+    Ok(Client::new(port, ClientOptions::default()))
+}
+
+fn hello(client: &mut Client<serialport::TTYPort>, port: &str) -> CliResult<DeviceInfo> {
+    client.hello().map_err(|e| CliError::new(format!("{port}: {e}")))
+}
+
+fn info(a: InfoArgs) -> CliResult {
+    let mut client = open_client(&a.port)?;
+    let i = hello(&mut client, &a.port.port)?;
+    let status = client.status().map_err(|e| CliError::new(format!("{}: {e}", a.port.port)))?;
+    let mut out = std::io::stdout().lock();
+    if a.json {
+        let v = serde_json::json!({
+            "port": a.port.port, "protocol": i.protocol, "firmware": i.firmware,
+            "counts_per_rev": i.counts_per_rev, "facets": i.facets, "lasers": i.lasers,
+            "max_rate_hz": i.max_rate_hz, "state": status.state.as_str(),
+            "fired": status.fired, "overruns": status.overruns, "crc_errors": status.crc_errors,
+        });
+        writeln!(out, "{v}")?;
+    } else {
+        writeln!(out, "port:             {}", a.port.port)?;
+        writeln!(out, "protocol:         {}", i.protocol)?;
+        writeln!(out, "firmware:         {}", i.firmware)?;
+        writeln!(out, "encoder:          {} counts/rev ({}°/count)", i.counts_per_rev, i.degrees_per_count())?;
+        writeln!(out, "facets:           {} ({}° of mirror angle each)", i.facets, 360.0 / i.facets as f64)?;
+        writeln!(out, "lasers:           {}", i.lasers)?;
+        writeln!(out, "max trigger rate: {} Hz", i.max_rate_hz)?;
+        writeln!(
+            out,
+            "state:            {} (fired {}, overruns {}, crc errors {})",
+            status.state.as_str(),
+            status.fired,
+            status.overruns,
+            status.crc_errors
+        )?;
+    }
+    Ok(())
+}
+
+fn scan_config(a: &ScanArgs) -> CliResult<ScanConfig> {
+    let angles = AngleSpec::parse(&a.angles).map_err(CliError::usage)?;
+    let facets = match a.facets.as_str() {
+        "all" => None,
+        list => Some(
+            list.split(',')
+                .map(|w| w.trim().parse::<u32>().map_err(|_| CliError::usage(format!("--facets: bad facet {w:?}"))))
+                .collect::<CliResult<Vec<u32>>>()?,
+        ),
+    };
+    let stop = match (a.revolutions, a.duration) {
+        (_, Some(d)) if !(d > 0.0 && d.is_finite()) => return Err(CliError::usage("--duration must be positive")),
+        (_, Some(d)) => StopWhen::Duration(Duration::from_secs_f64(d)),
+        (Some(0), None) => return Err(CliError::usage("--revolutions must be at least 1")),
+        (n, None) => StopWhen::Revolutions(n.unwrap_or(1)),
+    };
+    if !(a.rpm >= 0.0 && a.rpm.is_finite()) || !a.latency_ms.is_finite() {
+        return Err(CliError::usage("--rpm must be >= 0 and --latency-ms finite"));
+    }
+    let mut facets_sorted = facets.clone();
+    if let Some(f) = facets_sorted.as_mut() {
+        f.sort_unstable();
+        f.dedup();
+    }
+    let mut lasers = a.lasers.clone();
+    if let Some(l) = lasers.as_mut() {
+        l.sort_unstable();
+        l.dedup();
+    }
+    Ok(ScanConfig {
+        angles,
+        facets: facets_sorted,
+        lasers,
+        ambient: a.laser_off,
+        rpm: a.rpm,
+        stop,
+        pairing: PairOptions {
+            frame_timeout_us: a.frame_timeout_ms as i64 * 1000,
+            latency_us: (a.latency_ms * 1000.0).round() as i64,
+            ..PairOptions::default()
+        },
+        silence_timeout: Duration::from_millis(1500),
+    })
+}
+
+fn open_output(path: &Path) -> CliResult<Box<dyn Write>> {
+    if path == Path::new("-") {
+        return Ok(Box::new(std::io::stdout()));
+    }
+    let f = std::fs::File::create(path).map_err(|e| CliError::new(format!("{}: {e}", path.display())))?;
+    Ok(Box::new(std::io::BufWriter::new(f)))
+}
+
+fn scan(a: ScanArgs) -> CliResult {
+    let cfg = scan_config(&a)?;
+    let mut source =
+        DirFrameSource::new(&a.frames).map_err(|e| CliError::new(format!("{}: {e}", a.frames.display())))?;
+    let mut client = open_client(&a.port)?;
+    let info = hello(&mut client, &a.port.port)?;
+    let out_name = omni_formats::io::display_name(&a.output, "stdout");
+    let mut writer = StreamWriter::new(open_output(&a.output)?, out_name);
+    let mut header = Header::new(&format!("{TOOL} {}", env!("CARGO_PKG_VERSION")));
+    header.frames_dir = Some(a.frames.display().to_string());
+    header.extra.insert(
+        "controller".into(),
+        serde_json::json!({"port": a.port.port, "firmware": info.firmware, "protocol": info.protocol,
+            "counts_per_rev": info.counts_per_rev, "facets": info.facets, "lasers": info.lasers}),
+    );
+    header.extra.insert("angles".into(), a.angles.clone().into());
+    writer.write(&Record::Header(header))?;
+
+    let (schedule, rpm) = match configure(&mut client, &info, &cfg) {
+        Ok(s) => s,
+        Err(e) => {
+            let msg = format!("{}: configuration failed: {e}", a.port.port);
+            writer.write(&Record::Status(failed_status(&msg)))?;
+            return Err(CliError::new(msg));
+        }
+    };
+    let bar = omni_cli::progress(expected_triggers(&schedule, &cfg), "scan");
+    let mut write_error = None;
+    let mut sink = |e: &PairEvent| -> Result<(), String> {
+        bar.inc(1);
+        match e {
+            PairEvent::Paired(f) => writer.write(&Record::Frame(f.clone())).map_err(|e| {
+                let m = e.to_string();
+                write_error = Some(m.clone());
+                m
+            }),
+            other => {
+                if let Some(m) = omni_hw::scan::describe(other) {
+                    bar.suspend(|| omni_cli::warn(TOOL, &m));
+                }
+                Ok(())
+            }
+        }
+    };
+    let outcome = run_scan(&mut client, &mut source, schedule, rpm, &cfg, &mut sink);
+    bar.finish_and_clear();
+    if let Some(e) = write_error {
+        return Err(CliError::new(e));
+    }
+    writer.write(&Record::Status(outcome.status.clone()))?;
+    writer.flush()?;
+    let s = &outcome.status;
+    match outcome.error {
+        Some(e) => Err(CliError::new(format!("{}: scan stopped after {} frames: {e}", a.port.port, s.frames))),
+        None => {
+            if s.frames_missing > 0 || outcome.stats.frames_unmatched > 0 {
+                omni_cli::warn(
+                    TOOL,
+                    &format!(
+                        "{} frames paired, {} missing, {} unmatched frames (see the status record)",
+                        s.frames, s.frames_missing, outcome.stats.frames_unmatched
+                    ),
+                );
+            }
+            Ok(())
+        }
+    }
+}
+
+fn renderer(a: &EmulateArgs) -> CliResult<Box<dyn FrameRenderer>> {
+    if a.camera_mode == "blank" {
+        let w = a.width.min(64);
+        return Ok(Box::new(BlankRenderer { width: w, height: w }));
+    }
+    let sensor = match (&a.camera, &a.scanner) {
+        (Some(c), Some(s)) => omni_simulator::Sensor::load(c, s)?,
+        _ => {
+            if a.width < 16 {
+                return Err(CliError::usage("--width must be at least 16"));
+            }
+            omni_simulator::Sensor::paper_scaled(a.width)
+        }
+    };
+    let scene = match &a.scene {
+        Some(p) => omni_simulator::Scene::load(p)?,
+        None => omni_simulator::Scene::from_file(omni_simulator::paper_bench(omni_simulator::BenchObject::Plane))
+            .map_err(CliError::new)?,
+    };
+    let options = omni_simulator::RenderOptions { seed: a.seed, ..Default::default() };
+    Ok(Box::new(render::SimRenderer { sensor, scene, options }))
+}
+
+fn check_probability(name: &str, p: f64) -> CliResult {
+    if (0.0..=1.0).contains(&p) { Ok(()) } else { Err(CliError::usage(format!("--{name} must be within 0..1"))) }
+}
+
+fn emulate(a: EmulateArgs) -> CliResult {
+    for (name, p) in
+        [("garbage", a.garbage), ("bad-crc", a.bad_crc), ("drop-events", a.drop_events), ("dup-events", a.dup_events)]
+    {
+        check_probability(name, p)?;
+    }
+    let mut renderer = renderer(&a)?;
+    let max_rate_hz = match a.max_rate_hz {
+        Some(r) if r > 0.0 && r.is_finite() => r,
+        Some(_) => return Err(CliError::usage("--max-rate-hz must be positive")),
+        None => {
+            let secs = render::measure_frame_time(renderer.as_mut(), &[0, 1])?;
+            let rate = (1.0 / (2.5 * secs)).min(50.0);
+            eprintln!(
+                "{TOOL} emulate: a frame takes {:.1} ms to render; trigger rate limited to {rate:.2} Hz",
+                secs * 1e3
+            );
+            rate
+        }
+    };
+    let mut camera =
+        VirtualCamera::start(&a.frames, renderer, Duration::from_millis(a.slow_camera_ms), a.truth.clone())
+            .map_err(|e| CliError::new(format!("{}: {e}", a.frames.display())))?;
+    let (mut master, slave) =
+        serialport::TTYPort::pair().map_err(|e| CliError::new(format!("cannot create a pseudo-terminal: {e}")))?;
+    let path = serialport::SerialPort::name(&slave).ok_or_else(|| CliError::new("the pseudo-terminal has no name"))?;
+    // The host opens the slave side itself; holding it here would hide the host's hang-up.
+    drop(slave);
+    serialport::SerialPort::set_timeout(&mut master, Duration::from_millis(2))?;
+    {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{path}")?;
+        out.flush()?;
+    }
+    let mut options = EmulatorOptions::default();
+    options.spec.max_rate_hz = max_rate_hz;
+    options.persist = a.persist;
+    options.faults = Faults {
+        garbage: a.garbage,
+        bad_crc: a.bad_crc,
+        drop_events: a.drop_events,
+        duplicate_events: a.dup_events,
+        disconnect_after: a.disconnect_after,
+        seed: a.fault_seed,
+    };
+    let end = serve(&mut master, &options, &mut camera).map_err(|e| CliError::new(format!("{path}: {e}")))?;
+    match end {
+        ServeEnd::HostDisconnected => camera.finish(),
+        ServeEnd::SimulatedDisconnect => {
+            eprintln!("{TOOL} emulate: simulated disconnect after {} triggers", a.disconnect_after.unwrap_or(0));
+            drop(master);
+        }
+    }
+    Ok(())
+}

@@ -17,7 +17,7 @@
 
 use crate::frame::Frame16;
 use crate::rng::{SplitMix64, mix};
-use crate::scene::Scene;
+use crate::scene::{Hit, Scene};
 use crate::sensor::Sensor;
 use omni_geom::{Point3, Vector2, Vector3};
 use omni_model::LightPlane;
@@ -188,20 +188,29 @@ impl Shader<'_> {
         CornerKey { surface: hit.object as u32 * 4 + hit.pattern as u32, sides, near }
     }
 
-    /// Electrons collected from the scene point seen along a camera ray.
-    fn radiance(&self, origin: &Point3<f64>, dir: &Vector3<f64>) -> f64 {
-        let Some(hit) = self.scene.cast(origin, dir, 1e-6, f64::INFINITY) else { return 0.0 };
+    /// Electrons collected at a hit seen along `view`; `footprint[i]` is the spread (mm rms) of
+    /// slice i's plane distance over the sample's own footprint (0 for a point sample).
+    fn shade(&self, hit: &Hit, view: &Vector3<f64>, footprint: impl Fn(usize) -> f64) -> f64 {
         let mut e = self.opts.ambient_e;
-        for s in self.slices {
-            e += s.weight * self.laser_irradiance(&s.lp, &hit.point, &hit.normal, dir);
+        for (i, s) in self.slices.iter().enumerate() {
+            let sigma = (self.sigma * self.sigma + footprint(i).powi(2)).sqrt();
+            e += s.weight * self.laser_irradiance(&s.lp, &hit.point, &hit.normal, view, sigma);
         }
         hit.albedo * e
     }
 
-    /// Laser signal (e⁻ for albedo 1) of one light plane at a surface point seen along `view`.
-    fn laser_irradiance(&self, lp: &LightPlane, p: &Point3<f64>, n: &Vector3<f64>, view: &Vector3<f64>) -> f64 {
+    /// Laser signal (e⁻ for albedo 1) of one light plane at a surface point seen along `view`,
+    /// with the sheet profile's σ widened to `sigma` (mm) by the sample's footprint.
+    fn laser_irradiance(
+        &self,
+        lp: &LightPlane,
+        p: &Point3<f64>,
+        n: &Vector3<f64>,
+        view: &Vector3<f64>,
+        sigma: f64,
+    ) -> f64 {
         let d = lp.plane.signed_distance(p);
-        if d.abs() > 6.0 * self.sigma || !lp.lights(p) {
+        if d.abs() > 6.0 * sigma || !lp.lights(p) {
             return 0.0;
         }
         let to_p = p - lp.virtual_source;
@@ -215,7 +224,7 @@ impl Shader<'_> {
             return 0.0;
         }
         let cos_inc = u.dot(n).abs();
-        let gauss = (-0.5 * (d / self.sigma).powi(2)).exp() / (self.sigma * (2.0 * std::f64::consts::PI).sqrt());
+        let gauss = (-0.5 * (d / sigma).powi(2)).exp() / (sigma * (2.0 * std::f64::consts::PI).sqrt());
         self.opts.laser_strength * cos_inc * gauss / (std::f64::consts::PI * r)
     }
 
@@ -236,12 +245,19 @@ pub(crate) fn facet_exit(lp: &LightPlane, u: &Vector3<f64>) -> Point3<f64> {
     lp.virtual_source + u * t.max(0.0)
 }
 
-/// Renders the noiseless electron image (before blur) with adaptive supersampling.
+/// Renders the noiseless electron image, optical blur included, with adaptive supersampling.
+///
+/// The optics blur the continuous image before the pixels integrate it, so each sample is
+/// spread with the PSF integrated over a pixel's area, K(t) = Φ((t + ½)/σ) − Φ((t − ½)/σ) per
+/// axis, from its own sub-pixel position: a stripe narrower than a pixel keeps its sub-pixel
+/// position in the image (blurring the pixel-integrated image instead would snap it to pixel
+/// centres).
 fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &RenderOptions) -> Vec<f64> {
     let camera = sensor.camera.as_ref();
     let (w, h) = camera.image_size();
+    let (w, h) = (w as usize, h as usize);
     let shader = Shader { scene, slices, sigma: opts.beam_sigma(), opts };
-    let cw = w as usize + 1;
+    let cw = w + 1;
     let corners: Vec<CornerKey> = (0..=h)
         .into_par_iter()
         .flat_map_iter(|cy| {
@@ -249,72 +265,215 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
             (0..=w).map(move |cx| shader.corner(camera, Vector2::new(cx as f64 - 0.5, cy as f64 - 0.5)))
         })
         .collect();
-    let n = opts.supersample.max(1);
-    let mut out = vec![0.0; (w * h) as usize];
-    out.par_chunks_mut(w as usize).enumerate().for_each(|(y, row)| {
-        for (x, value) in row.iter_mut().enumerate() {
-            let c = [
-                corners[y * cw + x],
-                corners[y * cw + x + 1],
-                corners[(y + 1) * cw + x],
-                corners[(y + 1) * cw + x + 1],
-            ];
-            let uniform = c.iter().all(|k| k.surface == c[0].surface && k.sides == c[0].sides && !k.near);
-            if uniform && c[0].surface == u32::MAX {
-                continue;
+    let n = opts.supersample.max(1) as usize;
+    let psf = PixelPsf::new(opts.psf_sigma_px, n);
+    // Pixels whose corners agree take one sample at their centre (spread later by a discrete
+    // convolution); the others get a supersampled patch spread from the exact sample positions.
+    let rows: Vec<RowResult> = (0..h)
+        .into_par_iter()
+        .map(|y| {
+            let mut centre = vec![0.0; w];
+            let mut patches = Vec::new();
+            for x in 0..w {
+                let c = [
+                    corners[y * cw + x],
+                    corners[y * cw + x + 1],
+                    corners[(y + 1) * cw + x],
+                    corners[(y + 1) * cw + x + 1],
+                ];
+                let uniform = c.iter().all(|k| k.surface == c[0].surface && k.sides == c[0].sides && !k.near);
+                if uniform && c[0].surface == u32::MAX {
+                    continue;
+                }
+                if uniform {
+                    centre[x] = pixel_samples(&shader, camera, x as f64, y as f64, 1)[0];
+                } else {
+                    let samples = pixel_samples(&shader, camera, x as f64, y as f64, n as u32);
+                    patches.push((x, psf.patch(&samples)));
+                }
             }
-            let samples = if uniform { 1 } else { n };
-            *value = pixel_mean(&shader, camera, x as f64, y as f64, samples);
+            (centre, patches)
+        })
+        .collect();
+    let centre: Vec<f64> = rows.iter().flat_map(|(c, _)| c.iter().copied()).collect();
+    let mut out = psf.convolve_centres(&centre, w, h);
+    let r = psf.radius as isize;
+    for (y, (_, patches)) in rows.iter().enumerate() {
+        for (x, patch) in patches {
+            let side = 2 * psf.radius + 1;
+            for dy in -r..=r {
+                let yy = y as isize + dy;
+                if yy < 0 || yy >= h as isize {
+                    continue;
+                }
+                for dx in -r..=r {
+                    let xx = *x as isize + dx;
+                    if xx < 0 || xx >= w as isize {
+                        continue;
+                    }
+                    out[yy as usize * w + xx as usize] += patch[(dy + r) as usize * side + (dx + r) as usize];
+                }
+            }
         }
-    });
+    }
     out
 }
 
-/// Mean signal over an `n × n` grid of samples inside pixel (x, y).
-fn pixel_mean(shader: &Shader, camera: &dyn omni_model::CameraModel, x: f64, y: f64, n: u32) -> f64 {
-    let mut sum = 0.0;
-    for j in 0..n {
-        for i in 0..n {
+/// One image row: centre samples of uniform pixels, and (column, PSF patch) of supersampled ones.
+type RowResult = (Vec<f64>, Vec<(usize, Vec<f64>)>);
+
+/// The optical PSF (Gaussian, σ in px) integrated over a pixel: K(t) = Φ((t + ½)/σ) − Φ((t − ½)/σ).
+struct PixelPsf {
+    radius: usize,
+    /// K at integer offsets −radius..=radius (for centre samples).
+    centre: Vec<f64>,
+    /// K at offsets −radius..=radius from each of the n sub-sample positions.
+    sub: Vec<Vec<f64>>,
+    n: usize,
+}
+
+impl PixelPsf {
+    fn new(sigma: f64, n: usize) -> Self {
+        let radius = if sigma > 0.0 { (4.0 * sigma + 0.5).ceil() as usize } else { 1 };
+        let k = |t: f64| {
+            if sigma > 0.0 {
+                let s = sigma * std::f64::consts::SQRT_2;
+                0.5 * (erf((t + 0.5) / s) - erf((t - 0.5) / s))
+            } else if t.abs() < 0.5 {
+                1.0
+            } else {
+                0.0
+            }
+        };
+        let r = radius as isize;
+        let centre = (-r..=r).map(|o| k(o as f64)).collect();
+        let sub = (0..n)
+            .map(|i| {
+                let s = (i as f64 + 0.5) / n as f64 - 0.5;
+                (-r..=r).map(|o| k(o as f64 - s)).collect()
+            })
+            .collect();
+        PixelPsf { radius, centre, sub, n }
+    }
+
+    /// The (2r+1)² spread of one supersampled pixel's samples (row-major n × n), each standing
+    /// for 1/n² of the pixel.
+    fn patch(&self, samples: &[f64]) -> Vec<f64> {
+        let side = 2 * self.radius + 1;
+        let mut patch = vec![0.0; side * side];
+        let area = 1.0 / (self.n * self.n) as f64;
+        for j in 0..self.n {
+            let mut row = vec![0.0; side];
+            for i in 0..self.n {
+                let v = samples[j * self.n + i] * area;
+                if v != 0.0 {
+                    for (r, k) in row.iter_mut().zip(&self.sub[i]) {
+                        *r += v * k;
+                    }
+                }
+            }
+            for (dy, ky) in self.sub[j].iter().enumerate() {
+                for (dx, v) in row.iter().enumerate() {
+                    patch[dy * side + dx] += ky * v;
+                }
+            }
+        }
+        patch
+    }
+
+    /// Separable discrete convolution of the centre-sampled image with K (zero outside).
+    fn convolve_centres(&self, img: &[f64], w: usize, h: usize) -> Vec<f64> {
+        let r = self.radius as isize;
+        let k = &self.centre;
+        let mut tmp = vec![0.0; w * h];
+        tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            for (x, out) in row.iter_mut().enumerate() {
+                let mut s = 0.0;
+                for (i, kv) in k.iter().enumerate() {
+                    let xx = x as isize + i as isize - r;
+                    if xx >= 0 && xx < w as isize {
+                        s += kv * img[y * w + xx as usize];
+                    }
+                }
+                *out = s;
+            }
+        });
+        let mut out = vec![0.0; w * h];
+        out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            for (x, o) in row.iter_mut().enumerate() {
+                let mut s = 0.0;
+                for (i, kv) in k.iter().enumerate() {
+                    let yy = y as isize + i as isize - r;
+                    if yy >= 0 && yy < h as isize {
+                        s += kv * tmp[yy as usize * w + x];
+                    }
+                }
+                *o = s;
+            }
+        });
+        out
+    }
+}
+
+/// The error function (Abramowitz & Stegun 7.1.26, |error| < 1.5e-7).
+fn erf(x: f64) -> f64 {
+    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
+    let poly =
+        t * (0.254_829_592 + t * (-0.284_496_736 + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+    let y = 1.0 - poly * (-x * x).exp();
+    if x >= 0.0 { y } else { -y }
+}
+
+/// Signal of an `n × n` grid of samples inside pixel (x, y), row-major.
+///
+/// Each sample stands for a 1/n × 1/n patch of the pixel. The sheet is far thinner than a
+/// pixel's footprint on distant surfaces, so point samples would alias its profile; instead the
+/// profile is box-filtered analytically over the patch: the plane distance d varies linearly
+/// across it with the gradient measured between neighbouring samples on the same surface, and a
+/// Gaussian convolved with boxes of widths a, b is, to the order that matters here, a Gaussian
+/// with σ² + (a² + b²)/12 (same area, same centre).
+fn pixel_samples(shader: &Shader, camera: &dyn omni_model::CameraModel, x: f64, y: f64, n: u32) -> Vec<f64> {
+    let n = n as usize;
+    let hits: Vec<Option<(Hit, Vector3<f64>)>> = (0..n * n)
+        .map(|k| {
+            let (i, j) = (k % n, k / n);
             let px = Vector2::new(x + (i as f64 + 0.5) / n as f64 - 0.5, y + (j as f64 + 0.5) / n as f64 - 0.5);
-            if let Some(ray) = camera.pixel_to_ray(&px) {
-                sum += shader.radiance(&ray.origin, &ray.dir);
+            let ray = camera.pixel_to_ray(&px)?;
+            let dir = ray.dir.into_inner();
+            shader.scene.cast(&ray.origin, &dir, 1e-6, f64::INFINITY).map(|h| (h, dir))
+        })
+        .collect();
+    let same_surface = |a: usize, b: usize| match (&hits[a], &hits[b]) {
+        (Some((ha, _)), Some((hb, _))) => ha.object == hb.object && ha.normal.dot(&hb.normal) > 0.9,
+        _ => false,
+    };
+    let mut values = vec![0.0; n * n];
+    for k in 0..n * n {
+        let Some((hit, dir)) = &hits[k] else { continue };
+        let (i, j) = (k % n, k / n);
+        // Neighbour along each axis on the same surface (forward, else backward).
+        let along = |step: usize, ok_fwd: bool, ok_bwd: bool| {
+            if ok_fwd && same_surface(k, k + step) {
+                Some(k + step)
+            } else if ok_bwd && same_surface(k, k - step) {
+                Some(k - step)
+            } else {
+                None
             }
-        }
+        };
+        let nx = along(1, i + 1 < n, i > 0);
+        let ny = along(n, j + 1 < n, j > 0);
+        let footprint = |s: usize| {
+            let plane = &shader.slices[s].lp.plane;
+            let d0 = plane.signed_distance(&hit.point);
+            let grad = |m: Option<usize>| {
+                m.and_then(|m| hits[m].as_ref()).map_or(0.0, |(h, _)| plane.signed_distance(&h.point) - d0)
+            };
+            ((grad(nx).powi(2) + grad(ny).powi(2)) / 12.0).sqrt()
+        };
+        values[k] = shader.shade(hit, dir, footprint);
     }
-    sum / (n * n) as f64
-}
-
-/// Separable Gaussian blur (σ in px), edges clamped.
-fn blur(img: &[f64], w: usize, h: usize, sigma: f64) -> Vec<f64> {
-    if sigma <= 0.0 {
-        return img.to_vec();
-    }
-    let radius = (3.5 * sigma).ceil() as isize;
-    let kernel: Vec<f64> = (-radius..=radius).map(|i| (-0.5 * (i as f64 / sigma).powi(2)).exp()).collect();
-    let norm: f64 = kernel.iter().sum();
-    let kernel: Vec<f64> = kernel.iter().map(|k| k / norm).collect();
-    let clamp = |v: isize, max: usize| v.clamp(0, max as isize - 1) as usize;
-    let mut tmp = vec![0.0; w * h];
-    tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        for (x, out) in row.iter_mut().enumerate() {
-            *out = kernel
-                .iter()
-                .enumerate()
-                .map(|(k, kv)| kv * img[y * w + clamp(x as isize + k as isize - radius, w)])
-                .sum();
-        }
-    });
-    let mut out = vec![0.0; w * h];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        for (x, o) in row.iter_mut().enumerate() {
-            *o = kernel
-                .iter()
-                .enumerate()
-                .map(|(k, kv)| kv * tmp[clamp(y as isize + k as isize - radius, h) * w + x])
-                .sum();
-        }
-    });
-    out
+    values
 }
 
 /// Photon and read noise, saturation, gamma and quantisation.
@@ -337,8 +496,7 @@ fn digitise(electrons: &[f64], w: usize, opts: &RenderOptions, frame_seed: u64) 
 
 fn finish(sensor: &Sensor, electrons: Vec<f64>, opts: &RenderOptions, frame_seed: u64) -> Frame16 {
     let (w, h) = sensor.camera.image_size();
-    let blurred = blur(&electrons, w as usize, h as usize, opts.psf_sigma_px);
-    Frame16 { width: w, height: h, data: digitise(&blurred, w as usize, opts, frame_seed), bit_depth: opts.bit_depth }
+    Frame16 { width: w, height: h, data: digitise(&electrons, w as usize, opts, frame_seed), bit_depth: opts.bit_depth }
 }
 
 /// The noise seed of one frame: the user's seed mixed with what identifies the frame, so that
@@ -412,14 +570,19 @@ mod tests {
     use super::*;
 
     #[test]
-    fn blur_preserves_sum_and_spreads_as_sigma() {
-        let (w, h) = (41, 41);
-        let mut img = vec![0.0; w * h];
-        img[20 * w + 20] = 1000.0;
-        let b = blur(&img, w, h, 1.5);
-        assert!((b.iter().sum::<f64>() - 1000.0).abs() < 1e-6);
-        let var: f64 = (0..w).map(|x| b[20 * w + x] * ((x as f64 - 20.0).powi(2))).sum::<f64>()
-            / (0..w).map(|x| b[20 * w + x]).sum::<f64>();
-        assert!((var.sqrt() - 1.5).abs() < 0.02, "σ = {}", var.sqrt());
+    fn pixel_psf_preserves_energy_and_centre() {
+        let psf = PixelPsf::new(0.7, 8);
+        // One sample lit off-centre: the patch keeps its energy and its sub-pixel position.
+        let mut samples = vec![0.0; 64];
+        samples[3 * 8 + 6] = 64.0;
+        let patch = psf.patch(&samples);
+        let side = 2 * psf.radius + 1;
+        let sum: f64 = patch.iter().sum();
+        assert!((sum - 1.0).abs() < 1e-6, "sum {sum}");
+        let r = psf.radius as f64;
+        let cx: f64 = patch.iter().enumerate().map(|(k, v)| v * ((k % side) as f64 - r)).sum::<f64>() / sum;
+        let cy: f64 = patch.iter().enumerate().map(|(k, v)| v * ((k / side) as f64 - r)).sum::<f64>() / sum;
+        assert!((cx - (6.5 / 8.0 - 0.5)).abs() < 1e-4 && (cy - (3.5 / 8.0 - 0.5)).abs() < 1e-4, "{cx} {cy}");
+        assert!((erf(0.5) - 0.520_499_877_8).abs() < 2e-7 && (erf(-1.5) + 0.966_105_146_5).abs() < 2e-7);
     }
 }

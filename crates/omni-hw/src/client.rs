@@ -108,7 +108,7 @@ impl<P: Read + Write> Client<P> {
             Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted) => {
                 return Ok(());
             }
-            Err(e) => return Err(HwError::Disconnected(e.to_string())),
+            Err(e) => return Err(HwError::Disconnected(describe_io(&e))),
         };
         let at_us = host_time_us();
         let mut bodies = Vec::new();
@@ -140,7 +140,7 @@ impl<P: Read + Write> Client<P> {
         self.port
             .write_all(line.as_bytes())
             .and_then(|_| self.port.flush())
-            .map_err(|e| HwError::Disconnected(e.to_string()))
+            .map_err(|e| HwError::Disconnected(describe_io(&e)))
     }
 
     /// Sends a command and waits for its ACK, retrying with the same id on timeout.
@@ -228,6 +228,15 @@ impl<P: Read + Write> Client<P> {
     /// Gives the port back (e.g. to close it).
     pub fn into_inner(self) -> P {
         self.port
+    }
+}
+
+/// A port failure in words; a hang-up is named as such (not "broken pipe", which command-line
+/// tools reserve for a closed output pipe).
+fn describe_io(e: &std::io::Error) -> String {
+    match e.kind() {
+        ErrorKind::BrokenPipe => "the port hung up (cable unplugged or device closed)".into(),
+        _ => format!("port error: {e}"),
     }
 }
 

@@ -1,0 +1,321 @@
+//! End-to-end tests: the real `omni-trigger` binary scanning against `omni-trigger emulate` on a
+//! real pseudo-terminal (the production path through `serialport`), clean and with each fault.
+//! Ground truth: the emulator's `--truth` file says which trigger and true angle each frame shows.
+
+use omni_formats::stream::{Frame, Record, Status, StreamReader};
+use omni_hw::emulator::{TruthRecord, read_truth};
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_omni-trigger");
+
+/// An emulator child process; killed when dropped.
+struct Emulator {
+    child: Child,
+    port: String,
+    dir: tempfile::TempDir,
+}
+
+impl Emulator {
+    fn start(args: &[&str]) -> Emulator {
+        let dir = tempfile::tempdir().unwrap();
+        let mut child = Command::new(BIN)
+            .arg("emulate")
+            .arg("--frames")
+            .arg(dir.path().join("frames"))
+            .arg("--truth")
+            .arg(dir.path().join("truth.jsonl"))
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+        let port = line.trim().to_string();
+        assert!(port.starts_with("/dev/"), "emulator printed {line:?}");
+        Emulator { child, port, dir }
+    }
+
+    fn frames(&self) -> PathBuf {
+        self.dir.path().join("frames")
+    }
+
+    fn truth(&self) -> Vec<TruthRecord> {
+        let p = self.dir.path().join("truth.jsonl");
+        if p.exists() { read_truth(&p).unwrap() } else { vec![] }
+    }
+
+    fn manifest_path(&self) -> PathBuf {
+        self.dir.path().join("scan.jsonl")
+    }
+
+    fn scan(&self, args: &[&str]) -> Output {
+        Command::new(BIN)
+            .args(["scan", "--port", &self.port, "--frames"])
+            .arg(self.frames())
+            .arg("-o")
+            .arg(self.manifest_path())
+            .args(args)
+            .output()
+            .unwrap()
+    }
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Reads a manifest, checking it is valid JSON Lines: header first, status last, frames between.
+fn read_manifest(path: &Path) -> (Vec<Frame>, Status) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let records: Vec<Record> =
+        StreamReader::new(text.as_bytes(), "manifest").map(|r| r.unwrap_or_else(|e| panic!("{e}\n{text}"))).collect();
+    assert!(matches!(records.first(), Some(Record::Header(_))), "{text}");
+    let Some(Record::Status(status)) = records.last().cloned() else { panic!("no final status record:\n{text}") };
+    let frames: Vec<Frame> = records[1..records.len() - 1]
+        .iter()
+        .map(|r| match r {
+            Record::Frame(f) => (**f).clone(),
+            other => panic!("unexpected record {other:?}"),
+        })
+        .collect();
+    (frames, status)
+}
+
+/// Every paired frame shows exactly the trigger and angle the manifest says (truth from the
+/// emulator), and no frame file is used twice.
+fn assert_frames_true(frames: &[Frame], truth: &[TruthRecord]) {
+    let by_path: HashMap<&str, &TruthRecord> = truth.iter().map(|t| (t.path.as_str(), t)).collect();
+    let mut used = std::collections::HashSet::new();
+    for f in frames {
+        let t = by_path.get(f.path.as_str()).unwrap_or_else(|| panic!("{} not written by the camera", f.path));
+        assert_eq!(
+            t.trigger_seq, f.seq,
+            "{}: paired with trigger {} but shows trigger {}",
+            f.path, f.seq, t.trigger_seq
+        );
+        assert!(
+            (t.alpha_deg - f.alpha_deg).abs() < 1e-9,
+            "{}: manifest {}° true {}°",
+            f.path,
+            f.alpha_deg,
+            t.alpha_deg
+        );
+        assert_eq!((t.facet, &t.lasers), (f.facet, &f.lasers), "{}", f.path);
+        assert!(used.insert(f.path.clone()), "{} paired twice", f.path);
+    }
+}
+
+fn extra(status: &Status, key: &str) -> u64 {
+    status.extra.get(key).and_then(|v| v.as_u64()).unwrap_or_else(|| panic!("status lacks {key}"))
+}
+
+/// 24 triggers per revolution (angles 0° and 15° on all 12 facets), evenly spaced.
+const FAST: [&str; 4] = ["--angles", "0,15", "--revolutions", "1"];
+
+#[test]
+fn clean_scan_of_two_revolutions_gives_exactly_the_expected_manifest() {
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "25"]);
+    let out = emu.scan(&["--angles", "0,15", "--revolutions", "2"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (frames, status) = read_manifest(&emu.manifest_path());
+    assert_eq!(frames.len(), 48);
+    for (i, f) in frames.iter().enumerate() {
+        let i = i as u64;
+        let (rev, facet, alpha) = (i / 24, (i % 24 / 2) as u32, if i % 2 == 0 { 0.0 } else { 15.0 });
+        assert_eq!(f.seq, i);
+        assert_eq!(f.path, format!("frame_{i:06}.png"));
+        assert_eq!((f.facet, f.revolution, f.alpha_deg), (facet, rev, alpha), "frame {i}");
+        assert_eq!(f.encoder, Some(facet as u64 * 3000 + if i % 2 == 0 { 0 } else { 1500 }));
+        assert_eq!(f.lasers, vec![0, 1]);
+        assert!(f.ambient_path.is_none());
+    }
+    let t: Vec<u64> = frames.iter().map(|f| f.timestamp_us.unwrap()).collect();
+    assert!(t.windows(2).all(|w| w[1] - w[0] == 40_000), "25 Hz, evenly spaced: {t:?}");
+    assert_frames_true(&frames, &emu.truth());
+    assert_eq!((status.frames, status.frames_missing, status.complete), (48, 0, true));
+    assert!(status.errors.is_empty(), "{:?}", status.errors);
+    assert_eq!(extra(&status, "controller_fired"), 48);
+}
+
+#[test]
+fn rendered_frames_through_the_simulator_pair_with_their_true_angles_and_ambient_frames() {
+    let emu = Emulator::start(&["--width", "64"]);
+    let out = emu.scan(&["--angles", "5,20", "--facets", "0,3,6,9", "--revolutions", "1", "--laser-off"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (frames, status) = read_manifest(&emu.manifest_path());
+    assert_frames_true(&frames, &emu.truth());
+    // Rendering speed varies with machine load: a missed frame is allowed, but accounted for.
+    assert_eq!(status.frames + status.frames_missing, 16, "{status:?}");
+    assert!(status.frames >= 12, "{status:?}");
+    let paths: HashMap<u64, &Frame> = frames.iter().map(|f| (f.seq, f)).collect();
+    for f in &frames {
+        let png = std::fs::read(emu.frames().join(&f.path)).unwrap();
+        assert_eq!(&png[1..4], b"PNG");
+        let (w, h) =
+            (u32::from_be_bytes(png[16..20].try_into().unwrap()), u32::from_be_bytes(png[20..24].try_into().unwrap()));
+        assert_eq!((w, h), (64, 64));
+        if f.revolution == 0 {
+            assert!(f.lasers.is_empty(), "revolution 0 is the laser-off revolution");
+        } else {
+            assert_eq!(f.lasers, vec![0, 1]);
+            // Its ambient frame: same encoder count one revolution (8 triggers) earlier, if paired.
+            let expected = paths.get(&(f.seq - 8)).map(|a| a.path.clone());
+            assert_eq!(f.ambient_path, expected, "frame {}", f.seq);
+        }
+    }
+    // A laser frame differs from its ambient frame: the stripe is drawn.
+    let laser = frames.iter().find(|f| f.ambient_path.is_some()).expect("some laser frame with its ambient frame");
+    let a = std::fs::read(emu.frames().join(&laser.path)).unwrap();
+    let b = std::fs::read(emu.frames().join(laser.ambient_path.as_ref().unwrap())).unwrap();
+    assert_ne!(a, b);
+}
+
+/// Runs a 24-trigger scan against an emulator with `fault` and checks what must hold whatever
+/// was lost: exit 0, a valid manifest, true angles, and every trigger accounted for.
+fn faulty_scan(fault: &[&str]) -> (Vec<Frame>, Status) {
+    let mut args = vec!["--camera-mode", "blank", "--max-rate-hz", "40"];
+    args.extend_from_slice(fault);
+    let emu = Emulator::start(&args);
+    let out = emu.scan(&FAST);
+    assert!(out.status.success(), "{fault:?}: {}", String::from_utf8_lossy(&out.stderr));
+    let (frames, status) = read_manifest(&emu.manifest_path());
+    assert_frames_true(&frames, &emu.truth());
+    assert!(status.complete, "{status:?}");
+    assert_eq!(status.frames + status.frames_missing, 24, "every trigger is paired or reported: {status:?}");
+    if status.frames_missing > 0 {
+        assert!(!status.errors.is_empty(), "losses must be explained: {status:?}");
+        assert!(!out.stderr.is_empty(), "losses must be warned about");
+    }
+    (frames, status)
+}
+
+#[test]
+fn bad_checksums_are_dropped_commands_retried_and_lost_events_reported() {
+    let (_, status) = faulty_scan(&["--bad-crc", "0.25", "--fault-seed", "3"]);
+    assert!(extra(&status, "line_crc_errors") > 0, "{status:?}");
+    assert_eq!(extra(&status, "events_lost"), status.frames_missing, "{status:?}");
+}
+
+#[test]
+fn garbage_between_lines_is_survived() {
+    let (_, status) = faulty_scan(&["--garbage", "0.4", "--fault-seed", "5"]);
+    assert!(extra(&status, "line_crc_errors") + extra(&status, "lines_malformed") > 0, "{status:?}");
+}
+
+#[test]
+fn dropped_events_leave_their_frames_unmatched_never_shifted() {
+    let (frames, status) = faulty_scan(&["--drop-events", "0.2", "--fault-seed", "7"]);
+    let lost = extra(&status, "events_lost");
+    assert!(lost > 0, "{status:?}");
+    assert_eq!(extra(&status, "frames_unmatched"), lost, "each lost event's frame is left out: {status:?}");
+    assert_eq!(frames.len() as u64, 24 - lost);
+}
+
+#[test]
+fn duplicated_events_are_counted_once() {
+    let (frames, status) = faulty_scan(&["--dup-events", "0.3", "--fault-seed", "9"]);
+    assert!(extra(&status, "events_duplicated") > 0);
+    assert_eq!((frames.len(), status.frames_missing), (24, 0), "{status:?}");
+}
+
+#[test]
+fn a_slow_camera_misses_frames_and_they_are_reported_missing() {
+    // 40 Hz = 25 ms per trigger; 40 ms per frame: the camera misses about every other trigger.
+    let (frames, status) = faulty_scan(&["--slow-camera-ms", "40"]);
+    assert!(status.frames_missing >= 8, "{status:?}");
+    assert!(frames.len() >= 8, "{status:?}");
+    assert_eq!(extra(&status, "frames_unmatched"), 0);
+}
+
+#[test]
+fn a_disconnect_mid_scan_stops_with_an_error_and_keeps_the_partial_manifest() {
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40", "--disconnect-after", "7"]);
+    let out = emu.scan(&FAST);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("hung up") && stderr.lines().count() == 1, "{stderr}");
+    let (frames, status) = read_manifest(&emu.manifest_path());
+    assert!(!status.complete);
+    assert!(status.errors.iter().any(|e| e.contains("disconnected")), "{status:?}");
+    assert!(frames.len() <= 7);
+    assert_frames_true(&frames, &emu.truth());
+}
+
+#[test]
+fn an_unplugged_port_ends_the_scan_within_one_second() {
+    let mut emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40"]);
+    let mut scan = Command::new(BIN)
+        .args(["scan", "--port", &emu.port, "--angles", "0,15", "--revolutions", "20", "--frames"])
+        .arg(emu.frames())
+        .arg("-o")
+        .arg(emu.manifest_path())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while std::fs::read_to_string(emu.manifest_path()).map(|t| t.matches("\"frame\"").count()).unwrap_or(0) < 5 {
+        assert!(started.elapsed() < Duration::from_secs(10), "scan produced no frames");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    emu.child.kill().unwrap();
+    emu.child.wait().unwrap();
+    let unplugged = Instant::now();
+    let status = loop {
+        if let Some(s) = scan.try_wait().unwrap() {
+            break s;
+        }
+        assert!(unplugged.elapsed() < Duration::from_secs(5), "scan still running 5 s after the unplug");
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let took = unplugged.elapsed();
+    eprintln!("scan noticed the unplug after {took:?}");
+    assert!(took < Duration::from_secs(1), "scan took {took:?} to notice");
+    assert_eq!(status.code(), Some(1));
+    let (frames, st) = read_manifest(&emu.manifest_path());
+    assert!(frames.len() >= 5 && !st.complete);
+    assert_frames_true(&frames, &emu.truth());
+}
+
+#[test]
+fn info_prints_the_controller_description() {
+    let emu = Emulator::start(&["--camera-mode", "blank"]);
+    let out = Command::new(BIN).args(["info", "--json", "--port", &emu.port]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["protocol"], 1);
+    assert_eq!(v["counts_per_rev"], 36000);
+    assert_eq!(v["facets"], 12);
+    assert_eq!(v["lasers"], 2);
+    assert_eq!(v["state"], "idle");
+}
+
+#[test]
+fn bad_ports_and_arguments_fail_cleanly() {
+    let out = Command::new(BIN).args(["info", "--port", "/dev/omni-no-such-port"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(e.contains("/dev/omni-no-such-port") && e.lines().count() == 1, "{e}");
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(BIN)
+        .args(["scan", "--port", "/dev/null", "--angles", "0:30", "--frames"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("start:stop:step"));
+    // An angle beyond the facet is refused after the handshake, with a status record.
+    let emu = Emulator::start(&["--camera-mode", "blank"]);
+    let out = emu.scan(&["--angles", "10,31"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("31° is outside the facet"));
+    let (frames, status) = read_manifest(&emu.manifest_path());
+    assert!(frames.is_empty() && !status.complete);
+}

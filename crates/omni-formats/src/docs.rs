@@ -1,7 +1,10 @@
 //! Description files: camera, scanner (transmitter), checkerboard.
 
 use crate::{Error, Result, Versioned};
-use omni_model::{CameraModel, HyperbolicCamera, HyperbolicParams, Transmitter, TransmitterParams};
+use omni_model::{
+    CameraModel, HyperbolicCamera, HyperbolicParams, MeiCamera, MeiParams, OcamCamera, OcamParams, Transmitter,
+    TransmitterParams,
+};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -12,6 +15,10 @@ use std::path::Path;
 pub enum CameraSpec {
     /// The exact hyperbolic mirror + pinhole model (SENSOR.md).
     Hyperbolic(HyperbolicParams),
+    /// Mei's unified model with radial-tangential distortion (omni_model::mei).
+    Mei(MeiParams),
+    /// Scaramuzza's polynomial model, OCamCalib (omni_model::ocam).
+    Ocam(OcamParams),
 }
 
 /// Deserialises `{"kind": K, ...params}` by hand so that errors name the exact parameter
@@ -28,7 +35,11 @@ impl<'de> Deserialize<'de> for CameraSpec {
         }
         match kind.as_str() {
             "hyperbolic" => Ok(CameraSpec::Hyperbolic(params(rest)?)),
-            other => Err(D::Error::custom(format!("unknown camera model kind \"{other}\" (known: hyperbolic)"))),
+            "mei" => Ok(CameraSpec::Mei(params(rest)?)),
+            "ocam" => Ok(CameraSpec::Ocam(params(rest)?)),
+            other => {
+                Err(D::Error::custom(format!("unknown camera model kind \"{other}\" (known: hyperbolic, mei, ocam)")))
+            }
         }
     }
 }
@@ -38,6 +49,8 @@ impl CameraSpec {
     pub fn build(&self) -> std::result::Result<Box<dyn CameraModel>, String> {
         match self {
             CameraSpec::Hyperbolic(p) => Ok(Box::new(HyperbolicCamera::new(p.clone())?)),
+            CameraSpec::Mei(p) => Ok(Box::new(MeiCamera::new(p.clone())?)),
+            CameraSpec::Ocam(p) => Ok(Box::new(OcamCamera::new(p.clone())?)),
         }
     }
 }

@@ -14,8 +14,12 @@
 
 mod camera;
 mod hyperbolic;
+pub mod mei;
+pub mod ocam;
 mod transmitter;
 
 pub use camera::{CameraModel, MirrorCircle};
 pub use hyperbolic::{HyperbolicCamera, HyperbolicParams};
+pub use mei::{MeiCamera, MeiParams};
+pub use ocam::{OcamCamera, OcamParams};
 pub use transmitter::{FacetError, LaserParams, LightPlane, PolygonParams, Transmitter, TransmitterParams};

@@ -1,0 +1,308 @@
+//! Scaramuzza's polynomial omnidirectional camera model (OCamCalib).
+//!
+//! D. Scaramuzza, A. Martinelli, R. Siegwart, "A Toolbox for Easily Calibrating Omnidirectional
+//! Cameras", IROS 2006. Parameters: the polynomial f(ρ) = a0 + a1·ρ + a2·ρ² + … (OCamCalib
+//! keeps a1 = 0), the distortion centre, and the affine matrix [c d; e 1].
+//!
+//! Convention in the omniscan world frame: OCamCalib works in (row, column) order; here the
+//! centre is stored as `cx_px` (column, x right) and `cy_px` (row, y down), 0-based (the
+//! `calib_results.txt` import/export adds or removes Matlab's +1). The affine relation keeps
+//! OCamCalib's meaning: (row − cy, col − cx) = [c d; e 1]·(v′, u′), where (u′, v′) are the
+//! ideal sensor coordinates along x and y. The world direction of a pixel is
+//! (u′, v′, f(ρ)), ρ = √(u′² + v′²): with a0 < 0 the image centre looks straight down (−z),
+//! as for [`crate::HyperbolicCamera`]. Projection solves f(ρ)/ρ = z/√(x² + y²) for ρ exactly
+//! (bracketed Newton), so it is the true inverse; the inverse polynomial ρ(θ) that OCamCalib
+//! stores is only used for import/export ([`OcamParams::fit_inverse_poly`]).
+
+use crate::camera::{CameraModel, MirrorCircle};
+use omni_geom::{Point3, Ray, Vector2, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Parameters of the polynomial model (what `camera.json` stores for kind `ocam`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OcamParams {
+    /// f(ρ) coefficients a0, a1, a2, … (ρ in px; a0 < 0).
+    pub poly: Vec<f64>,
+    /// Inverse polynomial ρ(θ) (θ = elevation of the direction above the sensor plane, rad),
+    /// as OCamCalib's `invpol`; informative, may be empty.
+    #[serde(default)]
+    pub inv_poly: Vec<f64>,
+    /// Distortion centre, column (px).
+    pub cx_px: f64,
+    /// Distortion centre, row (px).
+    pub cy_px: f64,
+    /// Affine coefficients [c d; e 1] (OCamCalib meaning, see the module docs).
+    pub c: f64,
+    pub d: f64,
+    pub e: f64,
+    pub width: u32,
+    pub height: u32,
+    /// Radius (px) around the centre below which the camera sees itself; 0 = none.
+    #[serde(default)]
+    pub inner_radius_px: f64,
+    /// Radius (px) of the mirror rim; 0 = the whole image.
+    #[serde(default)]
+    pub outer_radius_px: f64,
+    /// Single viewpoint (mm, world frame) where all rays start.
+    #[serde(default)]
+    pub viewpoint_mm: [f64; 3],
+}
+
+impl OcamParams {
+    /// Checks that the parameters are finite and meaningful; names the field at fault.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.poly.is_empty() || !(self.poly[0] < 0.0) {
+            return Err(format!("poly[0] (a0) must be negative, got {:?}", self.poly.first()));
+        }
+        for (k, v) in self.poly.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(format!("poly[{k}] must be finite, got {v}"));
+            }
+        }
+        for (k, v) in self.inv_poly.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(format!("inv_poly[{k}] must be finite, got {v}"));
+            }
+        }
+        let finite = [
+            ("cx_px", self.cx_px),
+            ("cy_px", self.cy_px),
+            ("c", self.c),
+            ("d", self.d),
+            ("e", self.e),
+            ("inner_radius_px", self.inner_radius_px),
+            ("outer_radius_px", self.outer_radius_px),
+        ];
+        for (name, v) in finite {
+            if !v.is_finite() {
+                return Err(format!("{name} must be finite, got {v}"));
+            }
+        }
+        if (self.c - self.d * self.e).abs() < 1e-9 {
+            return Err("affine matrix [c d; e 1] is singular".into());
+        }
+        if self.width == 0 || self.height == 0 {
+            return Err("width and height must be positive".into());
+        }
+        Ok(())
+    }
+
+    /// Largest ρ (px) the model is used at: the rim radius, else the image half-diagonal.
+    pub fn max_rho(&self) -> f64 {
+        if self.outer_radius_px > 0.0 {
+            self.outer_radius_px * 1.05
+        } else {
+            (self.width as f64).hypot(self.height as f64)
+        }
+    }
+
+    /// Fits OCamCalib's inverse polynomial ρ(θ) of the given degree over the used radii
+    /// (least squares on 400 samples); returns the worst residual (px).
+    pub fn fit_inverse_poly(&mut self, degree: usize) -> f64 {
+        let rho_max = self.max_rho();
+        let rho_min = self.inner_radius_px.max(1.0);
+        let samples: Vec<(f64, f64)> = (0..400)
+            .map(|k| {
+                let rho = rho_min + (rho_max - rho_min) * k as f64 / 399.0;
+                let theta = poly_eval(&self.poly, rho).atan2(rho);
+                (theta, rho)
+            })
+            .collect();
+        let n = degree + 1;
+        let mut a = nalgebra::DMatrix::zeros(samples.len(), n);
+        let mut b = nalgebra::DVector::zeros(samples.len());
+        for (r, (theta, rho)) in samples.iter().enumerate() {
+            for k in 0..n {
+                a[(r, k)] = theta.powi(k as i32);
+            }
+            b[r] = *rho;
+        }
+        let Ok(x) = a.clone().svd(true, true).solve(&b, 1e-15) else {
+            return f64::INFINITY;
+        };
+        self.inv_poly = x.iter().cloned().collect();
+        samples.iter().map(|(t, r)| (poly_eval(&self.inv_poly, *t) - r).abs()).fold(0.0, f64::max)
+    }
+}
+
+/// Evaluates Σ c_k·x^k.
+pub fn poly_eval(c: &[f64], x: f64) -> f64 {
+    c.iter().rev().fold(0.0, |acc, &k| acc * x + k)
+}
+
+fn poly_derivative(c: &[f64], x: f64) -> f64 {
+    c.iter().enumerate().skip(1).rev().fold(0.0, |acc, (k, &v)| acc * x + k as f64 * v)
+}
+
+/// Intrinsics vector for calibration: cx, cy, c, d, e, then the polynomial coefficients.
+pub fn ocam_vector(p: &OcamParams) -> Vec<f64> {
+    let mut v = vec![p.cx_px, p.cy_px, p.c, p.d, p.e];
+    v.extend_from_slice(&p.poly);
+    v
+}
+
+/// Unit world direction of a pixel with intrinsics `v` ([`ocam_vector`] order).
+pub fn ocam_unproject(v: &[f64], px: &Vector2<f64>) -> Option<Vector3<f64>> {
+    let (cx, cy, c, d, e) = (v[0], v[1], v[2], v[3], v[4]);
+    let (row, col) = (px.y - cy, px.x - cx);
+    let det = c - d * e;
+    // (row, col) = [c d; e 1]·(v′, u′)  ⇒  (v′, u′) = [1 −d; −e c]·(row, col) / det.
+    let vp = (row - d * col) / det;
+    let up = (-e * row + c * col) / det;
+    let rho = up.hypot(vp);
+    let z = poly_eval(&v[5..], rho);
+    Vector3::new(up, vp, z).try_normalize(1e-300)
+}
+
+/// Projects a world direction with intrinsics `v` ([`ocam_vector`] order), solving
+/// f(ρ)/ρ = z/√(x² + y²) for ρ in (0, `rho_max`].
+pub fn ocam_project(v: &[f64], dir: &Vector3<f64>, rho_max: f64) -> Option<Vector2<f64>> {
+    let (cx, cy, c, d, e) = (v[0], v[1], v[2], v[3], v[4]);
+    let poly = &v[5..];
+    let norm = dir.x.hypot(dir.y);
+    let (up, vp) = if norm < 1e-12 * dir.z.abs() {
+        if dir.z >= 0.0 || poly[0] >= 0.0 {
+            return None;
+        }
+        (0.0, 0.0)
+    } else {
+        // g(ρ) = ρ·z − norm·f(ρ); at ρ = 0 it is −norm·a0 > 0.
+        let g = |rho: f64| rho * dir.z - norm * poly_eval(poly, rho);
+        let dg = |rho: f64| dir.z - norm * poly_derivative(poly, rho);
+        // The first sign change of g on a coarse scan brackets the smallest root (the one seen).
+        const SCAN: usize = 64;
+        let (mut lo, mut hi) = (0.0, f64::NAN);
+        for k in 1..=SCAN {
+            let rho = rho_max * k as f64 / SCAN as f64;
+            if g(rho) <= 0.0 {
+                hi = rho;
+                break;
+            }
+            lo = rho;
+        }
+        if hi.is_nan() {
+            return None; // direction beyond the rim
+        }
+        let mut rho = 0.5 * (lo + hi);
+        for _ in 0..100 {
+            let gv = g(rho);
+            if gv > 0.0 {
+                lo = rho;
+            } else {
+                hi = rho;
+            }
+            let step = gv / dg(rho);
+            if step.is_finite() && step.abs() < 1e-13 * (1.0 + rho) {
+                break; // converged: rho is the root to rounding
+            }
+            let next = rho - step;
+            rho = if step.is_finite() && next > lo && next < hi { next } else { 0.5 * (lo + hi) };
+            if hi - lo < 1e-13 * (1.0 + rho) {
+                break;
+            }
+        }
+        (rho * dir.x / norm, rho * dir.y / norm)
+    };
+    let row = c * vp + d * up + cy;
+    let col = e * vp + up + cx;
+    Some(Vector2::new(col, row))
+}
+
+/// The polynomial camera, ready to use.
+#[derive(Debug, Clone)]
+pub struct OcamCamera {
+    params: OcamParams,
+    vector: Vec<f64>,
+}
+
+impl OcamCamera {
+    /// Builds the camera; fails with the name of an invalid field.
+    pub fn new(params: OcamParams) -> Result<Self, String> {
+        params.validate()?;
+        let vector = ocam_vector(&params);
+        Ok(OcamCamera { params, vector })
+    }
+
+    pub fn params(&self) -> &OcamParams {
+        &self.params
+    }
+
+    fn viewpoint(&self) -> Point3<f64> {
+        Point3::from(Vector3::from(self.params.viewpoint_mm))
+    }
+}
+
+impl CameraModel for OcamCamera {
+    fn image_size(&self) -> (u32, u32) {
+        (self.params.width, self.params.height)
+    }
+
+    fn pixel_to_ray(&self, px: &Vector2<f64>) -> Option<Ray> {
+        if !px.x.is_finite() || !px.y.is_finite() || !self.in_image(px) || !self.mirror_circle().contains(px) {
+            return None;
+        }
+        let d = ocam_unproject(&self.vector, px)?;
+        Some(Ray::new(self.viewpoint(), d))
+    }
+
+    fn point_to_pixel(&self, p: &Point3<f64>) -> Option<Vector2<f64>> {
+        if !p.coords.iter().all(|x| x.is_finite()) {
+            return None;
+        }
+        let px = ocam_project(&self.vector, &(p - self.viewpoint()), self.params.max_rho())?;
+        (self.in_image(&px) && self.mirror_circle().contains(&px)).then_some(px)
+    }
+
+    fn mirror_circle(&self) -> MirrorCircle {
+        let p = &self.params;
+        let outer = if p.outer_radius_px > 0.0 { p.outer_radius_px } else { (p.width as f64).hypot(p.height as f64) };
+        MirrorCircle { centre: Vector2::new(p.cx_px, p.cy_px), inner_radius: p.inner_radius_px, outer_radius: outer }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> OcamParams {
+        // Coefficients of the size OCamCalib finds for a 752 × 480 mirror camera.
+        OcamParams {
+            poly: vec![-209.0, 0.0, 1.8e-3, -1.0e-6, 1.0e-9],
+            inv_poly: vec![],
+            cx_px: 375.0,
+            cy_px: 240.0,
+            c: 1.001,
+            d: 2e-3,
+            e: -1e-3,
+            width: 752,
+            height: 480,
+            inner_radius_px: 20.0,
+            outer_radius_px: 0.0,
+            viewpoint_mm: [0.0; 3],
+        }
+    }
+
+    #[test]
+    fn round_trips_and_centre_looks_down() {
+        let cam = OcamCamera::new(sample()).unwrap();
+        let down = cam.pixel_to_ray(&Vector2::new(375.0 + 21.0, 240.0)).unwrap();
+        assert!(down.dir.z < -0.99, "{:?}", down.dir);
+        // x right in the image is +x in the world.
+        assert!(down.dir.x > 0.0);
+        for &(x, y) in &[(100.0, 100.0), (500.0, 300.0), (375.0, 100.0), (650.0, 420.0)] {
+            let px = Vector2::new(x, y);
+            let ray = cam.pixel_to_ray(&px).unwrap();
+            let back = cam.point_to_pixel(&ray.at(500.0)).unwrap();
+            assert!((back - px).norm() < 1e-8, "{px} -> {back}");
+        }
+    }
+
+    #[test]
+    fn inverse_polynomial_fits_to_a_hundredth_of_a_pixel() {
+        let mut p = sample();
+        p.outer_radius_px = 240.0;
+        let worst = p.fit_inverse_poly(12);
+        assert!(worst < 0.01, "{worst}");
+    }
+}

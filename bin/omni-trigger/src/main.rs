@@ -250,7 +250,7 @@ fn scan_config(a: &ScanArgs) -> CliResult<ScanConfig> {
         (Some(0), None) => return Err(CliError::usage("--revolutions must be at least 1")),
         (n, None) => StopWhen::Revolutions(n.unwrap_or(1)),
     };
-    if !(a.rpm >= 0.0 && a.rpm.is_finite()) || !a.latency_ms.is_finite() {
+    if !(a.rpm >= 0.0 && a.rpm.is_finite() && a.latency_ms.is_finite()) {
         return Err(CliError::usage("--rpm must be >= 0 and --latency-ms finite"));
     }
     let mut facets_sorted = facets.clone();

@@ -129,11 +129,11 @@ fn clean_scan_of_two_revolutions_gives_exactly_the_expected_manifest() {
     assert_eq!(frames.len(), 48);
     for (i, f) in frames.iter().enumerate() {
         let i = i as u64;
-        let (rev, facet, alpha) = (i / 24, (i % 24 / 2) as u32, if i % 2 == 0 { 0.0 } else { 15.0 });
+        let (rev, facet, alpha) = (i / 24, (i % 24 / 2) as u32, if i.is_multiple_of(2) { 0.0 } else { 15.0 });
         assert_eq!(f.seq, i);
         assert_eq!(f.path, format!("frame_{i:06}.png"));
         assert_eq!((f.facet, f.revolution, f.alpha_deg), (facet, rev, alpha), "frame {i}");
-        assert_eq!(f.encoder, Some(facet as u64 * 3000 + if i % 2 == 0 { 0 } else { 1500 }));
+        assert_eq!(f.encoder, Some(facet as u64 * 3000 + if i.is_multiple_of(2) { 0 } else { 1500 }));
         assert_eq!(f.lasers, vec![0, 1]);
         assert!(f.ambient_path.is_none());
     }

@@ -247,7 +247,7 @@ fn check_info(info: DeviceInfo) -> Result<DeviceInfo, HwError> {
             info.protocol
         )));
     }
-    if info.facets == 0 || info.counts_per_rev == 0 || info.counts_per_rev % info.facets != 0 {
+    if info.facets == 0 || info.counts_per_rev == 0 || !info.counts_per_rev.is_multiple_of(info.facets) {
         return Err(HwError::Protocol(format!(
             "HELLO: cpr={} is not a multiple of facets={}",
             info.counts_per_rev, info.facets

@@ -107,7 +107,7 @@ pub struct Schedule {
 impl Schedule {
     /// Checks the schedule against the controller's geometry.
     pub fn validate(&self) -> Result<(), String> {
-        if self.facets_total == 0 || self.counts_per_rev % self.facets_total != 0 {
+        if self.facets_total == 0 || !self.counts_per_rev.is_multiple_of(self.facets_total) {
             return Err(format!(
                 "{} counts per revolution do not divide into {} facets",
                 self.counts_per_rev, self.facets_total
@@ -140,7 +140,7 @@ impl Schedule {
         let i = (seq % per_rev) as usize;
         let facet = self.facets[i / self.counts.len()];
         let count_in_facet = self.counts[i % self.counts.len()];
-        let lasers = if self.ambient && revolution % 2 == 0 { vec![] } else { self.lasers.clone() };
+        let lasers = if self.ambient && revolution.is_multiple_of(2) { vec![] } else { self.lasers.clone() };
         ExpectedTrigger {
             facet,
             count_in_facet,

@@ -1,1 +1,483 @@
-fn main() {}
+//! omni-sim: the virtual omnidirectional line-laser sensor (see the `omni_simulator` crate).
+
+use clap::{Parser, Subcommand, ValueEnum};
+use omni_cli::{CliError, CliResult};
+use omni_formats::stream::{Frame, Header, Record, Status, StreamWriter};
+use omni_formats::{BoardFile, CameraFile, CameraSpec, ScannerFile, write_doc};
+use omni_simulator::{
+    BenchObject, BoardPose, Imperfections, RenderOptions, Rig, Scene, Sensor, TruthRecord, check_boards_visible,
+    paper_bench, paper_preset, parse_angles, random_board_poses, render_ambient_frame, render_board_image,
+    render_laser_frame, render_rig_pose_image, truth_header,
+};
+use rayon::prelude::*;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+const AFTER_HELP: &str = "\
+The simulated sensor is the paper's prototype: hyperbolic mirror a² = 1248.2060 mm², b² = 351.7940 mm²
+(c = 40 mm), rim radius 25 mm, seen by a 1024 × 1024 px camera with f = 1950 px (a 10.7 mm lens on
+5.5 µm pixels) at the mirror's lower focus; a 12-facet polygon mirror of circumradius R = 20 mm turning
+about the y axis 120 mm below the camera centre, two line lasers (180° fans) on either side.
+
+Default camera: industrial 8-bit monochrome, full well 10 000 e-, read noise 6 e-, gamma 1, PSF σ 0.7 px;
+laser sheet 0.5 mm FWHM, stripe peak ≈ 190/255 on a matte plane at 500 mm; dim ambient light.
+
+Examples:
+  omni-sim sensor --preset paper -o sensor/
+  omni-sim sensor --preset paper --camera-offset 0.3,0,0.5 --facet-errors 0.02 --seed 1 -o bad-sensor/
+  omni-sim scene --bench plane -o plane.json
+  omni-sim scan --camera sensor/camera.json --scanner sensor/scanner.json --scene plane.json \\
+      --angles 14:29:0.5 --frames frames/ -o scan.jsonl --truth truth.jsonl
+  omni-sim boards --camera sensor/camera.json --board board.json --count 20 --seed 1 --out boards/
+  omni-sim rig --camera sensor/camera.json --scanner sensor/scanner.json --board board.json \\
+      --angles 14:28:1 --out rig/";
+
+/// The virtual sensor: writes sensor files, renders laser scans, checkerboard sets and the
+/// transmitter-calibration rig, with ground truth.
+#[derive(Parser, Debug)]
+#[command(version, about, after_help = AFTER_HELP)]
+struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Write camera.json and scanner.json of a sensor preset, optionally with build errors.
+    Sensor(SensorArgs),
+    /// Write a scene.json of the paper bench.
+    Scene(SceneArgs),
+    /// Render laser frames of a scene over mirror angles, with manifest and ground truth.
+    Scan(ScanArgs),
+    /// Render checkerboard images at random poses (receiver calibration), with true corners.
+    Boards(BoardsArgs),
+    /// Render the two-perpendicular-boards rig (transmitter calibration): pose image + laser frames.
+    Rig(RigArgs),
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Preset {
+    /// The paper's prototype with our lens and polygon dimensions.
+    Paper,
+}
+
+#[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Example:\n  omni-sim sensor --preset paper --camera-offset 0.5,0,0 --encoder-offset 0.05 -o sensor/"
+)]
+struct SensorArgs {
+    #[arg(long, value_enum, default_value = "paper")]
+    preset: Preset,
+    /// Output directory (created if missing).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Image width and height (px); focal length and principal point scale with it.
+    #[arg(long, default_value_t = 1024)]
+    width: u32,
+    /// Camera centre off the mirror focus, X,Y,Z (mm).
+    #[arg(long, value_parser = parse_vec::<3>, allow_hyphen_values = true, value_name = "X,Y,Z")]
+    camera_offset: Option<[f64; 3]>,
+    /// Camera tilt about x then y, TX,TY (degrees).
+    #[arg(long, value_parser = parse_vec::<2>, allow_hyphen_values = true, value_name = "TX,TY")]
+    camera_tilt: Option<[f64; 2]>,
+    /// Principal point shift from the image centre, DX,DY (px).
+    #[arg(long, value_parser = parse_vec::<2>, allow_hyphen_values = true, value_name = "DX,DY")]
+    principal_point_offset: Option<[f64; 2]>,
+    /// Random per-facet tilt and pitch errors with this σ (degrees), radius errors σ = R·sin(σ).
+    #[arg(long, default_value_t = 0.0, value_name = "SIGMA_DEG")]
+    facet_errors: f64,
+    /// Encoder zero offset (degrees).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_name = "DEG")]
+    encoder_offset: f64,
+    /// Seed of the random facet errors.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Bench {
+    Plane,
+    Cylinder,
+    Sphere,
+    ConePyramid,
+}
+
+#[derive(clap::Args, Debug)]
+struct SceneArgs {
+    /// Which paper-bench scene.
+    #[arg(long, value_enum)]
+    bench: Bench,
+    /// Output file; `-` for stdout.
+    #[arg(short, long, default_value = "-")]
+    output: PathBuf,
+}
+
+/// Rendering options shared by the rendering subcommands.
+#[derive(clap::Args, Debug)]
+struct RenderArgs {
+    /// Output bit depth of the PNG frames.
+    #[arg(long, default_value_t = 8, value_parser = parse_bit_depth)]
+    bit_depth: u8,
+    /// Noise seed (same seed, same images).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Turn photon and read noise off.
+    #[arg(long)]
+    no_noise: bool,
+    /// Laser power relative to the default (e.g. 3 for a saturated stripe, 0.3 for a weak one).
+    #[arg(long, default_value_t = 1.0)]
+    laser_gain: f64,
+    /// Ambient light relative to the default (a white surface ≈ 51/255 at 1 in laser frames; for
+    /// checkerboard and rig pose images the room is lit: ≈ 178/255 at 1).
+    #[arg(long, default_value_t = 1.0)]
+    ambient_gain: f64,
+    /// Polygon turn during the exposure (degrees): motion blur of the stripe.
+    #[arg(long, default_value_t = 0.0)]
+    motion_blur: f64,
+    /// Worker threads (0: one per core).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+}
+
+impl RenderArgs {
+    /// Options on top of the defaults (laser frames, dim room).
+    fn options(&self) -> CliResult<RenderOptions> {
+        self.options_from(RenderOptions::default())
+    }
+
+    /// Options on top of `d`.
+    fn options_from(&self, d: RenderOptions) -> CliResult<RenderOptions> {
+        let opts = RenderOptions {
+            bit_depth: self.bit_depth,
+            seed: self.seed,
+            noise: !self.no_noise,
+            laser_strength: d.laser_strength * self.laser_gain,
+            ambient_e: d.ambient_e * self.ambient_gain,
+            motion_blur_deg: self.motion_blur,
+            ..d
+        };
+        opts.validate().map_err(|e| CliError::usage(format!("rendering options: {e}")))?;
+        if self.threads > 0 {
+            // Only the first call can set the global pool; later calls keep it.
+            let _ = rayon::ThreadPoolBuilder::new().num_threads(self.threads).build_global();
+        }
+        Ok(opts)
+    }
+}
+
+#[derive(clap::Args, Debug)]
+#[command(after_help = "Frames are named frame_NNNNNN.png (and ambient_NNNNNN.png with --laser-off) in --frames.\n\
+The manifest is the omniscan stream (header, one frame record per frame, status) that omni-ridge reads.\n\
+The ground truth (--truth) holds per frame the true stripe points [x, y, z, u, v, laser].")]
+struct ScanArgs {
+    #[arg(long)]
+    camera: PathBuf,
+    #[arg(long)]
+    scanner: PathBuf,
+    /// scene.json (see `omni-sim scene`).
+    #[arg(long)]
+    scene: PathBuf,
+    /// Mirror angles within the facet (degrees): start:stop:step (stop excluded) or a list a,b,c.
+    #[arg(long, default_value = "0:30:0.5", allow_hyphen_values = true)]
+    angles: String,
+    /// Facet facing laser 0.
+    #[arg(long, default_value_t = 0)]
+    facet: u32,
+    /// Lasers switched on, e.g. 0,1.
+    #[arg(long, default_value = "0,1", value_delimiter = ',')]
+    lasers: Vec<u32>,
+    /// Directory for the PNG frames (created if missing).
+    #[arg(long)]
+    frames: PathBuf,
+    /// Also render a laser-off (ambient) frame for every frame.
+    #[arg(long)]
+    laser_off: bool,
+    /// Manifest stream; `-` for stdout.
+    #[arg(short, long, default_value = "-")]
+    output: PathBuf,
+    /// Ground-truth file (JSON Lines).
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    #[command(flatten)]
+    render: RenderArgs,
+}
+
+#[derive(clap::Args, Debug)]
+#[command(after_help = "Writes DIR/board_NNN.png and DIR/boards_truth.json (board, poses board→world, true corner\n\
+pixels row-major, null where a corner is not visible).")]
+struct BoardsArgs {
+    #[arg(long)]
+    camera: PathBuf,
+    /// board.json (inner corners, square size, margin).
+    #[arg(long)]
+    board: PathBuf,
+    /// Number of images.
+    #[arg(long, default_value_t = 20)]
+    count: usize,
+    /// Output directory (created if missing).
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    render: RenderArgs,
+}
+
+#[derive(clap::Args, Debug)]
+#[command(after_help = "Writes DIR/pose.png (lasers off), DIR/frame_NNNNNN.png, DIR/scan.jsonl (manifest),\n\
+DIR/rig.json (true board poses and the pose image's corner pixels) and DIR/truth.jsonl.")]
+struct RigArgs {
+    #[arg(long)]
+    camera: PathBuf,
+    #[arg(long)]
+    scanner: PathBuf,
+    /// board.json of the two (identical) boards.
+    #[arg(long)]
+    board: PathBuf,
+    /// Mirror angles (degrees): start:stop:step (stop excluded) or a list.
+    #[arg(long, default_value = "14:28:1", allow_hyphen_values = true)]
+    angles: String,
+    /// Facet facing laser 0.
+    #[arg(long, default_value_t = 0)]
+    facet: u32,
+    /// Output directory (created if missing).
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    render: RenderArgs,
+}
+
+fn parse_bit_depth(s: &str) -> Result<u8, String> {
+    match s {
+        "8" => Ok(8),
+        "16" => Ok(16),
+        _ => Err(format!("must be 8 or 16, got \"{s}\"")),
+    }
+}
+
+fn parse_vec<const N: usize>(s: &str) -> Result<[f64; N], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().map_err(|_| format!("\"{}\" is not a number", x.trim())))
+        .collect::<Result<_, _>>()?;
+    let arr: [f64; N] =
+        v.try_into().map_err(|v: Vec<f64>| format!("expected {N} comma-separated numbers, got {}", v.len()))?;
+    if arr.iter().all(|x| x.is_finite()) { Ok(arr) } else { Err("numbers must be finite".into()) }
+}
+
+fn main() -> ExitCode {
+    omni_cli::main("omni-sim", || match Args::parse().command {
+        Command::Sensor(a) => sensor(a),
+        Command::Scene(a) => scene(a),
+        Command::Scan(a) => scan(a),
+        Command::Boards(a) => boards(a),
+        Command::Rig(a) => rig(a),
+    })
+}
+
+fn create_dir(dir: &Path) -> CliResult {
+    std::fs::create_dir_all(dir).map_err(|e| CliError::new(format!("{}: {e}", dir.display())))
+}
+
+fn sensor(a: SensorArgs) -> CliResult {
+    let Preset::Paper = a.preset;
+    if !(16..=8192).contains(&a.width) {
+        return Err(CliError::usage(format!("--width must be in 16..=8192, got {}", a.width)));
+    }
+    let imp = Imperfections {
+        camera_offset_mm: a.camera_offset.unwrap_or_default(),
+        camera_tilt_deg: a.camera_tilt.unwrap_or_default(),
+        principal_point_offset_px: a.principal_point_offset.unwrap_or_default(),
+        facet_sigma_deg: a.facet_errors,
+        encoder_offset_deg: a.encoder_offset,
+        seed: a.seed,
+    };
+    let (cam, tx) = paper_preset(a.width, &imp).map_err(CliError::usage)?;
+    create_dir(&a.output)?;
+    write_doc(&a.output.join("camera.json"), &CameraFile::new(CameraSpec::Hyperbolic(cam)))?;
+    write_doc(&a.output.join("scanner.json"), &ScannerFile::new(tx))?;
+    Ok(())
+}
+
+fn scene(a: SceneArgs) -> CliResult {
+    let object = match a.bench {
+        Bench::Plane => BenchObject::Plane,
+        Bench::Cylinder => BenchObject::Cylinder,
+        Bench::Sphere => BenchObject::Sphere,
+        Bench::ConePyramid => BenchObject::ConePyramid,
+    };
+    write_doc(&a.output, &paper_bench(object))?;
+    Ok(())
+}
+
+/// One rendered frame: its manifest record and its ground truth.
+struct Rendered {
+    record: Frame,
+    truth: TruthRecord,
+}
+
+/// Renders laser frames (and optionally laser-off frames) in parallel and writes the PNGs.
+fn render_frames(
+    sensor: &Sensor,
+    scene: &Scene,
+    angles: &[f64],
+    facet: u32,
+    lasers: &[u32],
+    laser_off: bool,
+    frames_dir: &Path,
+    opts: &RenderOptions,
+) -> CliResult<Vec<Rendered>> {
+    let bar = omni_cli::progress(Some(angles.len() as u64), "rendering");
+    let out = angles
+        .par_iter()
+        .enumerate()
+        .map(|(seq, &alpha_deg)| -> CliResult<Rendered> {
+            let frame = render_laser_frame(sensor, scene, alpha_deg.to_radians(), facet, lasers, opts);
+            let name = format!("frame_{seq:06}.png");
+            frame.image.to_png(&frames_dir.join(&name))?;
+            let mut record = Frame::new(seq as u64, name.clone(), alpha_deg, facet);
+            record.lasers = lasers.to_vec();
+            if laser_off {
+                let ambient_name = format!("ambient_{seq:06}.png");
+                let seeded = RenderOptions { seed: opts.seed ^ (0xA3B1 + seq as u64), ..opts.clone() };
+                render_ambient_frame(sensor, scene, &seeded).to_png(&frames_dir.join(&ambient_name))?;
+                record.ambient_path = Some(ambient_name);
+            }
+            bar.inc(1);
+            Ok(Rendered { truth: TruthRecord::new(seq as u64, &name, alpha_deg, facet, &frame.truth), record })
+        })
+        .collect::<CliResult<Vec<_>>>();
+    bar.finish_and_clear();
+    out
+}
+
+/// Writes the manifest stream (header, frames, status); files atomically, `-` to stdout.
+fn write_manifest(path: &Path, frames_dir: &Path, camera: &Path, scanner: &Path, frames: &[Rendered]) -> CliResult {
+    let mut header = Header::new(concat!("omni-sim ", env!("CARGO_PKG_VERSION")));
+    header.frames_dir = Some(frames_dir.display().to_string());
+    header.camera = Some(camera.display().to_string());
+    header.scanner = Some(scanner.display().to_string());
+    let status = Status {
+        frames: frames.len() as u64,
+        frames_missing: 0,
+        frames_failed: 0,
+        complete: true,
+        errors: vec![],
+        extra: Default::default(),
+    };
+    let write = |w: &mut dyn Write| -> std::io::Result<()> {
+        let mut s = StreamWriter::new(w, "manifest");
+        s.flush_each = false;
+        let io = |e: omni_formats::Error| std::io::Error::other(e.to_string());
+        s.write(&Record::Header(header.clone())).map_err(io)?;
+        for f in frames {
+            s.write(&Record::Frame(Box::new(f.record.clone()))).map_err(io)?;
+        }
+        s.write(&Record::Status(status.clone())).map_err(io)?;
+        s.flush().map_err(io)
+    };
+    if path == Path::new("-") {
+        let stdout = std::io::stdout();
+        let mut lock = stdout.lock();
+        write(&mut lock).map_err(|e| CliError::new(format!("stdout: {e}")))
+    } else {
+        Ok(omni_formats::io::write_atomic(path, |w| write(w))?)
+    }
+}
+
+fn write_truth(path: &Path, scene_name: &str, frames: &[Rendered]) -> CliResult {
+    Ok(omni_formats::io::write_atomic(path, |w| {
+        serde_json::to_writer(&mut *w, &truth_header(scene_name)).map_err(std::io::Error::other)?;
+        w.write_all(b"\n")?;
+        for f in frames {
+            serde_json::to_writer(&mut *w, &f.truth).map_err(std::io::Error::other)?;
+            w.write_all(b"\n")?;
+        }
+        Ok(())
+    })?)
+}
+
+fn load_board(path: &Path) -> CliResult<BoardFile> {
+    let board: BoardFile = omni_formats::read_doc(path)?;
+    board.validate().map_err(|e| CliError::new(format!("{}: {e}", path.display())))?;
+    Ok(board)
+}
+
+fn check_lasers(sensor: &Sensor, lasers: &[u32]) -> CliResult {
+    match lasers.iter().find(|l| **l as usize >= sensor.transmitter.num_lasers()) {
+        Some(l) => Err(CliError::usage(format!(
+            "--lasers: laser {l} does not exist (the scanner has {})",
+            sensor.transmitter.num_lasers()
+        ))),
+        None => Ok(()),
+    }
+}
+
+fn scan(a: ScanArgs) -> CliResult {
+    let opts = a.render.options()?;
+    let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
+    let sensor = Sensor::load(&a.camera, &a.scanner)?;
+    check_lasers(&sensor, &a.lasers)?;
+    let scene = Scene::load(&a.scene)?;
+    check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("{}: {e}", a.scene.display())))?;
+    create_dir(&a.frames)?;
+    let frames = render_frames(&sensor, &scene, &angles, a.facet, &a.lasers, a.laser_off, &a.frames, &opts)?;
+    if let Some(t) = &a.truth {
+        write_truth(t, &a.scene.display().to_string(), &frames)?;
+    }
+    write_manifest(&a.output, &a.frames, &a.camera, &a.scanner, &frames)
+}
+
+fn boards(a: BoardsArgs) -> CliResult {
+    let opts = a.render.options_from(RenderOptions::calibration())?;
+    let (_, camera) = CameraFile::load(&a.camera)?;
+    let board = load_board(&a.board)?;
+    if a.count == 0 {
+        return Err(CliError::usage("--count must be at least 1"));
+    }
+    // The transmitter plays no part in board images; the paper's stands in.
+    let sensor = Sensor { camera, transmitter: Sensor::paper().transmitter };
+    let poses = random_board_poses(&sensor, &board, a.count, opts.seed).map_err(CliError::new)?;
+    create_dir(&a.out)?;
+    let bar = omni_cli::progress(Some(poses.len() as u64), "boards");
+    let images = poses
+        .par_iter()
+        .enumerate()
+        .map(|(i, pose)| -> CliResult<serde_json::Value> {
+            let o = RenderOptions { seed: opts.seed ^ (0xB0A2D00 + i as u64), ..opts.clone() };
+            let (image, corners) = render_board_image(&sensor, pose, &board, &o);
+            let name = format!("board_{i:03}.png");
+            image.to_png(&a.out.join(&name))?;
+            bar.inc(1);
+            Ok(serde_json::json!({"path": name, "pose": BoardPose::from_isometry(pose), "corners": corners}))
+        })
+        .collect::<CliResult<Vec<_>>>()?;
+    bar.finish_and_clear();
+    let doc = serde_json::json!({"format": "omniscan.sim-boards", "version": 1, "board": board,
+        "camera": a.camera.display().to_string(), "images": images});
+    write_doc(&a.out.join("boards_truth.json"), &doc)?;
+    Ok(())
+}
+
+fn rig(a: RigArgs) -> CliResult {
+    let opts = a.render.options()?;
+    let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
+    let sensor = Sensor::load(&a.camera, &a.scanner)?;
+    let board = load_board(&a.board)?;
+    let rig = Rig::standard(&board);
+    let scene = Scene::from_file(rig.scene()).map_err(CliError::new)?;
+    check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("rig: {e}")))?;
+    create_dir(&a.out)?;
+    let lit = a.render.options_from(RenderOptions::calibration())?;
+    let (pose_image, corners) = render_rig_pose_image(&sensor, &rig, &lit);
+    pose_image.to_png(&a.out.join("pose.png"))?;
+    let frames = render_frames(&sensor, &scene, &angles, a.facet, &[0, 1], false, &a.out, &opts)?;
+    write_truth(&a.out.join("truth.jsonl"), "rig", &frames)?;
+    write_manifest(&a.out.join("scan.jsonl"), &a.out, &a.camera, &a.scanner, &frames)?;
+    let doc = serde_json::json!({
+        "format": "omniscan.sim-rig", "version": 1, "board": board, "pose_image": "pose.png",
+        "poses": rig.poses.iter().map(BoardPose::from_isometry).collect::<Vec<_>>(),
+        "corners": corners,
+    });
+    write_doc(&a.out.join("rig.json"), &doc)?;
+    Ok(())
+}

@@ -36,6 +36,7 @@ mod render;
 pub mod rng;
 mod scene;
 mod sensor;
+mod tools;
 mod truth;
 
 pub use bench::{BENCH_ALBEDO, BenchObject, paper_bench};
@@ -44,8 +45,10 @@ pub use boards::{
 };
 pub use frame::Frame16;
 pub use render::{
-    DEFAULT_LASER_STRENGTH, LaserFrame, RenderOptions, TruthPoint, render_ambient_frame, render_laser_frame,
+    CALIBRATION_AMBIENT_E, DEFAULT_LASER_STRENGTH, LaserFrame, RenderOptions, TruthPoint, render_ambient_frame,
+    render_laser_frame,
 };
 pub use scene::{Hit, Scene, board_corners};
 pub use sensor::{Sensor, paper_camera_scaled};
+pub use tools::{Imperfections, TruthRecord, check_boards_visible, paper_preset, parse_angles, truth_header};
 pub use truth::{stripe_truth, truth_point, truth_polylines};

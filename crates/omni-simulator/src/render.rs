@@ -83,7 +83,16 @@ impl Default for RenderOptions {
 /// of 255 on the paper bench plane (measured by a test).
 pub const DEFAULT_LASER_STRENGTH: f64 = 6.0e7;
 
+/// Ambient signal of a white surface (e⁻) for checkerboard images: room lights on and the
+/// exposure set so that white paper reads about 150–180 of 255, as one does for calibration.
+pub const CALIBRATION_AMBIENT_E: f64 = 7000.0;
+
 impl RenderOptions {
+    /// The defaults with the room lit for checkerboard images ([`CALIBRATION_AMBIENT_E`]).
+    pub fn calibration() -> Self {
+        RenderOptions { ambient_e: CALIBRATION_AMBIENT_E, ..Default::default() }
+    }
+
     /// The defaults without photon and read noise.
     pub fn noiseless() -> Self {
         RenderOptions { noise: false, ..Default::default() }

@@ -356,10 +356,12 @@ fn scan(a: ScanArgs) -> CliResult {
     }
 }
 
-fn renderer(a: &EmulateArgs) -> CliResult<Box<dyn FrameRenderer>> {
+/// The virtual camera's renderer, and the polygon's facets and lasers it implies.
+fn renderer(a: &EmulateArgs) -> CliResult<(Box<dyn FrameRenderer>, u32, u32)> {
     if a.camera_mode == "blank" {
         let w = a.width.min(64);
-        return Ok(Box::new(BlankRenderer { width: w, height: w }));
+        let spec = omni_hw::controller::ControllerSpec::default();
+        return Ok((Box::new(BlankRenderer { width: w, height: w }), spec.facets, spec.lasers));
     }
     let sensor = match (&a.camera, &a.scanner) {
         (Some(c), Some(s)) => omni_simulator::Sensor::load(c, s)?,
@@ -376,7 +378,8 @@ fn renderer(a: &EmulateArgs) -> CliResult<Box<dyn FrameRenderer>> {
             .map_err(CliError::new)?,
     };
     let options = omni_simulator::RenderOptions { seed: a.seed, ..Default::default() };
-    Ok(Box::new(render::SimRenderer { sensor, scene, options }))
+    let (facets, lasers) = (sensor.transmitter.num_facets(), sensor.transmitter.num_lasers() as u32);
+    Ok((Box::new(render::SimRenderer { sensor, scene, options }), facets, lasers))
 }
 
 fn check_probability(name: &str, p: f64) -> CliResult {
@@ -389,12 +392,13 @@ fn emulate(a: EmulateArgs) -> CliResult {
     {
         check_probability(name, p)?;
     }
-    let mut renderer = renderer(&a)?;
+    let (mut renderer, facets, lasers) = renderer(&a)?;
+    let all_lasers: Vec<u32> = (0..lasers).collect();
     let max_rate_hz = match a.max_rate_hz {
         Some(r) if r > 0.0 && r.is_finite() => r,
         Some(_) => return Err(CliError::usage("--max-rate-hz must be positive")),
         None => {
-            let secs = render::measure_frame_time(renderer.as_mut(), &[0, 1])?;
+            let secs = render::measure_frame_time(renderer.as_mut(), &all_lasers, facets)?;
             let rate = (1.0 / (2.5 * secs)).min(50.0);
             eprintln!(
                 "{TOOL} emulate: a frame takes {:.1} ms to render; trigger rate limited to {rate:.2} Hz",
@@ -419,6 +423,12 @@ fn emulate(a: EmulateArgs) -> CliResult {
     }
     let mut options = EmulatorOptions::default();
     options.spec.max_rate_hz = max_rate_hz;
+    options.spec.facets = facets;
+    options.spec.lasers = lasers;
+    // 0.01° per count for the usual 12 facets; any facet count divides the fallback.
+    if !options.spec.counts_per_rev.is_multiple_of(facets) {
+        options.spec.counts_per_rev = facets * 3000;
+    }
     options.persist = a.persist;
     options.faults = Faults {
         garbage: a.garbage,

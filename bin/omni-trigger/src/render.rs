@@ -24,8 +24,8 @@ impl FrameRenderer for SimRenderer {
 
 /// Seconds the slowest of a few representative frames takes to render (the emulator limits its
 /// trigger rate to what the camera can do).
-pub fn measure_frame_time(renderer: &mut dyn FrameRenderer, lasers: &[u32]) -> Result<f64, String> {
-    let facet_deg = 30.0_f64;
+pub fn measure_frame_time(renderer: &mut dyn FrameRenderer, lasers: &[u32], facets: u32) -> Result<f64, String> {
+    let facet_deg = 360.0 / facets.max(1) as f64;
     let mut worst = 0.0_f64;
     for alpha_deg in [0.25 * facet_deg, 0.5 * facet_deg, 0.75 * facet_deg] {
         let shot = Shot {

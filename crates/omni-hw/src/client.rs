@@ -225,6 +225,11 @@ impl<P: Read + Write> Client<P> {
         Err(HwError::Timeout("no STS line from the controller".into()))
     }
 
+    /// Forgets every message received so far (stale events of an interrupted earlier run).
+    pub fn discard_received(&mut self) {
+        self.inbox.clear();
+    }
+
     /// Gives the port back (e.g. to close it).
     pub fn into_inner(self) -> P {
         self.port

@@ -72,6 +72,9 @@ pub fn configure<P: Read + Write>(
     if let Some(&j) = schedule.lasers.iter().find(|&&j| j >= info.lasers) {
         return Err(HwError::Protocol(format!("laser {j} does not exist (the controller has {})", info.lasers)));
     }
+    // A run left over from an interrupted scan would refuse the configuration: stop it first
+    // (in `idle` or `armed` this only disarms).
+    client.request(Command::Stop)?;
     client.request(Command::Speed(cfg.rpm))?;
     client.request(Command::Lasers(schedule.lasers.clone()))?;
     client.request(Command::Ambient(cfg.ambient))?;
@@ -210,6 +213,8 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
     }
 
     fn main_loop(&mut self, cfg: &ScanConfig, revolutions: u64) -> Result<(), String> {
+        // Armed controllers send no triggers: anything queued now belongs to an earlier run.
+        self.client.discard_received();
         self.client.request(Command::Start { revolutions }).map_err(|e| e.to_string())?;
         let started = Instant::now();
         let mut stop_sent = false;

@@ -2,4 +2,5 @@
 //! images, and the transmitter (swept light planes, [`plane`]) from two perpendicular boards.
 
 pub mod plane;
+pub mod pose;
 pub mod receiver;

@@ -134,8 +134,12 @@ pub struct PlaneCalibration {
 }
 
 /// The gauge conventions of the fit, as stated in the report.
-pub const GAUGE_NOTES: [&str; 4] = [
+pub const GAUGE_NOTES: [&str; 6] = [
     "facet pitch errors have zero mean over the observed facets; their common part is the encoder zero",
+    "facet tilt and radius errors have zero mean over the observed facets (their common parts are \
+     indistinguishable from the fan plane's tilt and offset)",
+    "the first observed laser keeps its initial turn about the polygon axis (indistinguishable from the \
+     encoder zero), so the encoder zero is relative to that laser's mounting",
     "zero_dir is the initial zero_dir projected perpendicular to the fitted axis",
     "the axis point moves only perpendicular to the initial axis",
     "laser apex and direction are the initial ones projected onto the fitted fan plane",

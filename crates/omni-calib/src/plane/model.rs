@@ -7,10 +7,11 @@
 //! * polygon axis direction: 2 tilts (rad) of the initial direction towards two perpendiculars;
 //! * polygon axis point: 2 offsets (mm) perpendicular to the initial axis;
 //! * encoder zero ε (rad);
-//! * per observed facet: pitch (rad), tilt (rad), radius error (mm);
-//! * per observed laser: its fan plane (2 normal tilts in rad, 1 offset in mm).
+//! * per observed facet: pitch (rad), tilt (rad), radius error (mm), each block with zero mean;
+//! * per observed laser: its fan plane (normal tilt towards the axis and turn about it in rad,
+//!   offset in mm).
 //!
-//! Gauge freedoms, fixed explicitly (they change no light plane at all):
+//! Gauge freedoms, fixed explicitly. Exact ones (they change no light plane at all):
 //! * a common pitch of all facets is the same as the encoder zero: pitches are fitted with
 //!   **zero mean over the observed facets**, so ε is the encoder zero of the average facet;
 //! * turning `zero_dir` about the axis is again the encoder zero: `zero_dir` stays the initial
@@ -19,6 +20,16 @@
 //! * a laser's apex, central direction and fan axis matter only through its fan plane: the apex
 //!   is projected onto the fitted plane and the direction kept as close to the initial one as the
 //!   plane allows (they still decide which points count as lit).
+//!
+//! Near-gauges (a rig cannot tell them apart: fitted freely their standard deviations reach
+//! degrees and millimetres, while the light planes stay the same to a few thousandths of a
+//! degree), fixed so that the fitted numbers mean something:
+//! * turning the first observed laser's fan about the polygon axis ≈ changing the encoder zero
+//!   (the reflected plane turns by −δ or by +2ε): that laser's turn stays at its initial value,
+//!   so ε is measured relative to the laser's mounting;
+//! * a common facet tilt ≈ tilting the fan plane towards the axis, and a common radius error ≈
+//!   shifting the fan plane and the axis: tilts and radius errors have **zero mean** over the
+//!   observed facets.
 //!
 //! Facets and lasers without observations keep their initial values (listed in the report).
 
@@ -84,7 +95,8 @@ pub struct ModelFit {
     pub observation_rms_mm: Vec<f64>,
 }
 
-/// Basis of a laser's fan plane perturbation.
+/// Basis of a laser's fan plane perturbation: `u` tilts the fan normal towards the polygon axis,
+/// `v` turns it about the axis (fixed for the first observed laser: a gauge with the encoder zero).
 #[derive(Debug, Clone)]
 struct LaserBasis {
     index: usize,
@@ -93,9 +105,21 @@ struct LaserBasis {
     v: Vector3<f64>,
     offset0: f64,
     init: LaserParams,
+    /// Whether the turn about the axis is a free parameter.
+    turns: bool,
+    /// Index of this laser's first parameter.
+    start: usize,
 }
 
-/// Maps the parameter vector to [`TransmitterParams`].
+impl LaserBasis {
+    fn len(&self) -> usize {
+        if self.turns { 3 } else { 2 }
+    }
+}
+
+/// Maps the parameter vector to [`TransmitterParams`]. Layout: axis tilts (2), axis point (2),
+/// encoder zero (1), then for the observed facets pitches, tilts and radius errors (each with
+/// zero mean: n − 1 free values, the last is minus their sum), then the lasers.
 #[derive(Debug, Clone)]
 struct Layout {
     base: TransmitterParams,
@@ -113,17 +137,42 @@ const I_POINT: usize = 2;
 const I_ENC: usize = 4;
 const I_FACETS: usize = 5;
 
+/// Mean of the per-facet values of the observed facets.
+fn facet_mean(errs: &[FacetError], facets: &[u32], get: impl Fn(&FacetError) -> f64) -> f64 {
+    facets.iter().map(|&k| get(&errs[k as usize])).sum::<f64>() / facets.len().max(1) as f64
+}
+
 impl Layout {
     fn new(base: &TransmitterParams, facets: Vec<u32>, lasers: &[usize]) -> Self {
         let a0 = Vector3::from(base.polygon.axis_dir).normalize();
         let (au, av) = orthonormal_basis(&a0);
+        let n_free = facets.len().saturating_sub(1);
+        let mut start = I_FACETS + 3 * n_free;
         let lasers = lasers
             .iter()
-            .map(|&j| {
+            .enumerate()
+            .map(|(i, &j)| {
                 let l = &base.lasers[j];
                 let n0 = Vector3::from(l.direction).cross(&Vector3::from(l.fan_axis)).normalize();
-                let (u, v) = orthonormal_basis(&n0);
-                LaserBasis { index: j, n0, u, v, offset0: n0.dot(&Vector3::from(l.source_mm)), init: l.clone() }
+                let towards_axis = a0 - n0 * n0.dot(&a0);
+                let (u, v) = if towards_axis.norm() > 1e-6 {
+                    let u = towards_axis.normalize();
+                    (u, n0.cross(&u))
+                } else {
+                    orthonormal_basis(&n0)
+                };
+                let basis = LaserBasis {
+                    index: j,
+                    n0,
+                    u,
+                    v,
+                    offset0: n0.dot(&Vector3::from(l.source_mm)),
+                    init: l.clone(),
+                    turns: i > 0,
+                    start,
+                };
+                start += basis.len();
+                basis
             })
             .collect();
         let mut base = base.clone();
@@ -133,8 +182,7 @@ impl Layout {
         }
         // The observed facets' mean pitch moves into the encoder zero (initial_vector), so the
         // unobserved facets' pitches shift by the same amount to keep their planes unchanged.
-        let mean_pitch = facets.iter().map(|&k| base.polygon.facet_errors[k as usize].pitch_deg).sum::<f64>()
-            / facets.len().max(1) as f64;
+        let mean_pitch = facet_mean(&base.polygon.facet_errors, &facets, |e| e.pitch_deg);
         for (k, e) in base.polygon.facet_errors.iter_mut().enumerate() {
             if !facets.contains(&(k as u32)) {
                 e.pitch_deg -= mean_pitch;
@@ -152,42 +200,42 @@ impl Layout {
         }
     }
 
-    fn n_pitch(&self) -> usize {
+    fn n_free(&self) -> usize {
         self.facets.len().saturating_sub(1)
     }
     fn i_tilt(&self) -> usize {
-        I_FACETS + self.n_pitch()
+        I_FACETS + self.n_free()
     }
     fn i_radius(&self) -> usize {
-        self.i_tilt() + self.facets.len()
-    }
-    fn i_lasers(&self) -> usize {
-        self.i_radius() + self.facets.len()
+        self.i_tilt() + self.n_free()
     }
     fn len(&self) -> usize {
-        self.i_lasers() + 3 * self.lasers.len()
+        self.lasers.last().map_or(I_FACETS + 3 * self.n_free(), |l| l.start + l.len())
     }
 
-    /// The parameter vector of the initial model, with the pitches of the observed facets moved
-    /// to zero mean (their mean goes into the encoder zero: same light planes).
+    /// The parameter vector of the initial model. The observed facets' pitches, tilts and radius
+    /// errors are moved to zero mean: the mean pitch goes into the encoder zero (same planes);
+    /// mean tilt and radius are dropped (the fit moves the axis and fan planes to make up for them).
     fn initial_vector(&self) -> Vec<f64> {
         let mut p = vec![0.0; self.len()];
         let errs = &self.base.polygon.facet_errors;
-        let pitches: Vec<f64> = self.facets.iter().map(|&k| errs[k as usize].pitch_deg.to_radians()).collect();
-        let mean = pitches.iter().sum::<f64>() / pitches.len().max(1) as f64;
-        p[I_ENC] = self.base.polygon.encoder_zero_deg.to_radians() + mean;
-        for i in 0..self.n_pitch() {
-            p[I_FACETS + i] = pitches[i] - mean;
-        }
-        for (i, &k) in self.facets.iter().enumerate() {
-            p[self.i_tilt() + i] = errs[k as usize].tilt_deg.to_radians();
-            p[self.i_radius() + i] = errs[k as usize].radius_mm;
+        let mean_pitch = facet_mean(errs, &self.facets, |e| e.pitch_deg).to_radians();
+        let mean_tilt = facet_mean(errs, &self.facets, |e| e.tilt_deg).to_radians();
+        let mean_radius = facet_mean(errs, &self.facets, |e| e.radius_mm);
+        p[I_ENC] = self.base.polygon.encoder_zero_deg.to_radians() + mean_pitch;
+        for (i, &k) in self.facets[..self.n_free()].iter().enumerate() {
+            let e = &errs[k as usize];
+            p[I_FACETS + i] = e.pitch_deg.to_radians() - mean_pitch;
+            p[self.i_tilt() + i] = e.tilt_deg.to_radians() - mean_tilt;
+            p[self.i_radius() + i] = e.radius_mm - mean_radius;
         }
         p
     }
 
-    fn pitch(&self, p: &[f64], i: usize) -> f64 {
-        if i < self.n_pitch() { p[I_FACETS + i] } else { -p[I_FACETS..I_FACETS + self.n_pitch()].iter().sum::<f64>() }
+    /// Value `i` (in observed-facet order) of a zero-mean block starting at `start`.
+    fn zero_mean(&self, p: &[f64], start: usize, i: usize) -> f64 {
+        let n = self.n_free();
+        if i < n { p[start + i] } else { -p[start..start + n].iter().sum::<f64>() }
     }
 
     fn params(&self, p: &[f64]) -> TransmitterParams {
@@ -201,15 +249,16 @@ impl Layout {
         t.polygon.encoder_zero_deg = p[I_ENC].to_degrees();
         for (i, &k) in self.facets.iter().enumerate() {
             t.polygon.facet_errors[k as usize] = FacetError {
-                tilt_deg: p[self.i_tilt() + i].to_degrees(),
-                pitch_deg: self.pitch(p, i).to_degrees(),
-                radius_mm: p[self.i_radius() + i],
+                tilt_deg: self.zero_mean(p, self.i_tilt(), i).to_degrees(),
+                pitch_deg: self.zero_mean(p, I_FACETS, i).to_degrees(),
+                radius_mm: self.zero_mean(p, self.i_radius(), i),
             };
         }
-        for (li, l) in self.lasers.iter().enumerate() {
-            let q = &p[self.i_lasers() + 3 * li..self.i_lasers() + 3 * li + 3];
-            let n = (l.n0 + l.u * q[0] + l.v * q[1]).normalize();
-            let offset = l.offset0 + q[2];
+        for l in &self.lasers {
+            let q = &p[l.start..l.start + l.len()];
+            let turn = if l.turns { q[2] } else { 0.0 };
+            let n = (l.n0 + l.u * q[0] + l.v * turn).normalize();
+            let offset = l.offset0 + q[1];
             let src0 = Vector3::from(l.init.source_mm);
             let src = src0 - n * (n.dot(&src0) - offset);
             let d0 = Vector3::from(l.init.direction);
@@ -224,8 +273,8 @@ impl Layout {
         t
     }
 
+    /// (name, unit, stored in radians → reported in degrees) of every parameter, in order.
     fn names(&self) -> Vec<(String, &'static str, bool)> {
-        // (name, unit, stored in radians → reported in degrees)
         let mut v = vec![
             ("polygon.axis_dir tilt u".to_string(), "deg", true),
             ("polygon.axis_dir tilt v".to_string(), "deg", true),
@@ -233,19 +282,16 @@ impl Layout {
             ("polygon.axis_point offset v".to_string(), "mm", false),
             ("polygon.encoder_zero_deg".to_string(), "deg", true),
         ];
-        for &k in &self.facets[..self.n_pitch()] {
-            v.push((format!("facet_errors[{k}].pitch_deg"), "deg", true));
-        }
-        for &k in &self.facets {
-            v.push((format!("facet_errors[{k}].tilt_deg"), "deg", true));
-        }
-        for &k in &self.facets {
-            v.push((format!("facet_errors[{k}].radius_mm"), "mm", false));
-        }
+        let free = &self.facets[..self.n_free()];
+        v.extend(free.iter().map(|k| (format!("facet_errors[{k}].pitch_deg"), "deg", true)));
+        v.extend(free.iter().map(|k| (format!("facet_errors[{k}].tilt_deg"), "deg", true)));
+        v.extend(free.iter().map(|k| (format!("facet_errors[{k}].radius_mm"), "mm", false)));
         for l in &self.lasers {
-            v.push((format!("lasers[{}] fan normal tilt u", l.index), "deg", true));
-            v.push((format!("lasers[{}] fan normal tilt v", l.index), "deg", true));
+            v.push((format!("lasers[{}] fan normal tilt towards the axis", l.index), "deg", true));
             v.push((format!("lasers[{}] fan plane offset", l.index), "mm", false));
+            if l.turns {
+                v.push((format!("lasers[{}] fan normal turn about the axis", l.index), "deg", true));
+            }
         }
         v
     }
@@ -435,14 +481,23 @@ fn estimates(layout: &Layout, report: &lm::Report) -> Vec<Estimate> {
         })
         .collect();
     if let Some(&last) = layout.facets.last() {
-        let range = I_FACETS..I_FACETS + layout.n_pitch();
-        let var = cov.map(|c| range.clone().flat_map(|a| range.clone().map(move |b| c[(a, b)])).sum::<f64>());
-        out.push(Estimate {
-            name: format!("facet_errors[{last}].pitch_deg (gauge: minus the sum of the other pitches)"),
-            value: layout.pitch(p, layout.facets.len() - 1).to_degrees(),
-            std: var.map(|v| v.max(0.0).sqrt().to_degrees()),
-            unit: "deg",
-        });
+        let n = layout.n_free();
+        let blocks = [
+            (I_FACETS, "pitch_deg", "deg", true),
+            (layout.i_tilt(), "tilt_deg", "deg", true),
+            (layout.i_radius(), "radius_mm", "mm", false),
+        ];
+        for (start, field, unit, radians) in blocks {
+            let scale = if radians { 1f64.to_degrees() } else { 1.0 };
+            let var =
+                cov.map(|c| (start..start + n).flat_map(|a| (start..start + n).map(move |b| c[(a, b)])).sum::<f64>());
+            out.push(Estimate {
+                name: format!("facet_errors[{last}].{field} (gauge: minus the sum of the other facets')"),
+                value: layout.zero_mean(p, start, layout.facets.len() - 1) * scale,
+                std: var.map(|v| v.max(0.0).sqrt() * scale),
+                unit,
+            });
+        }
     }
     out
 }

@@ -1,1 +1,687 @@
-//! (in progress)
+//! Receiver calibration: the catadioptric camera from checkerboard corners.
+//!
+//! [`calibrate`] fits one of three models ([`ModelKind`]) to the corners of many board images:
+//! 1. Initialisation without hand-tuning: principal point at the image centre, ξ = 1, and the
+//!    generalised focal length γ chosen on a logarithmic grid by the median per-image
+//!    reprojection error after a linear pose (DLT on the rays) and a short per-board pose
+//!    refinement. The same search decides once whether the corner labeling must be mirrored
+//!    (a board seen through one mirror appears reversed).
+//! 2. Joint Levenberg–Marquardt over the intrinsics and all board poses (6 per board) with a
+//!    Huber loss; the Jacobian is numeric but exploits the block structure (a pose moves only its
+//!    own board's residuals).
+//! 3. Images whose RMS error is an outlier (more than `outlier_factor` × the median and above
+//!    `outlier_floor_px`) are rejected with the reason, and the fit is repeated.
+//!
+//! The polynomial (OCamCalib) model starts from the fitted Mei model (its rays give the
+//! polynomial by linear least squares) and is then refined the same way. The exact hyperbolic
+//! model is the Mei model with ξ fixed by the given mirror and no distortion; only the focal
+//! lengths and the principal point are fitted.
+
+pub mod export;
+
+use crate::pose::{UNPROJECTABLE_PX, board_to_world, params_to_pose, pose_from_rays, pose_to_params, refine_pose};
+use nalgebra::{DMatrix, Isometry3, Point3, Vector2, Vector3};
+use omni_formats::CameraSpec;
+use omni_geom::lm;
+use omni_model::mei::{mei_project, mei_unproject};
+use omni_model::ocam::{ocam_project, ocam_unproject};
+use omni_model::{HyperbolicParams, MeiParams, OcamParams};
+use serde_json::json;
+
+/// The camera model to fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ModelKind {
+    /// Mei's unified model with radial-tangential distortion.
+    Mei,
+    /// Scaramuzza's polynomial model (OCamCalib).
+    Ocam,
+    /// The exact hyperbolic mirror model with the mirror (a, b) given.
+    Hyperbolic,
+}
+
+impl std::str::FromStr for ModelKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "mei" => Ok(ModelKind::Mei),
+            "ocam" => Ok(ModelKind::Ocam),
+            "hyperbolic" => Ok(ModelKind::Hyperbolic),
+            _ => Err(format!("unknown model \"{s}\" (known: mei, ocam, hyperbolic)")),
+        }
+    }
+}
+
+/// The corners of one board image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// Image name (for reports).
+    pub name: String,
+    /// Board coordinates of the corners (mm, board frame z = 0).
+    pub board_mm: Vec<[f64; 2]>,
+    /// Their image positions (px).
+    pub pixels: Vec<[f64; 2]>,
+}
+
+impl Observation {
+    /// From detected corners: corner (i, j) is at (i·square, j·square) mm on the board.
+    pub fn from_corners(name: &str, corners: &omni_vision::corners::BoardCorners, square_mm: f64) -> Self {
+        Observation {
+            name: name.to_string(),
+            board_mm: corners
+                .corners
+                .iter()
+                .map(|c| [c.index[0] as f64 * square_mm, c.index[1] as f64 * square_mm])
+                .collect(),
+            pixels: corners.corners.iter().map(|c| c.px).collect(),
+        }
+    }
+
+    /// The same corners with the board mirrored (x → −x): the other labeling handedness.
+    pub fn mirrored(&self) -> Observation {
+        Observation { board_mm: self.board_mm.iter().map(|p| [-p[0], p[1]]).collect(), ..self.clone() }
+    }
+}
+
+/// Settings of the fit.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub model: ModelKind,
+    /// Huber threshold of the robust loss (px).
+    pub huber_px: f64,
+    /// An image is an outlier if its RMS exceeds this factor × the median image RMS …
+    pub outlier_factor: f64,
+    /// … and this absolute floor (px).
+    pub outlier_floor_px: f64,
+    /// Degree of the OCamCalib polynomial (a1 is fixed to 0 as in OCamCalib).
+    pub ocam_degree: usize,
+    /// Mirror for the hyperbolic model (a, b, rim radius; focal length and principal point are
+    /// fitted).
+    pub mirror: HyperbolicParams,
+    /// Fewest corners per image.
+    pub min_corners: usize,
+    /// LM iterations of the joint refinement.
+    pub max_iterations: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            model: ModelKind::Mei,
+            huber_px: 1.0,
+            outlier_factor: 3.0,
+            outlier_floor_px: 0.5,
+            ocam_degree: 4,
+            mirror: HyperbolicParams::paper(),
+            min_corners: 8,
+            max_iterations: 60,
+        }
+    }
+}
+
+/// What happened to one image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImageReport {
+    pub name: String,
+    pub corners: usize,
+    /// RMS reprojection error of the image under the final model (px), if a pose was found.
+    pub rms_px: Option<f64>,
+    /// Whether the image took part in the final fit.
+    pub used: bool,
+    /// Why it was rejected.
+    pub reason: Option<String>,
+    /// Board → world pose (if found).
+    pub pose: Option<Isometry3<f64>>,
+}
+
+/// The result of a calibration.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// The fitted camera (ready for `camera.json`).
+    pub spec: CameraSpec,
+    /// RMS reprojection error over all corners of the used images (px).
+    pub rms_px: f64,
+    pub images: Vec<ImageReport>,
+    /// Names, values and standard deviations of the fitted intrinsics.
+    pub param_names: Vec<String>,
+    pub params: Vec<f64>,
+    pub std_devs: Vec<f64>,
+    /// Whether the corner labeling was mirrored (see [`Observation::mirrored`]).
+    pub mirrored_labels: bool,
+}
+
+impl Calibration {
+    /// Where the fitted model puts the corners of image `k` (the same `obs` as given to
+    /// [`calibrate`]); `None` for corners that do not project or images without a pose.
+    pub fn reprojected(&self, k: usize, obs: &Observation) -> Vec<Option<[f64; 2]>> {
+        let (Some(pose), Ok(cam)) = (self.images.get(k).and_then(|i| i.pose), self.spec.build()) else {
+            return vec![None; obs.pixels.len()];
+        };
+        let sign = if self.mirrored_labels { -1.0 } else { 1.0 };
+        obs.board_mm
+            .iter()
+            .map(|xy| cam.point_to_pixel(&(pose * Point3::new(sign * xy[0], xy[1], 0.0))).map(|p| [p.x, p.y]))
+            .collect()
+    }
+
+    /// The calibration report stored in `camera.json`.
+    pub fn report_json(&self) -> serde_json::Value {
+        let params: serde_json::Map<String, serde_json::Value> = self
+            .param_names
+            .iter()
+            .zip(self.params.iter().zip(&self.std_devs))
+            .map(|(n, (v, s))| (n.clone(), json!({"value": v, "std": s})))
+            .collect();
+        json!({
+            "rms_px": self.rms_px,
+            "images_used": self.images.iter().filter(|i| i.used).count(),
+            "images_rejected": self.images.iter().filter(|i| !i.used).count(),
+            "mirrored_labels": self.mirrored_labels,
+            "parameters": params,
+            "images": self.images.iter().map(|i| json!({
+                "name": i.name,
+                "corners": i.corners,
+                "rms_px": i.rms_px,
+                "used": i.used,
+                "reason": i.reason,
+            })).collect::<Vec<_>>(),
+        })
+    }
+}
+
+/// The model being fitted: which parameters are free, and how to project with them.
+#[derive(Debug, Clone)]
+struct Model {
+    kind: ModelKind,
+    /// Full parameter vector (free ones are overwritten from the solver's vector).
+    full: Vec<f64>,
+    free: Vec<usize>,
+    names: Vec<String>,
+    /// ρ normalisation of the polynomial coefficients (px).
+    rho_scale: f64,
+    rho_max: f64,
+}
+
+impl Model {
+    fn mei(width: u32, height: u32, xi: f64, gamma: f64, fixed_xi_no_distortion: bool) -> Model {
+        let full = vec![xi, gamma, gamma, (width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0, 0.0, 0.0, 0.0, 0.0];
+        let free = if fixed_xi_no_distortion { vec![1, 2, 3, 4] } else { (0..9).collect() };
+        let names =
+            ["xi", "fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2"].iter().map(|s| s.to_string()).collect();
+        Model {
+            kind: if fixed_xi_no_distortion { ModelKind::Hyperbolic } else { ModelKind::Mei },
+            full,
+            free,
+            names,
+            rho_scale: 1.0,
+            rho_max: 0.0,
+        }
+    }
+
+    fn free_values(&self) -> Vec<f64> {
+        self.free.iter().map(|&i| self.full[i]).collect()
+    }
+
+    fn with_free(&self, v: &[f64]) -> Vec<f64> {
+        let mut full = self.full.clone();
+        for (k, &i) in self.free.iter().enumerate() {
+            full[i] = v[k];
+        }
+        full
+    }
+
+    /// OCam full vector: cx, cy, c, d, e, a0, a2·R², a3·R³, … → the model crate's order.
+    fn ocam_vector(&self, full: &[f64]) -> Vec<f64> {
+        let mut v = full[..5].to_vec();
+        v.push(full[5]);
+        v.push(0.0);
+        for (k, a) in full[6..].iter().enumerate() {
+            v.push(a / self.rho_scale.powi(k as i32 + 2));
+        }
+        v
+    }
+
+    fn project(&self, full: &[f64], d: &Vector3<f64>) -> Option<Vector2<f64>> {
+        match self.kind {
+            ModelKind::Mei | ModelKind::Hyperbolic => mei_project(full, d),
+            ModelKind::Ocam => ocam_project(&self.ocam_vector(full), d, self.rho_max),
+        }
+    }
+
+    fn unproject(&self, full: &[f64], px: &Vector2<f64>) -> Option<Vector3<f64>> {
+        match self.kind {
+            ModelKind::Mei | ModelKind::Hyperbolic => mei_unproject(full, px),
+            ModelKind::Ocam => ocam_unproject(&self.ocam_vector(full), px),
+        }
+    }
+}
+
+/// Per-image residuals (2 per corner) for a pose given as 6 parameters.
+fn image_residuals(model: &Model, full: &[f64], pose: &[f64], obs: &Observation, out: &mut [f64]) {
+    for (k, (xy, px)) in obs.board_mm.iter().zip(&obs.pixels).enumerate() {
+        let p = board_to_world(pose, *xy);
+        match model.project(full, &p.coords) {
+            Some(q) => {
+                out[2 * k] = q.x - px[0];
+                out[2 * k + 1] = q.y - px[1];
+            }
+            None => {
+                out[2 * k] = UNPROJECTABLE_PX;
+                out[2 * k + 1] = UNPROJECTABLE_PX;
+            }
+        }
+    }
+}
+
+fn rms(r: &[f64]) -> f64 {
+    (r.iter().map(|x| x * x).sum::<f64>() / r.len().max(1) as f64).sqrt()
+}
+
+/// The joint problem: free intrinsics, then 6 pose parameters per image.
+struct Joint<'a> {
+    model: &'a Model,
+    obs: &'a [Observation],
+    offsets: Vec<usize>,
+    n_res: usize,
+}
+
+impl<'a> Joint<'a> {
+    fn new(model: &'a Model, obs: &'a [Observation]) -> Self {
+        let mut offsets = Vec::with_capacity(obs.len());
+        let mut n = 0;
+        for o in obs {
+            offsets.push(n);
+            n += 2 * o.pixels.len();
+        }
+        Joint { model, obs, offsets, n_res: n }
+    }
+
+    fn n_intr(&self) -> usize {
+        self.model.free.len()
+    }
+}
+
+impl lm::Problem for Joint<'_> {
+    fn num_params(&self) -> usize {
+        self.n_intr() + 6 * self.obs.len()
+    }
+    fn num_residuals(&self) -> usize {
+        self.n_res
+    }
+    fn residuals(&self, p: &[f64], out: &mut [f64]) {
+        let full = self.model.with_free(&p[..self.n_intr()]);
+        for (k, o) in self.obs.iter().enumerate() {
+            let pose = &p[self.n_intr() + 6 * k..self.n_intr() + 6 * k + 6];
+            let off = self.offsets[k];
+            image_residuals(self.model, &full, pose, o, &mut out[off..off + 2 * o.pixels.len()]);
+        }
+    }
+    fn jacobian(&self, p: &[f64], jac: &mut DMatrix<f64>) {
+        jac.fill(0.0);
+        let ni = self.n_intr();
+        let mut plus = vec![0.0; self.n_res];
+        let mut minus = vec![0.0; self.n_res];
+        let mut q = p.to_vec();
+        for j in 0..ni {
+            let h = 1e-6 * p[j].abs().max(1e-2);
+            q[j] = p[j] + h;
+            self.residuals(&q, &mut plus);
+            q[j] = p[j] - h;
+            self.residuals(&q, &mut minus);
+            q[j] = p[j];
+            for i in 0..self.n_res {
+                jac[(i, j)] = (plus[i] - minus[i]) / (2.0 * h);
+            }
+        }
+        let full = self.model.with_free(&p[..ni]);
+        for (k, o) in self.obs.iter().enumerate() {
+            let m = 2 * o.pixels.len();
+            let off = self.offsets[k];
+            let base = ni + 6 * k;
+            let mut pose = p[base..base + 6].to_vec();
+            for c in 0..6 {
+                let h = if c < 3 { 1e-7 } else { 1e-5 * pose[c].abs().max(1.0) };
+                let v = pose[c];
+                pose[c] = v + h;
+                image_residuals(self.model, &full, &pose, o, &mut plus[..m]);
+                pose[c] = v - h;
+                image_residuals(self.model, &full, &pose, o, &mut minus[..m]);
+                pose[c] = v;
+                for i in 0..m {
+                    jac[(off + i, base + c)] = (plus[i] - minus[i]) / (2.0 * h);
+                }
+            }
+        }
+    }
+}
+
+/// Linear + refined pose of one image under a trial model; (pose params, RMS px).
+fn initial_pose(model: &Model, full: &[f64], obs: &Observation, iterations: usize) -> Option<([f64; 6], f64)> {
+    let mut dirs = Vec::new();
+    let mut board = Vec::new();
+    for (xy, px) in obs.board_mm.iter().zip(&obs.pixels) {
+        if let Some(d) = model.unproject(full, &Vector2::new(px[0], px[1])) {
+            dirs.push(d);
+            board.push(*xy);
+        }
+    }
+    let pose = pose_from_rays(&Point3::origin(), &dirs, &board)?;
+    let project = |p: &Point3<f64>| model.project(full, &p.coords);
+    let (pose, rms) = refine_pose(&project, &obs.board_mm, &obs.pixels, &pose, iterations);
+    Some((pose_to_params(&pose), rms))
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+/// Grid search of γ (and the labeling handedness) for the Mei/hyperbolic model.
+fn initialise_mei(width: u32, height: u32, xi: f64, fixed: bool, obs: &[Observation]) -> Option<(Model, bool)> {
+    let r = width.min(height) as f64 / 2.0;
+    let mut best: Option<(f64, f64, bool)> = None;
+    // A subset of images keeps the search cheap for large data sets.
+    let step = (obs.len() / 8).max(1);
+    let sample: Vec<&Observation> = obs.iter().step_by(step).collect();
+    for k in 0..24 {
+        let gamma = r * 0.1 * (30.0f64).powf(k as f64 / 23.0);
+        let model = Model::mei(width, height, xi, gamma, fixed);
+        for mirrored in [false, true] {
+            let errs: Vec<f64> = sample
+                .iter()
+                .map(|o| {
+                    let o = if mirrored { o.mirrored() } else { (*o).clone() };
+                    initial_pose(&model, &model.full, &o, 8).map(|x| x.1).unwrap_or(1e6)
+                })
+                .collect();
+            let score = median(errs);
+            if best.is_none_or(|b| score < b.0) {
+                best = Some((score, gamma, mirrored));
+            }
+        }
+    }
+    let (_, gamma, mirrored) = best?;
+    Some((Model::mei(width, height, xi, gamma, fixed), mirrored))
+}
+
+/// Joint refinement with outlier rejection. Returns the model, poses (per `obs` index, `None` =
+/// rejected), per-image RMS and rejection reasons, and the LM report of the last fit.
+struct Fit {
+    model: Model,
+    poses: Vec<Option<[f64; 6]>>,
+    reasons: Vec<Option<String>>,
+    report: lm::Report,
+}
+
+fn joint_fit(mut model: Model, obs: &[Observation], mut poses: Vec<Option<[f64; 6]>>, opts: &Options) -> Option<Fit> {
+    let mut reasons: Vec<Option<String>> = poses
+        .iter()
+        .map(|p| if p.is_none() { Some("no pose found for the board".to_string()) } else { None })
+        .collect();
+    loop {
+        let used: Vec<usize> = (0..obs.len()).filter(|&k| poses[k].is_some() && reasons[k].is_none()).collect();
+        if used.is_empty() {
+            return None;
+        }
+        let sub: Vec<Observation> = used.iter().map(|&k| obs[k].clone()).collect();
+        let mut x0 = model.free_values();
+        for &k in &used {
+            x0.extend_from_slice(&poses[k]?);
+        }
+        let problem = Joint::new(&model, &sub);
+        let lm_opts =
+            lm::Options { max_iterations: opts.max_iterations, huber: Some(opts.huber_px), ..Default::default() };
+        let report = lm::minimize(&problem, &x0, &lm_opts);
+        let ni = model.free.len();
+        model.full = model.with_free(&report.params[..ni]);
+        for (s, &k) in used.iter().enumerate() {
+            poses[k] = Some(report.params[ni + 6 * s..ni + 6 * s + 6].try_into().ok()?);
+        }
+        // Outlier images after the fit.
+        let rms_of: Vec<f64> = used
+            .iter()
+            .map(|&k| poses[k].map_or(f64::INFINITY, |p| image_rms(&model, &model.full, &p, &obs[k])))
+            .collect();
+        let med = median(rms_of.clone());
+        let limit = (opts.outlier_factor * med).max(opts.outlier_floor_px);
+        let worst = rms_of.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(s, r)| (used[s], *r));
+        match worst {
+            Some((k, r)) if r > limit && used.len() > 3 => {
+                reasons[k] = Some(format!(
+                    "outlier after fitting: RMS {r:.3} px > {limit:.3} px ({} × median {med:.3} px)",
+                    opts.outlier_factor
+                ));
+            }
+            _ => return Some(Fit { model, poses, reasons, report }),
+        }
+    }
+}
+
+fn image_rms(model: &Model, full: &[f64], pose: &[f64; 6], obs: &Observation) -> f64 {
+    let mut r = vec![0.0; 2 * obs.pixels.len()];
+    image_residuals(model, full, pose, obs, &mut r);
+    rms(&r)
+}
+
+/// Polynomial model initialised from a fitted Mei model: the Mei rays at the observed corners
+/// give a0, a2, a3, … by linear least squares (affine c = fy/fx, d = e = 0).
+fn ocam_from_mei(mei: &Model, obs: &[Observation], degree: usize, width: u32, height: u32) -> Option<Model> {
+    let f = &mei.full;
+    let (cx, cy, aspect) = (f[3], f[4], f[2] / f[1]);
+    let rho_scale = width.min(height) as f64 / 2.0;
+    let n = degree; // a0 and a2..a_degree
+    let mut rows = Vec::new();
+    let mut rhs = Vec::new();
+    let mut rho_max: f64 = 0.0;
+    for o in obs {
+        for px in &o.pixels {
+            let Some(d) = mei_unproject(f, &Vector2::new(px[0], px[1])) else { continue };
+            let (u, v) = (px[0] - cx, (px[1] - cy) / aspect);
+            let rho = u.hypot(v);
+            let lateral = d.x.hypot(d.y);
+            if rho < 1.0 || lateral < 1e-9 {
+                continue;
+            }
+            rho_max = rho_max.max(rho);
+            let mut row = vec![1.0];
+            for k in 2..=degree {
+                row.push((rho / rho_scale).powi(k as i32));
+            }
+            rows.push(row);
+            rhs.push(d.z * rho / lateral);
+        }
+    }
+    if rows.len() < n + 2 {
+        return None;
+    }
+    let a = DMatrix::from_fn(rows.len(), n, |i, j| rows[i][j]);
+    let b = nalgebra::DVector::from_vec(rhs);
+    let coef = a.svd(true, true).solve(&b, 1e-12).ok()?;
+    let mut full = vec![cx, cy, aspect, 0.0, 0.0];
+    full.extend(coef.iter());
+    let mut names: Vec<String> = ["cx_px", "cy_px", "c", "d", "e", "a0"].iter().map(|s| s.to_string()).collect();
+    for k in 2..=degree {
+        names.push(format!("a{k}"));
+    }
+    Some(Model {
+        kind: ModelKind::Ocam,
+        free: (0..full.len()).collect(),
+        full,
+        names,
+        rho_scale,
+        rho_max: (width as f64).hypot(height as f64).max(2.0 * rho_max),
+    })
+}
+
+/// Calibrates the receiver from the corners of board images of size `width × height` px.
+pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -> Result<Calibration, String> {
+    let mut images: Vec<ImageReport> = obs
+        .iter()
+        .map(|o| ImageReport {
+            name: o.name.clone(),
+            corners: o.pixels.len(),
+            rms_px: None,
+            used: false,
+            reason: None,
+            pose: None,
+        })
+        .collect();
+    let mut usable: Vec<usize> = Vec::new();
+    for (k, o) in obs.iter().enumerate() {
+        if o.pixels.len() != o.board_mm.len() {
+            images[k].reason = Some("corner and board point counts differ".into());
+        } else if o.pixels.len() < opts.min_corners {
+            images[k].reason = Some(format!("too few corners ({} < {})", o.pixels.len(), opts.min_corners));
+        } else {
+            usable.push(k);
+        }
+    }
+    if usable.len() < 2 {
+        return Err(format!("need at least 2 usable board images, have {}", usable.len()));
+    }
+    let (xi, fixed) = match opts.model {
+        ModelKind::Hyperbolic => {
+            let (a, b2) = (opts.mirror.a_mm, opts.mirror.b_mm * opts.mirror.b_mm);
+            let c = (a * a + b2).sqrt();
+            (2.0 * a * c / (a * a + c * c), true)
+        }
+        _ => (1.0, false),
+    };
+    let base: Vec<Observation> = usable.iter().map(|&k| obs[k].clone()).collect();
+    let (model, mirrored) =
+        initialise_mei(width, height, xi, fixed, &base).ok_or("initialisation failed: no pose found for any board")?;
+    let sub: Vec<Observation> = if mirrored { base.iter().map(|o| o.mirrored()).collect() } else { base };
+    let poses: Vec<Option<[f64; 6]>> =
+        sub.iter().map(|o| initial_pose(&model, &model.full, o, 20).map(|x| x.0)).collect();
+    let mut fit = joint_fit(model, &sub, poses, opts).ok_or("the joint fit found no usable board")?;
+    if opts.model == ModelKind::Ocam {
+        let used: Vec<Observation> =
+            (0..sub.len()).filter(|&k| fit.reasons[k].is_none()).map(|k| sub[k].clone()).collect();
+        let ocam = ocam_from_mei(&fit.model, &used, opts.ocam_degree, width, height)
+            .ok_or("polynomial initialisation failed (too few corners)")?;
+        let poses = fit.poses.iter().zip(&fit.reasons).map(|(p, r)| if r.is_none() { *p } else { None }).collect();
+        let reasons = fit.reasons.clone();
+        fit = joint_fit(ocam, &sub, poses, opts).ok_or("the polynomial fit found no usable board")?;
+        for (k, r) in reasons.into_iter().enumerate() {
+            if r.is_some() {
+                fit.reasons[k] = r;
+            }
+        }
+    }
+    // Per-image report.
+    let mut all_res = Vec::new();
+    for (s, &k) in usable.iter().enumerate() {
+        if let Some(p) = fit.poses[s] {
+            let mut r = vec![0.0; 2 * sub[s].pixels.len()];
+            image_residuals(&fit.model, &fit.model.full, &p, &sub[s], &mut r);
+            images[k].rms_px = Some(rms(&r));
+            images[k].pose = Some(params_to_pose(&p));
+            if fit.reasons[s].is_none() {
+                images[k].used = true;
+                all_res.extend(r);
+            }
+        }
+        images[k].reason = fit.reasons[s].clone();
+    }
+    let std_free = fit.report.std_devs().unwrap_or_else(|| vec![f64::NAN; fit.report.params.len()]);
+    let (names, params, std_devs, spec) = describe(&fit.model, &std_free, width, height, opts);
+    Ok(Calibration {
+        spec,
+        rms_px: rms(&all_res),
+        images,
+        param_names: names,
+        params,
+        std_devs,
+        mirrored_labels: mirrored,
+    })
+}
+
+/// Names, values, standard deviations of the fitted parameters and the camera spec.
+fn describe(
+    model: &Model,
+    std_free: &[f64],
+    width: u32,
+    height: u32,
+    opts: &Options,
+) -> (Vec<String>, Vec<f64>, Vec<f64>, CameraSpec) {
+    let f = &model.full;
+    let mut std_full = vec![0.0; f.len()];
+    for (k, &i) in model.free.iter().enumerate() {
+        std_full[i] = std_free[k];
+    }
+    match model.kind {
+        ModelKind::Mei => {
+            let mut p = MeiParams {
+                xi: 0.0,
+                fx_px: 0.0,
+                fy_px: 0.0,
+                cx_px: 0.0,
+                cy_px: 0.0,
+                k1: 0.0,
+                k2: 0.0,
+                p1: 0.0,
+                p2: 0.0,
+                width,
+                height,
+                inner_radius_px: 0.0,
+                outer_radius_px: 0.0,
+                viewpoint_mm: [0.0; 3],
+            };
+            p.set_vector(f);
+            (model.names.clone(), f.clone(), std_full, CameraSpec::Mei(p))
+        }
+        ModelKind::Hyperbolic => {
+            let m = &opts.mirror;
+            let (a, b2) = (m.a_mm, m.b_mm * m.b_mm);
+            let c = (a * a + b2).sqrt();
+            let k = (a * a + c * c) / b2; // f = γ·(a² + c²)/b²
+            let p = HyperbolicParams {
+                fx_px: f[1] * k,
+                fy_px: f[2] * k,
+                cx_px: f[3],
+                cy_px: f[4],
+                width,
+                height,
+                camera_offset_mm: [0.0; 3],
+                camera_tilt_deg: [0.0; 2],
+                ..m.clone()
+            };
+            let names = vec!["fx_px".into(), "fy_px".into(), "cx_px".into(), "cy_px".into()];
+            let values = vec![p.fx_px, p.fy_px, p.cx_px, p.cy_px];
+            let stds = vec![std_full[1] * k, std_full[2] * k, std_full[3], std_full[4]];
+            (names, values, stds, CameraSpec::Hyperbolic(p))
+        }
+        ModelKind::Ocam => {
+            let v = model.ocam_vector(f);
+            let mut p = OcamParams {
+                poly: v[5..].to_vec(),
+                inv_poly: Vec::new(),
+                cx_px: v[0],
+                cy_px: v[1],
+                c: v[2],
+                d: v[3],
+                e: v[4],
+                width,
+                height,
+                inner_radius_px: 0.0,
+                outer_radius_px: 0.0,
+                viewpoint_mm: [0.0; 3],
+            };
+            p.outer_radius_px = 0.0;
+            p.fit_inverse_poly(12);
+            let mut values = v[..6].to_vec();
+            let mut stds = std_full[..6].to_vec();
+            for k in 2..=opts.ocam_degree {
+                let s = model.rho_scale.powi(k as i32);
+                values.push(f[4 + k] / s);
+                stds.push(std_full[4 + k] / s);
+            }
+            (model.names.clone(), values, stds, CameraSpec::Ocam(p))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -44,7 +44,7 @@ struct Args {
     #[arg(long)]
     threshold: Option<f64>,
     /// Narrowest accepted stripe (px, threshold crossing to crossing along the ray).
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 1.0)]
     min_width: f64,
     /// Widest accepted stripe (px); wider segments are glints or ambient light.
     #[arg(long, default_value_t = 12.0)]

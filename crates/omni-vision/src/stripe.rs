@@ -44,6 +44,7 @@
 mod estimators;
 mod frames;
 mod overlay;
+mod sampling;
 mod steger;
 
 pub use estimators::Segment;
@@ -107,7 +108,8 @@ impl std::str::FromStr for Method {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RidgeParams {
     pub method: Method,
-    /// Samples brighter than this belong to a stripe. `None`: 12 % of full scale (30 of 255).
+    /// Contrast above the local background (in the Gaussian-sampled profile) that makes a
+    /// stripe. `None`: 4 % of full scale (10.2 of 255).
     pub threshold: Option<f64>,
     /// Segments narrower than this (threshold crossing to crossing, along the ray) are noise.
     pub min_width: f64,
@@ -119,14 +121,14 @@ pub struct RidgeParams {
 
 impl Default for RidgeParams {
     fn default() -> Self {
-        RidgeParams { method: Method::Windowed, threshold: None, min_width: 2.0, max_width: 12.0, hessian_sigma: 1.5 }
+        RidgeParams { method: Method::Windowed, threshold: None, min_width: 1.0, max_width: 12.0, hessian_sigma: 1.5 }
     }
 }
 
 impl RidgeParams {
     /// The threshold for a frame whose samples saturate at `max_value`.
     pub fn threshold_for(&self, max_value: f64) -> f64 {
-        self.threshold.unwrap_or(0.12 * max_value)
+        self.threshold.unwrap_or(0.04 * max_value)
     }
 
     /// Checks the settings; the message names the bad one.
@@ -190,6 +192,21 @@ impl<P: Pixel> Frame<'_, P> {
         self.data[y * self.width as usize + x].to_f32()
     }
 
+    /// Whether a pixel of the 3×3 neighbourhood of (x, y) px is at the saturation level.
+    fn saturated_near(&self, x: f64, y: f64) -> bool {
+        let (xi, yi) = (x.round() as i64, y.round() as i64);
+        let sat = self.max_value as f32;
+        (yi - 1..=yi + 1).any(|yy| {
+            (xi - 1..=xi + 1).any(|xx| {
+                xx >= 0
+                    && yy >= 0
+                    && xx < self.width as i64
+                    && yy < self.height as i64
+                    && self.at(xx as usize, yy as usize) >= sat
+            })
+        })
+    }
+
     /// Bilinear sample at (x, y) px, or `None` if its 2×2 neighbourhood leaves the image.
     #[inline]
     fn bilinear(&self, x: f64, y: f64) -> Option<f32> {
@@ -226,6 +243,7 @@ pub struct RidgeDetector {
     dirs: Vec<(f64, f64)>,
     /// 64-bit words per ray in the radius bitmap.
     words_per_ray: usize,
+    sampler: sampling::GaussSampler,
     steger: steger::Kernels,
 }
 
@@ -236,7 +254,16 @@ pub struct Scratch {
     bits: Vec<u64>,
     /// Rays with at least one bit set, to clear and visit only those.
     touched: Vec<u32>,
-    profile: Vec<f32>,
+    profiles: Profiles,
+}
+
+/// Working buffers for one stretch of a ray.
+#[derive(Debug, Default)]
+struct Profiles {
+    /// Sampled intensities.
+    raw: Vec<f32>,
+    /// Intensities minus the local background of the maximum being measured.
+    contrast: Vec<f32>,
 }
 
 impl RidgeDetector {
@@ -255,7 +282,8 @@ impl RidgeDetector {
         let dirs = (0..n_rays).map(|i| (TAU * i as f64 / n_rays as f64).sin_cos()).map(|(s, c)| (c, s)).collect();
         let words_per_ray = (r_out as usize + 2).div_ceil(64);
         let steger = steger::Kernels::new(params.hessian_sigma);
-        RidgeDetector { params, width, height, cx, cy, r_in, r_out, dirs, words_per_ray, steger }
+        let sampler = sampling::GaussSampler::default();
+        RidgeDetector { params, width, height, cx, cy, r_in, r_out, dirs, words_per_ray, sampler, steger }
     }
 
     /// A detector sampling from the image centre, over the largest circle inside the image.
@@ -353,6 +381,7 @@ impl RidgeDetector {
         let y_lo = (self.cy - self.r_out).floor().max(0.0) as usize;
         let y_hi = ((self.cy + self.r_out).ceil() as usize).min(self.height as usize - 1);
         let rays_per_rad = n as f64 / TAU;
+        let reach = (0.5 * self.params.max_width).ceil() as usize + 1;
         for y in y_lo..=y_hi {
             let dy = y as f64 - self.cy;
             let half = (self.r_out * self.r_out - dy * dy).max(0.0).sqrt();
@@ -368,8 +397,8 @@ impl RidgeDetector {
                     continue;
                 }
                 for (k, &p) in chunk.iter().enumerate() {
-                    if p > t {
-                        let x = x_lo + ci * 16 + k;
+                    let x = x_lo + ci * 16 + k;
+                    if p > t && stands_out(frame, x, y, reach, threshold as f32) {
                         self.mark_pixel(x as f64 - self.cx, dy, rays_per_rad, scratch);
                     }
                 }
@@ -427,16 +456,20 @@ impl RidgeDetector {
             }
         }
         for (lo, hi) in stretches {
-            let r0 = (lo as f64).max(self.r_in);
-            let r1 = (hi as f64).min(self.r_out);
-            if r1 - r0 < 2.0 {
-                continue;
-            }
-            self.scan_stretch(frame, ray, r0, r1, threshold, &mut scratch.profile, out);
+            // The stretch may reach past the annulus (for the background windows); only peaks
+            // inside it are measured.
+            let (r0, r1) = (lo as f64, hi as f64);
+            self.scan_stretch(frame, ray, r0, r1, threshold, &mut scratch.profiles, out);
         }
     }
 
     /// Samples the ray from radius `r0` to `r1` and emits a point per accepted segment.
+    ///
+    /// Segments are found around local maxima of the profile whose contrast above the local
+    /// background exceeds the threshold. The background of a maximum is the larger of the
+    /// profile's minima within [`Self::background_window`] on either side: a stripe on a lit
+    /// surface (ambient light without a laser-off frame) stands out from it, while the edge of a
+    /// lit area (a step, not a ridge) does not.
     fn scan_stretch<P: Pixel>(
         &self,
         frame: &Frame<'_, P>,
@@ -444,50 +477,78 @@ impl RidgeDetector {
         r0: f64,
         r1: f64,
         threshold: f64,
-        profile: &mut Vec<f32>,
+        scratch: &mut Profiles,
         out: &mut Vec<StripePoint>,
     ) {
         let (dx, dy) = self.dirs[ray];
         let n = ((r1 - r0) / SAMPLE_STEP_PX) as usize + 1;
-        profile.clear();
+        let Profiles { raw: p, contrast: q } = scratch;
+        p.clear();
         for k in 0..n {
             let r = r0 + k as f64 * SAMPLE_STEP_PX;
-            // Outside the image counts as dark; a segment touching it is rejected below.
-            profile.push(frame.bilinear(self.cx + r * dx, self.cy + r * dy).unwrap_or(f32::NAN));
+            // Outside the image is NaN; a segment or background window touching it is rejected.
+            p.push(self.sampler.sample(frame, self.cx + r * dx, self.cy + r * dy).unwrap_or(f32::NAN));
         }
         let t = threshold as f32;
-        let mut k = 0;
-        while k < n {
-            if !(profile[k] > t) {
-                k += 1;
+        let w = self.background_window();
+        let mut done_until = 0;
+        for k in w.max(1)..n.saturating_sub(w.max(1)) {
+            let is_max = p[k] >= p[k - 1] && p[k] > p[k + 1];
+            let r_k = r0 + k as f64 * SAMPLE_STEP_PX;
+            if !is_max || k < done_until || r_k < self.r_in || r_k > self.r_out {
                 continue;
             }
-            let start = k;
-            let mut peak = k;
-            while k < n && profile[k] > t {
-                if profile[k] > profile[peak] {
-                    peak = k;
-                }
-                k += 1;
+            let window_min = |range: std::ops::RangeInclusive<usize>| {
+                p[range].iter().fold(f32::INFINITY, |m, &v| if v.is_nan() { f32::NAN } else { m.min(v) })
+            };
+            let (left, right) = (window_min(k - w..=k), window_min(k..=k + w));
+            let background = left.max(right);
+            if !(p[k] - background > t) || left.is_nan() || right.is_nan() {
+                continue;
             }
-            let seg = Segment { start, end: k, peak };
+            // A stripe lying on a step of the background (the edge of a lit object, where the
+            // stripe itself is cut off) has no reliable centre.
+            if (left - right).abs() > MAX_BACKGROUND_STEP * (p[k] - background) {
+                done_until = k + 1;
+                continue;
+            }
+            q.clear();
+            q.extend(p.iter().map(|v| v - background));
+            let mut start = k;
+            while start > 0 && q[start - 1] > t {
+                start -= 1;
+            }
+            let mut end = k + 1;
+            while end < n && q[end] > t {
+                end += 1;
+            }
+            done_until = end;
             // A segment cut by the stretch's ends (annulus or image border) is incomplete.
-            if start == 0 || k == n || profile[start - 1].is_nan() || profile[k].is_nan() {
+            if start == 0 || end == n || q[start - 1].is_nan() || q[end].is_nan() {
                 continue;
             }
-            if let Some(p) = self.segment_point(frame, ray, r0, profile, &seg, t) {
-                out.push(p);
+            let peak = (start..end).fold(k, |b, i| if q[i] > q[b] { i } else { b });
+            let seg = Segment { start, end, peak };
+            if let Some(point) = self.segment_point(frame, ray, r0, p, q, &seg, t) {
+                out.push(point);
             }
         }
     }
 
+    /// Samples on either side of a maximum searched for its background: past the flank of the
+    /// widest accepted stripe.
+    fn background_window(&self) -> usize {
+        ((0.5 * self.params.max_width + 2.0) / SAMPLE_STEP_PX).ceil() as usize
+    }
+
     /// The centre of one segment along the ray, or `None` if it is too narrow/wide or the fit
-    /// fails.
+    /// fails. `p` is the sampled profile, `q` its contrast above the local background.
     fn segment_point<P: Pixel>(
         &self,
         frame: &Frame<'_, P>,
         ray: usize,
         r0: f64,
+        raw: &[f32],
         p: &[f32],
         seg: &Segment,
         t: f32,
@@ -499,20 +560,21 @@ impl RidgeDetector {
             return None;
         }
         let peak = p[seg.peak];
-        let sat = frame.max_value as f32;
+        let (dx, dy) = self.dirs[ray];
+        let r_peak = r0 + seg.peak as f64 * SAMPLE_STEP_PX;
         let mut quality = 0;
-        let index = if peak >= sat - 0.5 {
+        let index = if frame.saturated_near(self.cx + r_peak * dx, self.cy + r_peak * dy) {
             quality |= quality::SATURATED;
-            estimators::plateau_centre(p, seg, t, sat)?
+            estimators::plateau_centre(p, seg, t, peak)?
         } else {
             match self.params.method {
-                Method::Centroid => estimators::centroid(p, seg)?,
+                // Eq. 16 weighs the raw intensities, background included.
+                Method::Centroid => estimators::centroid(raw, seg)?,
                 Method::Windowed | Method::Hessian => estimators::windowed_centroid(p, seg, t)?,
                 Method::Gauss => estimators::gaussian(p, seg)?,
                 Method::BlaisRioux => estimators::blais_rioux(p, seg)?,
             }
         };
-        let (dx, dy) = self.dirs[ray];
         let mut r = r0 + index * SAMPLE_STEP_PX;
         if !self.is_ridge_centre(frame, self.cx + r * dx, self.cy + r * dy, peak) {
             return None;
@@ -568,12 +630,32 @@ impl RidgeDetector {
 /// on that ray.
 pub const MIN_EDGE_ANGLE_DEG: f64 = 30.0;
 
+/// Largest difference between the backgrounds on the two sides of a stripe, relative to its
+/// contrast, for the stripe to be measured.
+pub const MAX_BACKGROUND_STEP: f32 = 0.5;
+
 /// Arc length (px) over which a stripe must continue on at least one side of a point.
 pub const MIN_STRIPE_ARC_PX: f64 = 2.5;
 
 /// The largest gradient (per px, relative to the peak) accepted at a stripe centre; a
 /// Gaussian stripe of σ = 1.5 px measured 0.3 px off its centre has 0.13.
 pub const MAX_CENTRE_GRADIENT: f32 = 0.25;
+
+/// Whether pixel (x, y) is brighter by more than `t` than the darker of its two neighbours
+/// `reach` px away along the row, or along the column: true on a stripe (narrower than
+/// 2·reach) in any direction, false inside a uniformly lit area. Beyond the image counts as 0.
+#[inline]
+fn stands_out<P: Pixel>(f: &Frame<'_, P>, x: usize, y: usize, reach: usize, t: f32) -> bool {
+    let (w, h) = (f.width as usize, f.height as usize);
+    let get = |xx: Option<usize>, yy: Option<usize>| match (xx, yy) {
+        (Some(xx), Some(yy)) if xx < w && yy < h => f.at(xx, yy),
+        _ => 0.0,
+    };
+    let v = f.at(x, y);
+    let row = get(x.checked_sub(reach), Some(y)).min(get(Some(x + reach), Some(y)));
+    let col = get(Some(x), y.checked_sub(reach)).min(get(Some(x), Some(y + reach)));
+    v - row > t || v - col > t
+}
 
 /// atan2 in [0, 2π) with an error below 1e-5 rad (a 7th-order odd polynomial of the octant
 /// ratio): the candidate scan only needs to know which rays pass near a pixel.
@@ -602,3 +684,6 @@ fn fast_atan2(y: f64, x: f64) -> f64 {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod sim_tests;

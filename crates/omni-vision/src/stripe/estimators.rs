@@ -139,10 +139,10 @@ pub fn crossings(p: &[f32], s: &Segment, level: f32) -> Option<(f64, f64)> {
 }
 
 /// Centre of a saturated plateau: the midpoint of the two edges, taken where the profile
-/// crosses half way between the threshold and the saturation level (the steep, well-sampled
-/// part of the edges), never the first saturated sample.
-pub fn plateau_centre(p: &[f32], s: &Segment, t: f32, saturation: f32) -> Option<f64> {
-    let (a, b) = crossings(p, s, 0.5 * (t + saturation))?;
+/// crosses half way between the threshold and the plateau level `top` (the steep,
+/// well-sampled part of the edges), never the first saturated sample.
+pub fn plateau_centre(p: &[f32], s: &Segment, t: f32, top: f32) -> Option<f64> {
+    let (a, b) = crossings(p, s, 0.5 * (t + top))?;
     Some(0.5 * (a + b))
 }
 

@@ -1,0 +1,100 @@
+//! Sampling the image between pixel centres with a small Gaussian kernel.
+//!
+//! Bilinear interpolation of a stripe only 2–3 px wide (σ ≈ 0.8 px: a sharp lens) flattens the
+//! peak towards the nearest pixel centre ("pixel locking", 0.2 px of error measured on the
+//! simulator's frames). A Gaussian kernel of σ = [`SAMPLE_SIGMA_PX`] instead samples the image
+//! smoothed by that Gaussian, whose maximum stays where the stripe's is up to the aliasing of
+//! the pixel grid: for a Gaussian stripe of σ_s the residual is below 0.02 px for σ_s ≥ 0.75 px,
+//! 0.007 px for σ_s ≥ 1 px and 0.09 px for a very sharp σ_s = 0.5 px (computed numerically;
+//! tested below). A wider kernel would alias less but shifts curved stripes more (a ridge of
+//! radius of curvature R moves inwards by about σ²/(2R): 0.005 px at R = 70 px).
+
+use super::{Frame, Pixel};
+
+/// Standard deviation (px) of the sampling kernel.
+pub const SAMPLE_SIGMA_PX: f64 = 0.8;
+/// Taps either side: the kernel covers offsets −3..=4 around floor(x) (≥ ±3 σ).
+const HALF: i64 = 3;
+const TAPS: usize = 2 * HALF as usize + 2;
+/// Sub-pixel resolution of the weight table (position error ≤ 1 / (2 · LEVELS) px).
+const LEVELS: usize = 512;
+
+/// Precomputed kernel weights for `LEVELS` sub-pixel phases.
+#[derive(Debug, Clone)]
+pub struct GaussSampler {
+    /// `weights[phase][tap]`, normalised to sum 1 per phase.
+    weights: Vec<[f32; TAPS]>,
+}
+
+impl Default for GaussSampler {
+    fn default() -> Self {
+        Self::new(SAMPLE_SIGMA_PX)
+    }
+}
+
+impl GaussSampler {
+    pub fn new(sigma: f64) -> Self {
+        let weights = (0..LEVELS)
+            .map(|phase| {
+                let f = phase as f64 / LEVELS as f64;
+                let mut w = [0.0f64; TAPS];
+                for (k, wk) in w.iter_mut().enumerate() {
+                    let d = (k as i64 - HALF) as f64 - f;
+                    *wk = (-d * d / (2.0 * sigma * sigma)).exp();
+                }
+                let sum: f64 = w.iter().sum();
+                w.map(|v| (v / sum) as f32)
+            })
+            .collect();
+        GaussSampler { weights }
+    }
+
+    /// The Gaussian-weighted image value at (x, y) px, or `None` if the kernel leaves the image.
+    #[inline]
+    pub fn sample<P: Pixel>(&self, f: &Frame<'_, P>, x: f64, y: f64) -> Option<f32> {
+        let (x0, y0) = (x.floor(), y.floor());
+        let (xi, yi) = (x0 as i64 - HALF, y0 as i64 - HALF);
+        if xi < 0 || yi < 0 || xi + TAPS as i64 > f.width as i64 || yi + TAPS as i64 > f.height as i64 {
+            return None;
+        }
+        let wx = &self.weights[(((x - x0) * LEVELS as f64) as usize).min(LEVELS - 1)];
+        let wy = &self.weights[(((y - y0) * LEVELS as f64) as usize).min(LEVELS - 1)];
+        let w = f.width as usize;
+        let mut acc = 0.0f32;
+        for (j, &wyj) in wy.iter().enumerate() {
+            let row = &f.data[(yi as usize + j) * w + xi as usize..][..TAPS];
+            let mut r = 0.0f32;
+            for (i, &p) in row.iter().enumerate() {
+                r += wx[i] * p.to_f32();
+            }
+            acc += wyj * r;
+        }
+        Some(acc)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flat_images_stay_flat_and_narrow_peaks_keep_their_centre() {
+        let (w, h) = (24u32, 24u32);
+        let flat = vec![100u16; (w * h) as usize];
+        let s = GaussSampler::default();
+        let f = Frame { width: w, height: h, data: &flat, max_value: 255.0 };
+        assert!((s.sample(&f, 7.3, 9.9).unwrap() - 100.0).abs() < 1e-3);
+        assert!(s.sample(&f, 2.5, 9.0).is_none());
+        // A vertical line of σ = 0.75 px centred at x = 9.3: the sampled row's maximum (found by
+        // a fine scan) is at 9.3 within the aliasing residual (0.02 px) and the table step.
+        let c = 9.3;
+        let img: Vec<u16> =
+            (0..w * h).map(|i| (20000.0 * (-((i % w) as f64 - c).powi(2) / (2.0 * 0.5625)).exp()) as u16).collect();
+        let f = Frame { width: w, height: h, data: &img, max_value: 65535.0 };
+        let best = (0..2000)
+            .map(|k| 8.0 + k as f64 * 0.001)
+            .max_by(|a, b| s.sample(&f, *a, 10.0).unwrap().total_cmp(&s.sample(&f, *b, 10.0).unwrap()))
+            .unwrap();
+        assert!((best - c).abs() < 0.02, "{best}");
+    }
+}

@@ -5,8 +5,8 @@
 //! 1. For every pixel *corner* cast the camera ray ([`CameraModel::pixel_to_ray`]) and record
 //!    what it hits and on which side of each light plane. A pixel whose corners disagree (an
 //!    object or checkerboard edge, the mirror rim, a light plane crossing it) or lie within
-//!    4 σ of a light plane is supersampled on an `n × n` grid; any other pixel takes one
-//!    sample at its centre.
+//!    4 σ of a light plane is supersampled on an `n × n` grid; any other pixel takes the mean of
+//!    its four corners' samples.
 //! 2. Each sample shades the first hit: `albedo · (ambient_e + Σ laser)` electrons, where a
 //!    light plane contributes `laser_strength · cos(incidence) · g(d) / (π r)`: `g` the normalised
 //!    Gaussian of the distance `d` (mm) from the plane (σ = FWHM / 2.3548), `1/(π r)` the spreading
@@ -180,11 +180,13 @@ struct CornerKey {
     sides: u64,
     /// Whether the hit lies within 4 σ of any light plane.
     near: bool,
+    /// Signal (e⁻) of a point sample at the corner.
+    value: f64,
 }
 
 impl Shader<'_> {
     fn corner(&self, camera: &dyn omni_model::CameraModel, px: Vector2<f64>) -> CornerKey {
-        let none = CornerKey { surface: u32::MAX, sides: 0, near: false };
+        let none = CornerKey { surface: u32::MAX, sides: 0, near: false, value: 0.0 };
         let Some(ray) = camera.pixel_to_ray(&px) else { return none };
         let Some(hit) = self.scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY) else { return none };
         let mut sides = 0u64;
@@ -194,7 +196,8 @@ impl Shader<'_> {
             sides |= u64::from(d > 0.0) << i;
             near |= d.abs() < 4.0 * self.sigma;
         }
-        CornerKey { surface: hit.object as u32 * 4 + hit.pattern as u32, sides, near }
+        let value = if near { 0.0 } else { self.shade(&hit, &ray.dir, |_| 0.0) };
+        CornerKey { surface: hit.object as u32 * 4 + hit.pattern as u32, sides, near, value }
     }
 
     /// Electrons collected at a hit seen along `view`; `footprint[i]` is the spread (mm rms) of
@@ -276,7 +279,7 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
         .collect();
     let n = opts.supersample.max(1) as usize;
     let psf = PixelPsf::new(opts.psf_sigma_px, n);
-    // Pixels whose corners agree take one sample at their centre (spread later by a discrete
+    // Pixels whose corners agree take the mean of their corners (spread later by a discrete
     // convolution); the others get a supersampled patch spread from the exact sample positions.
     let rows: Vec<RowResult> = (0..h)
         .into_par_iter()
@@ -295,7 +298,9 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
                     continue;
                 }
                 if uniform {
-                    centre[x] = pixel_samples(&shader, camera, x as f64, y as f64, 1)[0];
+                    // Same surface and pattern, far from every light plane at all four corners:
+                    // the signal is smooth over the pixel and the corners' mean integrates it.
+                    centre[x] = 0.25 * c.iter().map(|k| k.value).sum::<f64>();
                 } else {
                     let samples = pixel_samples(&shader, camera, x as f64, y as f64, n as u32);
                     patches.push((x, psf.patch(&samples)));

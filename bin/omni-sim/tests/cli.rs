@@ -1,0 +1,244 @@
+//! The omni-sim binary end to end: files written, streams readable, errors clear.
+
+use omni_formats::stream::{Record, StreamReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn sim(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_omni-sim")).args(args).current_dir(dir).output().unwrap()
+}
+
+fn ok(out: &Output) {
+    assert!(out.status.success(), "exit {:?}: {}", out.status.code(), String::from_utf8_lossy(&out.stderr));
+}
+
+fn testdata(rel: &str) -> String {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../testdata")).join(rel).display().to_string()
+}
+
+/// A 256 × 256 paper sensor in `dir/sensor` (small images keep the tests fast).
+fn small_sensor(dir: &Path) {
+    ok(&sim(&["sensor", "--preset", "paper", "--width", "256", "-o", "sensor"], dir));
+}
+
+#[test]
+fn sensor_files_carry_the_imperfections() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "sensor",
+        "--preset",
+        "paper",
+        "-o",
+        "s",
+        "--camera-offset",
+        "0.3,-0.1,0.5",
+        "--camera-tilt",
+        "0.1,-0.2",
+        "--principal-point-offset",
+        "1.5,-2",
+        "--facet-errors",
+        "0.02",
+        "--encoder-offset",
+        "-0.05",
+        "--seed",
+        "4",
+    ];
+    ok(&sim(&args, dir.path()));
+    let (cam, _) = omni_formats::CameraFile::load(&dir.path().join("s/camera.json")).unwrap();
+    let omni_formats::CameraSpec::Hyperbolic(p) = cam.model else { panic!("not hyperbolic") };
+    assert_eq!(p.camera_offset_mm, [0.3, -0.1, 0.5]);
+    assert_eq!(p.camera_tilt_deg, [0.1, -0.2]);
+    assert_eq!((p.cx_px, p.cy_px), (513.0, 509.5));
+    assert_eq!((p.fx_px, p.width), (1950.0, 1024));
+    let (scanner, _) = omni_formats::ScannerFile::load(&dir.path().join("s/scanner.json")).unwrap();
+    assert_eq!(scanner.transmitter.polygon.facet_errors.len(), 12);
+    assert_eq!(scanner.transmitter.polygon.encoder_zero_deg, -0.05);
+}
+
+#[test]
+fn scan_writes_frames_manifest_and_truth_deterministically() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let scene = testdata("scenes/plane.json");
+    let scan = |frames: &str, out: &str| {
+        let args = [
+            "scan",
+            "--camera",
+            "sensor/camera.json",
+            "--scanner",
+            "sensor/scanner.json",
+            "--scene",
+            &scene,
+            "--angles",
+            "16:22:2",
+            "--frames",
+            frames,
+            "--laser-off",
+            "--seed",
+            "9",
+            "-o",
+            out,
+            "--truth",
+            "truth.jsonl",
+        ];
+        ok(&sim(&args, d));
+    };
+    scan("f1", "scan.jsonl");
+    scan("f2", "-");
+    let text = std::fs::read_to_string(d.join("scan.jsonl")).unwrap();
+    let records: Vec<Record> = StreamReader::new(text.as_bytes(), "scan.jsonl").map(|r| r.unwrap()).collect();
+    assert_eq!(records.len(), 5);
+    let Record::Header(h) = &records[0] else { panic!("no header") };
+    assert_eq!(h.frames_dir.as_deref(), Some("f1"));
+    for (i, r) in records[1..4].iter().enumerate() {
+        let Record::Frame(f) = r else { panic!("record {i} is not a frame") };
+        assert_eq!((f.seq, f.alpha_deg, f.facet, f.lasers.clone()), (i as u64, 16.0 + 2.0 * i as f64, 0, vec![0, 1]));
+        let png = std::fs::read(d.join("f1").join(&f.path)).unwrap();
+        assert_eq!(png, std::fs::read(d.join("f2").join(&f.path)).unwrap(), "same seed, same PNG");
+        assert!(d.join("f1").join(f.ambient_path.as_ref().unwrap()).exists());
+    }
+    let Record::Status(s) = &records[4] else { panic!("no status") };
+    assert!(s.complete && s.frames == 3);
+    let truth = std::fs::read_to_string(d.join("truth.jsonl")).unwrap();
+    assert_eq!(truth.lines().count(), 4);
+    let rec: omni_simulator::TruthRecord = serde_json::from_str(truth.lines().nth(2).unwrap()).unwrap();
+    assert_eq!(rec.alpha_deg, 18.0);
+    assert!(rec.points.len() > 100 && rec.points.iter().all(|p| (p[0] - 500.0).abs() < 1e-6));
+}
+
+#[test]
+fn sixteen_bit_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let args = [
+        "scan",
+        "--camera",
+        "sensor/camera.json",
+        "--scanner",
+        "sensor/scanner.json",
+        "--scene",
+        &testdata("scenes/sphere.json"),
+        "--angles",
+        "20",
+        "--frames",
+        "f",
+        "--bit-depth",
+        "16",
+        "-o",
+        "m.jsonl",
+    ];
+    ok(&sim(&args, d));
+    let f = omni_simulator::Frame16::from_png(&d.join("f/frame_000000.png")).unwrap();
+    assert_eq!((f.bit_depth, f.width), (16, 256));
+    assert!(f.data.iter().any(|v| *v > 255));
+}
+
+#[test]
+fn bad_input_is_refused_with_a_clear_message_and_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let text = std::fs::read_to_string(testdata("scenes/sphere.json")).unwrap();
+    std::fs::write(d.join("torus.json"), text.replace("\"sphere\"", "\"torus\"")).unwrap();
+    std::fs::write(d.join("negative.json"), text.replace("50.0", "-50.0")).unwrap();
+    let board_above = r#"{"format":"omniscan.scene","version":1,"objects":[{"type":"checkerboard",
+        "centre_mm":[0,0,3000],"normal":[0,0,-1],"up":[1,0,0],"square_mm":30,"inner_cols":9,"inner_rows":6}]}"#;
+    std::fs::write(d.join("above.json"), board_above).unwrap();
+    for (scene, expect) in [
+        ("torus.json", "unknown variant `torus`"),
+        ("negative.json", "radius_mm must be a positive"),
+        ("above.json", "never enters the camera's field of view"),
+        ("missing.json", "missing.json"),
+    ] {
+        let args = [
+            "scan",
+            "--camera",
+            "sensor/camera.json",
+            "--scanner",
+            "sensor/scanner.json",
+            "--scene",
+            scene,
+            "--angles",
+            "20",
+            "--frames",
+            "f",
+            "-o",
+            "m.jsonl",
+        ];
+        let out = sim(&args, d);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{scene}: {err}");
+        assert!(err.starts_with("omni-sim: error: ") && err.contains(scene) && err.contains(expect), "{err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(!d.join("m.jsonl").exists(), "no manifest after an error");
+    }
+    let out = sim(
+        &[
+            "scan",
+            "--camera",
+            "sensor/camera.json",
+            "--scanner",
+            "sensor/scanner.json",
+            "--scene",
+            "x.json",
+            "--angles",
+            "0:30:-1",
+            "--frames",
+            "f",
+        ],
+        d,
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--angles"));
+}
+
+#[test]
+fn boards_and_rig() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let board = testdata("boards/board_9x6.json");
+    ok(&sim(
+        &["boards", "--camera", "sensor/camera.json", "--board", &board, "--count", "3", "--seed", "2", "--out", "b"],
+        d,
+    ));
+    let truth: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("b/boards_truth.json")).unwrap()).unwrap();
+    let images = truth["images"].as_array().unwrap();
+    assert_eq!(images.len(), 3);
+    for img in images {
+        assert!(d.join("b").join(img["path"].as_str().unwrap()).exists());
+        assert_eq!(img["corners"].as_array().unwrap().len(), 54);
+        assert!(img["corners"].as_array().unwrap().iter().any(|c| !c.is_null()));
+    }
+    let args = [
+        "rig",
+        "--camera",
+        "sensor/camera.json",
+        "--scanner",
+        "sensor/scanner.json",
+        "--board",
+        &board,
+        "--angles",
+        "18,22",
+        "--out",
+        "r",
+    ];
+    ok(&sim(&args, d));
+    for f in ["pose.png", "frame_000000.png", "frame_000001.png", "scan.jsonl", "rig.json", "truth.jsonl"] {
+        assert!(d.join("r").join(f).exists(), "{f}");
+    }
+    let rig: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("r/rig.json")).unwrap()).unwrap();
+    assert_eq!(rig["poses"].as_array().unwrap().len(), 2);
+}
+
+#[test]
+fn help_teaches() {
+    let out = sim(&["--help"], Path::new("."));
+    ok(&out);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("Examples:") && text.contains("omni-sim scan") && text.contains("f = 1950 px"));
+    assert_eq!(sim(&["scan"], Path::new(".")).status.code(), Some(2));
+}

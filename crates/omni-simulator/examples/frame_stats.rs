@@ -1,5 +1,7 @@
-//! Prints a rendered frame's statistics (stripe pixels, peak, SNR, render time) for the paper
-//! bench: `cargo run --release -p omni-simulator --example frame_stats -- [plane|cylinder|sphere] [alpha_deg]`.
+//! Prints a rendered frame's statistics for the paper bench: render time, ground-truth samples,
+//! stripe pixels, stripe peak, noise and SNR.
+//! `cargo run --release -p omni-simulator --example frame_stats -- [plane|cylinder|sphere|cone] [alpha_deg]`
+//! (set `RAYON_NUM_THREADS=1` for the one-core figure).
 
 use omni_simulator::{
     BenchObject, RenderOptions, Scene, Sensor, paper_bench, render_ambient_frame, render_laser_frame,
@@ -14,24 +16,31 @@ fn main() {
         Some("cone") => BenchObject::ConePyramid,
         _ => BenchObject::Plane,
     };
-    let alpha: f64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(15.0);
+    let alpha: f64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(20.0);
     let sensor = Sensor::paper();
     let scene = Scene::from_file(paper_bench(object)).unwrap();
     let opts = RenderOptions::default();
     let t = Instant::now();
     let frame = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &opts);
-    let dt = t.elapsed();
-    let ambient = render_ambient_frame(&sensor, &scene, &RenderOptions { seed: 1, ..opts.clone() });
-    let diff: Vec<f64> = frame.image.data.iter().zip(&ambient.data).map(|(a, b)| *a as f64 - *b as f64).collect();
-    let stripe = diff.iter().filter(|d| **d > 20.0).count();
-    let peak = frame.image.data.iter().copied().max().unwrap();
-    let bg: Vec<f64> = diff.iter().copied().filter(|d| d.abs() < 20.0).collect();
-    let sd = (bg.iter().map(|d| d * d).sum::<f64>() / bg.len() as f64 / 2.0).sqrt();
-    let amb_max = ambient.data.iter().copied().max().unwrap();
+    let seconds = t.elapsed().as_secs_f64();
+    // The same frame without noise, and the ambient (laser-off) frame without noise.
+    let clean = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &RenderOptions::noiseless());
+    let ambient = render_ambient_frame(&sensor, &scene, &RenderOptions::noiseless());
+    let laser: Vec<f64> = clean.image.data.iter().zip(&ambient.data).map(|(a, b)| *a as f64 - *b as f64).collect();
+    let stripe: Vec<usize> = (0..laser.len()).filter(|&i| laser[i] > 20.0).collect();
+    let peak = stripe.iter().map(|&i| clean.image.data[i]).max().unwrap_or(0);
+    // Noise at the stripe: noisy − noiseless over the stripe pixels.
+    let residual: Vec<f64> = stripe.iter().map(|&i| frame.image.data[i] as f64 - clean.image.data[i] as f64).collect();
+    let sigma = (residual.iter().map(|r| r * r).sum::<f64>() / residual.len().max(1) as f64).sqrt();
+    let peak_laser = stripe.iter().map(|&i| laser[i]).fold(0.0, f64::max);
     println!(
-        "{object:?} α={alpha}°: render {:.3} s, truth points {}, stripe pixels (>20 DN over ambient) {stripe}, peak {peak}, ambient max {amb_max}, noise σ {sd:.2} DN, SNR {:.1}",
-        dt.as_secs_f64(),
+        "{object:?} α = {alpha}°, {} × {} px: render {seconds:.3} s; truth samples {}; stripe pixels (> 20 DN above \
+         ambient) {}; stripe peak {peak} of 255 ({peak_laser:.0} DN of laser over ambient); noise at the stripe σ = \
+         {sigma:.2} DN; peak SNR {:.0}",
+        frame.image.width,
+        frame.image.height,
         frame.truth.len(),
-        (peak as f64 - amb_max as f64) / sd
+        stripe.len(),
+        peak_laser / sigma.max(1e-9)
     );
 }

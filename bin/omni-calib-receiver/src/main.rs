@@ -1,1 +1,318 @@
-fn main() {}
+//! omni-calib-receiver: calibrate the catadioptric camera from checkerboard images.
+
+use clap::{Parser, Subcommand};
+use omni_calib::receiver::corners_file::{CornersFile, ImageCorners};
+use omni_calib::receiver::{self, Calibration, ModelKind, Observation, Options, export};
+use omni_cli::{CliError, CliResult};
+use omni_formats::{BoardFile, CameraFile, CameraSpec, read_doc, write_doc};
+use omni_vision::corners::{DetectorOptions, GrayF32, detect_board, load_gray, overlay};
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+
+#[derive(Parser, Debug)]
+#[command(
+    version,
+    about = "Calibrate the catadioptric camera (receiver) from checkerboard images: detect the corners, \
+fit a camera model, write camera.json with the fitted model and a report.",
+    args_conflicts_with_subcommands = true,
+    subcommand_negates_reqs = true,
+    after_help = "Examples:\n  \
+omni-calib-receiver --board board.json -o camera.json boards/*.png\n  \
+omni-calib-receiver --board board.json --model ocam --export-ocam calib_results.txt boards/\n  \
+omni-calib-receiver --board board.json --save-corners corners.json --overlay check/ boards/\n  \
+omni-calib-receiver --board board.json --corners corners.json --model mei --export-kalibr camchain.yaml\n  \
+omni-calib-receiver import-ocam calib_results.txt -o camera.json\n\n\
+Models: mei (unified sphere model + radial-tangential distortion, as Kalibr omni-radtan and OpenCV \
+omnidir), ocam (Scaramuzza polynomial, as OCamCalib), hyperbolic (the exact mirror of --mirror with \
+focal length and principal point fitted). Images may be files or directories (png, jpg, tif). \
+Images whose board is not found, has too few corners, or fits much worse than the others are \
+reported and left out. camera.json is written only if the calibration succeeded.\n\
+Exit codes: 0 ok, 1 bad input or failed calibration, 2 usage error."
+)]
+struct Args {
+    #[command(subcommand)]
+    command: Option<Command>,
+    #[command(flatten)]
+    calib: CalibArgs,
+}
+
+#[derive(clap::Args, Debug)]
+struct CalibArgs {
+    /// The checkerboard (board.json: inner corners and square size).
+    #[arg(long, required = true)]
+    board: Option<PathBuf>,
+    /// Camera model to fit: mei, ocam or hyperbolic.
+    #[arg(long, default_value = "mei")]
+    model: ModelKind,
+    /// Read corners from this file (see --save-corners) instead of detecting them.
+    #[arg(long, conflicts_with = "images")]
+    corners: Option<PathBuf>,
+    /// Write the detected corners to this file (JSON, `omniscan.corners`).
+    #[arg(long)]
+    save_corners: Option<PathBuf>,
+    /// Write one PNG per image with detected (green) and reprojected (red) corners here.
+    #[arg(long, value_name = "DIR")]
+    overlay: Option<PathBuf>,
+    /// Output camera.json (`-` = stdout).
+    #[arg(short, long, default_value = "camera.json")]
+    output: PathBuf,
+    /// For --model hyperbolic: camera.json of kind hyperbolic giving the mirror (a, b, rim);
+    /// default: the paper's mirror.
+    #[arg(long)]
+    mirror: Option<PathBuf>,
+    /// Also export OCamCalib calib_results.txt (needs --model ocam).
+    #[arg(long, value_name = "FILE")]
+    export_ocam: Option<PathBuf>,
+    /// Also export Kalibr camchain.yaml, omni + radtan (needs --model mei).
+    #[arg(long, value_name = "FILE")]
+    export_kalibr: Option<PathBuf>,
+    /// Also export OpenCV omnidir K, D, xi as OpenCV YAML (needs --model mei).
+    #[arg(long, value_name = "FILE")]
+    export_opencv: Option<PathBuf>,
+    /// Huber threshold of the robust loss (px).
+    #[arg(long, default_value_t = 1.0)]
+    huber_px: f64,
+    /// Board images (files or directories).
+    #[arg(required_unless_present = "corners")]
+    images: Vec<PathBuf>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Convert an OCamCalib calib_results.txt into camera.json (kind ocam).
+    ImportOcam {
+        /// OCamCalib's calib_results.txt.
+        input: PathBuf,
+        /// Output camera.json (`-` = stdout).
+        #[arg(short, long, default_value = "camera.json")]
+        output: PathBuf,
+    },
+}
+
+fn main() -> std::process::ExitCode {
+    omni_cli::main("omni-calib-receiver", || {
+        let args = Args::parse();
+        match args.command {
+            Some(Command::ImportOcam { input, output }) => import_ocam(&input, &output),
+            None => calibrate(&args.calib),
+        }
+    })
+}
+
+fn import_ocam(input: &Path, output: &Path) -> CliResult {
+    let text = std::fs::read_to_string(input).map_err(|e| format!("{}: {e}", input.display()))?;
+    let params = export::parse_ocam_calib_results(&text).map_err(|e| format!("{}: {e}", input.display()))?;
+    let mut file = CameraFile::new(CameraSpec::Ocam(params));
+    file.report = Some(serde_json::json!({"imported_from": input.display().to_string()}));
+    write_doc(output, &file)?;
+    Ok(())
+}
+
+/// Image files named on the command line, directories expanded (sorted by name).
+fn expand_images(paths: &[PathBuf]) -> CliResult<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            let mut files: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| format!("{}: {e}", p.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| {
+                    let ext = f.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+                    matches!(ext.as_str(), "png" | "jpg" | "jpeg" | "tif" | "tiff" | "bmp" | "pgm")
+                })
+                .collect();
+            files.sort();
+            if files.is_empty() {
+                return Err(CliError::new(format!("{}: no images in directory", p.display())));
+            }
+            out.extend(files);
+        } else {
+            out.push(p.clone());
+        }
+    }
+    Ok(out)
+}
+
+fn check_exports(args: &CalibArgs) -> CliResult {
+    if args.export_ocam.is_some() && args.model != ModelKind::Ocam {
+        return Err(CliError::usage("--export-ocam needs --model ocam"));
+    }
+    if (args.export_kalibr.is_some() || args.export_opencv.is_some()) && args.model != ModelKind::Mei {
+        return Err(CliError::usage("--export-kalibr and --export-opencv need --model mei"));
+    }
+    if !(args.huber_px.is_finite() && args.huber_px > 0.0) {
+        return Err(CliError::usage("--huber-px must be a positive number"));
+    }
+    Ok(())
+}
+
+/// Detected corners and the images (kept for the overlays).
+struct Detected {
+    corners: CornersFile,
+    images: Vec<Option<GrayF32>>,
+}
+
+fn detect(paths: &[PathBuf], board: &BoardFile, keep_images: bool) -> CliResult<Detected> {
+    let bar = omni_cli::progress(Some(paths.len() as u64), "detecting corners");
+    let results: Vec<Result<(GrayF32, ImageCorners), String>> = paths
+        .par_iter()
+        .map(|p| {
+            let img = load_gray(p)?;
+            let name = p.display().to_string();
+            let found = detect_board(&img, board.inner_cols, board.inner_rows, &DetectorOptions::default());
+            bar.inc(1);
+            let entry = match found {
+                Ok(b) => ImageCorners {
+                    name,
+                    corners: b
+                        .corners
+                        .iter()
+                        .map(|c| [c.index[0] as f64, c.index[1] as f64, c.px[0], c.px[1]])
+                        .collect(),
+                    reason: None,
+                },
+                Err(why) => ImageCorners { name, corners: Vec::new(), reason: Some(why.to_string()) },
+            };
+            Ok((img, entry))
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut size: Option<(usize, usize, String)> = None;
+    let mut file = CornersFile::new(0, 0, board.inner_cols, board.inner_rows);
+    let mut images = Vec::new();
+    for r in results {
+        let (img, entry) = r.map_err(CliError::new)?;
+        match &size {
+            None => size = Some((img.width, img.height, entry.name.clone())),
+            Some((w, h, first)) if (*w, *h) != (img.width, img.height) => {
+                return Err(CliError::new(format!(
+                    "{}: image is {} × {} px but {first} is {w} × {h} px (all images must come from one camera)",
+                    entry.name, img.width, img.height
+                )));
+            }
+            _ => {}
+        }
+        file.images.push(entry);
+        images.push(keep_images.then_some(img));
+    }
+    let (w, h, _) = size.ok_or_else(|| CliError::new("no images given"))?;
+    file.width = w as u32;
+    file.height = h as u32;
+    Ok(Detected { corners: file, images })
+}
+
+fn load_corners(path: &Path, board: &BoardFile) -> CliResult<CornersFile> {
+    let file: CornersFile = read_doc(path)?;
+    file.validate().map_err(|e| format!("{}: {e}", path.display()))?;
+    if (file.inner_cols, file.inner_rows) != (board.inner_cols, board.inner_rows) {
+        return Err(CliError::new(format!(
+            "{}: corners are for a {} × {} board but the board file says {} × {}",
+            path.display(),
+            file.inner_cols,
+            file.inner_rows,
+            board.inner_cols,
+            board.inner_rows
+        )));
+    }
+    Ok(file)
+}
+
+fn calibrate(args: &CalibArgs) -> CliResult {
+    check_exports(args)?;
+    let board_path = args.board.as_ref().ok_or_else(|| CliError::usage("--board is required"))?;
+    let board: BoardFile = read_doc(board_path)?;
+    board.validate().map_err(|e| format!("{}: {e}", board_path.display()))?;
+    let mirror = match &args.mirror {
+        Some(p) => match read_doc::<CameraFile>(p)?.model {
+            CameraSpec::Hyperbolic(h) => h,
+            _ => return Err(CliError::new(format!("{}: --mirror needs a camera of kind hyperbolic", p.display()))),
+        },
+        None => omni_model::HyperbolicParams::paper(),
+    };
+    let detected = match &args.corners {
+        Some(path) => Detected { corners: load_corners(path, &board)?, images: Vec::new() },
+        None => detect(&expand_images(&args.images)?, &board, args.overlay.is_some())?,
+    };
+    if let Some(path) = &args.save_corners {
+        write_doc(path, &detected.corners)?;
+    }
+    let corners = &detected.corners;
+    let obs = corners.observations(board.square_mm);
+    let opts = Options { model: args.model, huber_px: args.huber_px, mirror, ..Default::default() };
+    let cal = receiver::calibrate(corners.width, corners.height, &obs, &opts).map_err(|e| {
+        let reasons: Vec<String> =
+            corners.images.iter().filter_map(|i| i.reason.as_ref().map(|r| format!("{}: {r}", i.name))).collect();
+        CliError::new(format!("calibration failed: {e}; {}", reasons.join("; ")))
+    })?;
+    print_summary(&cal, corners);
+    if let Some(dir) = &args.overlay {
+        write_overlays(dir, &cal, &obs, &detected)?;
+    }
+    write_exports(args, &cal)?;
+    let mut file = CameraFile::new(cal.spec.clone());
+    let mut report = cal.report_json();
+    report["model"] = serde_json::json!(format!("{:?}", args.model).to_lowercase());
+    report["board"] = serde_json::json!({"inner_cols": board.inner_cols, "inner_rows": board.inner_rows, "square_mm": board.square_mm});
+    file.report = Some(report);
+    write_doc(&args.output, &file)?;
+    Ok(())
+}
+
+fn print_summary(cal: &Calibration, corners: &CornersFile) {
+    for (img, entry) in cal.images.iter().zip(&corners.images) {
+        let reason = img.reason.as_ref().or(entry.reason.as_ref());
+        match (img.used, img.rms_px, reason) {
+            (true, Some(r), _) => eprintln!("  {}: {} corners, RMS {r:.3} px", img.name, img.corners),
+            (_, _, Some(why)) => eprintln!("  {}: rejected: {why}", img.name),
+            _ => eprintln!("  {}: rejected", img.name),
+        }
+    }
+    let used = cal.images.iter().filter(|i| i.used).count();
+    eprintln!("RMS reprojection error {:.3} px over {used} of {} images", cal.rms_px, cal.images.len());
+    for ((n, v), s) in cal.param_names.iter().zip(&cal.params).zip(&cal.std_devs) {
+        eprintln!("  {n} = {v:.6} ± {s:.2e}");
+    }
+}
+
+fn write_overlays(dir: &Path, cal: &Calibration, obs: &[Observation], detected: &Detected) -> CliResult {
+    if detected.images.is_empty() {
+        return Err(CliError::usage("--overlay needs images (it cannot be used with --corners)"));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    for (k, (o, img)) in obs.iter().zip(&detected.images).enumerate() {
+        let Some(img) = img else { continue };
+        let reproj: Vec<[f64; 2]> = cal.reprojected(k, o).into_iter().flatten().collect();
+        let picture = overlay::draw_overlay(img, &o.pixels, &reproj);
+        let stem = Path::new(&o.name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or(format!("{k}"));
+        let path = dir.join(format!("{stem}.png"));
+        let tmp = omni_formats::io::temp_path(&path).with_extension("png");
+        picture.save(&tmp).map_err(|e| format!("{}: {e}", path.display()))?;
+        std::fs::rename(&tmp, &path).map_err(|e| format!("{}: {e}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn write_text(path: &Path, text: &str) -> CliResult {
+    omni_formats::io::write_atomic(path, |w| w.write_all(text.as_bytes()))?;
+    Ok(())
+}
+
+fn write_exports(args: &CalibArgs, cal: &Calibration) -> CliResult {
+    match &cal.spec {
+        CameraSpec::Ocam(p) => {
+            if let Some(path) = &args.export_ocam {
+                write_text(path, &export::ocam_calib_results(p))?;
+            }
+        }
+        CameraSpec::Mei(p) => {
+            if let Some(path) = &args.export_kalibr {
+                write_text(path, &export::kalibr_camchain(p))?;
+            }
+            if let Some(path) = &args.export_opencv {
+                write_text(path, &export::opencv_omnidir_yaml(p))?;
+            }
+        }
+        _ => {}
+    }
+    Ok(())
+}

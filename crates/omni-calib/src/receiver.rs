@@ -17,6 +17,7 @@
 //! model is the Mei model with ξ fixed by the given mirror and no distortion; only the focal
 //! lengths and the principal point are fitted.
 
+pub mod corners_file;
 pub mod export;
 
 use crate::pose::{UNPROJECTABLE_PX, board_to_world, params_to_pose, pose_from_rays, pose_to_params, refine_pose};

@@ -20,9 +20,10 @@ fn main() {
     let sensor = Sensor::paper();
     let scene = Scene::from_file(paper_bench(object)).unwrap();
     let opts = RenderOptions::default();
-    let t = Instant::now();
+    let (t, cpu0) = (Instant::now(), process_cpu_seconds());
     let frame = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &opts);
     let seconds = t.elapsed().as_secs_f64();
+    let cpu = process_cpu_seconds().zip(cpu0).map_or(f64::NAN, |(b, a)| b - a);
     // The same frame without noise, and the ambient (laser-off) frame without noise.
     let clean = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &RenderOptions::noiseless());
     let ambient = render_ambient_frame(&sensor, &scene, &RenderOptions::noiseless());
@@ -34,7 +35,7 @@ fn main() {
     let sigma = (residual.iter().map(|r| r * r).sum::<f64>() / residual.len().max(1) as f64).sqrt();
     let peak_laser = stripe.iter().map(|&i| laser[i]).fold(0.0, f64::max);
     println!(
-        "{object:?} α = {alpha}°, {} × {} px: render {seconds:.3} s; truth samples {}; stripe pixels (> 20 DN above \
+        "{object:?} α = {alpha}°, {} × {} px: render {seconds:.3} s wall, {cpu:.2} s CPU; truth samples {}; stripe pixels (> 20 DN above \
          ambient) {}; stripe peak {peak} of 255 ({peak_laser:.0} DN of laser over ambient); noise at the stripe σ = \
          {sigma:.2} DN; peak SNR {:.0}",
         frame.image.width,
@@ -43,4 +44,13 @@ fn main() {
         stripe.len(),
         peak_laser / sigma.max(1e-9)
     );
+}
+
+/// User + system CPU time of the whole process (s), from /proc (Linux; `None` elsewhere): on a
+/// busy machine this, not the wall clock, is the one-core cost.
+fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let fields: Vec<&str> = stat.rsplit(')').next()?.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }

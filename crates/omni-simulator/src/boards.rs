@@ -8,7 +8,7 @@
 
 use crate::frame::Frame16;
 use crate::render::{RenderOptions, render_ambient_frame};
-use crate::rng::SplitMix64;
+use crate::rng::{SplitMix64, mix};
 use crate::scene::{Scene, board_corners};
 use crate::sensor::Sensor;
 use nalgebra::Translation3;
@@ -87,7 +87,9 @@ pub fn corner_pixels(
         .collect()
 }
 
-/// Renders one checkerboard (ambient light only) and its corners' true pixels.
+/// Renders one checkerboard (ambient light only) and its corners' true pixels. The noise stream
+/// is derived from `opts.seed` and the pose, so a set of boards rendered with the same options
+/// gets independent noise.
 ///
 /// Panics if the board or the options are invalid (check them with `validate` first).
 pub fn render_board_image(
@@ -97,7 +99,9 @@ pub fn render_board_image(
     opts: &RenderOptions,
 ) -> (Frame16, Vec<Option<[f64; 2]>>) {
     let scene = Scene::from_file(SceneFile::new(vec![board_object(board, board_pose)])).expect("valid board");
-    let image = render_ambient_frame(sensor, &scene, opts);
+    let t = board_pose.translation.vector;
+    let seed = [t.x, t.y, t.z, board_pose.rotation.w].iter().fold(opts.seed, |s, v| mix(s ^ mix(v.to_bits())));
+    let image = render_ambient_frame(sensor, &scene, &RenderOptions { seed, ..opts.clone() });
     (image, corner_pixels(sensor, &scene, board_pose, board))
 }
 

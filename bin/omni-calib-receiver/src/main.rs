@@ -270,7 +270,7 @@ fn print_summary(cal: &Calibration, corners: &CornersFile) {
     let used = cal.images.iter().filter(|i| i.used).count();
     eprintln!("RMS reprojection error {:.3} px over {used} of {} images", cal.rms_px, cal.images.len());
     for ((n, v), s) in cal.param_names.iter().zip(&cal.params).zip(&cal.std_devs) {
-        eprintln!("  {n} = {v:.6} ± {s:.2e}");
+        eprintln!("  {n} = {v:.6e} ± {s:.2e}");
     }
 }
 

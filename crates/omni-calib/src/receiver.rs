@@ -408,12 +408,11 @@ fn initialise_mei(width: u32, height: u32, xi: f64, fixed: bool, obs: &[Observat
 }
 
 /// Joint refinement with outlier rejection. Returns the model, poses (per `obs` index, `None` =
-/// rejected), per-image RMS and rejection reasons, and the LM report of the last fit.
+/// rejected) and rejection reasons.
 struct Fit {
     model: Model,
     poses: Vec<Option<[f64; 6]>>,
     reasons: Vec<Option<String>>,
-    report: lm::Report,
 }
 
 fn joint_fit(mut model: Model, obs: &[Observation], mut poses: Vec<Option<[f64; 6]>>, opts: &Options) -> Option<Fit> {
@@ -455,7 +454,7 @@ fn joint_fit(mut model: Model, obs: &[Observation], mut poses: Vec<Option<[f64; 
                     opts.outlier_factor
                 ));
             }
-            _ => return Some(Fit { model, poses, reasons, report }),
+            _ => return Some(Fit { model, poses, reasons }),
         }
     }
 }
@@ -508,7 +507,9 @@ fn ocam_from_mei(mei: &Model, obs: &[Observation], degree: usize, width: u32, he
     }
     Some(Model {
         kind: ModelKind::Ocam,
-        free: (0..full.len()).collect(),
+        // e stays 0: a rotation of the image about the centre (d = −e) is a rotation of all rays
+        // about the axis, which the board poses absorb — a gauge, not a parameter.
+        free: (0..full.len()).filter(|&i| i != 4).collect(),
         full,
         names,
         rho_scale,
@@ -586,7 +587,17 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
         }
         images[k].reason = fit.reasons[s].clone();
     }
-    let std_free = fit.report.std_devs().unwrap_or_else(|| vec![f64::NAN; fit.report.params.len()]);
+    let std_free = {
+        let used: Vec<Observation> = (0..sub.len())
+            .filter(|&k| fit.reasons[k].is_none() && fit.poses[k].is_some())
+            .map(|k| sub[k].clone())
+            .collect();
+        let mut x = fit.model.free_values();
+        for k in (0..sub.len()).filter(|&k| fit.reasons[k].is_none()) {
+            x.extend_from_slice(&fit.poses[k].unwrap_or_default());
+        }
+        intrinsic_std_devs(&fit.model, &used, &x, opts.huber_px)
+    };
     let (names, params, std_devs, spec) = describe(&fit.model, &std_free, width, height, opts);
     Ok(Calibration {
         spec,
@@ -597,6 +608,45 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
         std_devs,
         mirrored_labels: mirrored,
     })
+}
+
+/// Standard deviations of the free intrinsics: σ²·(JᵀWJ)⁻¹ with σ² = Σw·r²/(m − n), inverted
+/// after Jacobi scaling (the parameters differ by many orders of magnitude). NaN if singular.
+fn intrinsic_std_devs(model: &Model, obs: &[Observation], x: &[f64], huber: f64) -> Vec<f64> {
+    use lm::Problem as _;
+    let problem = Joint::new(model, obs);
+    let (m, n) = (problem.num_residuals(), problem.num_params());
+    let ni = model.free.len();
+    if x.len() != n || m <= n {
+        return vec![f64::NAN; ni];
+    }
+    let mut r = vec![0.0; m];
+    problem.residuals(x, &mut r);
+    let mut jac = DMatrix::<f64>::zeros(m, n);
+    problem.jacobian(x, &mut jac);
+    let w: Vec<f64> = r.iter().map(|ri| if ri.abs() > huber { huber / ri.abs() } else { 1.0 }).collect();
+    let sigma2 = r.iter().zip(&w).map(|(r, w)| w * r * r).sum::<f64>() / (m - n) as f64;
+    let mut jtj = DMatrix::<f64>::zeros(n, n);
+    for i in 0..m {
+        let row = jac.row(i);
+        for a in 0..n {
+            let ja = row[a] * w[i];
+            if ja != 0.0 {
+                for b in 0..n {
+                    jtj[(a, b)] += ja * row[b];
+                }
+            }
+        }
+    }
+    let d: Vec<f64> = (0..n).map(|i| jtj[(i, i)].max(1e-300).sqrt()).collect();
+    let scaled = DMatrix::from_fn(n, n, |a, b| jtj[(a, b)] / (d[a] * d[b]));
+    match scaled.cholesky() {
+        Some(ch) => {
+            let inv = ch.inverse();
+            (0..ni).map(|i| (sigma2 * inv[(i, i)]).max(0.0).sqrt() / d[i]).collect()
+        }
+        None => vec![f64::NAN; ni],
+    }
 }
 
 /// Names, values, standard deviations of the fitted parameters and the camera spec.

@@ -152,7 +152,7 @@ fn random_pose(rng: &mut SplitMix64, board: &BoardFile) -> Isometry3<f64> {
 
 /// The two-perpendicular-boards rig for transmitter calibration: two copies of a board standing
 /// vertically on the +x side like an open book facing the sensor (a concave right angle), the
-/// spine (their shared vertical edge, 2 mm gap) at (560, 0) mm, both centred at z = −50 mm, so
+/// spine (their shared vertical edge, 2 mm gap) at (620, 0) mm (a 9 × 6 board of 30 mm squares then spans 365–620 mm in x), both centred at z = −50 mm, so
 /// that laser 0's light planes of mid-range mirror angles cross both boards.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Rig {
@@ -166,7 +166,7 @@ impl Rig {
     pub fn standard(board: &BoardFile) -> Rig {
         let s = board.square_mm;
         let width = (board.inner_cols as f64 + 1.0) * s + 2.0 * board.margin_mm;
-        let spine = Vector3::new(560.0, 0.0, -50.0);
+        let spine = Vector3::new(620.0, 0.0, -50.0);
         let r2 = std::f64::consts::FRAC_1_SQRT_2;
         let pose = |normal: Vector3<f64>, right: Vector3<f64>, centre: Vector3<f64>| {
             // Board axes: x = right, y = down, z = −normal.

@@ -170,3 +170,40 @@ fn same_seed_same_png_other_seed_other_noise() {
     assert_eq!(png(7), png(7));
     assert_ne!(png(7), png(8));
 }
+
+#[test]
+fn truth_stays_exact_for_an_imperfect_sensor() {
+    // Camera 0.5 mm off the focus and tilted (a non-central camera), facet errors, encoder offset.
+    let imp = omni_simulator::Imperfections {
+        camera_offset_mm: [0.3, -0.2, 0.5],
+        camera_tilt_deg: [0.2, -0.1],
+        principal_point_offset_px: [1.5, -1.0],
+        facet_sigma_deg: 0.05,
+        encoder_offset_deg: 0.1,
+        seed: 11,
+    };
+    let (cam, tx) = omni_simulator::paper_preset(1024, &imp).unwrap();
+    let sensor = Sensor::from_params(cam, tx).unwrap();
+    let ideal = Sensor::paper();
+    let scene = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
+    let alpha = 20f64.to_radians();
+    for facet in [0, 5] {
+        let truth = omni_simulator::stripe_truth(&sensor, &scene, alpha, facet, &[0, 1]);
+        assert!(truth.len() > 500);
+        let mut worst: f64 = 0.0;
+        for t in &truth {
+            let ray = sensor.camera.pixel_to_ray(&Vector2::from(t.pixel)).unwrap();
+            let lp = sensor.transmitter.light_plane(alpha, facet, t.laser as usize).unwrap();
+            let hit = intersect_ray_plane(&ray, &lp.plane, 1e-6).unwrap();
+            worst = worst.max((hit.point.x - 500.0).abs()).max((hit.point - Point3::from(t.xyz)).norm());
+        }
+        assert!(worst < 1e-6, "facet {facet}: {worst:.2e} mm");
+        // The imperfections matter: the same frame of the ideal sensor lands elsewhere.
+        let ideal_truth = omni_simulator::stripe_truth(&ideal, &scene, alpha, facet, &[0]);
+        let z = |tr: &[TruthPoint]| {
+            tr.iter().filter(|t| t.laser == 0).map(|t| t.xyz[2]).sum::<f64>()
+                / tr.iter().filter(|t| t.laser == 0).count() as f64
+        };
+        assert!((z(&truth) - z(&ideal_truth)).abs() > 0.1, "facet {facet}");
+    }
+}

@@ -152,8 +152,9 @@ fn random_pose(rng: &mut SplitMix64, board: &BoardFile) -> Isometry3<f64> {
 
 /// The two-perpendicular-boards rig for transmitter calibration: two copies of a board standing
 /// vertically on the +x side like an open book facing the sensor (a concave right angle), the
-/// spine (their shared vertical edge, 2 mm gap) at (620, 0) mm (a 9 × 6 board of 30 mm squares then spans 365–620 mm in x), both centred at z = −50 mm, so
-/// that laser 0's light planes of mid-range mirror angles cross both boards.
+/// spine (their shared vertical edge, 2 mm gap) at (620, 0) mm, both centred at z = −50 mm, so
+/// that laser 0's light planes of mid-range mirror angles (about 15°–24°) cross both boards. A
+/// 9 × 6 board of 30 mm squares then spans x ≈ 365–620 mm.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Rig {
     pub board: BoardFile,

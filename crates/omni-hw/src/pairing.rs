@@ -438,6 +438,27 @@ mod tests {
     }
 
     #[test]
+    fn directory_source_reports_only_new_complete_image_files_with_their_mtime() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("stale.png"), b"old run").unwrap();
+        let mut src = DirFrameSource::new(dir.path()).unwrap();
+        std::fs::write(dir.path().join(".tmp.png"), b"being written").unwrap();
+        std::fs::write(dir.path().join("notes.txt"), b"not an image").unwrap();
+        std::fs::write(dir.path().join("empty.png"), b"").unwrap();
+        let f = std::fs::File::create(dir.path().join("b.PNG")).unwrap();
+        let stamp = std::time::UNIX_EPOCH + std::time::Duration::from_micros(1_700_000_000_123_456);
+        std::io::Write::write_all(&mut &f, b"png bytes").unwrap();
+        f.set_modified(stamp).unwrap();
+        drop(f);
+        // First sight: the size is recorded; it is reported once it has not changed.
+        assert!(src.poll().unwrap().is_empty());
+        let got = src.poll().unwrap();
+        assert_eq!(got.len(), 1, "{got:?}");
+        assert_eq!((got[0].name.as_str(), got[0].time_us), ("b.PNG", 1_700_000_000_123_456));
+        assert!(src.poll().unwrap().is_empty(), "reported once");
+    }
+
+    #[test]
     fn clean_run_pairs_every_frame_with_its_own_angle() {
         let s = schedule(false);
         let all: Vec<u64> = (0..12).collect();

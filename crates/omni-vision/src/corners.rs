@@ -171,6 +171,14 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     if grid.is_empty() {
         return Err(Rejection::NoBoard { candidates: cands.len() });
     }
+    // A grid that keeps growing past the board's size means the board file is wrong (a smaller
+    // board would otherwise be "found" inside a larger one).
+    let unbounded = GrowLimits { max_long: 4 * limits.max_long + 8, max_short: 4 * limits.max_long + 8, ..limits };
+    let (i0, i1, j0, j1) = grid::grow_best_grid(&cands, &unbounded, opts.max_seeds).bounds();
+    let (wi, wj) = (i1 - i0 + 1, j1 - j0 + 1);
+    if wi.max(wj) > limits.max_long || wi.min(wj) > limits.max_short {
+        return Err(Rejection::LargerThanBoard { found: (wi.max(0) as u32, wj.max(0) as u32) });
+    }
     let refine_img = gaussian_blur(img, opts.refine_sigma);
     let positions = refine_grid(&refine_img, &cands, &grid);
     let positions = drop_unsmooth(positions);

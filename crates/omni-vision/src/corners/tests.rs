@@ -43,3 +43,12 @@ fn real_images_board_with_70_of_77_corners_found_in_at_least_14_of_15() {
     }
     assert!(found >= 14, "full board in {found} of 15");
 }
+
+#[test]
+fn a_smaller_board_size_is_refused_not_found_inside_the_real_board() {
+    let img = load_gray(&real_dir().join("MiniOmni1.jpg")).unwrap();
+    let e = detect_board(&img, 5, 4, &DetectorOptions::default()).unwrap_err();
+    assert!(matches!(e, Rejection::LargerThanBoard { .. }), "{e}");
+    // The same image with its true size (either axis order) is found.
+    assert_eq!(detect_board(&img, 11, 7, &DetectorOptions::default()).unwrap().corners.len(), 77);
+}

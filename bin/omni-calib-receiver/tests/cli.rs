@@ -1,0 +1,134 @@
+//! End-to-end tests of the omni-calib-receiver binary.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_omni-calib-receiver"))
+}
+
+fn real_dir() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/real-omni-miniomni"))
+}
+
+fn write_board(dir: &Path, cols: u32, rows: u32) -> PathBuf {
+    let path = dir.join(format!("board{cols}x{rows}.json"));
+    let text = format!(
+        "{{\"format\": \"omniscan.board\", \"version\": 1, \"inner_cols\": {cols}, \"inner_rows\": {rows}, \"square_mm\": 30.0}}"
+    );
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn calibrates_the_real_images_exports_and_reimports() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = write_board(dir.path(), 7, 11);
+    let camera = dir.path().join("camera.json");
+    let corners = dir.path().join("corners.json");
+    let overlay = dir.path().join("overlay");
+    let out = bin()
+        .arg("--board")
+        .arg(&board)
+        .arg("-o")
+        .arg(&camera)
+        .arg("--save-corners")
+        .arg(&corners)
+        .arg("--overlay")
+        .arg(&overlay)
+        .arg("--export-kalibr")
+        .arg(dir.path().join("camchain.yaml"))
+        .arg("--export-opencv")
+        .arg(dir.path().join("omnidir.yaml"))
+        .arg(real_dir())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let cam: serde_json::Value = serde_json::from_slice(&std::fs::read(&camera).unwrap()).unwrap();
+    assert_eq!(cam["model"]["kind"], "mei");
+    let rms = cam["report"]["rms_px"].as_f64().unwrap();
+    assert!(rms <= 0.4, "RMS {rms} px");
+    assert!(cam["report"]["images_used"].as_u64().unwrap() >= 14);
+    assert!(cam["report"]["parameters"]["xi"]["std"].as_f64().unwrap() > 0.0);
+    assert_eq!(std::fs::read_dir(&overlay).unwrap().count(), 15);
+    let kalibr = std::fs::read_to_string(dir.path().join("camchain.yaml")).unwrap();
+    assert!(kalibr.contains("camera_model: omni") && kalibr.contains("resolution: [752, 480]"), "{kalibr}");
+
+    // Fitting from the saved corners with the polynomial model, then OCamCalib round trip.
+    let txt = dir.path().join("calib_results.txt");
+    let out = bin()
+        .arg("--board")
+        .arg(&board)
+        .arg("--corners")
+        .arg(&corners)
+        .arg("--model")
+        .arg("ocam")
+        .arg("--export-ocam")
+        .arg(&txt)
+        .arg("-o")
+        .arg(dir.path().join("ocam.json"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let imported = dir.path().join("imported.json");
+    let out = bin().arg("import-ocam").arg(&txt).arg("-o").arg(&imported).output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let a: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("ocam.json")).unwrap()).unwrap();
+    let b: serde_json::Value = serde_json::from_slice(&std::fs::read(&imported).unwrap()).unwrap();
+    assert_eq!(b["model"]["kind"], "ocam");
+    let (ca, cb) = (a["model"]["cx_px"].as_f64().unwrap(), b["model"]["cx_px"].as_f64().unwrap());
+    assert!((ca - cb).abs() < 1e-5, "{ca} vs {cb}");
+}
+
+#[test]
+fn wrong_board_size_and_unreadable_files_fail_without_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let camera = dir.path().join("camera.json");
+    // A 5 × 4 board: the real 7 × 11 grid is larger, so no image is usable.
+    let small = write_board(dir.path(), 5, 4);
+    let out = bin()
+        .arg("--board")
+        .arg(&small)
+        .arg("-o")
+        .arg(&camera)
+        .arg(real_dir().join("MiniOmni1.jpg"))
+        .arg(real_dir().join("MiniOmni2.jpg"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("calibration failed"), "{}", stderr(&out));
+    assert!(stderr(&out).contains("does not fit the board"), "{}", stderr(&out));
+    assert!(!camera.exists());
+
+    // A truncated image names the file.
+    let broken = dir.path().join("broken.jpg");
+    let bytes = std::fs::read(real_dir().join("MiniOmni3.jpg")).unwrap();
+    std::fs::write(&broken, &bytes[..bytes.len() / 3]).unwrap();
+    let board = write_board(dir.path(), 7, 11);
+    let out = bin().arg("--board").arg(&board).arg("-o").arg(&camera).arg(&broken).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("broken.jpg"), "{}", stderr(&out));
+    assert!(!camera.exists());
+
+    // Corners for another board size.
+    let corners = dir.path().join("corners.json");
+    std::fs::write(
+        &corners,
+        r#"{"format": "omniscan.corners", "version": 1, "width": 752, "height": 480, "inner_cols": 9, "inner_rows": 6, "images": []}"#,
+    )
+    .unwrap();
+    let out = bin().arg("--board").arg(&board).arg("--corners").arg(&corners).arg("-o").arg(&camera).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("9 × 6 board"), "{}", stderr(&out));
+
+    // Usage errors: exports that do not match the model; missing images.
+    let out = bin().arg("--board").arg(&board).arg("--export-ocam").arg("x.txt").arg(&broken).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let out = bin().arg("--board").arg(&board).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(!camera.exists());
+}

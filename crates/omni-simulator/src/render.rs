@@ -549,7 +549,8 @@ pub struct LaserFrame {
 /// facet `facet` and the given lasers on, with its ground truth (always the still mirror at
 /// `alpha`, also under motion blur).
 ///
-/// Panics if `opts` is invalid (see [`RenderOptions::validate`]).
+/// Panics if `opts` is invalid (see [`RenderOptions::validate`]) or `alpha_rad` is not finite.
+/// Lasers the transmitter does not have, or whose central ray misses the facet, stay dark.
 pub fn render_laser_frame(
     sensor: &Sensor,
     scene: &Scene,
@@ -561,6 +562,7 @@ pub fn render_laser_frame(
     if let Err(e) = opts.validate() {
         panic!("invalid RenderOptions: {e}");
     }
+    assert!(alpha_rad.is_finite(), "render_laser_frame: mirror angle must be finite, got {alpha_rad}");
     let slices = light_slices(sensor, alpha_rad, facet, lasers, opts);
     let electrons = render_electrons(sensor, scene, &slices, opts);
     let image = finish(sensor, electrons, opts, frame_seed(opts.seed, alpha_rad, facet, lasers));

@@ -148,7 +148,7 @@ impl Shape {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::parse_doc;
+    use crate::docs::parse_doc;
 
     #[test]
     fn scene_round_trips_and_names_unknown_primitives() {

@@ -13,6 +13,8 @@ use omni_hw::{Client, ClientOptions, DeviceInfo};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 const TOOL: &str = "omni-trigger";
@@ -276,7 +278,29 @@ fn scan_config(a: &ScanArgs) -> CliResult<ScanConfig> {
             ..PairOptions::default()
         },
         silence_timeout: Duration::from_millis(1500),
+        cancel: Some(stop_on_interrupt()),
     })
+}
+
+/// Raised by Ctrl-C (SIGINT) or SIGTERM, so an interrupted scan stops the controller and still
+/// ends its manifest with a status record.
+static INTERRUPTED: std::sync::LazyLock<Arc<AtomicBool>> =
+    std::sync::LazyLock::new(|| Arc::new(AtomicBool::new(false)));
+
+fn stop_on_interrupt() -> Arc<AtomicBool> {
+    extern "C" fn on_signal(_: libc::c_int) {
+        // The flag is initialised before the handler is installed, so this is one atomic store:
+        // async-signal-safe.
+        INTERRUPTED.store(true, Ordering::SeqCst);
+    }
+    let flag = INTERRUPTED.clone();
+    // SAFETY: the handler only performs an atomic store; `signal` gets valid arguments.
+    unsafe {
+        let handler = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
+        libc::signal(libc::SIGINT, handler);
+        libc::signal(libc::SIGTERM, handler);
+    }
+    flag
 }
 
 fn open_output(path: &Path) -> CliResult<Box<dyn Write>> {

@@ -339,3 +339,30 @@ fn a_timed_scan_stops_the_controller_and_accounts_for_every_trigger() {
     assert_eq!(status.frames + status.frames_missing, fired, "{status:?}");
     assert!(status.complete);
 }
+
+#[test]
+fn an_interrupted_scan_stops_the_controller_and_ends_its_manifest_with_a_status() {
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40"]);
+    let mut scan = Command::new(BIN)
+        .args(["scan", "--port", &emu.port, "--angles", "0,15", "--revolutions", "20", "--frames"])
+        .arg(emu.frames())
+        .arg("-o")
+        .arg(emu.manifest_path())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while std::fs::read_to_string(emu.manifest_path()).map(|t| t.matches("\"frame\"").count()).unwrap_or(0) < 3 {
+        assert!(started.elapsed() < Duration::from_secs(10), "scan produced no frames");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let kill = Command::new("kill").args(["-TERM", &scan.id().to_string()]).status().unwrap();
+    assert!(kill.success());
+    let status = scan.wait().unwrap();
+    assert_eq!(status.code(), Some(1));
+    let (frames, st) = read_manifest(&emu.manifest_path());
+    assert!(!st.complete && st.errors.iter().any(|e| e.contains("interrupted")), "{st:?}");
+    assert!(extra(&st, "controller_fired") < 480, "the controller was stopped: {st:?}");
+    assert_eq!(st.frames + st.frames_missing, extra(&st, "controller_fired"), "{st:?}");
+    assert_frames_true(&frames, &emu.truth());
+}

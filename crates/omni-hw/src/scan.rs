@@ -9,6 +9,8 @@ use crate::pairing::{FrameSource, PairEvent, PairOptions, PairStats, Pairer};
 use crate::schedule::{AngleSpec, Schedule};
 use omni_formats::stream::Status;
 use std::io::{Read, Write};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// When the run ends.
@@ -21,7 +23,7 @@ pub enum StopWhen {
 }
 
 /// What to scan.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct ScanConfig {
     pub angles: AngleSpec,
     /// Triggering facets; `None` = all.
@@ -36,6 +38,9 @@ pub struct ScanConfig {
     pub pairing: PairOptions,
     /// Silence from the controller this long makes the host ask for its status.
     pub silence_timeout: Duration,
+    /// Set (e.g. by a Ctrl-C handler) to stop the run early: the controller gets STOP, the frames
+    /// still due are collected, and the status record says the scan was interrupted.
+    pub cancel: Option<Arc<AtomicBool>>,
 }
 
 impl ScanConfig {
@@ -50,6 +55,7 @@ impl ScanConfig {
             stop: StopWhen::Revolutions(revolutions),
             pairing: PairOptions::default(),
             silence_timeout: Duration::from_millis(1500),
+            cancel: None,
         }
     }
 }
@@ -153,6 +159,7 @@ struct Run<'a, P, S: ?Sized> {
     errors_total: usize,
     controller: Option<DeviceStatus>,
     done: Option<Instant>,
+    interrupted: bool,
 }
 
 impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
@@ -233,12 +240,12 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
                 }
                 continue;
             }
-            if let StopWhen::Duration(d) = cfg.stop
-                && !stop_sent
-                && started.elapsed() >= d
-            {
+            let timed_out = matches!(cfg.stop, StopWhen::Duration(d) if started.elapsed() >= d);
+            let cancelled = cfg.cancel.as_ref().is_some_and(|c| c.load(Ordering::SeqCst));
+            if (timed_out || cancelled) && !stop_sent {
                 self.client.request(Command::Stop).map_err(|e| e.to_string())?;
                 stop_sent = true;
+                self.interrupted = cancelled;
             }
             if last_heard.elapsed() > cfg.silence_timeout {
                 self.check_alive()?;
@@ -272,6 +279,7 @@ pub fn run_scan<P: Read + Write, S: FrameSource + ?Sized>(
         errors_total: 0,
         controller: None,
         done: None,
+        interrupted: false,
     };
     let result = run.main_loop(cfg, revolutions);
     let disconnected = result.as_ref().err().is_some_and(|e| e.contains("disconnected"));
@@ -286,7 +294,8 @@ pub fn run_scan<P: Read + Write, S: FrameSource + ?Sized>(
     if result.is_ok() && sink_result.is_ok() {
         let _ = run.client.status().map(|s| run.controller = Some(s));
     }
-    let error = result.err().or(sink_result.err());
+    let interrupted = run.interrupted.then(|| "interrupted: the run was stopped early".to_string());
+    let error = result.err().or(sink_result.err()).or(interrupted);
     finish(run, error)
 }
 

@@ -167,19 +167,20 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
         search_fraction: opts.search_fraction,
         max_line_angle: opts.max_line_angle,
     };
-    let grid = grid::grow_best_grid(&cands, &limits, opts.max_seeds);
+    let refine_img = gaussian_blur(img, opts.refine_sigma);
+    let verify = |p: [f64; 2], spacing: f64| local_x_junction(&refine_img, p, spacing, opts.saddle.min_contrast);
+    let grid = grid::grow_best_grid(&cands, &limits, opts.max_seeds, &verify);
     if grid.is_empty() {
         return Err(Rejection::NoBoard { candidates: cands.len() });
     }
     // A grid that keeps growing past the board's size means the board file is wrong (a smaller
     // board would otherwise be "found" inside a larger one).
     let unbounded = GrowLimits { max_long: 4 * limits.max_long + 8, max_short: 4 * limits.max_long + 8, ..limits };
-    let (i0, i1, j0, j1) = grid::grow_best_grid(&cands, &unbounded, opts.max_seeds).bounds();
+    let (i0, i1, j0, j1) = grid::grow_best_grid(&cands, &unbounded, opts.max_seeds, &verify).bounds();
     let (wi, wj) = (i1 - i0 + 1, j1 - j0 + 1);
     if wi.max(wj) > limits.max_long || wi.min(wj) > limits.max_short {
         return Err(Rejection::LargerThanBoard { found: (wi.max(0) as u32, wj.max(0) as u32) });
     }
-    let refine_img = gaussian_blur(img, opts.refine_sigma);
     let positions = refine_grid(&refine_img, &cands, &grid);
     let positions = drop_unsmooth(positions);
     let smooth = gaussian_blur(img, opts.saddle.sigma);
@@ -191,6 +192,14 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     let positions = canonical_handedness(positions);
     let colours = cell_colours(&refine_img, &positions).ok_or(Rejection::InconsistentColours)?;
     place_on_board(positions, colours, cols, rows, opts.first_square_dark)
+}
+
+/// An X-junction test at the grid's own scale: a circle of 0.3 × the corner spacing stays inside
+/// the four squares around a true corner, while T-junctions at the board's border (black square,
+/// white square, white margin) show only two transitions there.
+fn local_x_junction(img: &GrayF32, p: [f64; 2], spacing: f64, min_contrast: f32) -> bool {
+    let radius = (0.3 * spacing).clamp(1.5, 6.5);
+    saddle::circle_test(img, p, radius, 0.5 * min_contrast).is_some()
 }
 
 /// Refines every grid corner; the window follows the local corner spacing.
@@ -249,6 +258,9 @@ fn fill_missing(
             let Some((lines, _)) = saddle::circle_test(smooth, p, radius, 0.5 * opts.saddle.min_contrast) else {
                 continue;
             };
+            if !local_x_junction(refine_img, p, spacing, opts.saddle.min_contrast) {
+                continue;
+            }
             let dir_angle = line_dir[1].atan2(line_dir[0]);
             if lines.iter().any(|&l| saddle::axial_difference(l, dir_angle) < opts.max_line_angle) {
                 added.push((cell, p));

@@ -112,7 +112,16 @@ fn has_line_along(c: &Candidate, dir: [f64; 2], tol: f64) -> bool {
 }
 
 /// Grows the largest consistent grid found from the strongest seeds.
-pub fn grow_best_grid(cands: &[Candidate], limits: &GrowLimits, max_seeds: usize) -> Grid {
+///
+/// `verify(position, local spacing)` re-checks a candidate at the scale of the grid around it
+/// (e.g. an X-junction test on a circle that stays inside the four squares), so that junctions
+/// at the board's border, which look like corners at a coarser scale, are not taken.
+pub fn grow_best_grid(
+    cands: &[Candidate],
+    limits: &GrowLimits,
+    max_seeds: usize,
+    verify: &dyn Fn([f64; 2], f64) -> bool,
+) -> Grid {
     if cands.len() < 9 {
         return Grid::default();
     }
@@ -130,11 +139,11 @@ pub fn grow_best_grid(cands: &[Candidate], limits: &GrowLimits, max_seeds: usize
         if used_as_member[seed] {
             continue; // already part of a grid at least as large as any it would seed
         }
-        let Some(grid) = seed_grid(cands, &index, seed, limits) else {
+        let Some(grid) = seed_grid(cands, &index, seed, limits, verify) else {
             continue;
         };
         tried += 1;
-        let grid = grow(cands, &index, grid, limits);
+        let grid = grow(cands, &index, grid, limits, verify);
         for &k in grid.cells.values() {
             used_as_member[k] = true;
         }
@@ -168,7 +177,13 @@ fn neighbour_along(
 }
 
 /// A 3×3 seed patch around `seed`, or `None`.
-fn seed_grid(cands: &[Candidate], index: &Index, seed: usize, limits: &GrowLimits) -> Option<Grid> {
+fn seed_grid(
+    cands: &[Candidate],
+    index: &Index,
+    seed: usize,
+    limits: &GrowLimits,
+    verify: &dyn Fn([f64; 2], f64) -> bool,
+) -> Option<Grid> {
     let c = &cands[seed];
     let tol = limits.max_line_angle;
     let max_d = 120.0;
@@ -206,7 +221,12 @@ fn seed_grid(cands: &[Candidate], index: &Index, seed: usize, limits: &GrowLimit
         grid.cells.insert((di, dj), k);
     }
     let distinct: std::collections::HashSet<usize> = grid.cells.values().cloned().collect();
-    (distinct.len() == 9).then_some(grid)
+    let spacing = [(1, 0), (-1, 0), (0, 1), (0, -1)]
+        .iter()
+        .map(|n| dist(cands[grid.cells[n]].px, c.px))
+        .fold(f64::INFINITY, f64::min);
+    let verified = grid.cells.values().all(|&k| verify(cands[k].px, spacing));
+    (distinct.len() == 9 && verified).then_some(grid)
 }
 
 /// A prediction of the position of a missing cell from its known neighbours: (position,
@@ -264,7 +284,13 @@ fn fits_limits(grid: &Grid, cell: Cell, limits: &GrowLimits) -> bool {
 }
 
 /// Grows `grid` until no missing neighbour cell finds a consistent candidate.
-fn grow(cands: &[Candidate], index: &Index, mut grid: Grid, limits: &GrowLimits) -> Grid {
+fn grow(
+    cands: &[Candidate],
+    index: &Index,
+    mut grid: Grid,
+    limits: &GrowLimits,
+    verify: &dyn Fn([f64; 2], f64) -> bool,
+) -> Grid {
     let mut used: std::collections::HashSet<usize> = grid.cells.values().cloned().collect();
     loop {
         let mut frontier: Vec<Cell> = Vec::new();
@@ -283,10 +309,11 @@ fn grow(cands: &[Candidate], index: &Index, mut grid: Grid, limits: &GrowLimits)
             }
             let Some((pred, spacing, line_dir)) = predict(cands, &grid, cell) else { continue };
             let radius = limits.search_fraction * spacing;
-            let hit = index
-                .within(cands, pred, radius)
-                .into_iter()
-                .find(|&(_, k)| !used.contains(&k) && has_line_along(&cands[k], line_dir, limits.max_line_angle));
+            let hit = index.within(cands, pred, radius).into_iter().find(|&(_, k)| {
+                !used.contains(&k)
+                    && has_line_along(&cands[k], line_dir, limits.max_line_angle)
+                    && verify(cands[k].px, spacing)
+            });
             if let Some((_, k)) = hit {
                 grid.cells.insert(cell, k);
                 used.insert(k);

@@ -50,7 +50,7 @@ struct Args {
     #[arg(long, default_value_t = 12.0)]
     max_width: f64,
     /// Scale (px) of the Gaussian derivatives of the hessian method.
-    #[arg(long, default_value_t = 1.5)]
+    #[arg(long, default_value_t = 1.0)]
     hessian_sigma: f64,
     /// Write each frame with its detected centres drawn as DIR/<seq>.png.
     #[arg(long, value_name = "DIR")]

@@ -121,7 +121,7 @@ pub struct RidgeParams {
 
 impl Default for RidgeParams {
     fn default() -> Self {
-        RidgeParams { method: Method::Windowed, threshold: None, min_width: 1.0, max_width: 12.0, hessian_sigma: 1.5 }
+        RidgeParams { method: Method::Windowed, threshold: None, min_width: 1.0, max_width: 12.0, hessian_sigma: 1.0 }
     }
 }
 

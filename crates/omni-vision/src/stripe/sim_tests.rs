@@ -116,19 +116,39 @@ fn angles(scene: usize) -> [f64; 3] {
     if scene == 0 { [4.0, 13.0, 22.0] } else { [16.0, 21.0, 26.0] }
 }
 
-/// Renders laser frames at a few mirror angles for every scene; with `laser_off`, subtracts a
-/// laser-off frame rendered with independent noise. Returns each frame with its truth.
-fn frames(opts: &RenderOptions, laser_off: bool) -> Vec<(GrayImage, Vec<TruthPoint>)> {
+/// How the laser-off frame of a case is made.
+#[derive(Clone, Copy, PartialEq)]
+enum LaserOff {
+    /// No laser-off frame: the frame is used as rendered.
+    None,
+    /// `render_ambient_frame`, with independent noise.
+    Ambient,
+    /// `render_laser_frame` with the laser power at 0 (same mirror angle), with independent
+    /// noise. Physically the same as `Ambient`, but rendered with the same supersampling
+    /// pattern as the laser frame: `render_ambient_frame` samples pixels near the light planes
+    /// differently, which leaves up to 5 DN of ambient under strong ambient light in the
+    /// difference, right under the stripe (measured: 4420 pixels differ at α = 22° in the room).
+    ZeroPower,
+}
+
+/// Renders laser frames at a few mirror angles for every scene, subtracting a laser-off frame
+/// as `laser_off` says. Returns each frame with its truth.
+fn frames(opts: &RenderOptions, laser_off: LaserOff) -> Vec<(GrayImage, Vec<TruthPoint>)> {
     let sensor = Sensor::paper_scaled(SIZE);
     let mut out = Vec::new();
     for (si, scene) in scenes().into_iter().enumerate() {
-        let ambient = laser_off
-            .then(|| to_gray(&render_ambient_frame(&sensor, &scene, &RenderOptions { seed: 99, ..opts.clone() })));
+        let off_opts = RenderOptions { seed: opts.seed + 99, ..opts.clone() };
+        let ambient =
+            (laser_off == LaserOff::Ambient).then(|| to_gray(&render_ambient_frame(&sensor, &scene, &off_opts)));
         for (i, alpha_deg) in angles(si).iter().enumerate() {
             let o = RenderOptions { seed: opts.seed + i as u64, ..opts.clone() };
             let lf = render_laser_frame(&sensor, &scene, alpha_deg.to_radians(), 0, &[0, 1], &o);
             let mut img = to_gray(&lf.image);
-            if let Some(off) = &ambient {
+            let zero_power = (laser_off == LaserOff::ZeroPower).then(|| {
+                let dark = RenderOptions { laser_strength: 0.0, seed: off_opts.seed + i as u64, ..opts.clone() };
+                to_gray(&render_laser_frame(&sensor, &scene, alpha_deg.to_radians(), 0, &[0, 1], &dark).image)
+            });
+            if let Some(off) = ambient.as_ref().or(zero_power.as_ref()) {
                 img.subtract_saturating(off).unwrap();
             }
             out.push((img, lf.truth));
@@ -181,7 +201,7 @@ fn best(results: &[(Method, Measured)]) -> &(Method, Measured) {
 
 #[test]
 fn default_noise_unsaturated_stripe() {
-    let frames = frames(&RenderOptions::default(), false);
+    let frames = frames(&RenderOptions::default(), LaserOff::None);
     let results = report("default noise, dim ambient, no laser-off frame", &frames);
     let (method, m) = best(&results);
     let (rms, bias) = m.rms_bias();
@@ -202,7 +222,7 @@ fn default_noise_unsaturated_stripe() {
 #[test]
 fn saturated_stripe() {
     let opts = RenderOptions { laser_strength: 8.0 * omni_simulator::DEFAULT_LASER_STRENGTH, ..Default::default() };
-    let frames = frames(&opts, false);
+    let frames = frames(&opts, LaserOff::None);
     let results = report("saturated stripe (laser ×8)", &frames);
     for (method, m) in &results {
         let (rms, bias) = m.rms_bias();
@@ -215,7 +235,7 @@ fn saturated_stripe() {
 fn weak_stripe() {
     // Laser at 30 %: the brightest stripe pixels reach about 60 of 255 (ambient included).
     let opts = RenderOptions { laser_strength: 0.3 * omni_simulator::DEFAULT_LASER_STRENGTH, ..Default::default() };
-    let frames = frames(&opts, false);
+    let frames = frames(&opts, LaserOff::None);
     let results = report("weak stripe (laser ×0.3)", &frames);
     let (method, m) = best(&results);
     let (rms, _) = m.rms_bias();
@@ -232,11 +252,26 @@ fn weak_stripe() {
 fn strong_ambient_with_laser_off_frame() {
     // Ambient 4× brighter than default: a white wall at ≈ 204 of 255.
     let opts = RenderOptions { ambient_e: 8000.0, ..Default::default() };
-    let frames = frames(&opts, true);
-    let results = report("strong ambient, laser-off frame subtracted", &frames);
+    let frames = frames(&opts, LaserOff::ZeroPower);
+    let results = report("strong ambient, laser-off frame (zero laser power) subtracted", &frames);
     let (method, m) = best(&results);
     let (rms, _) = m.rms_bias();
     assert!(rms <= 0.1, "best {method:?}: rms {rms}");
+    for (method, m) in &results {
+        assert!(m.false_rate() <= 0.001, "{method:?}: {} false detections", m.false_detections);
+    }
+}
+
+/// The same frames with the simulator's own ambient frame subtracted: measured and reported
+/// (see [`LaserOff::ZeroPower`] for why it is worse), with a looser bound.
+#[test]
+fn strong_ambient_with_render_ambient_frame() {
+    let opts = RenderOptions { ambient_e: 8000.0, ..Default::default() };
+    let frames = frames(&opts, LaserOff::Ambient);
+    let results = report("strong ambient, render_ambient_frame subtracted", &frames);
+    let (method, m) = best(&results);
+    let (rms, _) = m.rms_bias();
+    assert!(rms <= 0.15, "best {method:?}: rms {rms}");
     for (method, m) in &results {
         assert!(m.false_rate() <= 0.001, "{method:?}: {} false detections", m.false_detections);
     }

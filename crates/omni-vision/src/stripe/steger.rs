@@ -1,81 +1,87 @@
 //! Steger's line detector (C. Steger, "An unbiased detector of curvilinear structures", PAMI
-//! 1998), used only at the coarse stripe centre of each ray: the Hessian of the
-//! Gaussian-smoothed image gives the stripe normal `n`, and a second-order Taylor expansion
-//! along `n` gives the sub-pixel centreline point; its tangent line is then intersected with
-//! the sampling ray, so the result is comparable with the 1-D estimators.
+//! 1998), used only in a band around each ray's coarse stripe centre: the image smoothed by a
+//! Gaussian of scale σ is evaluated at sub-pixel positions (so no pixel rounding enters), its
+//! Hessian gives the stripe normal `n`, and Newton steps along `n` converge to the ridge, the
+//! maximum across the stripe. The ridge's tangent is then intersected with the sampling ray, so
+//! the result is comparable with the 1-D estimators.
 
 use super::{Frame, Pixel};
 
-/// Sampled Gaussian derivative kernels (correlation weights) of one scale.
+/// Newton steps at most; the start (a windowed centroid) is within a few hundredths of a pixel.
+const MAX_STEPS: usize = 4;
+/// Converged when a step is shorter than this (px).
+const CONVERGED_PX: f64 = 1e-3;
+
+/// The smoothing scale and the window it needs.
 #[derive(Debug, Clone)]
 pub struct Kernels {
-    /// Half-size m: the kernels cover offsets −m..=m px.
-    half: usize,
-    g0: Vec<f64>,
-    g1: Vec<f64>,
-    g2: Vec<f64>,
+    sigma: f64,
+    /// Taps on either side of floor(x): −half..=half+1.
+    half: i64,
 }
 
 impl Kernels {
-    /// Kernels of scale `sigma` (px), normalised so that they measure the value, first and
-    /// second derivative of a polynomial exactly.
+    /// Gaussian derivatives of scale `sigma` (px).
     pub fn new(sigma: f64) -> Self {
-        let half = (3.0 * sigma).ceil().max(1.0) as usize;
-        let offs: Vec<f64> = (0..=2 * half).map(|i| i as f64 - half as f64).collect();
-        let g: Vec<f64> = offs.iter().map(|x| (-x * x / (2.0 * sigma * sigma)).exp()).collect();
-        let sum: f64 = g.iter().sum();
-        let g0: Vec<f64> = g.iter().map(|v| v / sum).collect();
-        // Correlation with x·G measures d/dx; scale so that f(x) = x gives 1.
-        let g1_raw: Vec<f64> = offs.iter().zip(&g0).map(|(x, g)| x * g).collect();
-        let s1: f64 = offs.iter().zip(&g1_raw).map(|(x, w)| x * w).sum();
-        let g1 = g1_raw.iter().map(|w| w / s1).collect();
-        // Second derivative: (x² − σ²)·G with zero sum; scale so that f(x) = x²/2 gives 1.
-        let g2_raw: Vec<f64> = offs.iter().zip(&g0).map(|(x, g)| (x * x - sigma * sigma) * g).collect();
-        let mean = g2_raw.iter().sum::<f64>() / g2_raw.len() as f64;
-        let g2_zero: Vec<f64> = g2_raw.iter().map(|w| w - mean).collect();
-        let s2: f64 = offs.iter().zip(&g2_zero).map(|(x, w)| 0.5 * x * x * w).sum();
-        let g2 = g2_zero.iter().map(|w| w / s2).collect();
-        Kernels { half, g0, g1, g2 }
+        Kernels { sigma, half: (3.0 * sigma).ceil() as i64 }
     }
 
-    /// Gradient and Hessian `(rx, ry, rxx, rxy, ryy)` of the smoothed image at pixel (x, y),
-    /// or `None` if the kernel window leaves the image.
-    fn derivatives<P: Pixel>(&self, f: &Frame<'_, P>, x: i64, y: i64) -> Option<[f64; 5]> {
-        let m = self.half as i64;
-        if x < m || y < m || x + m >= f.width as i64 || y + m >= f.height as i64 {
+    /// Value weights, first and second derivative weights of the taps around `x`: the
+    /// continuous Gaussian and its derivatives at each tap's offset from `x`.
+    fn weights(&self, x: f64) -> (i64, [Vec<f64>; 3]) {
+        let first = x.floor() as i64 - self.half;
+        let n = 2 * self.half as usize + 2;
+        let s2 = self.sigma * self.sigma;
+        let norm = 1.0 / ((std::f64::consts::TAU).sqrt() * self.sigma);
+        let mut w = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+        for k in 0..n {
+            let d = (first + k as i64) as f64 - x;
+            let g = norm * (-d * d / (2.0 * s2)).exp();
+            w[0][k] = g;
+            w[1][k] = d / s2 * g;
+            w[2][k] = (d * d - s2) / (s2 * s2) * g;
+        }
+        (first, w)
+    }
+
+    /// Gradient and Hessian `[rx, ry, rxx, rxy, ryy]` of the smoothed image at (x, y) px, or
+    /// `None` if the window leaves the image.
+    fn derivatives<P: Pixel>(&self, f: &Frame<'_, P>, x: f64, y: f64) -> Option<[f64; 5]> {
+        let (x0, wx) = self.weights(x);
+        let (y0, wy) = self.weights(y);
+        let n = wx[0].len() as i64;
+        if x0 < 0 || y0 < 0 || x0 + n > f.width as i64 || y0 + n > f.height as i64 {
             return None;
         }
         let mut acc = [0.0; 5];
-        for (j, yy) in (y - m..=y + m).enumerate() {
-            // Row responses to the three horizontal kernels.
+        for j in 0..n as usize {
             let (mut h0, mut h1, mut h2) = (0.0, 0.0, 0.0);
-            for (i, xx) in (x - m..=x + m).enumerate() {
-                let v = f.at(xx as usize, yy as usize) as f64;
-                h0 += v * self.g0[i];
-                h1 += v * self.g1[i];
-                h2 += v * self.g2[i];
+            for i in 0..n as usize {
+                let v = f.at(x0 as usize + i, y0 as usize + j) as f64;
+                h0 += v * wx[0][i];
+                h1 += v * wx[1][i];
+                h2 += v * wx[2][i];
             }
-            acc[0] += self.g0[j] * h1;
-            acc[1] += self.g1[j] * h0;
-            acc[2] += self.g0[j] * h2;
-            acc[3] += self.g1[j] * h1;
-            acc[4] += self.g2[j] * h0;
+            acc[0] += wy[0][j] * h1;
+            acc[1] += wy[1][j] * h0;
+            acc[2] += wy[0][j] * h2;
+            acc[3] += wy[1][j] * h1;
+            acc[4] += wy[2][j] * h0;
         }
         Some(acc)
     }
 
-    /// The centreline point near pixel (x, y): `(point, normal)`, or `None` if there is no
-    /// bright line (no strongly negative curvature) there.
-    fn centreline<P: Pixel>(&self, f: &Frame<'_, P>, x: i64, y: i64) -> Option<((f64, f64), (f64, f64))> {
-        let [rx, ry, rxx, rxy, ryy] = self.derivatives(f, x, y)?;
-        // Eigenvector of the most negative eigenvalue of [[rxx, rxy], [rxy, ryy]].
+    /// The unit normal of a bright line (eigenvector of the Hessian's most negative eigenvalue)
+    /// and that eigenvalue, or `None` where the image is not ridge-shaped.
+    fn normal(h: &[f64; 5]) -> Option<((f64, f64), f64)> {
+        let [_, _, rxx, rxy, ryy] = *h;
         let half_trace = 0.5 * (rxx + ryy);
         let disc = (0.25 * (rxx - ryy).powi(2) + rxy * rxy).sqrt();
         let lambda = half_trace - disc;
         if lambda >= 0.0 {
             return None;
         }
-        let (nx, ny) = if rxy.abs() > 1e-12 {
+        let (nx, ny) = if rxy.abs() > 1e-12 * (rxx.abs() + ryy.abs()) {
             (lambda - ryy, rxy)
         } else if rxx < ryy {
             (1.0, 0.0)
@@ -83,14 +89,12 @@ impl Kernels {
             (0.0, 1.0)
         };
         let norm = nx.hypot(ny);
-        let (nx, ny) = (nx / norm, ny / norm);
-        let t = -(rx * nx + ry * ny) / lambda;
-        Some(((x as f64 + t * nx, y as f64 + t * ny), (nx, ny)))
+        Some(((nx / norm, ny / norm), lambda))
     }
 
     /// Refines the coarse centre at radius `r` (px) on the ray from `centre` along unit `dir`:
-    /// the ray's intersection with the stripe's local centreline, or `None` if the stripe runs
-    /// nearly along the ray or the fit lands more than 1.5 px away.
+    /// the ray's intersection with the tangent of the ridge of the smoothed image, or `None` if
+    /// there is no ridge, the stripe runs nearly along the ray, or the fit moves > 1.5 px.
     pub fn refine_along_ray<P: Pixel>(
         &self,
         f: &Frame<'_, P>,
@@ -98,21 +102,51 @@ impl Kernels {
         dir: (f64, f64),
         r: f64,
     ) -> Option<f64> {
-        let (px, py) = (centre.0 + r * dir.0, centre.1 + r * dir.1);
-        let (mut qx, mut qy) = (px.round() as i64, py.round() as i64);
-        let mut fit = self.centreline(f, qx, qy)?;
-        // One more evaluation at the pixel nearest the first estimate keeps the Taylor step small.
-        let (cx, cy) = fit.0;
-        if (cx - qx as f64).abs() > 0.5 || (cy - qy as f64).abs() > 0.5 {
-            (qx, qy) = (cx.round() as i64, cy.round() as i64);
-            fit = self.centreline(f, qx, qy)?;
+        let (mut x, mut y) = (centre.0 + r * dir.0, centre.1 + r * dir.1);
+        let mut n = (0.0, 0.0);
+        for _ in 0..MAX_STEPS {
+            let h = self.derivatives(f, x, y)?;
+            let (normal, lambda) = Self::normal(&h)?;
+            n = normal;
+            let t = -(h[0] * n.0 + h[1] * n.1) / lambda;
+            x += t * n.0;
+            y += t * n.1;
+            if t.abs() < CONVERGED_PX {
+                break;
+            }
         }
-        let ((cx, cy), (nx, ny)) = fit;
-        let along = nx * dir.0 + ny * dir.1;
+        let along = n.0 * dir.0 + n.1 * dir.1;
         if along.abs() < 0.3 {
             return None;
         }
-        let s = (nx * (cx - centre.0) + ny * (cy - centre.1)) / along;
+        let s = (n.0 * (x - centre.0) + n.1 * (y - centre.1)) / along;
         ((s - r).abs() <= 1.5).then_some(s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn converges_to_a_straight_lines_centre_from_a_pixel_away() {
+        // A line at 30° to the columns: centre x = 15.37 + (y − 15)·tan 30°, σ = 0.8 px.
+        let (w, h) = (32u32, 32u32);
+        let tan = 30f64.to_radians().tan();
+        let cos = 30f64.to_radians().cos();
+        let img: Vec<u16> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f64, (i / w) as f64);
+                let d = (x - 15.37 - (y - 15.0) * tan) * cos;
+                (40000.0 * (-d * d / (2.0 * 0.64)).exp()) as u16
+            })
+            .collect();
+        let f = Frame { width: w, height: h, data: &img, max_value: 65535.0 };
+        let k = Kernels::new(1.0);
+        // Ray along +x through (0, 15): the line crosses it at x = 15.37.
+        for start in [14.6, 15.0, 15.9] {
+            let s = k.refine_along_ray(&f, (0.0, 15.0), (1.0, 0.0), start).unwrap();
+            assert!((s - 15.37).abs() < 0.003, "from {start}: {s}");
+        }
     }
 }

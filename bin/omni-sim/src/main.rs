@@ -135,6 +135,9 @@ struct RenderArgs {
     /// Polygon turn during the exposure (degrees): motion blur of the stripe.
     #[arg(long, default_value_t = 0.0)]
     motion_blur: f64,
+    /// Laser speckle contrast (0 = none; real stripes on paper ≈ 0.1–0.3).
+    #[arg(long, default_value_t = 0.0)]
+    speckle: f64,
     /// Worker threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -155,6 +158,7 @@ impl RenderArgs {
             laser_strength: d.laser_strength * self.laser_gain,
             ambient_e: d.ambient_e * self.ambient_gain,
             motion_blur_deg: self.motion_blur,
+            speckle_contrast: self.speckle,
             ..d
         };
         opts.validate().map_err(|e| CliError::usage(format!("rendering options: {e}")))?;

@@ -58,6 +58,13 @@ pub struct RenderOptions {
     /// Polygon turn during the exposure (degrees); the stripe is integrated over
     /// [α − m/2, α + m/2]. 0 = a still mirror.
     pub motion_blur_deg: f64,
+    /// Laser speckle contrast (std / mean of the laser light's intensity over one speckle grain);
+    /// 0 = none (the default: the noise model has no speckle; real stripes on paper show
+    /// about 0.1–0.3). Each grain's factor is Gamma-distributed with mean 1.
+    pub speckle_contrast: f64,
+    /// Speckle grain size in the image (px), ≈ 2.44 λ N / pixel pitch (≈ 1.2 px at f/4, 650 nm,
+    /// 5.5 µm).
+    pub speckle_grain_px: f64,
 }
 
 impl Default for RenderOptions {
@@ -75,6 +82,8 @@ impl Default for RenderOptions {
             noise: true,
             seed: 0,
             motion_blur_deg: 0.0,
+            speckle_contrast: 0.0,
+            speckle_grain_px: 1.2,
         }
     }
 }
@@ -93,6 +102,23 @@ impl RenderOptions {
         RenderOptions { ambient_e: CALIBRATION_AMBIENT_E, ..Default::default() }
     }
 
+    /// A saturated stripe: the default laser 4× stronger (the stripe clips at full scale on
+    /// the bench plane).
+    pub fn saturated() -> Self {
+        RenderOptions { laser_strength: 4.0 * DEFAULT_LASER_STRENGTH, ..Default::default() }
+    }
+
+    /// A weak stripe: the default laser at 40 % (≈ 60 DN above ambient on the bench plane).
+    pub fn weak_stripe() -> Self {
+        RenderOptions { laser_strength: 0.4 * DEFAULT_LASER_STRENGTH, ..Default::default() }
+    }
+
+    /// Strong ambient light: 3× the default (a white surface ≈ 153 DN, the bench plane ≈ 122 DN;
+    /// the stripe on top of it clips on bright surfaces).
+    pub fn strong_ambient() -> Self {
+        RenderOptions { ambient_e: 3.0 * RenderOptions::default().ambient_e, ..Default::default() }
+    }
+
     /// The defaults without photon and read noise.
     pub fn noiseless() -> Self {
         RenderOptions { noise: false, ..Default::default() }
@@ -106,6 +132,7 @@ impl RenderOptions {
             ("ambient_e", self.ambient_e),
             ("read_noise_e", self.read_noise_e),
             ("motion_blur_deg", self.motion_blur_deg),
+            ("speckle_contrast", self.speckle_contrast),
         ];
         for (name, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {
@@ -169,6 +196,8 @@ struct Shader<'a> {
     slices: &'a [Slice],
     sigma: f64,
     opts: &'a RenderOptions,
+    /// Seed of the frame's speckle pattern.
+    speckle_seed: u64,
 }
 
 /// What a camera ray at a pixel corner sees, for deciding where to supersample.
@@ -196,19 +225,32 @@ impl Shader<'_> {
             sides |= u64::from(d > 0.0) << i;
             near |= d.abs() < 4.0 * self.sigma;
         }
-        let value = if near { 0.0 } else { self.shade(&hit, &ray.dir, |_| 0.0) };
+        let value = if near { 0.0 } else { self.shade(&hit, &ray.dir, |_| 0.0, 1.0) };
         CornerKey { surface: hit.object as u32 * 4 + hit.pattern as u32, sides, near, value }
     }
 
     /// Electrons collected at a hit seen along `view`; `footprint[i]` is the spread (mm rms) of
     /// slice i's plane distance over the sample's own footprint (0 for a point sample).
-    fn shade(&self, hit: &Hit, view: &Vector3<f64>, footprint: impl Fn(usize) -> f64) -> f64 {
-        let mut e = self.opts.ambient_e;
+    /// `speckle` multiplies the laser light (1 = no speckle).
+    fn shade(&self, hit: &Hit, view: &Vector3<f64>, footprint: impl Fn(usize) -> f64, speckle: f64) -> f64 {
+        let mut laser = 0.0;
         for (i, s) in self.slices.iter().enumerate() {
             let sigma = (self.sigma * self.sigma + footprint(i).powi(2)).sqrt();
-            e += s.weight * self.laser_irradiance(&s.lp, &hit.point, &hit.normal, view, sigma);
+            laser += s.weight * self.laser_irradiance(&s.lp, &hit.point, &hit.normal, view, sigma);
         }
-        hit.albedo * e
+        hit.albedo * (self.opts.ambient_e + speckle * laser)
+    }
+
+    /// The speckle factor (mean 1) of the grain containing image point `px`.
+    fn speckle(&self, px: &Vector2<f64>) -> f64 {
+        let c = self.opts.speckle_contrast;
+        if c <= 0.0 {
+            return 1.0;
+        }
+        let g = self.opts.speckle_grain_px;
+        let (ix, iy) = ((px.x / g).floor() as i64, (px.y / g).floor() as i64);
+        let mut rng = SplitMix64::stream(self.speckle_seed, mix(ix as u64) ^ (iy as u64).rotate_left(32));
+        rng.gamma(1.0 / (c * c)) * c * c
     }
 
     /// Laser signal (e⁻ for albedo 1) of one light plane at a surface point seen along `view`,
@@ -264,11 +306,11 @@ pub(crate) fn facet_exit(lp: &LightPlane, u: &Vector3<f64>) -> Point3<f64> {
 /// axis, from its own sub-pixel position: a stripe narrower than a pixel keeps its sub-pixel
 /// position in the image (blurring the pixel-integrated image instead would snap it to pixel
 /// centres).
-fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &RenderOptions) -> Vec<f64> {
+fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &RenderOptions, seed: u64) -> Vec<f64> {
     let camera = sensor.camera.as_ref();
     let (w, h) = camera.image_size();
     let (w, h) = (w as usize, h as usize);
-    let shader = Shader { scene, slices, sigma: opts.beam_sigma(), opts };
+    let shader = Shader { scene, slices, sigma: opts.beam_sigma(), opts, speckle_seed: mix(seed ^ 0x5BEC) };
     let cw = w + 1;
     let corners: Vec<CornerKey> = (0..=h)
         .into_par_iter()
@@ -448,11 +490,13 @@ fn erf(x: f64) -> f64 {
 /// with σ² + (a² + b²)/12 (same area, same centre).
 fn pixel_samples(shader: &Shader, camera: &dyn omni_model::CameraModel, x: f64, y: f64, n: u32) -> Vec<f64> {
     let n = n as usize;
+    let sample_px = |k: usize| {
+        let (i, j) = (k % n, k / n);
+        Vector2::new(x + (i as f64 + 0.5) / n as f64 - 0.5, y + (j as f64 + 0.5) / n as f64 - 0.5)
+    };
     let hits: Vec<Option<(Hit, Vector3<f64>)>> = (0..n * n)
         .map(|k| {
-            let (i, j) = (k % n, k / n);
-            let px = Vector2::new(x + (i as f64 + 0.5) / n as f64 - 0.5, y + (j as f64 + 0.5) / n as f64 - 0.5);
-            let ray = camera.pixel_to_ray(&px)?;
+            let ray = camera.pixel_to_ray(&sample_px(k))?;
             let dir = ray.dir.into_inner();
             shader.scene.cast(&ray.origin, &dir, 1e-6, f64::INFINITY).map(|h| (h, dir))
         })
@@ -485,7 +529,7 @@ fn pixel_samples(shader: &Shader, camera: &dyn omni_model::CameraModel, x: f64, 
             };
             ((grad(nx).powi(2) + grad(ny).powi(2)) / 12.0).sqrt()
         };
-        values[k] = shader.shade(hit, dir, footprint);
+        values[k] = shader.shade(hit, dir, footprint, shader.speckle(&sample_px(k)));
     }
     values
 }
@@ -564,8 +608,9 @@ pub fn render_laser_frame(
     }
     assert!(alpha_rad.is_finite(), "render_laser_frame: mirror angle must be finite, got {alpha_rad}");
     let slices = light_slices(sensor, alpha_rad, facet, lasers, opts);
-    let electrons = render_electrons(sensor, scene, &slices, opts);
-    let image = finish(sensor, electrons, opts, frame_seed(opts.seed, alpha_rad, facet, lasers));
+    let seed = frame_seed(opts.seed, alpha_rad, facet, lasers);
+    let electrons = render_electrons(sensor, scene, &slices, opts, seed);
+    let image = finish(sensor, electrons, opts, seed);
     let truth = crate::truth::stripe_truth(sensor, scene, alpha_rad, facet, lasers);
     LaserFrame { image, truth }
 }
@@ -577,8 +622,9 @@ pub fn render_ambient_frame(sensor: &Sensor, scene: &Scene, opts: &RenderOptions
     if let Err(e) = opts.validate() {
         panic!("invalid RenderOptions: {e}");
     }
-    let electrons = render_electrons(sensor, scene, &[], opts);
-    finish(sensor, electrons, opts, frame_seed(opts.seed, f64::NAN, u32::MAX, &[]))
+    let seed = frame_seed(opts.seed, f64::NAN, u32::MAX, &[]);
+    let electrons = render_electrons(sensor, scene, &[], opts, seed);
+    finish(sensor, electrons, opts, seed)
 }
 
 #[cfg(test)]

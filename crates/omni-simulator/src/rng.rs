@@ -53,6 +53,25 @@ impl SplitMix64 {
     }
 }
 
+impl SplitMix64 {
+    /// Gamma with shape `k` ≥ 1 and scale 1 (Marsaglia & Tsang 2000).
+    pub fn gamma(&mut self, k: f64) -> f64 {
+        let d = k.max(1.0) - 1.0 / 3.0;
+        let c = 1.0 / (9.0 * d).sqrt();
+        loop {
+            let x = self.normal();
+            let v = (1.0 + c * x).powi(3);
+            if v <= 0.0 {
+                continue;
+            }
+            let u = self.uniform();
+            if u.ln() < 0.5 * x * x + d - d * v + d * v.ln() {
+                return d * v;
+            }
+        }
+    }
+}
+
 /// The SplitMix64 output function.
 pub fn mix(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -75,6 +94,16 @@ mod tests {
             s2 += x * x;
         }
         assert!((s / n as f64).abs() < 0.01 && (s2 / n as f64 - 1.0).abs() < 0.01);
+        for k in [1.0, 11.1] {
+            let (mut s, mut s2) = (0.0, 0.0);
+            for _ in 0..n {
+                let x = r.gamma(k);
+                s += x;
+                s2 += x * x;
+            }
+            let mean = s / n as f64;
+            assert!((mean / k - 1.0).abs() < 0.01 && ((s2 / n as f64 - mean * mean) / k - 1.0).abs() < 0.03);
+        }
         for lambda in [3.0, 25.0, 400.0] {
             let (mut s, mut s2) = (0.0, 0.0);
             for _ in 0..n {

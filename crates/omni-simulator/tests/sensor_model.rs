@@ -69,3 +69,59 @@ fn strong_laser_saturates_at_full_scale() {
     assert!(saturated(&hot.image) > 50, "a 10× laser saturates: {}", saturated(&hot.image));
     assert!(hot.image.data.iter().all(|v| *v <= 255));
 }
+
+#[test]
+fn speckle_modulates_the_stripe_and_keeps_its_mean() {
+    let sensor = Sensor::paper_scaled(512);
+    let scene = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
+    let alpha = 20f64.to_radians();
+    let clean = RenderOptions { ambient_e: 0.0, ..RenderOptions::noiseless() };
+    let speckled = RenderOptions { speckle_contrast: 0.3, ..clean.clone() };
+    let a = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &clean);
+    let b = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &speckled);
+    assert_eq!(b.image, render_laser_frame(&sensor, &scene, alpha, 0, &[0], &speckled).image, "deterministic");
+    // Stripe energy across the stripe (3 × 3 sum at each truth pixel, every 4th sample).
+    let energy = |f: &omni_simulator::Frame16| -> Vec<f64> {
+        a.truth
+            .iter()
+            .step_by(4)
+            .filter(|t| t.xyz[1].abs() < 150.0)
+            .map(|t| {
+                let (x, y) = (t.pixel[0].round() as i64, t.pixel[1].round() as i64);
+                let mut s = 0.0;
+                for dy in -2..=2 {
+                    for dx in -2..=2 {
+                        s += f.get((x + dx) as u32, (y + dy) as u32) as f64;
+                    }
+                }
+                s
+            })
+            .collect()
+    };
+    let rel_std = |v: &[f64]| {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        ((v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt() / m, m)
+    };
+    let ((s0, m0), (s1, m1)) = (rel_std(&energy(&a.image)), rel_std(&energy(&b.image)));
+    eprintln!("stripe energy relative std: clean {s0:.3}, speckle 0.3 → {s1:.3}; mean {m0:.0} → {m1:.0}");
+    assert!(s1 > s0 + 0.05, "speckle must modulate the stripe: {s0} → {s1}");
+    assert!((m1 / m0 - 1.0).abs() < 0.1, "speckle keeps the mean: {m0} → {m1}");
+}
+
+#[test]
+fn named_conditions_are_what_they_say() {
+    let sensor = Sensor::paper_scaled(512);
+    let scene = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
+    let peak = |o: RenderOptions| {
+        let f = render_laser_frame(&sensor, &scene, 20f64.to_radians(), 0, &[0], &RenderOptions { noise: false, ..o });
+        *f.image.data.iter().max().unwrap()
+    };
+    let (normal, weak, hot) =
+        (peak(RenderOptions::default()), peak(RenderOptions::weak_stripe()), peak(RenderOptions::saturated()));
+    eprintln!("peaks at 512 px: default {normal}, weak {weak}, saturated {hot}");
+    assert!(hot == 255 && normal < 255 && weak < normal);
+    let ambient =
+        render_ambient_frame(&sensor, &scene, &RenderOptions { noise: false, ..RenderOptions::strong_ambient() });
+    let plane_level = *ambient.data.iter().max().unwrap();
+    assert!((115..=130).contains(&plane_level), "bench plane under strong ambient: {plane_level}");
+}

@@ -115,7 +115,9 @@ pub struct PairOptions {
     /// Initial estimate of frame timestamp − trigger time (µs); refined as frames pair. 0 when
     /// the camera stamps frames with their exposure time.
     pub latency_us: i64,
-    /// How long a new frame waits for its trigger event to arrive (µs).
+    /// How long a new frame waits for its trigger event (µs). A frame is matched as soon as an
+    /// event at or after its time has arrived; the wait matters for a frame whose event was lost,
+    /// which is only known (and placed) when the next event or `DONE` arrives.
     pub event_grace_us: i64,
     /// A frame must lie within this fraction of the gap to the neighbouring trigger (< 0.5).
     pub tolerance_fraction: f64,
@@ -123,7 +125,7 @@ pub struct PairOptions {
 
 impl Default for PairOptions {
     fn default() -> Self {
-        PairOptions { frame_timeout_us: 2_000_000, latency_us: 0, event_grace_us: 200_000, tolerance_fraction: 0.4 }
+        PairOptions { frame_timeout_us: 2_000_000, latency_us: 0, event_grace_us: 2_000_000, tolerance_fraction: 0.4 }
     }
 }
 
@@ -134,8 +136,9 @@ pub enum PairEvent {
     Paired(Box<Frame>),
     /// A trigger that fired but whose frame never came.
     FrameMissing { seq: u64, facet: u32, alpha_deg: f64, reason: String },
-    /// Trigger events that were sent but never arrived (a sequence gap).
-    EventsLost { first_seq: u64, count: u64 },
+    /// Trigger events that were sent but never arrived (a sequence gap). Their triggers are
+    /// placed from the schedule (`placed` = how many could be) and still pair with their frames.
+    EventsLost { first_seq: u64, count: u64, placed: u64 },
     /// A frame that no received trigger accounts for (not written to the manifest).
     FrameUnmatched { path: String, reason: String },
     /// An event contradicting the schedule (dropped, never paired).
@@ -149,15 +152,19 @@ pub struct PairStats {
     pub paired: u64,
     pub frames_missing: u64,
     pub events_lost: u64,
+    /// Lost events that could not be placed in time (no event received at all).
+    pub events_unplaced: u64,
+    /// Frames paired with a trigger placed from the schedule (its event was lost).
+    pub paired_inferred: u64,
     pub events_duplicated: u64,
     pub frames_unmatched: u64,
     pub bad_events: u64,
 }
 
 impl PairStats {
-    /// Triggers without a frame in the manifest: lost events and frames that never came.
+    /// Triggers without a frame in the manifest.
     pub fn missing_total(&self) -> u64 {
-        self.frames_missing + self.events_lost
+        self.frames_missing + self.events_unplaced
     }
 }
 
@@ -178,7 +185,13 @@ pub struct Pairer {
     pending: BTreeMap<u64, TriggerEvent>,
     frames: VecDeque<PendingFrame>,
     ambient: HashMap<(u32, u64), String>,
-    newest_trigger_time: Option<i64>,
+    /// Sequence number and expected frame time of the newest received event.
+    newest_trigger_time: Option<(u64, i64)>,
+    /// The last received event: (seq, controller time µs), anchor for placing lost ones.
+    last_received: Option<(u64, u64)>,
+    inferred: HashSet<u64>,
+    /// `DONE` arrived: no event will come any more, so no frame needs to wait for one.
+    run_ended: bool,
     pub stats: PairStats,
 }
 
@@ -197,6 +210,9 @@ impl Pairer {
             frames: VecDeque::new(),
             ambient: HashMap::new(),
             newest_trigger_time: None,
+            last_received: None,
+            inferred: HashSet::new(),
+            run_ended: false,
             stats: PairStats::default(),
         }
     }
@@ -223,30 +239,70 @@ impl Pairer {
             self.stats.events_duplicated += 1;
             return out;
         }
-        out.extend(self.lose_events_before(ev.seq));
+        out.extend(self.lose_events_before(ev.seq, Some((ev.seq, ev.t_us))));
+        self.last_received = Some((ev.seq, ev.t_us));
         let offset = received_us - ev.t_us as i64;
         self.clock_offset_us = Some(self.clock_offset_us.map_or(offset, |o| o.min(offset)));
         self.stats.triggers += 1;
         self.next_seq = ev.seq + 1;
         self.pending.insert(ev.seq, ev);
-        self.newest_trigger_time = self.pending.values().last().map(|e| self.frame_time(e));
+        self.newest_trigger_time = self.pending.values().last().map(|e| (e.seq, self.frame_time(e)));
         out
     }
 
-    fn lose_events_before(&mut self, seq: u64) -> Option<PairEvent> {
-        (seq > self.next_seq).then(|| {
-            let count = seq - self.next_seq;
-            self.stats.events_lost += count;
-            let first_seq = self.next_seq;
-            self.next_seq = seq;
-            PairEvent::EventsLost { first_seq, count }
-        })
+    /// Events `next_seq..seq` were lost. The schedule says exactly which trigger each was (its
+    /// facet, encoder count, lasers); its time is interpolated in encoder position between the
+    /// received neighbours `prev` and `next` (constant speed), or extrapolated at the nominal
+    /// speed from one of them. Placed triggers wait for their frames like received ones.
+    fn lose_events_before(&mut self, seq: u64, next: Option<(u64, u64)>) -> Option<PairEvent> {
+        if seq <= self.next_seq {
+            return None;
+        }
+        let (first_seq, count) = (self.next_seq, seq - self.next_seq);
+        self.stats.events_lost += count;
+        let mut placed = 0;
+        for lost in first_seq..seq {
+            match self.place(lost, self.last_received, next) {
+                Some(t_us) => {
+                    let e = self.schedule.expected(lost);
+                    let ev = TriggerEvent {
+                        seq: lost,
+                        encoder: e.encoder,
+                        facet: e.facet,
+                        revolution: e.revolution,
+                        t_us,
+                        lasers: e.lasers,
+                    };
+                    self.pending.insert(lost, ev);
+                    self.inferred.insert(lost);
+                    placed += 1;
+                }
+                None => self.stats.events_unplaced += 1,
+            }
+        }
+        self.next_seq = seq;
+        Some(PairEvent::EventsLost { first_seq, count, placed })
+    }
+
+    /// Controller time (µs) of trigger `seq` from its received neighbours.
+    fn place(&self, seq: u64, prev: Option<(u64, u64)>, next: Option<(u64, u64)>) -> Option<u64> {
+        let pos = |s: u64| self.schedule.position(s) as f64;
+        let t = match (prev, next) {
+            (Some((sp, tp)), Some((sn, tn))) => {
+                tp as f64 + (pos(seq) - pos(sp)) * (tn as f64 - tp as f64) / (pos(sn) - pos(sp))
+            }
+            (Some((sp, tp)), None) => tp as f64 + (pos(seq) - pos(sp)) * self.us_per_count,
+            (None, Some((sn, tn))) => tn as f64 - (pos(sn) - pos(seq)) * self.us_per_count,
+            (None, None) => return None,
+        };
+        (t >= 0.0).then_some(t.round() as u64)
     }
 
     /// The controller reported the run's total trigger count: events beyond the last received
-    /// one are lost.
+    /// one are lost (and placed after it at the nominal speed).
     pub fn on_run_end(&mut self, fired: u64) -> Vec<PairEvent> {
-        self.lose_events_before(fired).into_iter().collect()
+        self.run_ended = true;
+        self.lose_events_before(fired, None).into_iter().collect()
     }
 
     /// A new frame, first seen at host time `now_us`.
@@ -271,8 +327,12 @@ impl Pairer {
     pub fn tick(&mut self, now_us: i64) -> Vec<PairEvent> {
         let mut out = Vec::new();
         while let Some(f) = self.frames.front() {
-            let trigger_seen = self.newest_trigger_time.is_some_and(|t| t >= f.frame.time_us);
-            if !trigger_seen && now_us - f.detected_us < self.options.event_grace_us {
+            // Events arrive in order: once one at (or, within its window, just before) the frame's
+            // time has arrived, the frame's own event has arrived or been found lost.
+            let trigger_seen = self
+                .newest_trigger_time
+                .is_some_and(|(seq, t)| t as f64 + self.tolerance_us(seq) >= f.frame.time_us as f64);
+            if !trigger_seen && !self.run_ended && now_us - f.detected_us < self.options.event_grace_us {
                 break;
             }
             let f = self.frames.pop_front().map(|f| f.frame);
@@ -308,6 +368,7 @@ impl Pairer {
 
     fn declare_missing(&mut self, seq: u64, reason: String) -> Option<PairEvent> {
         let ev = self.pending.remove(&seq)?;
+        self.inferred.remove(&seq);
         self.stats.frames_missing += 1;
         Some(PairEvent::FrameMissing { seq, facet: ev.facet, alpha_deg: self.schedule.alpha_deg(ev.encoder), reason })
     }
@@ -340,6 +401,9 @@ impl Pairer {
         self.latency_us += 0.3 * error_us;
         if let Some(ev) = self.pending.remove(&seq) {
             self.stats.paired += 1;
+            if self.inferred.contains(&seq) {
+                self.stats.paired_inferred += 1;
+            }
             out.push(PairEvent::Paired(Box::new(self.record(&ev, frame.name))));
         }
         out
@@ -351,6 +415,11 @@ impl Pairer {
         f.encoder = Some(ev.encoder as u64);
         f.timestamp_us = Some(ev.t_us);
         f.lasers = ev.lasers.clone();
+        if self.inferred.remove(&ev.seq) {
+            // Its event was lost: angle, facet and encoder come from the schedule, the timestamp
+            // is interpolated.
+            f.extra.insert("trigger_inferred".into(), true.into());
+        }
         if self.schedule.ambient {
             let key = |rev: u64| (ev.encoder, rev);
             if ev.lasers.is_empty() {
@@ -489,16 +558,42 @@ mod tests {
     }
 
     #[test]
-    fn a_lost_event_leaves_its_frame_unmatched_never_paired_with_a_neighbour() {
+    fn lost_events_are_placed_from_the_schedule_and_still_pair_with_their_own_frames() {
         let s = schedule(false);
-        let events: Vec<u64> = (0..12).filter(|&q| q != 5 && q != 11).collect();
+        let events: Vec<u64> = (0..12).filter(|&q| ![0, 5, 6, 11].contains(&q)).collect();
         let frames: Vec<(u64, i64)> = (0..12).map(|q| (q, 0)).collect();
         let (out, stats) = run(&s, &events, &frames, 12);
         let p = paired(&out);
-        assert_eq!(p.len(), 10);
-        assert!(p.iter().all(|(seq, path, _, _)| *path == format!("f{seq}.png")));
-        assert_eq!(stats.events_lost, 2, "seq 5 (gap) and seq 11 (tail, from DONE)");
-        assert_eq!(stats.frames_unmatched, 2);
+        assert_eq!(p.len(), 12, "{out:?}");
+        for (seq, path, alpha, facet) in &p {
+            let e = s.expected(*seq);
+            assert_eq!(*path, format!("f{seq}.png"));
+            assert_eq!((*facet, *alpha), (e.facet, e.count_in_facet as f64 * 0.01));
+        }
+        let inferred: Vec<u64> = out
+            .iter()
+            .filter_map(|e| match e {
+                PairEvent::Paired(f) if f.extra.contains_key("trigger_inferred") => Some(f.seq),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(inferred, vec![0, 5, 6, 11], "first (extrapolated), a gap of two (interpolated), last (from DONE)");
+        for f in out.iter().filter_map(|e| if let PairEvent::Paired(f) = e { Some(f) } else { None }) {
+            assert_eq!(f.timestamp_us, Some(event(&s, f.seq).t_us), "placed times are exact at constant speed");
+        }
+        assert_eq!((stats.events_lost, stats.paired_inferred, stats.missing_total()), (4, 4, 0));
+        assert_eq!(stats.frames_unmatched, 0);
+    }
+
+    #[test]
+    fn a_frame_off_its_placed_trigger_time_is_not_paired() {
+        let s = schedule(false);
+        let events: Vec<u64> = (0..6).filter(|&q| q != 2).collect();
+        // Frame 2 comes 10 ms late: beyond the ±8 ms window of its placed trigger.
+        let frames: Vec<(u64, i64)> = (0..6).map(|q| (q, if q == 2 { 10_000 } else { 0 })).collect();
+        let (out, stats) = run(&s, &events, &frames, 6);
+        assert_eq!(paired(&out).len(), 5);
+        assert_eq!((stats.frames_unmatched, stats.frames_missing), (1, 1));
     }
 
     #[test]

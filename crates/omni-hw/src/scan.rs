@@ -139,9 +139,10 @@ pub fn describe(event: &PairEvent) -> Option<String> {
         PairEvent::FrameMissing { seq, facet, alpha_deg, reason } => {
             Some(format!("trigger seq {seq} (facet {facet}, {alpha_deg}°): frame missing: {reason}"))
         }
-        PairEvent::EventsLost { first_seq, count } => {
-            Some(format!("trigger events seq {first_seq}..{} lost ({count})", first_seq + count - 1))
-        }
+        PairEvent::EventsLost { first_seq, count, placed } => Some(format!(
+            "trigger events seq {first_seq}..{} lost ({count}); {placed} placed from the schedule",
+            first_seq + count - 1
+        )),
         PairEvent::FrameUnmatched { path, reason } => Some(format!("frame {path}: not paired: {reason}")),
         PairEvent::BadEvent(m) => Some(format!("dropped event: {m}")),
     }
@@ -315,6 +316,7 @@ fn finish<P: Read + Write, S: FrameSource + ?Sized>(run: Run<'_, P, S>, error: O
     };
     put("triggers", stats.triggers);
     put("events_lost", stats.events_lost);
+    put("frames_with_inferred_trigger", stats.paired_inferred);
     put("events_duplicated", stats.events_duplicated);
     put("frames_unmatched", stats.frames_unmatched);
     put("bad_events", stats.bad_events);

@@ -41,7 +41,7 @@ pub(crate) fn synthetic_boards(
         let centre = Vector3::new(dist * az.cos(), dist * az.sin(), 80.0 + dist * elev.tan());
         let z = (centre - Vector3::new(0.0, 0.0, 80.0)).normalize();
         let facing = nalgebra::UnitQuaternion::rotation_between(&Vector3::z(), &z).unwrap();
-        let roll = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rng.uniform() * 6.28);
+        let roll = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rng.uniform() * std::f64::consts::TAU);
         let tilt = nalgebra::UnitQuaternion::from_scaled_axis(
             Vector3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, 0.0).normalize() * 1.0 * rng.uniform(),
         );

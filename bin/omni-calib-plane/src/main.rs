@@ -1,7 +1,7 @@
 //! omni-calib-plane: calibrate the swept light planes (the transmitter) from laser stripes on
 //! posed checkerboards, and print the light-plane table of a calibrated scanner.
 
-use clap::{Args, Parser, Subcommand};
+use clap::{ArgGroup, Args, Parser, Subcommand};
 use omni_calib::plane::{self, PlaneCalibOptions, inputs};
 use omni_cli::{CliError, CliResult};
 use omni_formats::rig::{BoardCornersFile, BoardPosesFile, RigFile};
@@ -21,6 +21,8 @@ use std::path::{Path, PathBuf};
         axis, encoder zero, per-facet tilt/pitch/radius errors, each laser's fan plane) to all frames \
         at once and writes scanner.json. `table` prints the light plane of any mirror angle.",
     after_help = "Examples:\n  \
+        omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose.png \\\n      \
+        --stripes stripes.jsonl -o scanner.json\n  \
         omni-calib-plane fit --camera camera.json --rig rig.json --board-corners corners.json \\\n      \
         --stripes stripes.jsonl -o scanner.json\n  \
         omni-calib-plane fit --camera camera.json --rig rig.json --board-poses poses.json \\\n      \
@@ -42,8 +44,10 @@ enum Command {
 }
 
 #[derive(Args)]
-#[command(after_help = "Board poses come from exactly one of --board-corners (corner pixels of each rig board in \
-    the pose image, posed with the camera) or --board-poses (known poses).\n\
+#[command(group(ArgGroup::new("pose_source").required(true).args(["pose_image", "board_corners", "board_poses"])))]
+#[command(after_help = "Board poses come from exactly one of --pose-image (the rig boards are found in the ambient \
+    pose image and posed with the camera), --board-corners (their corner pixels given) or --board-poses (known \
+    poses).\n\
     Frames belong to rig placement 0 unless their record has an integer field `placement`.")]
 struct FitArgs {
     /// Calibrated receiver (camera.json).
@@ -52,8 +56,11 @@ struct FitArgs {
     /// The rig's boards (rig.json, format omniscan.rig).
     #[arg(long)]
     rig: PathBuf,
+    /// Ambient (lasers off) image of the rig, in which the boards are found (PNG 8/16-bit, JPEG).
+    #[arg(long)]
+    pose_image: Option<PathBuf>,
     /// Corner pixels of the rig boards in the pose image (format omniscan.board_corners).
-    #[arg(long, conflicts_with = "board_poses", required_unless_present = "board_poses")]
+    #[arg(long)]
     board_corners: Option<PathBuf>,
     /// Known board poses (format omniscan.board_poses).
     #[arg(long)]
@@ -109,17 +116,22 @@ fn fit(a: &FitArgs) -> CliResult {
     let (_, camera) = CameraFile::load(&a.camera)?;
     let rig: RigFile = read_doc(&a.rig)?;
     rig.validate().map_err(|m| CliError::new(format!("{}: {m}", name(&a.rig))))?;
-    let boards = match (&a.board_corners, &a.board_poses) {
-        (Some(path), _) => {
+    let boards = match (&a.pose_image, &a.board_corners, &a.board_poses) {
+        (Some(path), _, _) => {
+            let image = omni_vision::corners::load_gray(path).map_err(CliError::new)?;
+            inputs::boards_from_pose_image(camera.as_ref(), &rig, &image, a.min_corners)
+                .map_err(|m| CliError::new(format!("{}: {m}", name(path))))?
+        }
+        (None, Some(path), _) => {
             let corners: BoardCornersFile = read_doc(path)?;
             inputs::boards_from_corners(camera.as_ref(), &rig, &corners, a.min_corners)
                 .map_err(|m| CliError::new(format!("{}: {m}", name(path))))?
         }
-        (None, Some(path)) => {
+        (None, None, Some(path)) => {
             let poses: BoardPosesFile = read_doc(path)?;
             inputs::boards_from_poses(&rig, &poses).map_err(|m| CliError::new(format!("{}: {m}", name(path))))?
         }
-        (None, None) => return Err(CliError::usage("give --board-corners or --board-poses")),
+        (None, None, None) => return Err(CliError::usage("give --pose-image, --board-corners or --board-poses")),
     };
     let initial = match &a.initial {
         Some(p) => ScannerFile::load(p)?.0.transmitter,

@@ -156,6 +156,25 @@ fn bad_inputs_fail_cleanly_without_output() {
     assert!(stderr(&o).contains("no usable frame"), "{}", stderr(&o));
     assert!(!out.exists());
 
+    // A pose image without boards (uniform grey), and a truncated one.
+    let paths = dataset(dir.path(), None);
+    let mut grey = omni_vision::image_io::GrayImage::new(1024, 1024, 8);
+    grey.data.iter_mut().for_each(|v| *v = 128);
+    let pose = dir.path().join("pose.png");
+    omni_vision::image_io::write_gray_png(&pose, &grey).unwrap();
+    let mut args = fit_args(&paths, &out);
+    args[5] = "--pose-image";
+    args[6] = pose.to_str().unwrap();
+    let o = run(&args);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("pose.png") && stderr(&o).contains("not found"), "{}", stderr(&o));
+    let bytes = std::fs::read(&pose).unwrap();
+    std::fs::write(&pose, &bytes[..bytes.len() / 2]).unwrap();
+    let o = run(&args);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("pose.png"), "{}", stderr(&o));
+    assert!(!out.exists());
+
     // A usage error.
     let o = run(&["table", "--scanner", "x.json", "--alpha", "5:1:1"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

@@ -25,6 +25,8 @@ pub mod inputs;
 pub mod model;
 mod observe;
 mod pose;
+#[cfg(test)]
+mod sim_tests;
 pub mod synth;
 mod table;
 #[cfg(test)]

@@ -159,3 +159,107 @@ pub fn boards_from_corners(
         })
         .collect()
 }
+
+/// Boards found in the ambient pose image: each rig board is detected in turn
+/// ([`omni_vision::corners::detect_board`]), posed with the camera, and blanked out of the image
+/// so the next detection finds the next board. The corner labeling may come out mirrored or
+/// turned by 180°; both leave the board's outline in place (it is symmetric), and the proper
+/// labeling is the one whose pose explains the corners better. Only rigs with one placement
+/// (one pose image) are supported.
+pub fn boards_from_pose_image(
+    camera: &dyn CameraModel,
+    rig: &RigFile,
+    image: &omni_vision::corners::GrayF32,
+    min_corners: usize,
+) -> std::result::Result<Vec<(PlacedBoard, BoardPoseReport)>, String> {
+    use omni_vision::corners::{DetectorOptions, detect_board};
+    if rig.boards.iter().any(|b| b.placement != rig.boards[0].placement) {
+        return Err("a pose image shows one placement; give --board-corners or --board-poses for several".into());
+    }
+    let circle = camera.mirror_circle();
+    let opts = DetectorOptions {
+        annulus: Some([circle.centre.x, circle.centre.y, circle.inner_radius, circle.outer_radius]),
+        min_corners: min_corners.max(4),
+        ..Default::default()
+    };
+    let mut img = image.clone();
+    let mut out = vec![];
+    for b in &rig.boards {
+        let found = detect_board(&img, b.inner_cols, b.inner_rows, &opts)
+            .map_err(|why| format!("board \"{}\" not found in the pose image: {why}", b.name))?;
+        let fit = [found.clone(), found.mirrored()]
+            .iter()
+            .filter_map(|labels| {
+                let pts: Vec<[f64; 2]> = labels
+                    .corners
+                    .iter()
+                    .map(|c| [c.index[0] as f64 * b.square_mm, c.index[1] as f64 * b.square_mm])
+                    .collect();
+                let px: Vec<[f64; 2]> = labels.corners.iter().map(|c| c.px).collect();
+                estimate_board_pose(camera, &pts, &px).map(|f| (f, pts, px))
+            })
+            .min_by(|a, b| a.0.rms_rad.total_cmp(&b.0.rms_rad))
+            .filter(|(f, _, _)| f.corners_used >= min_corners)
+            .ok_or_else(|| format!("board \"{}\" found in the pose image but could not be posed", b.name))?;
+        let (fit, _, px) = fit;
+        blank_board(&mut img, &px);
+        let mut r = report(b, &fit.pose, "pose image");
+        r.corners_used = Some(fit.corners_used);
+        r.corner_rms_deg = Some(fit.rms_rad.to_degrees());
+        out.push((PlacedBoard::new(b, fit.pose), r));
+    }
+    Ok(out)
+}
+
+/// Paints the board's corner region, grown by half its size about its centroid, with the image's
+/// median grey, so that the detector cannot find the same board again.
+fn blank_board(img: &mut omni_vision::corners::GrayF32, px: &[[f64; 2]]) {
+    let hull = convex_hull(px);
+    if hull.len() < 3 {
+        return;
+    }
+    let n = hull.len() as f64;
+    let c = hull.iter().fold([0.0, 0.0], |a, p| [a[0] + p[0] / n, a[1] + p[1] / n]);
+    let grown: Vec<[f64; 2]> = hull.iter().map(|p| [c[0] + 1.5 * (p[0] - c[0]), c[1] + 1.5 * (p[1] - c[1])]).collect();
+    let mut sorted = img.data.clone();
+    sorted.sort_by(f32::total_cmp);
+    let grey = sorted[sorted.len() / 2];
+    let (x0, x1) = grown.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| (a.0.min(p[0]), a.1.max(p[0])));
+    let (y0, y1) = grown.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| (a.0.min(p[1]), a.1.max(p[1])));
+    for y in (y0.floor().max(0.0) as usize)..=(y1.ceil().min(img.height as f64 - 1.0) as usize) {
+        for x in (x0.floor().max(0.0) as usize)..=(x1.ceil().min(img.width as f64 - 1.0) as usize) {
+            if inside_convex(&grown, [x as f64, y as f64]) {
+                img.data[y * img.width + x] = grey;
+            }
+        }
+    }
+}
+
+/// Convex hull (Andrew's monotone chain), counter-clockwise in (x, y).
+fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut p = points.to_vec();
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let mut hull: Vec<[f64; 2]> = Vec::new();
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f64; 2]>> =
+            if pass == 0 { Box::new(p.iter()) } else { Box::new(p.iter().rev()) };
+        for &q in iter {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+fn inside_convex(hull: &[[f64; 2]], q: [f64; 2]) -> bool {
+    let n = hull.len();
+    (0..n).all(|i| {
+        let (a, b) = (hull[i], hull[(i + 1) % n]);
+        (b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0]) >= 0.0
+    })
+}

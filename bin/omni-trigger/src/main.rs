@@ -32,7 +32,8 @@ const TOOL: &str = "omni-trigger";
         omni-trigger info --port /dev/ttyACM0\n  \
         omni-trigger scan --port /dev/ttyACM0 --frames frames/ --angles 0:30:0.5 --revolutions 1 > scan.jsonl\n  \
         omni-trigger scan --port /dev/ttyACM0 --frames frames/ --angles 5,10,15 --facets 0,6 --laser-off | omni-ridge\n  \
-        PORT=$(omni-trigger emulate --frames frames/ --width 256 &) ...   (see `omni-trigger emulate --help`)"
+        omni-trigger emulate --frames frames/ --width 256 > port.txt &  sleep 2\n  \
+        omni-trigger scan --port \"$(head -1 port.txt)\" --frames frames/ --angles 0:30:2 --facets 0 > scan.jsonl"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -73,8 +74,10 @@ struct InfoArgs {
     paired frame (seq = trigger sequence number, alpha_deg from the encoder count that fired, facet, revolution, \
     encoder, timestamp_us, lasers) written and flushed as it arrives, and ends with a status record (frames, \
     frames_missing, complete, errors) — also when the scan fails. A frame is paired only if its timestamp \
-    (file modification time) falls in its trigger's window; otherwise it is reported, never shifted to a \
-    neighbouring angle. With --laser-off, even revolutions fire with all lasers off and each laser frame's \
+    (file modification time; see --latency-ms) falls in its trigger's window; otherwise it is reported, never shifted to a \
+    neighbouring angle. A trigger event lost on the wire is placed from the trigger schedule (the sequence \
+    number fixes its facet and angle, its time is interpolated) and its frame still pairs, marked \
+    \"trigger_inferred\": true. With --laser-off, even revolutions fire with all lasers off and each laser frame's \
     ambient_path names the laser-off frame taken one revolution earlier at the same encoder count.\n\n\
     Examples:\n  \
     omni-trigger scan --port /dev/ttyACM0 --frames frames/ --angles 0:30:0.5 --revolutions 2 -o scan.jsonl\n  \

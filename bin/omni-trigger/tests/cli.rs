@@ -243,8 +243,9 @@ fn duplicated_events_are_counted_once() {
 fn a_slow_camera_misses_frames_and_they_are_reported_missing() {
     // 40 Hz = 25 ms per trigger; 40 ms per frame: the camera misses about every other trigger.
     let (frames, status) = faulty_scan(&["--slow-camera-ms", "40"]);
+    // Nominally 12 and 12; a loaded machine makes the camera slower still, never faster.
     assert!(status.frames_missing >= 8, "{status:?}");
-    assert!(frames.len() >= 8, "{status:?}");
+    assert!(frames.len() >= 4, "{status:?}");
     assert_eq!(extra(&status, "frames_unmatched"), 0);
 }
 

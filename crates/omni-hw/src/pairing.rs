@@ -11,6 +11,11 @@
 //! neighbouring angle: it pairs with its own trigger or is reported as unmatched. Triggers whose
 //! frame never comes are reported missing after `frame_timeout_us`, or as soon as a later frame
 //! arrives (cameras deliver in order).
+//!
+//! Lost events (sequence gaps, or fewer events than `DONE fired=`) are placed from the schedule:
+//! the sequence number fixes facet, encoder count and lasers, and the time is interpolated in
+//! encoder position between the received neighbours. Their frames pair like any other (the
+//! record carries `"trigger_inferred": true`), through the same timestamp window.
 
 use crate::message::TriggerEvent;
 use crate::schedule::Schedule;

@@ -377,3 +377,17 @@ fn an_interrupted_scan_stops_the_controller_and_ends_its_manifest_with_a_status(
     assert_eq!(st.frames + st.frames_missing, extra(&st, "controller_fired"), "{st:?}");
     assert_frames_true(&frames, &emu.truth());
 }
+
+#[test]
+fn a_persistent_emulator_serves_several_tool_runs() {
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40", "--persist"]);
+    for _ in 0..2 {
+        let out = Command::new(BIN).args(["info", "--port", &emu.port]).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(String::from_utf8_lossy(&out.stdout).contains("36000 counts/rev"));
+    }
+    let out = emu.scan(&["--angles", "0,15", "--facets", "0,6"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (frames, status) = read_manifest(&emu.manifest_path());
+    assert_eq!((frames.len(), status.frames_missing), (4, 0), "{status:?}");
+}

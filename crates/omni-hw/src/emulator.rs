@@ -258,6 +258,12 @@ impl<P: Write> Link<'_, P> {
         self.write(&line)
     }
 
+    /// Sends the lines; `false` if the port failed (no host: the lines are lost, as on a wire
+    /// without a listener).
+    fn send_all(&mut self, msgs: &[DeviceMessage]) -> bool {
+        msgs.iter().all(|m| self.send(m).is_ok())
+    }
+
     fn write(&mut self, bytes: &[u8]) -> std::io::Result<()> {
         match self.port.write_all(bytes) {
             Err(e) if e.kind() == ErrorKind::TimedOut => Ok(()),
@@ -266,10 +272,10 @@ impl<P: Write> Link<'_, P> {
     }
 }
 
-/// Serves the controller on `port` until the host disconnects (or, with `persist`, forever) or
-/// the disconnect fault fires. The port's read timeout should be short (1–2 ms): it sets the
-/// loop's tick. Before a host connects, a pseudo-terminal master reports a hang-up; that is
-/// waited out.
+/// Serves the controller on `port` until the host disconnects (or, with `persist`, forever: a run
+/// then goes on without a listener, as real firmware would) or the disconnect fault fires. The
+/// port's read timeout should be short (1–2 ms): it sets the loop's tick. Before a host
+/// connects, a pseudo-terminal master reports a hang-up; that is waited out.
 pub fn serve<P: Read + Write>(
     port: &mut P,
     options: &EmulatorOptions,
@@ -286,26 +292,31 @@ pub fn serve<P: Read + Write>(
     let mut last_status = Instant::now();
     let mut buf = [0u8; 256];
     loop {
+        let mut outgoing = Vec::new();
+        let mut disconnect = false;
         for msg in controller.poll(clock()) {
             if let DeviceMessage::Trigger(ev) = &msg {
                 camera.trigger(shot_for(ev, &options.spec, sys0));
                 fired += 1;
-                if !link.rng.chance(options.faults.drop_events) {
-                    if link.rng.chance(options.faults.duplicate_events) {
-                        link.send(&msg)?;
-                    }
-                    link.send(&msg)?;
+                disconnect |= options.faults.disconnect_after.is_some_and(|n| fired >= n);
+                if link.rng.chance(options.faults.drop_events) {
+                    continue;
                 }
-                if options.faults.disconnect_after.is_some_and(|n| fired >= n) {
-                    return Ok(ServeEnd::SimulatedDisconnect);
+                if link.rng.chance(options.faults.duplicate_events) {
+                    outgoing.push(msg.clone());
                 }
-                continue;
             }
-            link.send(&msg)?;
+            outgoing.push(msg);
         }
         if controller.state() == DeviceState::Running && last_status.elapsed() >= options.status_period {
             last_status = Instant::now();
-            link.send(&DeviceMessage::Status(controller.status(clock())))?;
+            outgoing.push(DeviceMessage::Status(controller.status(clock())));
+        }
+        if !link.send_all(&outgoing) && connected && !options.persist {
+            return Ok(ServeEnd::HostDisconnected);
+        }
+        if disconnect {
+            return Ok(ServeEnd::SimulatedDisconnect);
         }
         let n = match link.port.read(&mut buf) {
             Ok(n) if n > 0 => n,
@@ -329,10 +340,10 @@ pub fn serve<P: Read + Write>(
         for _ in crc_before..reader.stats.crc_errors {
             controller.count_crc_error();
         }
-        for body in bodies {
-            for reply in controller.handle_line(&body, clock()) {
-                link.send(&reply)?;
-            }
+        let replies: Vec<DeviceMessage> =
+            bodies.iter().flat_map(|body| controller.handle_line(body, clock())).collect();
+        if !link.send_all(&replies) && !options.persist {
+            return Ok(ServeEnd::HostDisconnected);
         }
     }
 }

@@ -142,8 +142,13 @@ pub fn fit_frame_plane(points: &[BoardPoint], n_boards: usize, opts: &FramePlane
             opts.min_points_per_board
         ));
     }
+    // Start from the least-median-of-squares plane: up to half the points may be spurious
+    // (glints, ambient structure) without pulling the least-squares rounds below away.
+    if let Some(start) = lmeds_inliers(points, opts) {
+        inliers = start;
+    }
     let mut fit = None;
-    for _round in 0..3 {
+    for _round in 0..4 {
         let kept: Vec<Point3<f64>> = points.iter().zip(&inliers).filter(|(_, k)| **k).map(|(p, _)| p.point).collect();
         let f = fit_plane(&kept).ok_or("plane fit failed (non-finite points)")?;
         if f.planarity_ratio < opts.min_planarity {
@@ -168,6 +173,60 @@ pub fn fit_frame_plane(points: &[BoardPoint], n_boards: usize, opts: &FramePlane
     Ok(FramePlane { plane: f.plane, rms_mm: f.rms, inliers, boards_crossed })
 }
 
+/// Inliers of a least-median-of-squares plane over deterministic random triples. The score of a
+/// plane is the worst, over the boards crossed, of the median squared distance of that board's
+/// points, so a plane must explain the stripe line on every board (a plain median would accept
+/// any plane through the line of the board that holds most points). Inliers lie within
+/// max(`outlier_sigmas`·σ, floor), σ = 1.4826·(1 + 5/(n − 3))·√score (Rousseeuw's scale).
+/// `None` if no triple spans a plane.
+fn lmeds_inliers(points: &[BoardPoint], opts: &FramePlaneOptions) -> Option<Vec<bool>> {
+    let n = points.len();
+    if n < 4 {
+        return None;
+    }
+    let mut groups: Vec<Vec<usize>> = vec![];
+    for b in 0..=points.iter().map(|p| p.board).max()? {
+        let idx: Vec<usize> = (0..n).filter(|&i| points[i].board == b).collect();
+        if idx.len() >= opts.min_points_per_board {
+            groups.push(idx);
+        }
+    }
+    let mut state = 0x9E37_79B9_7F4A_7C15u64 ^ n as u64;
+    let mut next = || {
+        // SplitMix64: deterministic for the same input.
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) % n as u64) as usize
+    };
+    let mut best: Option<(f64, Plane)> = None;
+    let mut dist = vec![];
+    for _ in 0..300 {
+        let (a, b, c) = (points[next()].point, points[next()].point, points[next()].point);
+        let normal = (b - a).cross(&(c - a));
+        // Skip triples that are (nearly) collinear: they come from one board line.
+        if normal.norm() < 1e-3 * (b - a).norm() * (c - a).norm() || normal.norm() == 0.0 {
+            continue;
+        }
+        let plane = Plane::from_point_normal(&a, &normal);
+        let mut score = 0.0f64;
+        for g in &groups {
+            dist.clear();
+            dist.extend(g.iter().map(|&i| plane.signed_distance(&points[i].point).powi(2)));
+            let k = dist.len() / 2;
+            score = score.max(*dist.select_nth_unstable_by(k, f64::total_cmp).1);
+        }
+        if best.is_none_or(|(m, _)| score < m) {
+            best = Some((score, plane));
+        }
+    }
+    let (score, plane) = best?;
+    let sigma = 1.4826 * (1.0 + 5.0 / (n as f64 - 3.0)) * score.sqrt();
+    let limit = (opts.outlier_sigmas * sigma).max(opts.outlier_floor_mm);
+    Some(points.iter().map(|p| plane.signed_distance(&p.point).abs() <= limit).collect())
+}
+
 /// 1.4826 × median absolute deviation from the median: σ of the bulk, blind to outliers.
 pub fn robust_sigma(values: &[f64]) -> f64 {
     if values.is_empty() {
@@ -181,4 +240,66 @@ fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     let n = v.len();
     if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plane::synth::Rng;
+
+    /// Points on two perpendicular lines of the plane z = 0.1·x − 100 (mm), on boards 0 and 1,
+    /// with 0.1 mm noise.
+    fn two_lines(rng: &mut Rng) -> (Plane, Vec<BoardPoint>) {
+        let plane = Plane::from_point_normal(&Point3::new(0.0, 0.0, -100.0), &Vector3::new(-0.1, 0.0, 1.0));
+        let mut pts = vec![];
+        for i in 0..100 {
+            let s = i as f64 * 3.0;
+            for (board, p) in [(0, Point3::new(400.0 + s, s, 0.0)), (1, Point3::new(400.0 + s, -s, 0.0))] {
+                let mut q = plane.project(&p);
+                q.z += 0.1 * rng.gauss();
+                pts.push(BoardPoint { board, point: q });
+            }
+        }
+        (plane, pts)
+    }
+
+    #[test]
+    fn frame_plane_survives_forty_percent_spurious_points() {
+        let mut rng = Rng::new(4);
+        let (truth, mut pts) = two_lines(&mut rng);
+        let good = pts.len();
+        // Spurious points: 40 % of the total, up to ±80 mm off the plane (e.g. checkerboard edges).
+        for i in 0..(good * 2 / 3) {
+            let mut p = pts[i].point;
+            p.z += 20.0 + 60.0 * rng.uniform();
+            pts.push(BoardPoint { point: p, ..pts[i] });
+        }
+        let fit = fit_frame_plane(&pts, 2, &FramePlaneOptions::default()).unwrap();
+        let angle = fit.plane.angle_to(&truth).to_degrees();
+        // 200 points with 0.1 mm noise over ~300 mm: the normal to a few thousandths of a degree.
+        assert!(angle < 0.005, "normal error {angle}°");
+        assert!(
+            (fit.plane.signed_distance(&Point3::new(500.0, 0.0, -50.0))
+                - truth.signed_distance(&Point3::new(500.0, 0.0, -50.0)))
+            .abs()
+                < 0.05
+        );
+        assert!(fit.inliers[..good].iter().filter(|k| **k).count() >= good - 2, "good points kept");
+        assert!(fit.inliers[good..].iter().all(|k| !k), "spurious points rejected");
+        assert!(fit.rms_mm < 0.12, "rms {}", fit.rms_mm);
+    }
+
+    #[test]
+    fn points_on_one_board_line_are_refused_with_the_reason() {
+        let mut rng = Rng::new(5);
+        let (_, pts) = two_lines(&mut rng);
+        let one_board: Vec<BoardPoint> = pts.iter().filter(|p| p.board == 0).copied().collect();
+        let e = fit_frame_plane(&one_board, 2, &FramePlaneOptions::default()).unwrap_err();
+        assert!(e.contains("one line"), "{e}");
+        // Two boards but all points on a single straight line: collinear.
+        let line: Vec<BoardPoint> =
+            (0..40).map(|i| BoardPoint { board: i % 2, point: Point3::new(i as f64, 0.0, 0.0) }).collect();
+        let e = fit_frame_plane(&line, 2, &FramePlaneOptions::default()).unwrap_err();
+        assert!(e.contains("collinear"), "{e}");
+    }
 }

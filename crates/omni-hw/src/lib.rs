@@ -22,6 +22,33 @@
 //! reader.push(encode_line("DONE fired=12 t=5000").as_bytes(), &mut bodies);
 //! assert_eq!(DeviceMessage::parse(&bodies[0]), Ok(DeviceMessage::Done { fired: 12, t_us: 5000 }));
 //! ```
+//!
+//! A scan from a program (what `omni-trigger scan` does):
+//!
+//! ```no_run
+//! use omni_hw::scan::{ScanConfig, configure, run_scan};
+//! use omni_hw::schedule::AngleSpec;
+//! use omni_hw::{Client, ClientOptions, DirFrameSource, PairEvent};
+//! use std::time::Duration;
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let port = serialport::new("/dev/ttyACM0", 115_200).timeout(Duration::from_millis(20)).open_native()?;
+//! let mut client = Client::new(port, ClientOptions::default());
+//! let info = client.hello()?;
+//! let cfg = ScanConfig::new(AngleSpec::parse("0:30:0.5")?, 2);
+//! let (schedule, rpm) = configure(&mut client, &info, &cfg)?;
+//! let mut frames = DirFrameSource::new(std::path::Path::new("frames"))?;
+//! let mut on_event = |e: &PairEvent| {
+//!     if let PairEvent::Paired(frame) = e {
+//!         println!("{} at {}° on facet {}", frame.path, frame.alpha_deg, frame.facet);
+//!     }
+//!     Ok(())
+//! };
+//! let outcome = run_scan(&mut client, &mut frames, schedule, rpm, &cfg, &mut on_event);
+//! println!("{} frames, {} missing", outcome.status.frames, outcome.status.frames_missing);
+//! # Ok(())
+//! # }
+//! ```
 
 pub mod client;
 pub mod controller;
@@ -35,3 +62,4 @@ pub mod schedule;
 
 pub use client::{Client, ClientOptions, HwError, host_time_us};
 pub use message::{DeviceInfo, TriggerEvent};
+pub use pairing::{CapturedFrame, DirFrameSource, FrameSource, PairEvent};

@@ -85,6 +85,9 @@ fn fit_writes_a_scanner_whose_planes_match_the_truth_and_table_prints_them() {
     let o = run(&fit_args(&paths, &out));
     assert!(o.status.success(), "{}", stderr(&o));
     let (file, fitted) = ScannerFile::load(&out).unwrap();
+    if let Ok(dump) = std::env::var("PLANE_DUMP") {
+        std::fs::copy(&out, dump).unwrap();
+    }
     let report = file.report.unwrap();
     assert!(report["model"]["residual_rms_mm"].as_f64().unwrap() < 1.0, "{report}");
     assert_eq!(report["boards"].as_array().unwrap().len(), 2);

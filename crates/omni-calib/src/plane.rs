@@ -233,7 +233,13 @@ pub fn calibrate_planes(
                 continue;
             }
             let pts: Vec<observe::BoardPoint> = idx.iter().map(|&i| points[i]).collect();
-            let own = fit_frame_plane(&pts, boards.len(), &opts.frame);
+            // Oriented like the model's planes (non-negative z) so the report reads consistently.
+            let own = fit_frame_plane(&pts, boards.len(), &opts.frame).map(|mut fp| {
+                if fp.plane.normal.z < 0.0 {
+                    fp.plane = fp.plane.flipped();
+                }
+                fp
+            });
             let used: Vec<Point3<f64>> = match &own {
                 Ok(fp) => pts.iter().zip(&fp.inliers).filter(|(_, k)| **k).map(|(p, _)| p.point).collect(),
                 Err(_) => pts.iter().map(|p| p.point).collect(),

@@ -480,7 +480,7 @@ fn estimates(layout: &Layout, report: &lm::Report) -> Vec<Estimate> {
             Estimate { name, value: p[i] * scale, std: std(i).map(|s| s * scale), unit }
         })
         .collect();
-    if let Some(&last) = layout.facets.last() {
+    if let (Some(&last), true) = (layout.facets.last(), layout.facets.len() > 1) {
         let n = layout.n_free();
         let blocks = [
             (I_FACETS, "pitch_deg", "deg", true),

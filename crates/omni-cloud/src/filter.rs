@@ -25,13 +25,21 @@ use rayon::prelude::*;
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
-/// A fast non-cryptographic hasher (the multiply-rotate "Fx" hash) for voxel keys.
+/// A fast non-cryptographic hasher for voxel keys: multiply-rotate mixing per word, then the
+/// MurmurHash3 finaliser. The finaliser matters: the hash table indexes buckets by the low bits,
+/// and without it the low bits of a product depend only on the low bits of the key, so all
+/// voxels of one z layer would collide.
 #[derive(Default, Clone, Copy)]
 pub struct FxHasher(u64);
 
 impl Hasher for FxHasher {
     fn finish(&self) -> u64 {
-        self.0
+        let mut h = self.0;
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
+        h ^ (h >> 33)
     }
     fn write(&mut self, bytes: &[u8]) {
         for b in bytes {
@@ -187,12 +195,46 @@ pub fn voxel_origin_open3d(points: &[[f64; 3]], size: f64) -> [f64; 3] {
     lo.map(|v| if v.is_finite() { v - 0.5 * size } else { 0.0 })
 }
 
-/// Voxel-grid downsampling of a whole cloud (module docs).
+/// Voxel-grid downsampling of a whole cloud (module docs). Same output as feeding the points
+/// through a [`VoxelGrid`] in order, bit for bit, but computed by sorting (point, voxel key)
+/// pairs in parallel instead of hashing, which is several times faster when most voxels hold
+/// few points.
 pub fn voxel_downsample(cloud: &PointCloud, size: f64, origin: [f64; 3]) -> Result<PointCloud, String> {
-    let names = cloud.scalars.iter().map(|s| s.name.clone()).collect();
-    let mut grid = VoxelGrid::new(size, origin, names)?;
-    grid.add_cloud(cloud)?;
-    Ok(grid.finish())
+    let names: Vec<String> = cloud.scalars.iter().map(|s| s.name.clone()).collect();
+    let grid = VoxelGrid::new(size, origin, names.clone())?;
+    let mut keyed: Vec<(u64, u32)> = cloud
+        .positions
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| grid.key(p).map(|k| (k, i as u32)))
+        .collect::<Result<_, _>>()?;
+    // (key, index) pairs are unique, so the unstable sort is deterministic, and within a voxel
+    // the points stay in input order: the sums below add up exactly as the streaming grid does.
+    keyed.par_sort_unstable();
+    let mut out = PointCloud {
+        positions: Vec::new(),
+        scalars: names.into_iter().map(|name| ScalarField { name, values: Vec::new() }).collect(),
+    };
+    let mut sums = vec![0.0f64; cloud.scalars.len()];
+    for run in keyed.chunk_by(|a, b| a.0 == b.0) {
+        let mut s = [0.0f64; 3];
+        sums.iter_mut().for_each(|x| *x = 0.0);
+        for &(_, i) in run {
+            let p = &cloud.positions[i as usize];
+            s[0] += p[0];
+            s[1] += p[1];
+            s[2] += p[2];
+            for (acc, f) in sums.iter_mut().zip(&cloud.scalars) {
+                *acc += f.values[i as usize] as f64;
+            }
+        }
+        let n = run.len() as f64;
+        out.positions.push([s[0] / n, s[1] / n, s[2] / n]);
+        for (f, acc) in out.scalars.iter_mut().zip(&sums) {
+            f.values.push((acc / n) as f32);
+        }
+    }
+    Ok(out)
 }
 
 /// Open3D-compatible statistical outlier mask (module docs): `true` = keep.
@@ -387,6 +429,20 @@ mod tests {
         assert_eq!(out2.scalar("intensity"), out.scalar("intensity"));
         assert!(voxel_downsample(&cloud, 0.0, [0.0; 3]).is_err());
         assert!(voxel_downsample(&cloud, 1e-9, [0.0; 3]).is_err());
+    }
+
+    #[test]
+    fn batch_voxel_equals_streaming_grid_bit_for_bit() {
+        let pts = noisy_plane(5000, 50, 4);
+        let cloud = PointCloud {
+            scalars: vec![ScalarField { name: "i".into(), values: (0..pts.len()).map(|i| i as f32 * 0.1).collect() }],
+            positions: pts,
+        };
+        let batch = voxel_downsample(&cloud, 3.0, [0.5, -0.25, 0.0]).unwrap();
+        let mut grid = VoxelGrid::new(3.0, [0.5, -0.25, 0.0], vec!["i".into()]).unwrap();
+        grid.add_cloud(&cloud).unwrap();
+        assert_eq!(batch, grid.finish());
+        assert!(batch.len() > 500 && batch.len() < cloud.len());
     }
 
     #[test]

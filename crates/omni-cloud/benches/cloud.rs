@@ -1,0 +1,102 @@
+//! Throughput of the point-cloud kernels (targets from issue 7):
+//! * triangulation kernel (ray ∩ light planes, laser choice): ≥ 20 M points/s per core;
+//! * the whole per-point path including the camera's pixel → ray: reported;
+//! * voxel-grid downsampling: ≥ 20 M points/s;
+//! * statistical outlier removal: at least as fast as Open3D (scripts/bench_cloud.py compares);
+//! * PLY binary write: ≥ 30 M points/s.
+//!
+//! Single-threaded kernels are measured as such; SOR uses all cores like Open3D does.
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use omni_cloud::cloud::POINT_SCALARS;
+use omni_cloud::filter::{statistical_outlier_mask, voxel_downsample};
+use omni_cloud::rng::Rng;
+use omni_cloud::triangulate::{DEFAULT_MIN_INCIDENCE_DEG, LaserPlane, Triangulator};
+use omni_formats::ply::{Encoding, PointCloud, ScalarField, write_ply_to};
+use omni_formats::stream::{Frame, StripePoint};
+use omni_geom::{Ray, Vector2};
+use omni_model::{CameraModel, HyperbolicCamera, HyperbolicParams, Transmitter, TransmitterParams};
+use std::hint::black_box;
+
+/// A room-like cloud: points on the six walls of a 4 × 3 × 2.5 m box with 0.3 mm noise.
+pub fn room_cloud(n: usize, seed: u64) -> PointCloud {
+    let mut rng = Rng::new(seed);
+    let half = [2000.0, 1500.0, 1250.0];
+    let positions: Vec<[f64; 3]> = (0..n)
+        .map(|_| {
+            let wall = rng.below(6);
+            let axis = wall / 2;
+            let mut p = [0.0; 3];
+            for a in 0..3 {
+                p[a] = (rng.uniform() * 2.0 - 1.0) * half[a];
+            }
+            p[axis] = if wall % 2 == 0 { -half[axis] } else { half[axis] } + rng.normal() * 0.3;
+            p
+        })
+        .collect();
+    let scalars = POINT_SCALARS
+        .iter()
+        .map(|name| ScalarField { name: name.to_string(), values: (0..n).map(|i| (i % 251) as f32).collect() })
+        .collect();
+    PointCloud { positions, scalars }
+}
+
+/// Stripe pixels of one frame: the rays of a sweep of pixels across the annulus.
+fn frame_fixture() -> (HyperbolicCamera, Transmitter, Frame) {
+    let cam = HyperbolicCamera::new(HyperbolicParams::paper()).unwrap();
+    let tx = Transmitter::new(TransmitterParams::paper()).unwrap();
+    let mut frame = Frame::new(0, "f.png", 12.0, 0);
+    let c = cam.mirror_circle();
+    let mut stripe = Vec::new();
+    for i in 0..100_000 {
+        let az = i as f64 * 0.000_07;
+        let r = c.inner_radius + (c.outer_radius - c.inner_radius) * ((i % 97) as f64 / 97.0);
+        let px = c.centre + Vector2::new(az.cos(), az.sin()) * r;
+        stripe.push(StripePoint { u: px.x, v: px.y, intensity: 100.0, width: 3.0, quality: 0 });
+    }
+    frame.stripe = Some(stripe);
+    (cam, tx, frame)
+}
+
+fn triangulation(c: &mut Criterion) {
+    let (cam, tx, frame) = frame_fixture();
+    let tri = Triangulator::new(&cam, &tx, DEFAULT_MIN_INCIDENCE_DEG).unwrap();
+    let planes: Vec<LaserPlane> = tri.frame_planes(&frame).unwrap();
+    let rays: Vec<Ray> =
+        frame.stripe.as_ref().unwrap().iter().filter_map(|s| cam.pixel_to_ray(&Vector2::new(s.u, s.v))).collect();
+    let mut g = c.benchmark_group("triangulate");
+    g.throughput(Throughput::Elements(rays.len() as u64));
+    let mut hits = Vec::with_capacity(rays.len());
+    g.bench_function("kernel_two_lasers", |b| {
+        b.iter(|| {
+            hits.clear();
+            black_box(tri.triangulate_rays(black_box(&rays), &planes, &mut hits))
+        })
+    });
+    g.throughput(Throughput::Elements(frame.stripe.as_ref().unwrap().len() as u64));
+    g.bench_function("frame_with_pixel_to_ray", |b| b.iter(|| black_box(tri.triangulate_frame(black_box(&frame)))));
+    g.finish();
+}
+
+fn filters(c: &mut Criterion) {
+    let cloud = room_cloud(1_000_000, 1);
+    let mut g = c.benchmark_group("filters");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(cloud.len() as u64));
+    g.bench_function("voxel_10mm_1M", |b| b.iter(|| black_box(voxel_downsample(&cloud, 10.0, [0.0; 3]).unwrap())));
+    g.bench_function("statistical_k20_1M", |b| {
+        b.iter(|| black_box(statistical_outlier_mask(&cloud.positions, 20, 2.0).unwrap()))
+    });
+    let mut buf = Vec::with_capacity(cloud.len() * 40 + 1024);
+    g.bench_function("ply_write_binary_1M", |b| {
+        b.iter(|| {
+            buf.clear();
+            write_ply_to(&mut buf, &cloud, Encoding::BinaryLittleEndian).unwrap();
+            black_box(buf.len())
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, triangulation, filters);
+criterion_main!(benches);

@@ -1,0 +1,57 @@
+//! Times omniscan's cloud operations on a PLY file, for the side-by-side comparison with Open3D
+//! in `scripts/bench_cloud.py` (which runs Open3D on the same file and parameters).
+//!
+//! Usage: `bench_filters CLOUD.ply OUT_DIR VOXEL K STD_RATIO NB_POINTS RADIUS`
+//! Prints one JSON object with the timings (s) and counts; writes `sor_mask.u8` and
+//! `ror_mask.u8` (one byte per input point, 1 = kept), `voxel.ply` (Open3D's grid anchoring)
+//! and `written.ply` (PLY write timing) into OUT_DIR.
+
+use omni_cloud::filter::{radius_outlier_mask, statistical_outlier_mask, voxel_downsample, voxel_origin_open3d};
+use omni_formats::ply::{Encoding, read_ply, write_ply};
+use std::path::PathBuf;
+use std::time::Instant;
+
+fn main() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().collect();
+    if args.len() != 8 {
+        return Err("usage: bench_filters CLOUD.ply OUT_DIR VOXEL K STD_RATIO NB_POINTS RADIUS".into());
+    }
+    let num = |i: usize| args[i].parse::<f64>().map_err(|e| format!("argument {i}: {e}"));
+    let (voxel, k, ratio, nb, radius) = (num(3)?, num(4)? as usize, num(5)?, num(6)? as usize, num(7)?);
+    let out = PathBuf::from(&args[2]);
+    let t = Instant::now();
+    let cloud = read_ply(&PathBuf::from(&args[1])).map_err(|e| e.to_string())?;
+    let read_s = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let origin = voxel_origin_open3d(&cloud.positions, voxel);
+    let down = voxel_downsample(&cloud, voxel, origin)?;
+    let voxel_s = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let sor = statistical_outlier_mask(&cloud.positions, k, ratio)?;
+    let sor_s = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let ror = radius_outlier_mask(&cloud.positions, nb, radius)?;
+    let ror_s = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    write_ply(&out.join("written.ply"), &cloud, Encoding::BinaryLittleEndian).map_err(|e| e.to_string())?;
+    let write_s = t.elapsed().as_secs_f64();
+
+    write_ply(&out.join("voxel.ply"), &down, Encoding::BinaryLittleEndian).map_err(|e| e.to_string())?;
+    let bytes = |m: &[bool]| m.iter().map(|&b| b as u8).collect::<Vec<u8>>();
+    std::fs::write(out.join("sor_mask.u8"), bytes(&sor)).map_err(|e| e.to_string())?;
+    std::fs::write(out.join("ror_mask.u8"), bytes(&ror)).map_err(|e| e.to_string())?;
+    let kept = |m: &[bool]| m.iter().filter(|&&b| b).count();
+    println!(
+        "{{\"points\":{},\"threads\":{},\"read_s\":{read_s},\"voxel_s\":{voxel_s},\"voxel_count\":{},\"sor_s\":{sor_s},\"sor_kept\":{},\"ror_s\":{ror_s},\"ror_kept\":{},\"write_s\":{write_s}}}",
+        cloud.len(),
+        rayon::current_num_threads(),
+        down.len(),
+        kept(&sor),
+        kept(&ror)
+    );
+    Ok(())
+}

@@ -229,3 +229,44 @@ fn physical_model_beats_interpolated_frame_planes_on_held_out_angles() {
     assert!(model_angle < 0.5 * interp_angle, "normal: model {model_angle}, interpolation {interp_angle}");
     assert!(model_off < 0.5 * interp_off, "offset: model {model_off}, interpolation {interp_off}");
 }
+
+#[test]
+fn single_board_placements_calibrate_from_lines_alone() {
+    // The same two boards, but in two placements (one board in view at a time): every frame's
+    // stripe is one line, so no frame has a plane of its own, yet the physical model fits.
+    let camera = paper_camera();
+    let truth = Transmitter::new(TransmitterParams::paper()).unwrap();
+    let mut rng = Rng::new(8);
+    let mut boards = true_rig();
+    boards[1].placement = 1;
+    let mut frames = vec![];
+    for (placement, board) in boards.iter().enumerate() {
+        for i in 0..=30 {
+            let seq = frames.len() as u64;
+            let mut f =
+                stripe_frame(&camera, &truth, std::slice::from_ref(board), seq, i as f64, 0, STRIPE_NOISE_PX, 2.0, &mut rng);
+            f.placement = placement as u32;
+            frames.push(f);
+        }
+    }
+    let mut initial = TransmitterParams::paper();
+    initial.polygon.encoder_zero_deg = 0.3;
+    let cal = calibrate_planes(&camera, &boards, &frames, &initial, &PlaneCalibOptions::default()).unwrap();
+    assert!(cal.report.frames.iter().all(|f| f.plane_refused.as_deref().is_some_and(|r| r.contains("one line"))));
+    let fitted = Transmitter::new(cal.transmitter.clone()).unwrap();
+    let mut worst = (0.0f64, 0.0f64);
+    for f in &cal.report.frames {
+        let t = truth.light_plane(f.alpha_deg.to_radians(), 0, 0).unwrap();
+        let (a, o, _) = plane_error(&t, &fitted.light_plane(f.alpha_deg.to_radians(), 0, 0).unwrap().plane);
+        worst = (worst.0.max(a), worst.1.max(o));
+    }
+    eprintln!(
+        "single-board placements: {} line frames, model rms {:.3} mm; worst normal {:.5}°, offset at 0.5 m {:.4} mm",
+        cal.report.frames.len(),
+        cal.report.model.residual_rms_mm,
+        worst.0,
+        worst.1
+    );
+    assert!(cal.report.frames.len() >= 50);
+    assert!(worst.0 < 0.01 && worst.1 < 0.05, "normal {}°, offset {} mm", worst.0, worst.1);
+}

@@ -342,6 +342,9 @@ fn scan(a: ScanArgs) -> CliResult {
     };
     let bar = omni_cli::progress(expected_triggers(&schedule, &cfg), "scan");
     let mut write_error = None;
+    // Losses are warned about one by one up to this many; the status record counts them all.
+    const MAX_WARNINGS: usize = 20;
+    let mut warnings = 0;
     let mut sink = |e: &PairEvent| -> Result<(), String> {
         bar.inc(1);
         match e {
@@ -351,7 +354,13 @@ fn scan(a: ScanArgs) -> CliResult {
                 m
             }),
             other => {
-                if let Some(m) = omni_hw::scan::describe(other) {
+                warnings += 1;
+                if let Some(m) = omni_hw::scan::describe(other).filter(|_| warnings <= MAX_WARNINGS) {
+                    let m = if warnings == MAX_WARNINGS {
+                        format!("{m} (further losses: see the status record)")
+                    } else {
+                        m
+                    };
                     bar.suspend(|| omni_cli::warn(TOOL, &m));
                 }
                 Ok(())

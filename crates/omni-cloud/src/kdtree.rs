@@ -64,10 +64,12 @@ impl KdTree {
         if k == 0 || self.nodes.is_empty() {
             return;
         }
-        self.knn_node(0, q, k, out);
+        self.knn_node(0, q, k, [0.0; 3], 0.0, out);
     }
 
-    fn knn_node(&self, n: usize, q: &[f64; 3], k: usize, out: &mut Vec<(f64, u32)>) {
+    /// `off`/`rd`: per-axis offsets from `q` to the node's cell and their squared sum (the
+    /// incremental distance of Arya & Mount), a much tighter bound than the last split alone.
+    fn knn_node(&self, n: usize, q: &[f64; 3], k: usize, mut off: [f64; 3], rd: f64, out: &mut Vec<(f64, u32)>) {
         let node = self.nodes[n];
         if node.left == NO_CHILD {
             for i in node.start as usize..node.end as usize {
@@ -82,11 +84,14 @@ impl KdTree {
             }
             return;
         }
-        let diff = q[node.axis as usize] - node.split;
+        let axis = node.axis as usize;
+        let diff = q[axis] - node.split;
         let (near, far) = if diff < 0.0 { (node.left, node.right) } else { (node.right, node.left) };
-        self.knn_node(near as usize, q, k, out);
-        if out.len() < k || diff * diff < out[k - 1].0 {
-            self.knn_node(far as usize, q, k, out);
+        self.knn_node(near as usize, q, k, off, rd, out);
+        let far_rd = rd - sq(off[axis]) + diff * diff;
+        if out.len() < k || far_rd < out[k - 1].0 {
+            off[axis] = diff;
+            self.knn_node(far as usize, q, k, off, far_rd, out);
         }
     }
 
@@ -97,11 +102,20 @@ impl KdTree {
             return 0;
         }
         let mut count = 0;
-        self.count_node(0, q, radius * radius, stop_at, &mut count);
+        self.count_node(0, q, radius * radius, stop_at, [0.0; 3], 0.0, &mut count);
         count
     }
 
-    fn count_node(&self, n: usize, q: &[f64; 3], r2: f64, stop_at: usize, count: &mut usize) {
+    fn count_node(
+        &self,
+        n: usize,
+        q: &[f64; 3],
+        r2: f64,
+        stop_at: usize,
+        mut off: [f64; 3],
+        rd: f64,
+        count: &mut usize,
+    ) {
         if *count >= stop_at {
             return;
         }
@@ -113,11 +127,14 @@ impl KdTree {
             }
             return;
         }
-        let diff = q[node.axis as usize] - node.split;
+        let axis = node.axis as usize;
+        let diff = q[axis] - node.split;
         let (near, far) = if diff < 0.0 { (node.left, node.right) } else { (node.right, node.left) };
-        self.count_node(near as usize, q, r2, stop_at, count);
-        if diff * diff < r2 {
-            self.count_node(far as usize, q, r2, stop_at, count);
+        self.count_node(near as usize, q, r2, stop_at, off, rd, count);
+        let far_rd = rd - sq(off[axis]) + diff * diff;
+        if far_rd < r2 {
+            off[axis] = diff;
+            self.count_node(far as usize, q, r2, stop_at, off, far_rd, count);
         }
     }
 }

@@ -46,12 +46,16 @@ pub trait FrameSource {
 /// Image files appearing in a directory, written by the camera's software.
 ///
 /// Files present when the source is created are ignored (stale frames of an earlier run must
-/// never pair). Hidden files (`.name`, the usual temporary names) and non-image extensions are
+/// never pair) unless they are rewritten (camera software that restarts its numbering). Hidden files (`.name`, the usual temporary names) and non-image extensions are
 /// ignored; a file is reported once its size is non-zero and unchanged between two polls, so a
 /// frame still being written is not read half-done. Its timestamp is the modification time.
 pub struct DirFrameSource {
     dir: PathBuf,
-    known: HashSet<OsString>,
+    /// Files present at the start, with (size, modification time): ignored while unchanged.
+    stale: HashMap<OsString, (u64, Option<std::time::SystemTime>)>,
+    /// Files already reported.
+    reported: HashSet<OsString>,
+    /// Files seen but not yet reported, with the size they had.
     sizes: HashMap<OsString, u64>,
 }
 
@@ -61,9 +65,16 @@ impl DirFrameSource {
     /// Watches `dir` (created if missing).
     pub fn new(dir: &Path) -> std::io::Result<Self> {
         std::fs::create_dir_all(dir)?;
-        let mut src = DirFrameSource { dir: dir.to_path_buf(), known: HashSet::new(), sizes: HashMap::new() };
+        let mut src = DirFrameSource {
+            dir: dir.to_path_buf(),
+            stale: HashMap::new(),
+            reported: HashSet::new(),
+            sizes: HashMap::new(),
+        };
         for entry in std::fs::read_dir(dir)? {
-            src.known.insert(entry?.file_name());
+            let entry = entry?;
+            let stamp = entry.metadata().map(|m| (m.len(), m.modified().ok())).unwrap_or((0, None));
+            src.stale.insert(entry.file_name(), stamp);
         }
         Ok(src)
     }
@@ -83,12 +94,15 @@ impl FrameSource for DirFrameSource {
         for entry in std::fs::read_dir(&self.dir)? {
             let entry = entry?;
             let name = entry.file_name();
-            if self.known.contains(&name) || !Self::is_image(&name) {
+            if self.reported.contains(&name) || !Self::is_image(&name) {
                 continue;
             }
             // The file may vanish or change between listing and stat: just look again next time.
             let Ok(meta) = entry.metadata() else { continue };
             let len = meta.len();
+            if self.stale.get(&name) == Some(&(len, meta.modified().ok())) {
+                continue;
+            }
             if len == 0 || self.sizes.get(&name) != Some(&len) {
                 self.sizes.insert(name, len);
                 continue;
@@ -100,8 +114,9 @@ impl FrameSource for DirFrameSource {
                 .map(|d| d.as_micros() as i64)
                 .unwrap_or_else(crate::client::host_time_us);
             self.sizes.remove(&name);
+            self.stale.remove(&name);
             out.push(CapturedFrame { path: entry.path(), name: name.to_string_lossy().into_owned(), time_us });
-            self.known.insert(name);
+            self.reported.insert(name);
         }
         out.sort_by(|a, b| (a.time_us, &a.name).cmp(&(b.time_us, &b.name)));
         Ok(out)
@@ -530,6 +545,14 @@ mod tests {
         assert_eq!(got.len(), 1, "{got:?}");
         assert_eq!((got[0].name.as_str(), got[0].time_us), ("b.PNG", 1_700_000_000_123_456));
         assert!(src.poll().unwrap().is_empty(), "reported once");
+        // A stale file rewritten by the camera (numbering restarted) is a new frame.
+        let f = std::fs::File::create(dir.path().join("stale.png")).unwrap();
+        std::io::Write::write_all(&mut &f, b"new frame").unwrap();
+        f.set_modified(stamp + std::time::Duration::from_millis(5)).unwrap();
+        drop(f);
+        assert!(src.poll().unwrap().is_empty());
+        let got = src.poll().unwrap();
+        assert_eq!(got.iter().map(|f| f.name.as_str()).collect::<Vec<_>>(), vec!["stale.png"]);
     }
 
     #[test]

@@ -7,21 +7,44 @@
 //! most 1 px apart at the rim, and every stripe segment crossing a ray gives one point on it.
 //!
 //! Speed: resampling the whole annulus radially would touch more samples than the image has
-//! pixels. Instead a fast row scan first finds the pixels above the threshold, marks the rays
-//! (and radii) passing through them, and only those short stretches of rays are resampled
-//! (bilinear, [`SAMPLE_STEP_PX`] steps) and searched for segments above the threshold. Each
-//! segment whose width lies within the bounds is handed to the selected [`Method`]:
+//! pixels. Instead a fast row scan first finds the pixels brighter by more than the threshold
+//! than both their row neighbours or both their column neighbours `max_width / 2 + 1` px away, marks the rays (and radii) passing within 1 px
+//! of them, and only those short stretches of rays are resampled, [`SAMPLE_STEP_PX`] apart,
+//! with a small Gaussian kernel (`sampling`: bilinear interpolation of a 2-px-wide stripe
+//! "pixel-locks" by up to 0.2 px; the Gaussian kernel does not).
 //!
-//! * [`Method::Centroid`] — the paper's baseline (Eq. 16): threshold, then intensity centroid;
-//! * [`Method::Windowed`] — centroid with the threshold subtracted from the weights;
-//! * [`Method::Gauss`] — 3-point log-parabola (Gaussian) peak fit;
+//! Segments: each local maximum of a ray's profile whose contrast above the local background
+//! (the larger of the minima within `max_width / 2 + 2` px on either side) exceeds the
+//! threshold starts a segment: the samples whose contrast stays above the threshold. So a stripe
+//! on a lit surface is found without a laser-off frame, while the edges of lit areas (steps)
+//! are not. A segment is kept if its width (threshold crossing to crossing, along the ray) lies
+//! within [`RidgeParams::min_width`]..[`RidgeParams::max_width`], the backgrounds on its two
+//! sides agree ([`MAX_BACKGROUND_STEP`]: a stripe cut off by an object's edge has no reliable
+//! centre), the image is flat at the centre found ([`MAX_CENTRE_GRADIENT`]), its edges face the
+//! ray ([`MIN_EDGE_ANGLE_DEG`]: a ray grazing a glint is not a stripe) and the stripe continues
+//! on a neighbouring ray ([`MIN_STRIPE_ARC_PX`]: hot pixels and specks are not stripes).
+//! Several segments on one ray (two lasers, occlusions) are all reported. The centre of a
+//! segment comes from the selected [`Method`]:
+//!
+//! * [`Method::Centroid`] — the paper's baseline (Eq. 16): intensity centroid of the samples
+//!   above the threshold;
+//! * [`Method::Windowed`] — centroid with the background and threshold subtracted from the
+//!   weights;
+//! * [`Method::Gauss`] — log-parabola (Gaussian) fit to the samples above 30 % of the peak;
 //! * [`Method::BlaisRioux`] — Blais–Rioux 4th-order derivative zero crossing;
-//! * [`Method::Hessian`] — Steger's line detector (Hessian of the Gaussian-smoothed image)
-//!   evaluated only in a band around the coarse (windowed-centroid) centre, and intersected
-//!   with the ray.
+//! * [`Method::Hessian`] — Steger's line detector: Newton steps on the Gaussian-smoothed image
+//!   (σ = [`RidgeParams::hessian_sigma`]) from the windowed centroid, in a band of ±1.5 px,
+//!   and the ridge's tangent intersected with the ray.
 //!
-//! Saturated segments (a sample at the saturation level) are always located at the centre of
-//! the saturated plateau and flagged [`quality::SATURATED`].
+//! Saturated segments (a raw pixel at the saturation level next to the peak) are always
+//! located at the centre of the saturated plateau (midpoint of the edges half way up) and
+//! flagged [`quality::SATURATED`]. Reported per point: `u`, `v` (px), `intensity` = the peak's
+//! contrast above the local background in the sampled profile (frame units), `width` (px) and
+//! the quality flags.
+//!
+//! Known limits: a curved stripe is shifted towards its centre of curvature by about
+//! σ²/(2R) by the sampling kernel (0.004 px at R = 80 px); stripes crossing the rays at more
+//! than 60° are not measured on those rays.
 //!
 //! ```
 //! use omni_vision::stripe::{Method, RidgeDetector, RidgeParams};
@@ -154,8 +177,11 @@ impl RidgeParams {
 /// A sample type the detector reads directly: 8- or 16-bit.
 pub trait Pixel: Copy + Send + Sync + PartialOrd {
     fn to_f32(self) -> f32;
-    /// The threshold as this type (values strictly above it are candidates).
+    /// The threshold as this type (floored: `v − m > T` ⇔ `v > m + floor(T)` for integers).
     fn from_threshold(t: f64) -> Self;
+    /// Whether `v` exceeds both its row neighbours `l`, `r` or both its column neighbours `u`,
+    /// `d` by more than `t`; written without branches so that it vectorises.
+    fn contrast_above(v: Self, l: Self, r: Self, u: Self, d: Self, t: Self) -> bool;
 }
 
 impl Pixel for u8 {
@@ -165,6 +191,10 @@ impl Pixel for u8 {
     fn from_threshold(t: f64) -> Self {
         t.floor().clamp(0.0, 255.0) as u8
     }
+    #[inline(always)]
+    fn contrast_above(v: u8, l: u8, r: u8, u: u8, d: u8, t: u8) -> bool {
+        (v > l.max(r).saturating_add(t)) | (v > u.max(d).saturating_add(t))
+    }
 }
 
 impl Pixel for u16 {
@@ -173,6 +203,10 @@ impl Pixel for u16 {
     }
     fn from_threshold(t: f64) -> Self {
         t.floor().clamp(0.0, 65535.0) as u16
+    }
+    #[inline(always)]
+    fn contrast_above(v: u16, l: u16, r: u16, u: u16, d: u16, t: u16) -> bool {
+        (v > l.max(r).saturating_add(t)) | (v > u.max(d).saturating_add(t))
     }
 }
 
@@ -260,7 +294,9 @@ pub struct Scratch {
 /// Working buffers for one stretch of a ray.
 #[derive(Debug, Default)]
 struct Profiles {
-    /// Sampled intensities.
+    /// Bilinear samples, 1 px apart.
+    coarse: Vec<f32>,
+    /// Gaussian-kernel samples around one candidate, [`SAMPLE_STEP_PX`] apart.
     raw: Vec<f32>,
     /// Intensities minus the local background of the maximum being measured.
     contrast: Vec<f32>,
@@ -278,7 +314,7 @@ impl RidgeDetector {
             .map(|&(x, y)| (x - cx).hypot(y - cy))
             .fold(0.0, f64::max);
         let r_out = circle.outer_radius.min(corner).max(r_in + 1.0);
-        let n_rays = (TAU * r_out).ceil().max(8.0) as usize;
+        let n_rays = ((TAU * r_out / MAX_RAY_STEP as f64).ceil().max(1.0) as usize) * MAX_RAY_STEP;
         let dirs = (0..n_rays).map(|i| (TAU * i as f64 / n_rays as f64).sin_cos()).map(|(s, c)| (c, s)).collect();
         let words_per_ray = (r_out as usize + 2).div_ceil(64);
         let steger = steger::Kernels::new(params.hessian_sigma);
@@ -341,28 +377,26 @@ impl RidgeDetector {
     /// it, a stripe runs on.
     fn drop_isolated(&self, out: Vec<StripePoint>, rays: &[(u32, usize)]) -> Vec<StripePoint> {
         let n = self.dirs.len();
-        let mut range_of: std::collections::HashMap<u32, (usize, usize)> = Default::default();
-        for (i, &(ray, start)) in rays.iter().enumerate() {
-            let end = rays.get(i + 1).map_or(out.len(), |r| r.1);
-            if end > start {
-                range_of.insert(ray, (start, end));
-            }
-        }
+        // Points of the ray at `rays[i]`: `out[rays[i].1..end(i)]`.
+        let end = |i: usize| rays.get(i + 1).map_or(out.len(), |r| r.1);
+        let points_of = |ray: u32| match rays.binary_search_by_key(&ray, |r| r.0) {
+            Ok(i) => &out[rays[i].1..end(i)],
+            Err(_) => &out[0..0],
+        };
         let radius = |p: &StripePoint| (p.u - self.cx).hypot(p.v - self.cy);
         // Largest radial step between neighbours on a stripe crossing the rays at 60°.
         let max_dr = MIN_STRIPE_ARC_PX * 3f64.sqrt() + 1.0;
         let has_neighbour = |ray: u32, r: f64, k: i64| {
             let other = (ray as i64 + k).rem_euclid(n as i64) as u32;
-            range_of.get(&other).is_some_and(|&(a, b)| out[a..b].iter().any(|q| (radius(q) - r).abs() <= max_dr))
+            points_of(other).iter().any(|q| (radius(q) - r).abs() <= max_dr)
         };
         let mut kept = Vec::with_capacity(out.len());
-        for &(ray, start) in rays {
-            let Some(&(a, b)) = range_of.get(&ray) else { continue };
-            debug_assert_eq!(a, start);
-            for p in &out[a..b] {
+        for (i, &(ray, start)) in rays.iter().enumerate() {
+            for p in &out[start..end(i)] {
                 let r = radius(p);
-                // Rays are 2π·r/n px apart at radius r.
-                let k = (MIN_STRIPE_ARC_PX * n as f64 / (TAU * r)).ceil().max(1.0) as i64;
+                // Rays are 2π·r/n px apart at radius r; only every step-th one is sampled.
+                let step = self.ray_step(r) as i64;
+                let k = (MIN_STRIPE_ARC_PX * n as f64 / (TAU * r) / step as f64).ceil().max(1.0) as i64 * step;
                 if has_neighbour(ray, r, k) || has_neighbour(ray, r, -k) {
                     kept.push(*p);
                 }
@@ -377,11 +411,13 @@ impl RidgeDetector {
         let n = self.dirs.len();
         scratch.bits.resize(n * self.words_per_ray, 0);
         let t = P::from_threshold(threshold);
-        let w = self.width as usize;
+        let (w, h) = (self.width as usize, self.height as usize);
         let y_lo = (self.cy - self.r_out).floor().max(0.0) as usize;
-        let y_hi = ((self.cy + self.r_out).ceil() as usize).min(self.height as usize - 1);
+        let y_hi = ((self.cy + self.r_out).ceil() as usize).min(h - 1);
         let rays_per_rad = n as f64 / TAU;
-        let reach = (0.5 * self.params.max_width).ceil() as usize + 1;
+        let k = (0.5 * self.params.max_width).ceil() as usize + 1;
+        let mut mark =
+            |x: usize, y: usize| self.mark_pixel(x as f64 - self.cx, y as f64 - self.cy, rays_per_rad, scratch);
         for y in y_lo..=y_hi {
             let dy = y as f64 - self.cy;
             let half = (self.r_out * self.r_out - dy * dy).max(0.0).sqrt();
@@ -390,16 +426,35 @@ impl RidgeDetector {
             if x_lo > x_hi {
                 continue;
             }
-            let row = &frame.data[y * w + x_lo..=y * w + x_hi];
-            // Skip dark 16-pixel blocks with one comparison per pixel and no branches.
-            for (ci, chunk) in row.chunks(16).enumerate() {
-                if !chunk.iter().fold(false, |any, &p| any | (p > t)) {
+            // Pixels whose four neighbours k px away exist take the fast, branch-free test;
+            // the few near the image border the general one.
+            let interior = y >= k && y + k < h;
+            let (a, b) = if interior { (x_lo.max(k), (x_hi + 1).min(w - k)) } else { (x_lo, x_lo) };
+            for x in (x_lo..a.max(x_lo)).chain(b.max(a)..=x_hi) {
+                if stands_out(frame, x, y, k, threshold as f32) {
+                    mark(x, y);
+                }
+            }
+            if a >= b {
+                continue;
+            }
+            let d = frame.data;
+            let cur = &d[y * w + a..y * w + b];
+            let left = &d[y * w + a - k..y * w + b - k];
+            let right = &d[y * w + a + k..y * w + b + k];
+            let up = &d[(y - k) * w + a..(y - k) * w + b];
+            let down = &d[(y + k) * w + a..(y + k) * w + b];
+            const BLOCK: usize = 32;
+            for start in (0..b - a).step_by(BLOCK) {
+                let end = (start + BLOCK).min(b - a);
+                let hit = |i: usize| P::contrast_above(cur[i], left[i], right[i], up[i], down[i], t);
+                // One pass without branches over the block; most blocks hold no stripe.
+                if !(start..end).fold(false, |any, i| any | hit(i)) {
                     continue;
                 }
-                for (k, &p) in chunk.iter().enumerate() {
-                    let x = x_lo + ci * 16 + k;
-                    if p > t && stands_out(frame, x, y, reach, threshold as f32) {
-                        self.mark_pixel(x as f64 - self.cx, dy, rays_per_rad, scratch);
+                for i in start..end {
+                    if hit(i) {
+                        mark(a + i, y);
                     }
                 }
             }
@@ -417,10 +472,11 @@ impl RidgeDetector {
         let centre = phi * rays_per_rad;
         // Rays within 1 px of the pixel centre (covers the pixel and the atan2 approximation).
         let span = rays_per_rad / r.max(1.0);
+        let step = self.ray_step(r) as i64;
         let (lo, hi) = ((centre - span).floor() as i64, (centre + span).ceil() as i64);
         let bin = r as usize;
         let (word, bit) = (bin / 64, 1u64 << (bin % 64));
-        for i in lo..=hi {
+        for i in (lo.div_euclid(step) * step..=hi).step_by(step as usize) {
             let ray = i.rem_euclid(n) as usize;
             let idx = ray * self.words_per_ray;
             if scratch.bits[idx..idx + self.words_per_ray].iter().all(|&b| b == 0) {
@@ -428,6 +484,14 @@ impl RidgeDetector {
             }
             scratch.bits[idx + word] |= bit;
         }
+    }
+
+    /// Which rays sample radius `r`: every `ray_step(r)`-th one (a power of two ≤
+    /// [`MAX_RAY_STEP`]), so that the rays used are 0.5–1 px apart at every radius instead of
+    /// crowding towards the centre (fewer, barely correlated points; less work).
+    fn ray_step(&self, r: f64) -> usize {
+        let ratio = (self.r_out / r.max(1.0)).max(1.0);
+        (1usize << (ratio.log2().floor() as u32).min(MAX_RAY_STEP.trailing_zeros())).min(MAX_RAY_STEP)
     }
 
     /// Resamples the marked stretches of one ray and turns each valid segment into a point.
@@ -440,8 +504,8 @@ impl RidgeDetector {
         out: &mut Vec<StripePoint>,
     ) {
         let bits = &scratch.bits[ray * self.words_per_ray..(ray + 1) * self.words_per_ray];
-        // Padding so that segments (≤ max_width) and the estimators' neighbours are inside.
-        let pad = (self.params.max_width * 0.5 + 4.0).ceil() as usize;
+        // Padding so that the background windows and the fine resampling stay inside.
+        let pad = self.background_window() + 3;
         let mut stretches: Vec<(usize, usize)> = Vec::new();
         for (wi, &word) in bits.iter().enumerate() {
             let mut m = word;
@@ -465,11 +529,13 @@ impl RidgeDetector {
 
     /// Samples the ray from radius `r0` to `r1` and emits a point per accepted segment.
     ///
-    /// Segments are found around local maxima of the profile whose contrast above the local
-    /// background exceeds the threshold. The background of a maximum is the larger of the
-    /// profile's minima within [`Self::background_window`] on either side: a stripe on a lit
-    /// surface (ambient light without a laser-off frame) stands out from it, while the edge of a
-    /// lit area (a step, not a ridge) does not.
+    /// A coarse profile (bilinear, 1 px steps) finds the candidate segments: local maxima whose
+    /// contrast above the local background exceeds the threshold. The background of a maximum
+    /// is the larger of the profile's minima within [`Self::background_window`] on either side:
+    /// a stripe on a lit surface (ambient light without a laser-off frame) stands out from it,
+    /// while the edge of a lit area (a step, not a ridge) does not. Each candidate is then
+    /// resampled finely with the Gaussian kernel ([`SAMPLE_STEP_PX`] steps), where the threshold
+    /// is applied again and the estimators work.
     fn scan_stretch<P: Pixel>(
         &self,
         frame: &Frame<'_, P>,
@@ -481,64 +547,67 @@ impl RidgeDetector {
         out: &mut Vec<StripePoint>,
     ) {
         let (dx, dy) = self.dirs[ray];
-        let n = ((r1 - r0) / SAMPLE_STEP_PX) as usize + 1;
-        let Profiles { raw: p, contrast: q } = scratch;
-        p.clear();
-        for k in 0..n {
-            let r = r0 + k as f64 * SAMPLE_STEP_PX;
-            // Outside the image is NaN; a segment or background window touching it is rejected.
-            p.push(self.sampler.sample(frame, self.cx + r * dx, self.cy + r * dy).unwrap_or(f32::NAN));
-        }
+        let n = (r1 - r0) as usize + 1;
+        let Profiles { coarse: c, raw: p, contrast: q } = scratch;
+        c.clear();
+        // Outside the image is NaN; a segment or background window touching it is rejected.
+        c.extend((0..n).map(|k| {
+            let r = r0 + k as f64;
+            frame.bilinear(self.cx + r * dx, self.cy + r * dy).unwrap_or(f32::NAN)
+        }));
         let t = threshold as f32;
         let w = self.background_window();
         let mut done_until = 0;
         for k in w.max(1)..n.saturating_sub(w.max(1)) {
-            let is_max = p[k] >= p[k - 1] && p[k] > p[k + 1];
-            let r_k = r0 + k as f64 * SAMPLE_STEP_PX;
+            let is_max = c[k] >= c[k - 1] && c[k] > c[k + 1];
+            let r_k = r0 + k as f64;
             if !is_max || k < done_until || r_k < self.r_in || r_k > self.r_out {
                 continue;
             }
             let window_min = |range: std::ops::RangeInclusive<usize>| {
-                p[range].iter().fold(f32::INFINITY, |m, &v| if v.is_nan() { f32::NAN } else { m.min(v) })
+                c[range].iter().fold(f32::INFINITY, |m, &v| if v.is_nan() { f32::NAN } else { m.min(v) })
             };
             let (left, right) = (window_min(k - w..=k), window_min(k..=k + w));
             let background = left.max(right);
-            if !(p[k] - background > t) || left.is_nan() || right.is_nan() {
+            if !(c[k] - background > t) || left.is_nan() || right.is_nan() {
                 continue;
             }
             // A stripe lying on a step of the background (the edge of a lit object, where the
             // stripe itself is cut off) has no reliable centre.
-            if (left - right).abs() > MAX_BACKGROUND_STEP * (p[k] - background) {
+            if (left - right).abs() > MAX_BACKGROUND_STEP * (c[k] - background) {
                 done_until = k + 1;
                 continue;
             }
-            q.clear();
-            q.extend(p.iter().map(|v| v - background));
+            // The coarse extent, generously (half the threshold), plus 2 px on either side.
             let mut start = k;
-            while start > 0 && q[start - 1] > t {
+            while start > 0 && c[start - 1] - background > 0.5 * t {
                 start -= 1;
             }
             let mut end = k + 1;
-            while end < n && q[end] > t {
+            while end < n && c[end] - background > 0.5 * t {
                 end += 1;
             }
             done_until = end;
-            // A segment cut by the stretch's ends (annulus or image border) is incomplete.
-            if start == 0 || end == n || q[start - 1].is_nan() || q[end].is_nan() {
-                continue;
-            }
-            let peak = (start..end).fold(k, |b, i| if q[i] > q[b] { i } else { b });
-            let seg = Segment { start, end, peak };
-            if let Some(point) = self.segment_point(frame, ray, r0, p, q, &seg, t) {
+            let rf0 = r0 + start as f64 - 2.0;
+            let nf = ((end - start + 3) as f64 / SAMPLE_STEP_PX) as usize + 1;
+            p.clear();
+            p.extend((0..nf).map(|i| {
+                let r = rf0 + i as f64 * SAMPLE_STEP_PX;
+                self.sampler.sample(frame, self.cx + r * dx, self.cy + r * dy).unwrap_or(f32::NAN)
+            }));
+            q.clear();
+            q.extend(p.iter().map(|v| v - background));
+            let Some(seg) = fine_segment(q, t) else { continue };
+            if let Some(point) = self.segment_point(frame, ray, rf0, p, q, &seg, t) {
                 out.push(point);
             }
         }
     }
 
-    /// Samples on either side of a maximum searched for its background: past the flank of the
-    /// widest accepted stripe.
+    /// Coarse samples (1 px) on either side of a maximum searched for its background: past the
+    /// flank of the widest accepted stripe.
     fn background_window(&self) -> usize {
-        ((0.5 * self.params.max_width + 2.0) / SAMPLE_STEP_PX).ceil() as usize
+        (0.5 * self.params.max_width + 2.0).ceil() as usize
     }
 
     /// The centre of one segment along the ray, or `None` if it is too narrow/wide or the fit
@@ -630,6 +699,9 @@ impl RidgeDetector {
 /// on that ray.
 pub const MIN_EDGE_ANGLE_DEG: f64 = 30.0;
 
+/// Largest stride between the rays sampled at small radii (see `RidgeDetector::ray_step`).
+pub const MAX_RAY_STEP: usize = 8;
+
 /// Largest difference between the backgrounds on the two sides of a stripe, relative to its
 /// contrast, for the stripe to be measured.
 pub const MAX_BACKGROUND_STEP: f32 = 0.5;
@@ -641,9 +713,29 @@ pub const MIN_STRIPE_ARC_PX: f64 = 2.5;
 /// Gaussian stripe of σ = 1.5 px measured 0.3 px off its centre has 0.13.
 pub const MAX_CENTRE_GRADIENT: f32 = 0.25;
 
-/// Whether pixel (x, y) is brighter by more than `t` than the darker of its two neighbours
-/// `reach` px away along the row, or along the column: true on a stripe (narrower than
-/// 2·reach) in any direction, false inside a uniformly lit area. Beyond the image counts as 0.
+/// The segment around the largest contrast of `q` whose samples stay above `t`, or `None` if
+/// the peak is not above `t` or the segment reaches either end (or a NaN) of `q`.
+fn fine_segment(q: &[f32], t: f32) -> Option<Segment> {
+    let peak = (0..q.len()).filter(|&i| !q[i].is_nan()).max_by(|&a, &b| q[a].total_cmp(&q[b]))?;
+    if !(q[peak] > t) {
+        return None;
+    }
+    let mut start = peak;
+    while start > 0 && q[start - 1] > t {
+        start -= 1;
+    }
+    let mut end = peak + 1;
+    while end < q.len() && q[end] > t {
+        end += 1;
+    }
+    let cut = start == 0 || end == q.len() || q[start - 1].is_nan() || q[end].is_nan();
+    (!cut).then_some(Segment { start, end, peak })
+}
+
+/// Whether pixel (x, y) is brighter by more than `t` than both its neighbours `reach` px away
+/// along the row, or than both along the column: true on a stripe (narrower than 2·reach) in
+/// any direction, false inside a uniformly lit area and at the edge of one (a step). Beyond
+/// the image counts as 0.
 #[inline]
 fn stands_out<P: Pixel>(f: &Frame<'_, P>, x: usize, y: usize, reach: usize, t: f32) -> bool {
     let (w, h) = (f.width as usize, f.height as usize);
@@ -652,8 +744,8 @@ fn stands_out<P: Pixel>(f: &Frame<'_, P>, x: usize, y: usize, reach: usize, t: f
         _ => 0.0,
     };
     let v = f.at(x, y);
-    let row = get(x.checked_sub(reach), Some(y)).min(get(Some(x + reach), Some(y)));
-    let col = get(Some(x), y.checked_sub(reach)).min(get(Some(x), Some(y + reach)));
+    let row = get(x.checked_sub(reach), Some(y)).max(get(Some(x + reach), Some(y)));
+    let col = get(Some(x), y.checked_sub(reach)).max(get(Some(x), Some(y + reach)));
     v - row > t || v - col > t
 }
 

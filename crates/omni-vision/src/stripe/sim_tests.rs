@@ -205,7 +205,7 @@ fn default_noise_unsaturated_stripe() {
     let results = report("default noise, dim ambient, no laser-off frame", &frames);
     let (method, m) = best(&results);
     let (rms, bias) = m.rms_bias();
-    assert!(m.errors.len() > 2000, "{} points", m.errors.len());
+    assert!(m.errors.len() > 1500, "{} points", m.errors.len());
     assert!(rms <= 0.05 && bias.abs() <= 0.02, "best {method:?}: rms {rms} bias {bias}");
     for (method, m) in &results {
         assert!(m.false_rate() <= 0.001, "{method:?}: {} false detections", m.false_detections);
@@ -240,9 +240,9 @@ fn weak_stripe() {
     let (method, m) = best(&results);
     let (rms, _) = m.rms_bias();
     assert!(rms <= 0.1, "best {method:?}: rms {rms}");
-    // The bench plane's stripes (≈ 180 points per frame) stay above the default threshold; the
+    // The bench plane's stripes (≈ 90 points per frame) stay above the default threshold; the
     // room's walls, 0.8 m away, give stripes of 5–10 DN that mostly do not.
-    assert!(m.errors.len() > 300, "{} points", m.errors.len());
+    assert!(m.errors.len() > 200, "{} points", m.errors.len());
     for (method, m) in &results {
         assert!(m.false_rate() <= 0.001, "{method:?}: {} false detections", m.false_detections);
     }

@@ -186,7 +186,9 @@ fn two_stripes_on_one_ray_are_both_reported() {
     let pts = det.detect(&img);
     let inner = pts.iter().filter(|p| (polar(p).1 - 45.0).abs() < 0.2).count();
     let outer = pts.iter().filter(|p| (polar(p).1 - 90.0).abs() < 0.2).count();
-    assert!(inner as f64 > 0.97 * det.ray_count() as f64, "inner {inner}");
+    // One point per sampled ray: every second ray at r = 45 px (< r_out / 2), every ray at 90.
+    assert_eq!((det.ray_step(45.0), det.ray_step(90.0)), (2, 1));
+    assert!(inner as f64 > 0.97 * det.ray_count() as f64 / 2.0, "inner {inner}");
     assert!(outer as f64 > 0.97 * det.ray_count() as f64, "outer {outer}");
     assert_eq!(inner + outer, pts.len(), "no point away from the two rings");
 }
@@ -277,4 +279,23 @@ fn methods_parse_from_their_names() {
         assert_eq!(m.name().parse::<Method>().unwrap(), m);
     }
     assert!("median".parse::<Method>().unwrap_err().contains("blais-rioux"));
+}
+
+#[test]
+fn fast_candidate_test_matches_the_general_one() {
+    let mut rng = Rng(77);
+    let (w, h) = (40u32, 30u32);
+    let data: Vec<u8> = (0..w * h).map(|_| (rng.uniform() * 60.0) as u8).collect();
+    let f = Frame { width: w, height: h, data: &data, max_value: 255.0 };
+    for threshold in [10.0, 10.5, 25.0] {
+        let t = u8::from_threshold(threshold);
+        let k = 7usize;
+        for y in k..h as usize - k {
+            for x in k..w as usize - k {
+                let at = |xx: usize, yy: usize| data[yy * w as usize + xx];
+                let fast = u8::contrast_above(at(x, y), at(x - k, y), at(x + k, y), at(x, y - k), at(x, y + k), t);
+                assert_eq!(fast, stands_out(&f, x, y, k, threshold as f32), "({x}, {y}) T {threshold}");
+            }
+        }
+    }
 }

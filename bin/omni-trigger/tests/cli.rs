@@ -122,7 +122,8 @@ const FAST: [&str; 4] = ["--angles", "0,15", "--revolutions", "1"];
 
 #[test]
 fn clean_scan_of_two_revolutions_gives_exactly_the_expected_manifest() {
-    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "25"]);
+    // 20 Hz leaves the camera 50 ms per frame: no misses even on a loaded machine.
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "20"]);
     let out = emu.scan(&["--angles", "0,15", "--revolutions", "2"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let (frames, status) = read_manifest(&emu.manifest_path());
@@ -138,7 +139,7 @@ fn clean_scan_of_two_revolutions_gives_exactly_the_expected_manifest() {
         assert!(f.ambient_path.is_none());
     }
     let t: Vec<u64> = frames.iter().map(|f| f.timestamp_us.unwrap()).collect();
-    assert!(t.windows(2).all(|w| w[1] - w[0] == 40_000), "25 Hz, evenly spaced: {t:?}");
+    assert!(t.windows(2).all(|w| w[1] - w[0] == 50_000), "20 Hz, evenly spaced: {t:?}");
     assert_frames_true(&frames, &emu.truth());
     assert_eq!((status.frames, status.frames_missing, status.complete), (48, 0, true));
     assert!(status.errors.is_empty(), "{:?}", status.errors);
@@ -179,7 +180,8 @@ fn rendered_frames_through_the_simulator_pair_with_their_true_angles_and_ambient
 }
 
 /// Runs a 24-trigger scan against an emulator with `fault` and checks what must hold whatever
-/// was lost: exit 0, a valid manifest, true angles, and every trigger accounted for.
+/// was lost: exit 0, a valid manifest, true angles, every frame the camera wrote paired (the
+/// camera itself may miss triggers on a loaded machine), every trigger accounted for.
 fn faulty_scan(fault: &[&str]) -> (Vec<Frame>, Status) {
     let mut args = vec!["--camera-mode", "blank", "--max-rate-hz", "40"];
     args.extend_from_slice(fault);
@@ -191,6 +193,8 @@ fn faulty_scan(fault: &[&str]) -> (Vec<Frame>, Status) {
     assert_frames_true(&frames, &emu.truth());
     assert!(status.complete, "{status:?}");
     assert_eq!(status.frames + status.frames_missing, 24, "every trigger is paired or reported: {status:?}");
+    let written = emu.truth().len();
+    assert_eq!((frames.len(), extra(&status, "frames_unmatched")), (written, 0), "every frame pairs: {status:?}");
     if status.frames_missing > 0 {
         assert!(!status.errors.is_empty(), "losses must be explained: {status:?}");
         assert!(!out.stderr.is_empty(), "losses must be warned about");
@@ -212,11 +216,12 @@ fn bad_checksums_are_dropped_commands_retried_and_lost_events_reported() {
 fn assert_recovered(frames: &[Frame], status: &Status) {
     let lost = extra(status, "events_lost");
     assert!(lost > 0, "the fault should have cost some events: {status:?}");
-    assert_eq!((status.frames, status.frames_missing, extra(status, "frames_unmatched")), (24, 0, 0), "{status:?}");
     let inferred =
-        frames.iter().filter(|f| f.extra.get("trigger_inferred") == Some(&serde_json::Value::Bool(true))).count();
-    assert_eq!(inferred as u64, lost, "{status:?}");
-    assert_eq!(extra(status, "frames_with_inferred_trigger"), lost);
+        frames.iter().filter(|f| f.extra.get("trigger_inferred") == Some(&serde_json::Value::Bool(true))).count()
+            as u64;
+    // A lost event's frame is still paired (unless the camera missed that trigger too).
+    assert!(inferred > 0 && inferred <= lost, "{status:?}");
+    assert_eq!(extra(status, "frames_with_inferred_trigger"), inferred);
 }
 
 #[test]
@@ -236,7 +241,7 @@ fn dropped_events_are_placed_from_the_schedule_and_their_frames_kept() {
 fn duplicated_events_are_counted_once() {
     let (frames, status) = faulty_scan(&["--dup-events", "0.3", "--fault-seed", "9"]);
     assert!(extra(&status, "events_duplicated") > 0);
-    assert_eq!((frames.len(), status.frames_missing), (24, 0), "{status:?}");
+    assert_eq!(frames.len() as u64, extra(&status, "triggers") - status.frames_missing, "{status:?}");
 }
 
 #[test]

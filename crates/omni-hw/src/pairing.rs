@@ -261,8 +261,7 @@ impl Pairer {
         }
         out.extend(self.lose_events_before(ev.seq, Some((ev.seq, ev.t_us))));
         self.last_received = Some((ev.seq, ev.t_us));
-        let offset = received_us - ev.t_us as i64;
-        self.clock_offset_us = Some(self.clock_offset_us.map_or(offset, |o| o.min(offset)));
+        self.observe_clock(ev.t_us, received_us);
         self.stats.triggers += 1;
         self.next_seq = ev.seq + 1;
         self.pending.insert(ev.seq, ev);
@@ -323,6 +322,13 @@ impl Pairer {
     pub fn on_run_end(&mut self, fired: u64) -> Vec<PairEvent> {
         self.run_ended = true;
         self.lose_events_before(fired, None).into_iter().collect()
+    }
+
+    /// A controller timestamp `controller_us` read at host time `received_us` (a `STS` line):
+    /// refines the clock mapping before and between trigger events.
+    pub fn observe_clock(&mut self, controller_us: u64, received_us: i64) {
+        let offset = received_us - controller_us as i64;
+        self.clock_offset_us = Some(self.clock_offset_us.map_or(offset, |o| o.min(offset)));
     }
 
     /// A new frame, first seen at host time `now_us`.

@@ -148,6 +148,9 @@ pub fn describe(event: &PairEvent) -> Option<String> {
     }
 }
 
+/// `STATUS` round trips used to map the controller clock before a run.
+const CLOCK_SAMPLES: usize = 5;
+
 /// Errors kept in the status record; the rest are counted.
 const MAX_LISTED_ERRORS: usize = 50;
 
@@ -189,6 +192,7 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
                 self.emit(out)
             }
             DeviceMessage::Status(s) => {
+                self.pairer.observe_clock(s.t_us, at_us);
                 self.controller = Some(s);
                 Ok(())
             }
@@ -221,6 +225,12 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
     }
 
     fn main_loop(&mut self, cfg: &ScanConfig, revolutions: u64) -> Result<(), String> {
+        // Map the controller clock onto ours before the first frame: each round trip bounds the
+        // offset from above; the smallest of a few is within one fast round trip.
+        for _ in 0..CLOCK_SAMPLES {
+            let s = self.client.status().map_err(|e| e.to_string())?;
+            self.pairer.observe_clock(s.t_us, host_time_us());
+        }
         // Armed controllers send no triggers: anything queued now belongs to an earlier run.
         self.client.discard_received();
         self.client.request(Command::Start { revolutions }).map_err(|e| e.to_string())?;

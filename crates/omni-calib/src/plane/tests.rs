@@ -243,8 +243,17 @@ fn single_board_placements_calibrate_from_lines_alone() {
     for (placement, board) in boards.iter().enumerate() {
         for i in 0..=30 {
             let seq = frames.len() as u64;
-            let mut f =
-                stripe_frame(&camera, &truth, std::slice::from_ref(board), seq, i as f64, 0, STRIPE_NOISE_PX, 2.0, &mut rng);
+            let mut f = stripe_frame(
+                &camera,
+                &truth,
+                std::slice::from_ref(board),
+                seq,
+                i as f64,
+                0,
+                STRIPE_NOISE_PX,
+                2.0,
+                &mut rng,
+            );
             f.placement = placement as u32;
             frames.push(f);
         }

@@ -179,6 +179,9 @@ struct EmulateArgs {
     /// Fault: close the port after this many triggers (an unplugged cable).
     #[arg(long)]
     disconnect_after: Option<u64>,
+    /// Fault: the motor stalls after this many triggers (the run never ends).
+    #[arg(long)]
+    stall_after: Option<u64>,
     /// Seed of the fault generator.
     #[arg(long, default_value_t = 1)]
     fault_seed: u64,
@@ -472,6 +475,7 @@ fn emulate(a: EmulateArgs) -> CliResult {
         drop_events: a.drop_events,
         duplicate_events: a.dup_events,
         disconnect_after: a.disconnect_after,
+        stall_after: a.stall_after,
         seed: a.fault_seed,
     };
     let end = serve(&mut master, &options, &mut camera).map_err(|e| CliError::new(format!("{path}: {e}")))?;

@@ -396,3 +396,17 @@ fn a_persistent_emulator_serves_several_tool_runs() {
     let (frames, status) = read_manifest(&emu.manifest_path());
     assert_eq!((frames.len(), status.frames_missing), (4, 0), "{status:?}");
 }
+
+#[test]
+fn a_stalled_motor_ends_the_scan_with_an_error_and_a_status_record() {
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40", "--stall-after", "5"]);
+    let started = Instant::now();
+    let out = emu.scan(&FAST);
+    // One revolution takes 0.6 s; the scan gives up at 2 x 0.6 + 5 s.
+    assert!(started.elapsed() < Duration::from_secs(12), "{:?}", started.elapsed());
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("still running"));
+    let (frames, status) = read_manifest(&emu.manifest_path());
+    assert!(!status.complete && frames.len() <= 5, "{status:?}");
+    assert_frames_true(&frames, &emu.truth());
+}

@@ -180,6 +180,9 @@ pub struct Faults {
     pub duplicate_events: f64,
     /// Close the port after this many triggers (an unplugged cable).
     pub disconnect_after: Option<u64>,
+    /// The motor stalls after this many triggers: no more triggers, the run never ends, status
+    /// lines keep coming.
+    pub stall_after: Option<u64>,
     /// Seed of the fault generator (same seed, same faults).
     pub seed: u64,
 }
@@ -294,7 +297,9 @@ pub fn serve<P: Read + Write>(
     loop {
         let mut outgoing = Vec::new();
         let mut disconnect = false;
-        for msg in controller.poll(clock()) {
+        let stalled = options.faults.stall_after.is_some_and(|n| fired >= n);
+        let fired_now = if stalled { vec![] } else { controller.poll(clock()) };
+        for msg in fired_now {
             if let DeviceMessage::Trigger(ev) = &msg {
                 camera.trigger(shot_for(ev, &options.spec, sys0));
                 fired += 1;

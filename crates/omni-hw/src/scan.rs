@@ -224,7 +224,9 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
         Ok(())
     }
 
-    fn main_loop(&mut self, cfg: &ScanConfig, revolutions: u64) -> Result<(), String> {
+    /// `expected`: how long the run should take (Revolutions mode); a run still going at twice
+    /// that plus 5 s (a stalled motor, a controller that forgot to stop) is an error.
+    fn main_loop(&mut self, cfg: &ScanConfig, revolutions: u64, expected: Option<Duration>) -> Result<(), String> {
         // Map the controller clock onto ours before the first frame: each round trip bounds the
         // offset from above; the smallest of a few is within one fast round trip.
         for _ in 0..CLOCK_SAMPLES {
@@ -262,6 +264,14 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
                 self.check_alive()?;
                 last_heard = Instant::now();
             }
+            if let Some(e) = expected
+                && started.elapsed() > 2 * e + Duration::from_secs(5)
+            {
+                return Err(format!(
+                    "the run should have ended after {:.1} s but the controller is still running",
+                    e.as_secs_f64()
+                ));
+            }
         }
     }
 }
@@ -281,6 +291,13 @@ pub fn run_scan<P: Read + Write, S: FrameSource + ?Sized>(
         StopWhen::Revolutions(n) => n,
         StopWhen::Duration(_) => 0,
     };
+    let expected = match cfg.stop {
+        StopWhen::Revolutions(_) => {
+            let last = schedule.position((revolutions * schedule.per_revolution()).max(1) - 1);
+            Some(Duration::from_secs_f64(last as f64 * 60.0 / (rpm.max(1e-9) * schedule.counts_per_rev as f64)))
+        }
+        StopWhen::Duration(_) => None,
+    };
     let mut run = Run {
         client,
         source,
@@ -292,7 +309,7 @@ pub fn run_scan<P: Read + Write, S: FrameSource + ?Sized>(
         done: None,
         interrupted: false,
     };
-    let result = run.main_loop(cfg, revolutions);
+    let result = run.main_loop(cfg, revolutions, expected);
     let disconnected = result.as_ref().err().is_some_and(|e| e.contains("disconnected"));
     if result.is_err() && !disconnected {
         // Best effort: leave the controller stopped.

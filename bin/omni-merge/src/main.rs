@@ -197,7 +197,14 @@ fn add_stream(merger: &mut Merger, path: &Path, name: &str, traj: Option<&Trajec
     merger.begin_stream_input().map_err(|m| format!("{name}: {m}"))?;
     let mut frames = 0u64;
     while let Some(record) = reader.next_record()? {
-        let Record::Frame(frame) = record else { continue };
+        let frame = match record {
+            Record::Frame(frame) => frame,
+            Record::Status(s) if !s.complete => {
+                omni_cli::warn("omni-merge", &format!("{name}: the stream is marked incomplete ({:?})", s.errors));
+                continue;
+            }
+            _ => continue,
+        };
         let loc = format!("{name}: line {} (frame {})", reader.line(), frame.seq);
         let pose = match traj {
             Some(t) => {

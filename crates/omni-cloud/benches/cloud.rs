@@ -9,7 +9,7 @@
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use omni_cloud::cloud::POINT_SCALARS;
-use omni_cloud::filter::{statistical_outlier_mask, voxel_downsample};
+use omni_cloud::filter::{VoxelGrid, statistical_outlier_mask, voxel_downsample};
 use omni_cloud::rng::Rng;
 use omni_cloud::triangulate::{DEFAULT_MIN_INCIDENCE_DEG, LaserPlane, Triangulator};
 use omni_formats::ply::{Encoding, PointCloud, ScalarField, write_ply_to};
@@ -86,6 +86,16 @@ fn filters(c: &mut Criterion) {
     // 10 mm voxels on this cloud hold ~2 points each (the hard case); 50 mm voxels ~40.
     g.bench_function("voxel_10mm_1M", |b| b.iter(|| black_box(voxel_downsample(&cloud, 10.0, [0.0; 3]).unwrap())));
     g.bench_function("voxel_50mm_1M", |b| b.iter(|| black_box(voxel_downsample(&cloud, 50.0, [0.0; 3]).unwrap())));
+    let names: Vec<String> = cloud.scalars.iter().map(|s| s.name.clone()).collect();
+    for size in [10.0, 50.0] {
+        g.bench_function(format!("voxel_streaming_{size}mm_1M"), |b| {
+            b.iter(|| {
+                let mut grid = VoxelGrid::new(size, [0.0; 3], names.clone()).unwrap();
+                grid.add_cloud(&cloud).unwrap();
+                black_box(grid.finish())
+            })
+        });
+    }
     g.bench_function("statistical_k20_1M", |b| {
         b.iter(|| black_box(statistical_outlier_mask(&cloud.positions, 20, 2.0).unwrap()))
     });

@@ -410,3 +410,43 @@ fn a_stalled_motor_ends_the_scan_with_an_error_and_a_status_record() {
     assert!(!status.complete && frames.len() <= 5, "{status:?}");
     assert_frames_true(&frames, &emu.truth());
 }
+
+#[test]
+fn emulate_renders_from_camera_scanner_and_scene_files_and_names_bad_ones() {
+    use omni_formats::{CameraFile, CameraSpec, ScannerFile, write_doc};
+    let files = tempfile::tempdir().unwrap();
+    let (camera, scanner, scene) =
+        (files.path().join("camera.json"), files.path().join("scanner.json"), files.path().join("scene.json"));
+    write_doc(&camera, &CameraFile::new(CameraSpec::Hyperbolic(omni_simulator::paper_camera_scaled(48)))).unwrap();
+    write_doc(&scanner, &ScannerFile::new(omni_model::TransmitterParams::paper())).unwrap();
+    write_doc(&scene, &omni_simulator::paper_bench(omni_simulator::BenchObject::Sphere)).unwrap();
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let emu = Emulator::start(&[
+        "--camera",
+        &s(&camera),
+        "--scanner",
+        &s(&scanner),
+        "--scene",
+        &s(&scene),
+        "--max-rate-hz",
+        "10",
+    ]);
+    let out = emu.scan(&["--angles", "10,20", "--facets", "0"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (frames, status) = read_manifest(&emu.manifest_path());
+    assert_eq!((frames.len(), status.frames_missing), (2, 0), "{status:?}");
+    assert_frames_true(&frames, &emu.truth());
+    let png = std::fs::read(emu.frames().join(&frames[0].path)).unwrap();
+    assert_eq!(u32::from_be_bytes(png[16..20].try_into().unwrap()), 48);
+
+    std::fs::write(&camera, "{\"format\":\"omniscan.camera\",\"version\":1,\"model\":{\"kind\":\"fisheye\"}}").unwrap();
+    let out = Command::new(BIN)
+        .args(["emulate", "--camera", &s(&camera), "--scanner", &s(&scanner), "--frames"])
+        .arg(files.path().join("frames"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(e.contains("camera.json") && e.contains("fisheye"), "{e}");
+    assert!(out.stdout.is_empty(), "no device path for a failed start");
+}

@@ -127,3 +127,27 @@ fn bad_inputs() {
     let out = run(d, &["fit", "--shape", "sphere", "--crop", "0,0,0,1,1,1", "c.ply"]);
     assert_eq!(out.status.code(), Some(1));
 }
+
+#[test]
+fn fits_a_cone() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rng = Rng::new(9);
+    // Cone: apex (450, -120, 100), axis down, half-angle atan(60/200) (the bench cone), σ 0.2 mm.
+    let th = (60.0f64 / 200.0).atan();
+    let pts: Vec<[f64; 3]> = (0..3000)
+        .map(|_| {
+            let h = 20.0 + rng.uniform() * 170.0;
+            let phi = 2.0 + rng.uniform() * 2.5; // the side facing the sensor (−x)
+            let e = rng.normal() * 0.2;
+            let r = h * th.tan() + e / th.cos();
+            [450.0 + r * phi.cos(), -120.0 + r * phi.sin(), 100.0 - h]
+        })
+        .collect();
+    write_ply(&dir.path().join("cone.ply"), &PointCloud { positions: pts, scalars: vec![] }, Encoding::Ascii).unwrap();
+    let v = json(&run(dir.path(), &["fit", "--shape", "cone", "--json", "cone.ply"]));
+    let half = v["shape"]["half_angle_deg"].as_f64().unwrap();
+    assert!((half - th.to_degrees()).abs() < 0.2, "half-angle {half}°");
+    let apex = v["shape"]["apex_mm"].as_array().unwrap();
+    assert!((apex[2].as_f64().unwrap() - 100.0).abs() < 1.5, "{apex:?}");
+    assert!((v["errors"]["std_dev"].as_f64().unwrap() - 0.2).abs() < 0.03);
+}

@@ -279,3 +279,48 @@ fn single_board_placements_calibrate_from_lines_alone() {
     assert!(cal.report.frames.len() >= 50);
     assert!(worst.0 < 0.01 && worst.1 < 0.05, "normal {}°, offset {} mm", worst.0, worst.1);
 }
+
+#[test]
+fn both_lasers_are_calibrated_from_boards_on_both_sides() {
+    // The rig and its copy turned by 180° about z (on the −x side, lit by laser 1): each frame
+    // holds two stripes that must be split between the lasers.
+    let camera = paper_camera();
+    let truth = Transmitter::new(imperfect_build()).unwrap();
+    let turn = nalgebra::Isometry3::rotation(nalgebra::Vector3::z() * std::f64::consts::PI);
+    let mut boards = true_rig();
+    for b in true_rig() {
+        boards.push(PlacedBoard { name: format!("{}-back", b.name), pose: turn * b.pose, ..b });
+    }
+    let mut rng = Rng::new(9);
+    let alphas: Vec<f64> = (0..=15).map(|i| 2.0 * i as f64).collect();
+    let mut frames = vec![];
+    for k in [0, 3] {
+        for &a in &alphas {
+            let seq = frames.len() as u64;
+            frames.push(stripe_frame(&camera, &truth, &boards, seq, a, k, STRIPE_NOISE_PX, 2.0, &mut rng));
+        }
+    }
+    let cal = calibrate_planes(&camera, &boards, &frames, &TransmitterParams::paper(), &PlaneCalibOptions::default())
+        .unwrap();
+    let fitted = Transmitter::new(cal.transmitter.clone()).unwrap();
+    for laser in 0..2 {
+        let own: Vec<&FrameReport> =
+            cal.report.frames.iter().filter(|f| f.laser == laser && f.plane_normal.is_some()).collect();
+        let mut worst = (0.0f64, 0.0f64);
+        for f in &own {
+            let t = truth.light_plane(f.alpha_deg.to_radians(), f.facet, laser).unwrap();
+            let (a, o, _) =
+                plane_error(&t, &fitted.light_plane(f.alpha_deg.to_radians(), f.facet, laser).unwrap().plane);
+            worst = (worst.0.max(a), worst.1.max(o));
+        }
+        eprintln!(
+            "laser {laser}: {} frames with planes; worst normal {:.5}°, offset at 0.5 m {:.4} mm",
+            own.len(),
+            worst.0,
+            worst.1
+        );
+        assert!(own.len() >= 24, "laser {laser}: {} frames", own.len());
+        assert!(worst.0 < 0.01 && worst.1 < 0.05, "laser {laser}: normal {}°, offset {} mm", worst.0, worst.1);
+    }
+    assert!(cal.report.model.parameters.iter().any(|e| e.name.contains("lasers[1] fan normal turn")));
+}

@@ -77,7 +77,8 @@ fn main() -> std::process::ExitCode {
         let mut cloud = ply_out.as_ref().map(|_| empty_point_cloud());
         let input = omni_formats::io::open_input(&args.input)?;
         let name = omni_formats::io::display_name(&args.input, "stdin");
-        let mut run = Run { tri: &tri, args: &args, cloud: cloud.as_mut(), rejections: Rejections::default() };
+        let mut run =
+            Run { tri: &tri, args: &args, cloud: cloud.as_mut(), rejections: Rejections::default(), points: 0 };
         match &stream_out {
             Some(path) => {
                 // The closure's error only aborts the atomic write; the message is kept here.
@@ -109,6 +110,8 @@ struct Run<'a> {
     args: &'a Args,
     cloud: Option<&'a mut PointCloud>,
     rejections: Rejections,
+    /// Points written so far.
+    points: u64,
 }
 
 impl Run<'_> {
@@ -131,11 +134,22 @@ impl Run<'_> {
                     let loc = format!("{name}: line {} (frame {})", reader.line(), frame.seq);
                     let res = self.tri.triangulate_frame(&frame).map_err(|m| fail(format!("{loc}: {m}")))?;
                     self.rejections.add(&res.rejections);
+                    self.points += res.points.len() as u64;
                     frame.points = Some(res.points);
                     if let Some(cloud) = self.cloud.as_deref_mut() {
                         append_frame_points(cloud, &frame, None, &|_| true).map_err(|m| fail(format!("{loc}: {m}")))?;
                     }
                     Record::Frame(frame)
+                }
+                Record::Status(mut status) => {
+                    // Say what this stage refused, next to the upstream counts.
+                    let r = &self.rejections;
+                    status.extra.insert(
+                        "triangulate".into(),
+                        serde_json::json!({"points": self.points, "no_ray": r.no_ray, "grazing": r.grazing,
+                            "unlit": r.unlit, "ambiguous": r.ambiguous}),
+                    );
+                    Record::Status(status)
                 }
                 other => other,
             };

@@ -53,6 +53,15 @@ fn fixture() -> Fixture {
             w.write(&Record::Frame(Box::new(f))).unwrap();
             truth.push(pts);
         }
+        w.write(&Record::Status(omni_formats::stream::Status {
+            frames: 3,
+            frames_missing: 0,
+            frames_failed: 0,
+            complete: true,
+            errors: vec![],
+            extra: Default::default(),
+        }))
+        .unwrap();
     }
     std::fs::write(dir.path().join("ridges.jsonl"), text).unwrap();
     Fixture { dir, truth }
@@ -72,7 +81,10 @@ fn writes_the_stream_with_points_and_keeps_other_fields() {
     assert_eq!(h.producers.len(), 2);
     assert!(h.producers[1].starts_with("omni-triangulate"));
     let mut n = 0;
-    for (r, truth) in records[1..].iter().zip(&fx.truth) {
+    let Some(Record::Status(status)) = records.last() else { panic!("no status record") };
+    assert_eq!(status.extra["triangulate"]["points"], 30);
+    assert_eq!(status.extra["triangulate"]["grazing"], 0);
+    for (r, truth) in records[1..4].iter().zip(&fx.truth) {
         let Record::Frame(f) = r else { panic!() };
         assert_eq!(f.extra.get("exposure_us"), Some(&500.into()));
         let pts = f.points.as_ref().unwrap();

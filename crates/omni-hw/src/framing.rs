@@ -38,11 +38,16 @@ impl std::fmt::Display for LineError {
     }
 }
 
-/// Frames `body` as one line. Panics in debug builds if the body is not a valid body; callers
-/// build bodies from numbers and fixed words, so this is a programming error, not bad input.
+/// Frames `body` as one line. Bodies are built from numbers and fixed words; should one carry
+/// a byte a body may not (e.g. an echoed value in a `NAK` reason), it is replaced by `?` and the
+/// body cut to [`MAX_BODY`], so the line is always valid.
 pub fn encode_line(body: &str) -> String {
-    debug_assert!(is_valid_body(body.as_bytes()), "invalid protocol body {body:?}");
-    format!("{body}*{:04X}\n", crc16_ccitt_false(body.as_bytes()))
+    let clean: String = body
+        .bytes()
+        .take(MAX_BODY)
+        .map(|b| if (0x20..=0x7E).contains(&b) && b != b'*' { b as char } else { '?' })
+        .collect();
+    format!("{clean}*{:04X}\n", crc16_ccitt_false(clean.as_bytes()))
 }
 
 fn is_valid_body(body: &[u8]) -> bool {
@@ -152,6 +157,14 @@ mod tests {
         assert_eq!(decode_line(line.trim_end().as_bytes()), Ok("ACK 17"));
         let crlf = line.replace('\n', "\r");
         assert_eq!(decode_line(crlf.as_bytes()), Ok("ACK 17"));
+    }
+
+    #[test]
+    fn encoding_never_produces_an_invalid_line() {
+        let line = encode_line(&format!("NAK 3 1 bad*value \u{e9}\n{}", "x".repeat(300)));
+        let body = decode_line(line.trim_end().as_bytes()).unwrap();
+        assert_eq!(body.len(), MAX_BODY);
+        assert!(body.starts_with("NAK 3 1 bad?value ???"), "{body}");
     }
 
     #[test]

@@ -244,12 +244,16 @@ impl<P: Pixel> Frame<'_, P> {
     /// Bilinear sample at (x, y) px, or `None` if its 2×2 neighbourhood leaves the image.
     #[inline]
     fn bilinear(&self, x: f64, y: f64) -> Option<f32> {
-        let (x0, y0) = (x.floor(), y.floor());
-        if x0 < 0.0 || y0 < 0.0 || x0 + 1.0 >= self.width as f64 || y0 + 1.0 >= self.height as f64 {
+        // `as` truncates, which is floor for the non-negative coordinates accepted here (and,
+        // unlike `floor`, needs no libm call on baseline x86-64).
+        if !(x >= 0.0 && y >= 0.0) {
             return None;
         }
-        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-        let (xi, yi) = (x0 as usize, y0 as usize);
+        let (xi, yi) = (x as usize, y as usize);
+        if xi + 1 >= self.width as usize || yi + 1 >= self.height as usize {
+            return None;
+        }
+        let (fx, fy) = ((x - xi as f64) as f32, (y - yi as f64) as f32);
         let w = self.width as usize;
         let i = yi * w + xi;
         let d = self.data;
@@ -383,7 +387,7 @@ impl RidgeDetector {
             Ok(i) => &out[rays[i].1..end(i)],
             Err(_) => &out[0..0],
         };
-        let radius = |p: &StripePoint| (p.u - self.cx).hypot(p.v - self.cy);
+        let radius = |p: &StripePoint| ((p.u - self.cx).powi(2) + (p.v - self.cy).powi(2)).sqrt();
         // Largest radial step between neighbours on a stripe crossing the rays at 60°.
         let max_dr = MIN_STRIPE_ARC_PX * 3f64.sqrt() + 1.0;
         let has_neighbour = |ray: u32, r: f64, k: i64| {
@@ -445,16 +449,19 @@ impl RidgeDetector {
             let up = &d[(y - k) * w + a..(y - k) * w + b];
             let down = &d[(y + k) * w + a..(y + k) * w + b];
             const BLOCK: usize = 32;
-            for start in (0..b - a).step_by(BLOCK) {
-                let end = (start + BLOCK).min(b - a);
-                let hit = |i: usize| P::contrast_above(cur[i], left[i], right[i], up[i], down[i], t);
+            let blocks = cur.chunks(BLOCK).zip(left.chunks(BLOCK)).zip(right.chunks(BLOCK));
+            let blocks = blocks.zip(up.chunks(BLOCK)).zip(down.chunks(BLOCK));
+            for (bi, ((((c, l), r), u), d)) in blocks.enumerate() {
+                let lanes = || c.iter().zip(l).zip(r).zip(u).zip(d);
                 // One pass without branches over the block; most blocks hold no stripe.
-                if !(start..end).fold(false, |any, i| any | hit(i)) {
+                let any =
+                    lanes().fold(false, |any, ((((&v, &l), &r), &u), &d)| any | P::contrast_above(v, l, r, u, d, t));
+                if !any {
                     continue;
                 }
-                for i in start..end {
-                    if hit(i) {
-                        mark(a + i, y);
+                for (i, ((((&v, &l), &r), &u), &d)) in lanes().enumerate() {
+                    if P::contrast_above(v, l, r, u, d, t) {
+                        mark(a + bi * BLOCK + i, y);
                     }
                 }
             }
@@ -673,7 +680,7 @@ impl RidgeDetector {
         else {
             return false;
         };
-        let gradient = (0.5 * (r - l)).hypot(0.5 * (d - u));
+        let gradient = (0.25 * ((r - l).powi(2) + (d - u).powi(2))).sqrt();
         gradient <= MAX_CENTRE_GRADIENT * peak
     }
     /// Whether the intensity edge at radius `r` on the ray crosses the ray at more than
@@ -690,7 +697,7 @@ impl RidgeDetector {
         };
         let (gx, gy) = ((rt - l) as f64, (d - u) as f64);
         let along = (gx * dir.0 + gy * dir.1).abs();
-        along >= MIN_EDGE_ANGLE_DEG.to_radians().sin() * gx.hypot(gy)
+        along >= MIN_EDGE_ANGLE_DEG.to_radians().sin() * (gx * gx + gy * gy).sqrt()
     }
 }
 

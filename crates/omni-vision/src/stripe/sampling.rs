@@ -52,7 +52,11 @@ impl GaussSampler {
     /// The Gaussian-weighted image value at (x, y) px, or `None` if the kernel leaves the image.
     #[inline]
     pub fn sample<P: Pixel>(&self, f: &Frame<'_, P>, x: f64, y: f64) -> Option<f32> {
-        let (x0, y0) = (x.floor(), y.floor());
+        // `as` truncates: floor for the non-negative coordinates accepted here, without libm.
+        if !(x >= 0.0 && y >= 0.0) {
+            return None;
+        }
+        let (x0, y0) = ((x as i64) as f64, (y as i64) as f64);
         let (xi, yi) = (x0 as i64 - HALF, y0 as i64 - HALF);
         if xi < 0 || yi < 0 || xi + TAPS as i64 > f.width as i64 || yi + TAPS as i64 > f.height as i64 {
             return None;

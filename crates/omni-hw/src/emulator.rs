@@ -303,6 +303,10 @@ pub fn serve<P: Read + Write>(
             if let DeviceMessage::Trigger(ev) = &msg {
                 camera.trigger(shot_for(ev, &options.spec, sys0));
                 fired += 1;
+                // The event leaves a whole trigger period after its edge: the queue fell behind.
+                if clock().saturating_sub(ev.t_us) as f64 > 1e6 / options.spec.max_rate_hz {
+                    controller.count_overrun();
+                }
                 disconnect |= options.faults.disconnect_after.is_some_and(|n| fired >= n);
                 if link.rng.chance(options.faults.drop_events) {
                     continue;

@@ -102,6 +102,9 @@ pub struct Options {
     pub min_corners: usize,
     /// LM iterations of the joint refinement.
     pub max_iterations: usize,
+    /// Refit once with each image weighted by 1 / (its RMS / the median RMS), clamped to
+    /// [0.3, 3]: maximum likelihood when images differ in corner noise.
+    pub reweight_images: bool,
 }
 
 impl Default for Options {
@@ -115,6 +118,7 @@ impl Default for Options {
             mirror: HyperbolicParams::paper(),
             min_corners: 8,
             max_iterations: 60,
+            reweight_images: true,
         }
     }
 }
@@ -283,6 +287,8 @@ struct Joint<'a> {
     obs: &'a [Observation],
     offsets: Vec<usize>,
     n_res: usize,
+    /// Per-image residual weights (1/relative noise level).
+    weights: Vec<f64>,
 }
 
 impl<'a> Joint<'a> {
@@ -293,7 +299,14 @@ impl<'a> Joint<'a> {
             offsets.push(n);
             n += 2 * o.pixels.len();
         }
-        Joint { model, obs, offsets, n_res: n }
+        Joint { model, obs, offsets, n_res: n, weights: vec![1.0; obs.len()] }
+    }
+
+    fn image_res(&self, k: usize, full: &[f64], pose: &[f64], out: &mut [f64]) {
+        image_residuals(self.model, full, pose, &self.obs[k], out);
+        if self.weights[k] != 1.0 {
+            out.iter_mut().for_each(|r| *r *= self.weights[k]);
+        }
     }
 
     fn n_intr(&self) -> usize {
@@ -313,7 +326,7 @@ impl lm::Problem for Joint<'_> {
         for (k, o) in self.obs.iter().enumerate() {
             let pose = &p[self.n_intr() + 6 * k..self.n_intr() + 6 * k + 6];
             let off = self.offsets[k];
-            image_residuals(self.model, &full, pose, o, &mut out[off..off + 2 * o.pixels.len()]);
+            self.image_res(k, &full, pose, &mut out[off..off + 2 * o.pixels.len()]);
         }
     }
     fn jacobian(&self, p: &[f64], jac: &mut DMatrix<f64>) {
@@ -343,9 +356,9 @@ impl lm::Problem for Joint<'_> {
                 let h = if c < 3 { 1e-7 } else { 1e-5 * pose[c].abs().max(1.0) };
                 let v = pose[c];
                 pose[c] = v + h;
-                image_residuals(self.model, &full, &pose, o, &mut plus[..m]);
+                self.image_res(k, &full, &pose, &mut plus[..m]);
                 pose[c] = v - h;
-                image_residuals(self.model, &full, &pose, o, &mut minus[..m]);
+                self.image_res(k, &full, &pose, &mut minus[..m]);
                 pose[c] = v;
                 for i in 0..m {
                     jac[(off + i, base + c)] = (plus[i] - minus[i]) / (2.0 * h);
@@ -420,6 +433,7 @@ fn joint_fit(mut model: Model, obs: &[Observation], mut poses: Vec<Option<[f64; 
         .iter()
         .map(|p| if p.is_none() { Some("no pose found for the board".to_string()) } else { None })
         .collect();
+    let mut weights: Option<Vec<f64>> = None;
     loop {
         let used: Vec<usize> = (0..obs.len()).filter(|&k| poses[k].is_some() && reasons[k].is_none()).collect();
         if used.is_empty() {
@@ -430,7 +444,10 @@ fn joint_fit(mut model: Model, obs: &[Observation], mut poses: Vec<Option<[f64; 
         for &k in &used {
             x0.extend_from_slice(&poses[k]?);
         }
-        let problem = Joint::new(&model, &sub);
+        let mut problem = Joint::new(&model, &sub);
+        if let Some(w) = &weights {
+            problem.weights = used.iter().map(|&k| w[k]).collect();
+        }
         let lm_opts =
             lm::Options { max_iterations: opts.max_iterations, huber: Some(opts.huber_px), ..Default::default() };
         let report = lm::minimize(&problem, &x0, &lm_opts);
@@ -453,6 +470,15 @@ fn joint_fit(mut model: Model, obs: &[Observation], mut poses: Vec<Option<[f64; 
                     "outlier after fitting: RMS {r:.3} px > {limit:.3} px ({} × median {med:.3} px)",
                     opts.outlier_factor
                 ));
+            }
+            _ if weights.is_none() && opts.reweight_images => {
+                // Images differ in noise (tiny, blurred boards near the rim vs large sharp ones):
+                // one refit with each image weighted by the inverse of its relative RMS.
+                let mut w = vec![1.0; obs.len()];
+                for (s, &k) in used.iter().enumerate() {
+                    w[k] = (med / rms_of[s].max(1e-9)).clamp(0.3, 3.0);
+                }
+                weights = Some(w);
             }
             _ => return Some(Fit { model, poses, reasons }),
         }

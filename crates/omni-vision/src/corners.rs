@@ -173,12 +173,13 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     if grid.is_empty() {
         return Err(Rejection::NoBoard { candidates: cands.len() });
     }
-    // A grid that keeps growing past the board's size means the board file is wrong (a smaller
-    // board would otherwise be "found" inside a larger one).
+    // A grid that keeps growing well past the board's size means the board file is wrong (a
+    // smaller board would otherwise be "found" inside a larger one). One extra row or column is
+    // tolerated: on tiny, blurred boards the junctions along the border can pass for corners.
     let unbounded = GrowLimits { max_long: 4 * limits.max_long + 8, max_short: 4 * limits.max_long + 8, ..limits };
     let (i0, i1, j0, j1) = grid::grow_best_grid(&cands, &unbounded, opts.max_seeds, &verify).bounds();
     let (wi, wj) = (i1 - i0 + 1, j1 - j0 + 1);
-    if wi.max(wj) > limits.max_long || wi.min(wj) > limits.max_short {
+    if wi.max(wj) > limits.max_long + 1 || wi.min(wj) > limits.max_short + 1 {
         return Err(Rejection::LargerThanBoard { found: (wi.max(0) as u32, wj.max(0) as u32) });
     }
     let positions = refine_grid(&refine_img, &cands, &grid);

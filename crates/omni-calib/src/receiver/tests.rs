@@ -124,7 +124,8 @@ fn mei_fit_on_exact_hyperbolic_corners_matches_truth() {
     // (measured: 12 boards at 0.15 px give 0.24° median; 20 boards at 0.05 px stay below 0.02°).
     let boards = synthetic_boards(&truth, 20, 0.05, 7);
     let obs: Vec<Observation> = boards.iter().map(|b| b.0.clone()).collect();
-    let cal = calibrate(1024, 1024, &obs, &Options::default()).unwrap();
+    // Every image has the same noise here, so the unweighted fit is the maximum-likelihood one.
+    let cal = calibrate(1024, 1024, &obs, &Options { reweight_images: false, ..Default::default() }).unwrap();
     let reference = truth_rms(&truth, &obs);
     assert_eq!(cal.images.iter().filter(|i| i.used).count(), 20);
     assert!(cal.rms_px <= 1.2 * reference, "RMS {} px vs truth {} px", cal.rms_px, reference);
@@ -236,7 +237,8 @@ fn real_images_calibrate_below_0_4_px() {
 }
 
 /// Renders `count` random 9 × 6 boards with the simulator (paper sensor scaled to `width` px) and
-/// detects their corners: (observations, detection error vs truth in px: RMS, max; boards found).
+/// detects their corners: (observations, detection error vs truth in px: RMS, max; boards found
+/// among those with at least 12 visible corners).
 pub(crate) fn simulated_observations(
     sensor: &omni_simulator::Sensor,
     count: usize,
@@ -262,6 +264,9 @@ pub(crate) fn simulated_observations(
             data: frame.data.iter().map(|&v| v as f32 * 255.0 / frame.max_value() as f32).collect(),
         };
         let visible = truth.iter().flatten().count();
+        if visible < 12 {
+            continue; // the random pose left (almost) the whole board out of view
+        }
         let found = match detect_board(&img, 9, 6, &DetectorOptions::default()) {
             Ok(f) => f,
             Err(e) => {
@@ -313,8 +318,25 @@ fn simulated_boards_calibrate_as_well_as_the_true_model() {
     );
     assert!(used >= 18, "{used} images used");
     assert!(cal.rms_px <= 1.2 * reference, "RMS {} px vs true model {} px", cal.rms_px, reference);
-    // Measured 0.063° median, 0.098° max: short of the 0.02° goal. The fit matches the corners
-    // better than the true model does; the ray error is the weakly observed focal-length/distance
-    // direction of small boards, driven by the detector's 0.07 px noise (see the synthetic tests).
-    assert!(med < 0.1 && max < 0.2, "ray errors median {med}°, max {max}°");
+    // Measured 0.042° median, 0.070° max (0.103°/0.164° without the per-image weights): short of
+    // the 0.02° goal. The fit matches the corners better than the true model does; the ray error
+    // is the weakly observed focal-length/distance direction of small boards, driven by the
+    // detector's 0.08 px noise (the synthetic tests show the same at 0.05 px and 0.15 px).
+    assert!(med < 0.06 && max < 0.1, "ray errors median {med}°, max {max}°");
+}
+
+#[test]
+fn simulated_off_focus_camera_generic_models_reach_0_3_px() {
+    let mut p = HyperbolicParams::paper();
+    p.camera_offset_mm = [0.0, 0.0, 0.5];
+    let sensor = omni_simulator::Sensor::from_params(p, omni_model::TransmitterParams::paper()).unwrap();
+    let (obs, _, _, found) = simulated_observations(&sensor, 12, 4);
+    // Seed 4 leaves 2 of the 12 boards with fewer than 12 corners in view.
+    assert!(found >= 9, "boards found in {found} of 12");
+    for model in [ModelKind::Mei, ModelKind::Ocam] {
+        let cal = calibrate(1024, 1024, &obs, &Options { model, ..Default::default() }).unwrap();
+        let used = cal.images.iter().filter(|i| i.used).count();
+        eprintln!("sim off focus {model:?}: {used} used, RMS {:.4} px", cal.rms_px);
+        assert!(used >= 9 && cal.rms_px <= 0.3, "{model:?}: {used} used, RMS {} px", cal.rms_px);
+    }
 }

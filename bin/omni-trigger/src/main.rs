@@ -349,7 +349,10 @@ fn scan(a: ScanArgs) -> CliResult {
     const MAX_WARNINGS: usize = 20;
     let mut warnings = 0;
     let mut sink = |e: &PairEvent| -> Result<(), String> {
-        bar.inc(1);
+        // Each trigger ends paired or missing exactly once.
+        if matches!(e, PairEvent::Paired(_) | PairEvent::FrameMissing { .. }) {
+            bar.inc(1);
+        }
         match e {
             PairEvent::Paired(f) => writer.write(&Record::Frame(f.clone())).map_err(|e| {
                 let m = e.to_string();

@@ -211,26 +211,41 @@ pub fn voxel_downsample(cloud: &PointCloud, size: f64, origin: [f64; 3]) -> Resu
     // (key, index) pairs are unique, so the unstable sort is deterministic, and within a voxel
     // the points stay in input order: the sums below add up exactly as the streaming grid does.
     keyed.par_sort_unstable();
-    let mut out = PointCloud {
-        positions: Vec::new(),
-        scalars: names.into_iter().map(|name| ScalarField { name, values: Vec::new() }).collect(),
-    };
-    let mut sums = vec![0.0f64; cloud.scalars.len()];
+    // Voxel number of every point (voxels numbered in key order), then one sequential pass in
+    // input order: the inputs are read in order and only the (smaller) accumulators are hit at
+    // random, and each voxel's sums add up exactly as in the streaming grid.
+    let mut slot_of = vec![0u32; keyed.len()];
+    let mut n_voxels = 0usize;
     for run in keyed.chunk_by(|a, b| a.0 == b.0) {
-        let mut s = [0.0f64; 3];
-        sums.iter_mut().for_each(|x| *x = 0.0);
         for &(_, i) in run {
-            let p = &cloud.positions[i as usize];
-            s[0] += p[0];
-            s[1] += p[1];
-            s[2] += p[2];
-            for (acc, f) in sums.iter_mut().zip(&cloud.scalars) {
-                *acc += f.values[i as usize] as f64;
-            }
+            slot_of[i as usize] = n_voxels as u32;
         }
-        let n = run.len() as f64;
+        n_voxels += 1;
+    }
+    drop(keyed);
+    let ns = cloud.scalars.len();
+    let mut sums = vec![[0.0f64; 3]; n_voxels];
+    let mut counts = vec![0u32; n_voxels];
+    let mut scalar_sums = vec![0.0f64; n_voxels * ns];
+    for (i, (p, &slot)) in cloud.positions.iter().zip(&slot_of).enumerate() {
+        let slot = slot as usize;
+        let s = &mut sums[slot];
+        s[0] += p[0];
+        s[1] += p[1];
+        s[2] += p[2];
+        counts[slot] += 1;
+        for (acc, f) in scalar_sums[slot * ns..(slot + 1) * ns].iter_mut().zip(&cloud.scalars) {
+            *acc += f.values[i] as f64;
+        }
+    }
+    let mut out = PointCloud {
+        positions: Vec::with_capacity(n_voxels),
+        scalars: names.into_iter().map(|name| ScalarField { name, values: Vec::with_capacity(n_voxels) }).collect(),
+    };
+    for (v, (s, &c)) in sums.iter().zip(&counts).enumerate() {
+        let n = c as f64;
         out.positions.push([s[0] / n, s[1] / n, s[2] / n]);
-        for (f, acc) in out.scalars.iter_mut().zip(&sums) {
+        for (f, acc) in out.scalars.iter_mut().zip(&scalar_sums[v * ns..(v + 1) * ns]) {
             f.values.push((acc / n) as f32);
         }
     }

@@ -1,6 +1,7 @@
 //! Steger's line detector (C. Steger, "An unbiased detector of curvilinear structures", PAMI
 //! 1998), used only in a band around each ray's coarse stripe centre: the image smoothed by a
-//! Gaussian of scale σ is evaluated at sub-pixel positions (so no pixel rounding enters), its
+//! Gaussian of scale σ is evaluated at sub-pixel positions (weights tabulated every 1/1024 px,
+//! so no pixel rounding enters), its
 //! Hessian gives the stripe normal `n`, and Newton steps along `n` converge to the ridge, the
 //! maximum across the stripe. The ridge's tangent is then intersected with the sampling ray, so
 //! the result is comparable with the 1-D estimators.
@@ -12,61 +13,82 @@ const MAX_STEPS: usize = 4;
 /// Converged when a step is shorter than this (px).
 const CONVERGED_PX: f64 = 1e-3;
 
-/// The smoothing scale and the window it needs.
+/// Sub-pixel phases of the weight table (position quantised to 1/1024 px).
+const LEVELS: usize = 1024;
+
+/// The smoothing scale, the window it needs and its weights at every sub-pixel phase.
 #[derive(Debug, Clone)]
 pub struct Kernels {
-    sigma: f64,
     /// Taps on either side of floor(x): −half..=half+1.
     half: i64,
+    /// Taps per axis (2·half + 2).
+    taps: usize,
+    /// `table[phase · 3 · taps + kind · taps + tap]`: value (kind 0), first (1) and second (2)
+    /// derivative weights of the continuous Gaussian at the tap's offset from the position.
+    table: Vec<f64>,
 }
 
 impl Kernels {
     /// Gaussian derivatives of scale `sigma` (px).
     pub fn new(sigma: f64) -> Self {
-        Kernels { sigma, half: (3.0 * sigma).ceil() as i64 }
+        let half = (3.0 * sigma).ceil() as i64;
+        let taps = 2 * half as usize + 2;
+        let s2 = sigma * sigma;
+        let norm = 1.0 / ((std::f64::consts::TAU).sqrt() * sigma);
+        let mut table = vec![0.0; LEVELS * 3 * taps];
+        for phase in 0..LEVELS {
+            let f = phase as f64 / LEVELS as f64;
+            for k in 0..taps {
+                let d = (k as i64 - half) as f64 - f;
+                let g = norm * (-d * d / (2.0 * s2)).exp();
+                let base = phase * 3 * taps;
+                table[base + k] = g;
+                table[base + taps + k] = d / s2 * g;
+                table[base + 2 * taps + k] = (d * d - s2) / (s2 * s2) * g;
+            }
+        }
+        Kernels { half, taps, table }
     }
 
-    /// Value weights, first and second derivative weights of the taps around `x`: the
-    /// continuous Gaussian and its derivatives at each tap's offset from `x`.
-    fn weights(&self, x: f64) -> (i64, [Vec<f64>; 3]) {
-        let first = x.floor() as i64 - self.half;
-        let n = 2 * self.half as usize + 2;
-        let s2 = self.sigma * self.sigma;
-        let norm = 1.0 / ((std::f64::consts::TAU).sqrt() * self.sigma);
-        let mut w = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-        for k in 0..n {
-            let d = (first + k as i64) as f64 - x;
-            let g = norm * (-d * d / (2.0 * s2)).exp();
-            w[0][k] = g;
-            w[1][k] = d / s2 * g;
-            w[2][k] = (d * d - s2) / (s2 * s2) * g;
-        }
-        (first, w)
+    /// The first tap's coordinate and the value, first and second derivative weights of the
+    /// taps around `x` (≥ 0).
+    fn weights(&self, x: f64) -> (i64, &[f64], &[f64], &[f64]) {
+        let xi = x as i64;
+        let phase = (((x - xi as f64) * LEVELS as f64) as usize).min(LEVELS - 1);
+        let w = &self.table[phase * 3 * self.taps..(phase + 1) * 3 * self.taps];
+        let (w0, rest) = w.split_at(self.taps);
+        let (w1, w2) = rest.split_at(self.taps);
+        (xi - self.half, w0, w1, w2)
     }
 
     /// Gradient and Hessian `[rx, ry, rxx, rxy, ryy]` of the smoothed image at (x, y) px, or
     /// `None` if the window leaves the image.
     fn derivatives<P: Pixel>(&self, f: &Frame<'_, P>, x: f64, y: f64) -> Option<[f64; 5]> {
-        let (x0, wx) = self.weights(x);
-        let (y0, wy) = self.weights(y);
-        let n = wx[0].len() as i64;
+        if !(x >= 0.0 && y >= 0.0) {
+            return None;
+        }
+        let (x0, wx0, wx1, wx2) = self.weights(x);
+        let (y0, wy0, wy1, wy2) = self.weights(y);
+        let n = self.taps as i64;
         if x0 < 0 || y0 < 0 || x0 + n > f.width as i64 || y0 + n > f.height as i64 {
             return None;
         }
         let mut acc = [0.0; 5];
-        for j in 0..n as usize {
+        let w = f.width as usize;
+        for j in 0..self.taps {
+            let row = &f.data[(y0 as usize + j) * w + x0 as usize..][..self.taps];
             let (mut h0, mut h1, mut h2) = (0.0, 0.0, 0.0);
-            for i in 0..n as usize {
-                let v = f.at(x0 as usize + i, y0 as usize + j) as f64;
-                h0 += v * wx[0][i];
-                h1 += v * wx[1][i];
-                h2 += v * wx[2][i];
+            for (i, p) in row.iter().enumerate() {
+                let v = p.to_f32() as f64;
+                h0 += v * wx0[i];
+                h1 += v * wx1[i];
+                h2 += v * wx2[i];
             }
-            acc[0] += wy[0][j] * h1;
-            acc[1] += wy[1][j] * h0;
-            acc[2] += wy[0][j] * h2;
-            acc[3] += wy[1][j] * h1;
-            acc[4] += wy[2][j] * h0;
+            acc[0] += wy0[j] * h1;
+            acc[1] += wy1[j] * h0;
+            acc[2] += wy0[j] * h2;
+            acc[3] += wy1[j] * h1;
+            acc[4] += wy2[j] * h0;
         }
         Some(acc)
     }

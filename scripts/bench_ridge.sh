@@ -5,6 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dir="${OMNI_RIDGE_BENCH_DIR:-$(mktemp -d)}"
+mkdir -p "$dir"
 log="$dir/rust.log"
 OMNI_RIDGE_BENCH_DIR="$dir" cargo bench -p omni-vision --bench ridge -- --warm-up-time 1 --measurement-time 3 | tee "$log"
 read -r _ cx cy rin rout < <(grep '^CIRCLE' "$log")

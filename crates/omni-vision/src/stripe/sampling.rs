@@ -13,8 +13,9 @@ use super::{Frame, Pixel};
 
 /// Standard deviation (px) of the sampling kernel.
 pub const SAMPLE_SIGMA_PX: f64 = 0.8;
-/// Taps either side: the kernel covers offsets −3..=4 around floor(x) (≥ ±3 σ).
-const HALF: i64 = 3;
+/// Taps either side: the kernel covers offsets −2..=3 around floor(x) (≥ ±2.5 σ; a wider
+/// window changes the centre by < 0.003 px for σ_s ≥ 0.75 px but costs 64 taps instead of 36).
+const HALF: i64 = 2;
 const TAPS: usize = 2 * HALF as usize + 2;
 /// Sub-pixel resolution of the weight table (position error ≤ 1 / (2 · LEVELS) px).
 const LEVELS: usize = 512;
@@ -88,7 +89,7 @@ mod tests {
         let s = GaussSampler::default();
         let f = Frame { width: w, height: h, data: &flat, max_value: 255.0 };
         assert!((s.sample(&f, 7.3, 9.9).unwrap() - 100.0).abs() < 1e-3);
-        assert!(s.sample(&f, 2.5, 9.0).is_none());
+        assert!(s.sample(&f, 1.5, 9.0).is_none());
         // A vertical line of σ = 0.75 px centred at x = 9.3: the sampled row's maximum (found by
         // a fine scan) is at 9.3 within the aliasing residual (0.02 px) and the table step.
         let c = 9.3;

@@ -195,12 +195,12 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     place_on_board(positions, colours, cols, rows, opts.first_square_dark)
 }
 
-/// An X-junction test at the grid's own scale: a circle of 0.3 × the corner spacing stays inside
+/// An X-junction test at the grid's own scale: a circle of 0.35 × the corner spacing stays inside
 /// the four squares around a true corner, while T-junctions at the board's border (black square,
 /// white square, white margin) show only two transitions there.
 fn local_x_junction(img: &GrayF32, p: [f64; 2], spacing: f64, min_contrast: f32) -> bool {
-    let radius = (0.3 * spacing).clamp(1.5, 6.5);
-    saddle::circle_test(img, p, radius, 0.5 * min_contrast).is_some()
+    let radius = (0.35 * spacing).clamp(2.5, 6.5);
+    saddle::circle_test(img, p, radius, 0.35 * min_contrast).is_some()
 }
 
 /// Refines every grid corner; the window follows the local corner spacing.
@@ -259,9 +259,6 @@ fn fill_missing(
             let Some((lines, _)) = saddle::circle_test(smooth, p, radius, 0.5 * opts.saddle.min_contrast) else {
                 continue;
             };
-            if !local_x_junction(refine_img, p, spacing, opts.saddle.min_contrast) {
-                continue;
-            }
             let dir_angle = line_dir[1].atan2(line_dir[0]);
             if lines.iter().any(|&l| saddle::axial_difference(l, dir_angle) < opts.max_line_angle) {
                 added.push((cell, p));

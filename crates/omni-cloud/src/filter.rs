@@ -196,33 +196,28 @@ pub fn voxel_origin_open3d(points: &[[f64; 3]], size: f64) -> [f64; 3] {
 }
 
 /// Voxel-grid downsampling of a whole cloud (module docs). Same output as feeding the points
-/// through a [`VoxelGrid`] in order, bit for bit, but computed by sorting (point, voxel key)
-/// pairs in parallel instead of hashing, which is several times faster when most voxels hold
-/// few points.
+/// through a [`VoxelGrid`] in order, bit for bit, but faster: voxel keys are computed in
+/// parallel, voxels are numbered in a tight hashing pass over the keys alone, and the sums are
+/// accumulated in one sequential pass over the input (each voxel's sum in input order).
 pub fn voxel_downsample(cloud: &PointCloud, size: f64, origin: [f64; 3]) -> Result<PointCloud, String> {
     let names: Vec<String> = cloud.scalars.iter().map(|s| s.name.clone()).collect();
     let grid = VoxelGrid::new(size, origin, names.clone())?;
-    let mut keyed: Vec<(u64, u32)> = cloud
-        .positions
-        .par_iter()
-        .enumerate()
-        .map(|(i, p)| grid.key(p).map(|k| (k, i as u32)))
-        .collect::<Result<_, _>>()?;
-    // (key, index) pairs are unique, so the unstable sort is deterministic, and within a voxel
-    // the points stay in input order: the sums below add up exactly as the streaming grid does.
-    keyed.par_sort_unstable();
-    // Voxel number of every point (voxels numbered in key order), then one sequential pass in
-    // input order: the inputs are read in order and only the (smaller) accumulators are hit at
-    // random, and each voxel's sums add up exactly as in the streaming grid.
-    let mut slot_of = vec![0u32; keyed.len()];
-    let mut n_voxels = 0usize;
-    for run in keyed.chunk_by(|a, b| a.0 == b.0) {
-        for &(_, i) in run {
-            slot_of[i as usize] = n_voxels as u32;
-        }
-        n_voxels += 1;
-    }
-    drop(keyed);
+    let keys: Vec<u64> = cloud.positions.par_iter().map(|p| grid.key(p)).collect::<Result<_, _>>()?;
+    let mut slots: HashMap<u64, u32, BuildHasherDefault<FxHasher>> = HashMap::default();
+    let mut voxel_keys: Vec<u64> = Vec::new();
+    let slot_of: Vec<u32> = keys
+        .iter()
+        .map(|&k| {
+            let next = voxel_keys.len() as u32;
+            *slots.entry(k).or_insert_with(|| {
+                voxel_keys.push(k);
+                next
+            })
+        })
+        .collect();
+    drop(slots);
+    drop(keys);
+    let n_voxels = voxel_keys.len();
     let ns = cloud.scalars.len();
     let mut sums = vec![[0.0f64; 3]; n_voxels];
     let mut counts = vec![0u32; n_voxels];
@@ -238,12 +233,16 @@ pub fn voxel_downsample(cloud: &PointCloud, size: f64, origin: [f64; 3]) -> Resu
             *acc += f.values[i] as f64;
         }
     }
+    // Output in voxel-index order (deterministic whatever the input order).
+    let mut order: Vec<u32> = (0..n_voxels as u32).collect();
+    order.par_sort_unstable_by_key(|&v| voxel_keys[v as usize]);
     let mut out = PointCloud {
         positions: Vec::with_capacity(n_voxels),
         scalars: names.into_iter().map(|name| ScalarField { name, values: Vec::with_capacity(n_voxels) }).collect(),
     };
-    for (v, (s, &c)) in sums.iter().zip(&counts).enumerate() {
-        let n = c as f64;
+    for &v in &order {
+        let v = v as usize;
+        let (s, n) = (sums[v], counts[v] as f64);
         out.positions.push([s[0] / n, s[1] / n, s[2] / n]);
         for (f, acc) in out.scalars.iter_mut().zip(&scalar_sums[v * ns..(v + 1) * ns]) {
             f.values.push((acc / n) as f32);

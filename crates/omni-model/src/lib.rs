@@ -3,7 +3,8 @@
 //! * [`CameraModel`]: the receiver, a catadioptric camera, as a map between image pixels and
 //!   world rays. Implementations: [`HyperbolicCamera`] (the exact mirror + pinhole model of
 //!   SENSOR.md, optionally with the camera off the mirror focus), and the generic calibration
-//!   models added by the calibration crate (Mei/unified, Scaramuzza polynomial).
+//!   models [`MeiCamera`] (Mei/unified + radial-tangential) and [`OcamCamera`] (Scaramuzza
+//!   polynomial, OCamCalib), fitted by `omni_calib::receiver`.
 //! * [`Transmitter`]: the rotating polygon mirror and its line lasers, giving the world light
 //!   plane of any (mirror angle, facet, laser).
 //!

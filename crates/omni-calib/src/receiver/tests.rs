@@ -280,17 +280,44 @@ pub(crate) fn simulated_observations(
                 continue;
             }
         };
+        let mut matches = Vec::new(); // (detected index, true index)
         for c in &found.corners {
-            let d =
-                truth.iter().flatten().map(|t| (t[0] - c.px[0]).hypot(t[1] - c.px[1])).fold(f64::INFINITY, f64::min);
+            let (d, t) = truth
+                .iter()
+                .enumerate()
+                .filter_map(|(t, p)| p.map(|p| ((p[0] - c.px[0]).hypot(p[1] - c.px[1]), t)))
+                .fold((f64::INFINITY, 0), |a, b| if b.0 < a.0 { b } else { a });
             sq += d * d;
             n += 1;
             worst = worst.max(d);
+            matches.push(([c.index[0] as i64, c.index[1] as i64], [(t % 9) as i64, (t / 9) as i64]));
         }
+        assert!(consistently_ordered(&matches), "sim{k}: corner labels are not one board motion of the truth");
         obs.push(Observation::from_corners(&format!("sim{k}"), &found, 30.0));
     }
     let found = obs.len();
     (obs, (sq / n.max(1) as f64).sqrt(), worst, found)
+}
+
+/// Whether detected corner labels map to the true labels by one symmetry of the grid (rotation
+/// or reflection) plus one offset: every corner correctly ordered relative to the others.
+fn consistently_ordered(matches: &[([i64; 2], [i64; 2])]) -> bool {
+    let symmetries: [[i64; 4]; 8] = [
+        [1, 0, 0, 1],
+        [0, -1, 1, 0],
+        [-1, 0, 0, -1],
+        [0, 1, -1, 0],
+        [-1, 0, 0, 1],
+        [1, 0, 0, -1],
+        [0, 1, 1, 0],
+        [0, -1, -1, 0],
+    ];
+    symmetries.iter().any(|m| {
+        let map = |d: [i64; 2]| [m[0] * d[0] + m[1] * d[1], m[2] * d[0] + m[3] * d[1]];
+        let (d0, t0) = matches[0];
+        let off = [t0[0] - map(d0)[0], t0[1] - map(d0)[1]];
+        matches.iter().all(|(d, t)| map(*d)[0] + off[0] == t[0] && map(*d)[1] + off[1] == t[1])
+    })
 }
 
 #[test]

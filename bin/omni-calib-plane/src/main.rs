@@ -74,6 +74,11 @@ struct FitArgs {
     /// Fewest board points a frame's laser needs to be used.
     #[arg(long, default_value_t = 20)]
     min_points: usize,
+    /// Drop board points farther than this (mm) from the initial model's light plane before
+    /// fitting (e.g. checkerboard edges in frames without ambient subtraction); needs an
+    /// --initial model that close to the build.
+    #[arg(long)]
+    gate_mm: Option<f64>,
     /// Fewest visible corners to pose a board.
     #[arg(long, default_value_t = 6)]
     min_corners: usize,
@@ -139,7 +144,10 @@ fn fit(a: &FitArgs) -> CliResult {
     };
     let mut reader = StreamReader::new(io::open_input(&a.stripes)?, name(&a.stripes));
     let frames = inputs::read_stripe_frames(&mut reader)?;
-    let opts = PlaneCalibOptions { min_points_per_frame: a.min_points, ..Default::default() };
+    if a.gate_mm.is_some_and(|g| !(g > 0.0)) {
+        return Err(CliError::usage("--gate-mm must be positive"));
+    }
+    let opts = PlaneCalibOptions { min_points_per_frame: a.min_points, gate_mm: a.gate_mm, ..Default::default() };
     let (placed, pose_reports): (Vec<_>, Vec<_>) = boards.into_iter().unzip();
     let cal = plane::calibrate_planes(camera.as_ref(), &placed, &frames, &initial, &opts)
         .map_err(|m| CliError::new(format!("{}: {m}", name(&a.stripes))))?;

@@ -60,6 +60,11 @@ pub struct PlaneCalibOptions {
     pub min_points_per_frame: usize,
     /// Rays meeting a board at |cos incidence| below this are ignored (grazing).
     pub min_cos: f64,
+    /// Board points farther than this (mm) from the initial model's light plane are dropped
+    /// before any fit (bright structure that is not the stripe), then a second pass gates at a
+    /// quarter of it (at least 2 mm) around the first pass's model; `None` keeps all points in
+    /// one pass.
+    pub gate_mm: Option<f64>,
 }
 
 impl Default for PlaneCalibOptions {
@@ -69,6 +74,7 @@ impl Default for PlaneCalibOptions {
             model: ModelFitOptions::default(),
             min_points_per_frame: 20,
             min_cos: 0.05,
+            gate_mm: None,
         }
     }
 }
@@ -178,8 +184,14 @@ pub fn check_frames(tx: &Transmitter, boards: &[PlacedBoard], frames: &[FrameStr
 }
 
 /// Splits a frame's board points between its lit lasers using the initial model: a point goes to
-/// the laser whose fan lights it (nearest plane if several or none do).
-fn assign_lasers(tx: &Transmitter, frame: &FrameStripes, points: &[observe::BoardPoint]) -> Vec<(usize, Vec<usize>)> {
+/// the laser whose fan lights it (nearest plane if several or none do), if it lies within
+/// `gate_mm` of that laser's initial plane.
+fn assign_lasers(
+    tx: &Transmitter,
+    frame: &FrameStripes,
+    points: &[observe::BoardPoint],
+    gate_mm: Option<f64>,
+) -> Vec<(usize, Vec<usize>)> {
     let lasers: Vec<usize> =
         frame.lasers.iter().map(|&l| l as usize).filter(|&l| l < tx.num_lasers()).collect::<Vec<_>>();
     let planes: Vec<_> = lasers.iter().map(|&l| tx.light_plane(frame.alpha_rad, frame.facet, l)).collect();
@@ -196,7 +208,9 @@ fn assign_lasers(tx: &Transmitter, frame: &FrameStripes, points: &[observe::Boar
             let (lb, db) = score(b);
             lb.cmp(&la).then(da.total_cmp(&db))
         });
-        if let Some(k) = best {
+        if let Some(k) = best
+            && gate_mm.is_none_or(|g| score(k).1 <= g)
+        {
             groups[k].1.push(i);
         }
     }
@@ -213,6 +227,23 @@ pub fn calibrate_planes(
     initial: &TransmitterParams,
     opts: &PlaneCalibOptions,
 ) -> Result<PlaneCalibration, String> {
+    let first = calibrate_once(camera, boards, frames, initial, opts)?;
+    let Some(gate) = opts.gate_mm else { return Ok(first) };
+    // The first gate must cover the initial model's error, so it may still let in bright lines
+    // near the stripe; a second pass gates tightly around the first pass's model.
+    let tight = (gate / 4.0).max(2.0).min(gate);
+    calibrate_once(camera, boards, frames, &first.transmitter, &PlaneCalibOptions { gate_mm: Some(tight), ..*opts })
+}
+
+/// One pass of [`calibrate_planes`]: laser assignment and gating with `initial`, frame planes,
+/// model fit started from `initial`.
+fn calibrate_once(
+    camera: &dyn CameraModel,
+    boards: &[PlacedBoard],
+    frames: &[FrameStripes],
+    initial: &TransmitterParams,
+    opts: &PlaneCalibOptions,
+) -> Result<PlaneCalibration, String> {
     let tx0 = Transmitter::new(initial.clone()).map_err(|e| format!("initial transmitter: {e}"))?;
     check_frames(&tx0, boards, frames)?;
     let mut rejected = vec![];
@@ -223,7 +254,7 @@ pub fn calibrate_planes(
             continue; // an ambient (laser-off) frame
         }
         let (points, _missed) = locate_on_boards(camera, boards, frame, opts.min_cos);
-        for (laser, idx) in assign_lasers(&tx0, frame, &points) {
+        for (laser, idx) in assign_lasers(&tx0, frame, &points, opts.gate_mm) {
             if idx.len() < opts.min_points_per_frame {
                 // A laser whose stripe misses the boards entirely is normal (it lights the other side).
                 if !idx.is_empty() || tx0.num_lasers() == 1 {

@@ -158,6 +158,7 @@ fn fit(a: &FitArgs) -> CliResult {
         "rig": name(&a.rig),
         "stripes": name(&a.stripes),
         "initial": a.initial.as_deref().map(name),
+        "gate_mm": a.gate_mm,
     });
     let mut out = ScannerFile::new(cal.transmitter);
     out.report = Some(report);

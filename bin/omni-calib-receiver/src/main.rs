@@ -239,12 +239,18 @@ fn calibrate(args: &CalibArgs) -> CliResult {
     let corners = &detected.corners;
     let obs = corners.observations(board.square_mm);
     let opts = Options { model: args.model, huber_px: args.huber_px, mirror, ..Default::default() };
-    let cal = receiver::calibrate(corners.width, corners.height, &obs, &opts).map_err(|e| {
+    let mut cal = receiver::calibrate(corners.width, corners.height, &obs, &opts).map_err(|e| {
         let reasons: Vec<String> =
             corners.images.iter().filter_map(|i| i.reason.as_ref().map(|r| format!("{}: {r}", i.name))).collect();
         CliError::new(format!("calibration failed: {e}; {}", reasons.join("; ")))
     })?;
-    print_summary(&cal, corners);
+    // The detector's reason ("no board found", …) says more than "too few corners (0 < 8)".
+    for (img, entry) in cal.images.iter_mut().zip(&corners.images) {
+        if entry.reason.is_some() {
+            img.reason = entry.reason.clone();
+        }
+    }
+    print_summary(&cal);
     if let Some(dir) = &args.overlay {
         write_overlays(dir, &cal, &obs, &detected)?;
     }
@@ -258,10 +264,9 @@ fn calibrate(args: &CalibArgs) -> CliResult {
     Ok(())
 }
 
-fn print_summary(cal: &Calibration, corners: &CornersFile) {
-    for (img, entry) in cal.images.iter().zip(&corners.images) {
-        let reason = img.reason.as_ref().or(entry.reason.as_ref());
-        match (img.used, img.rms_px, reason) {
+fn print_summary(cal: &Calibration) {
+    for img in &cal.images {
+        match (img.used, img.rms_px, img.reason.as_ref()) {
             (true, Some(r), _) => eprintln!("  {}: {} corners, RMS {r:.3} px", img.name, img.corners),
             (_, _, Some(why)) => eprintln!("  {}: rejected: {why}", img.name),
             _ => eprintln!("  {}: rejected", img.name),

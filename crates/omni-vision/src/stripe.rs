@@ -585,23 +585,39 @@ impl RidgeDetector {
                 done_until = k + 1;
                 continue;
             }
-            // The coarse extent, generously (half the threshold), plus 2 px on either side.
-            let mut start = k;
-            while start > 0 && c[start - 1] - background > 0.5 * t {
-                start -= 1;
-            }
-            let mut end = k + 1;
-            while end < n && c[end] - background > 0.5 * t {
-                end += 1;
-            }
-            done_until = end;
-            let rf0 = r0 + start as f64 - 2.0;
-            let nf = ((end - start + 3) as f64 / SAMPLE_STEP_PX) as usize + 1;
-            p.clear();
-            p.extend((0..nf).map(|i| {
-                let r = rf0 + i as f64 * SAMPLE_STEP_PX;
+            // Resample finely outwards from the coarse peak until two samples on each side are
+            // at or below the threshold (the crossing and one more for the estimators; three
+            // for Blais–Rioux, whose filter reaches two samples beyond its zero crossing).
+            let tail = if self.params.method == Method::BlaisRioux { 3 } else { 2 };
+            let coarse_end = (k + 1..n).find(|&i| !(c[i] - background > 0.5 * t)).unwrap_or(n);
+            done_until = coarse_end;
+            let r_peak = r0 + k as f64;
+            let limit = ((0.5 * self.params.max_width + 3.0) / SAMPLE_STEP_PX) as i64;
+            let fine = |i: i64| {
+                let r = r_peak + i as f64 * SAMPLE_STEP_PX;
                 self.sampler.sample(frame, self.cx + r * dx, self.cy + r * dy).unwrap_or(f32::NAN)
-            }));
+            };
+            let walk = |dir: i64, into: &mut Vec<f32>| {
+                into.clear();
+                let mut below = 0;
+                for i in 1..=limit {
+                    let v = fine(dir * i);
+                    into.push(v);
+                    if !(v - background > t) {
+                        below += 1;
+                        if below == tail {
+                            break;
+                        }
+                    }
+                }
+            };
+            walk(-1, q);
+            p.clear();
+            p.extend(q.iter().rev());
+            let rf0 = r_peak - q.len() as f64 * SAMPLE_STEP_PX;
+            p.push(fine(0));
+            walk(1, q);
+            p.extend(q.iter());
             q.clear();
             q.extend(p.iter().map(|v| v - background));
             let Some(seg) = fine_segment(q, t) else { continue };

@@ -88,6 +88,8 @@ pub struct FrameReport {
     pub laser: usize,
     /// Board points assigned to this laser.
     pub points: usize,
+    /// Stripe pixels of the frame that fell on no board (or gave no ray), all lasers together.
+    pub off_board: usize,
     /// The frame's own plane `normal · x = offset_mm` (world frame), if the points fix one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plane_normal: Option<[f64; 3]>,
@@ -253,7 +255,7 @@ fn calibrate_once(
         if frame.lasers.is_empty() {
             continue; // an ambient (laser-off) frame
         }
-        let (points, _missed) = locate_on_boards(camera, boards, frame, opts.min_cos);
+        let (points, off_board) = locate_on_boards(camera, boards, frame, opts.min_cos);
         for (laser, idx) in assign_lasers(&tx0, frame, &points, opts.gate_mm) {
             if idx.len() < opts.min_points_per_frame {
                 // A laser whose stripe misses the boards entirely is normal (it lights the other side).
@@ -288,6 +290,7 @@ fn calibrate_once(
                 facet: frame.facet,
                 laser,
                 points: pts.len(),
+                off_board,
                 plane_normal: own.as_ref().ok().map(|f| f.plane.normal.into_inner().into()),
                 plane_offset_mm: own.as_ref().ok().map(|f| f.plane.offset),
                 plane_rms_mm: own.as_ref().ok().map(|f| f.rms_mm),

@@ -164,8 +164,9 @@ pub fn boards_from_corners(
 /// ([`omni_vision::corners::detect_board`]), posed with the camera, and blanked out of the image
 /// so the next detection finds the next board. The corner labeling may come out mirrored or
 /// turned by 180°; both leave the board's outline in place (it is symmetric), and the proper
-/// labeling is the one whose pose explains the corners better. Only rigs with one placement
-/// (one pose image) are supported.
+/// labeling is the one whose pose explains the corners better. Boards of the same size are
+/// matched to the rig's boards in detection order (their names may swap; the calibration only
+/// uses their planes and outlines). Only rigs with one placement (one pose image) are supported.
 pub fn boards_from_pose_image(
     camera: &dyn CameraModel,
     rig: &RigFile,

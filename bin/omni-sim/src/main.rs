@@ -227,8 +227,24 @@ struct BoardsArgs {
 }
 
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Writes DIR/pose.png (lasers off), DIR/frame_NNNNNN.png, DIR/scan.jsonl (manifest),\n\
-DIR/rig.json (true board poses and the pose image's corner pixels) and DIR/truth.jsonl.")]
+#[command(after_help = "Writes into DIR:\n\
+  pose.png            ambient image of the rig, lasers off, room lit (for --pose-image)\n\
+  frame_NNNNNN.png    laser frames (and ambient_NNNNNN.png, lasers off, with --laser-off)\n\
+  scan.jsonl          the manifest stream that omni-ridge reads\n\
+  rig.json            the rig's boards \"left\" and \"right\" (omniscan.rig, read by omni-calib-plane --rig)\n\
+  board_poses.json    their TRUE board→world poses (omniscan.board_poses, for --board-poses)\n\
+  board_corners.json  their TRUE corner pixels in pose.png (omniscan.board_corners, for --board-corners)\n\
+  scene.json          the rig as an omniscan.scene (e.g. omni-trigger emulate --scene DIR/scene.json)\n\
+  rig_truth.json      the simulator's own record (omniscan.sim-rig: board, poses, corner pixels, null if hidden)\n\
+  truth.jsonl         the true stripe points of every laser frame\n\
+The laser frames keep the room's dim ambient light (the checkerboard shows at ≈ 51/255 on white squares);\n\
+give --laser-off so that omni-ridge subtracts the ambient frame instead of finding square edges.\n\n\
+Example (light-plane calibration on the true camera and poses):\n\
+  omni-sim rig --camera sensor/camera.json --scanner sensor/scanner.json --board board.json \\\n\
+      --angles 14:28:1 --laser-off --out rig/\n\
+  omni-ridge --camera sensor/camera.json rig/scan.jsonl -o stripes.jsonl\n\
+  omni-calib-plane fit --camera sensor/camera.json --rig rig/rig.json --board-poses rig/board_poses.json \\\n\
+      --stripes stripes.jsonl -o scanner.json")]
 struct RigArgs {
     #[arg(long)]
     camera: PathBuf,
@@ -243,6 +259,10 @@ struct RigArgs {
     /// Facet facing laser 0.
     #[arg(long, default_value_t = 0)]
     facet: u32,
+    /// Also render a laser-off (ambient) frame for every laser frame (`ambient_path` in the
+    /// manifest), so that omni-ridge subtracts the checkerboard.
+    #[arg(long)]
+    laser_off: bool,
     /// Output directory (created if missing).
     #[arg(long)]
     out: PathBuf,
@@ -468,20 +488,26 @@ fn rig(a: RigArgs) -> CliResult {
     let sensor = Sensor::load(&a.camera, &a.scanner)?;
     let board = load_board(&a.board)?;
     let rig = Rig::standard(&board);
-    let scene = Scene::from_file(rig.scene()).map_err(CliError::new)?;
+    let scene_file = rig.scene();
+    let scene = Scene::from_file(scene_file.clone()).map_err(CliError::new)?;
     check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("rig: {e}")))?;
     create_dir(&a.out)?;
     let lit = a.render.options_from(RenderOptions::calibration())?;
     let (pose_image, corners) = render_rig_pose_image(&sensor, &rig, &lit);
     pose_image.to_png(&a.out.join("pose.png"))?;
-    let frames = render_frames(&sensor, &scene, &angles, a.facet, &[0, 1], false, &a.out, &opts)?;
+    let frames = render_frames(&sensor, &scene, &angles, a.facet, &[0, 1], a.laser_off, &a.out, &opts)?;
     write_truth(&a.out.join("truth.jsonl"), "rig", &frames)?;
-    write_manifest(&a.out.join("scan.jsonl"), &a.out, &a.camera, &a.scanner, &frames)?;
-    let doc = serde_json::json!({
-        "format": "omniscan.sim-rig", "version": 1, "board": board, "pose_image": "pose.png",
+    write_doc(&a.out.join("scene.json"), &scene_file)?;
+    write_doc(&a.out.join("rig.json"), &rig.rig_file())?;
+    write_doc(&a.out.join("board_poses.json"), &rig.board_poses_file())?;
+    write_doc(&a.out.join("board_corners.json"), &rig.board_corners_file(&corners))?;
+    let truth = serde_json::json!({
+        "format": "omniscan.sim-rig", "version": 1, "board": board, "board_names": Rig::BOARD_NAMES,
+        "pose_image": "pose.png",
         "poses": rig.poses.iter().map(BoardPose::from_isometry).collect::<Vec<_>>(),
         "corners": corners,
     });
-    write_doc(&a.out.join("rig.json"), &doc)?;
-    Ok(())
+    write_doc(&a.out.join("rig_truth.json"), &truth)?;
+    // The manifest last: its presence means the rig directory is complete.
+    write_manifest(&a.out.join("scan.jsonl"), &a.out, &a.camera, &a.scanner, &frames)
 }

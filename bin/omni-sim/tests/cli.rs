@@ -223,15 +223,91 @@ fn boards_and_rig() {
         &board,
         "--angles",
         "18,22",
+        "--laser-off",
         "--out",
         "r",
     ];
     ok(&sim(&args, d));
-    for f in ["pose.png", "frame_000000.png", "frame_000001.png", "scan.jsonl", "rig.json", "truth.jsonl"] {
+    let files = [
+        "pose.png",
+        "frame_000000.png",
+        "frame_000001.png",
+        "scan.jsonl",
+        "rig.json",
+        "board_poses.json",
+        "board_corners.json",
+        "scene.json",
+        "rig_truth.json",
+        "truth.jsonl",
+    ];
+    for f in files {
         assert!(d.join("r").join(f).exists(), "{f}");
     }
-    let rig: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("r/rig.json")).unwrap()).unwrap();
-    assert_eq!(rig["poses"].as_array().unwrap().len(), 2);
+    let text = std::fs::read_to_string(d.join("r/scan.jsonl")).unwrap();
+    let frames: Vec<_> = StreamReader::new(text.as_bytes(), "scan.jsonl")
+        .filter_map(|r| match r.unwrap() {
+            Record::Frame(f) => Some(f),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(frames.len(), 2);
+    for f in &frames {
+        // The ambient frame shows the lit-by-room checkerboard the stripe detector must subtract.
+        let ambient = omni_simulator::Frame16::from_png(&d.join("r").join(f.ambient_path.as_ref().unwrap())).unwrap();
+        let laser = omni_simulator::Frame16::from_png(&d.join("r").join(&f.path)).unwrap();
+        assert!(ambient.data.iter().any(|v| *v > 30), "ambient frame shows the boards");
+        let gain = |t: u16| laser.data.iter().zip(&ambient.data).filter(|(l, a)| **l > **a + t).count();
+        let max_gain = laser.data.iter().zip(&ambient.data).map(|(l, a)| l.saturating_sub(*a)).max().unwrap();
+        eprintln!("{}: {} px > ambient + 20, {} px > ambient + 40, max gain {max_gain}", f.path, gain(20), gain(40));
+        assert!(gain(20) > 20, "the laser frame adds a stripe over the ambient one");
+    }
+    check_rig_files(&d.join("r"), &board);
+}
+
+/// The rig files parse with the omni-formats readers and agree with the simulator's own record.
+fn check_rig_files(dir: &Path, board_path: &str) {
+    use omni_formats::read_doc;
+    use omni_formats::rig::{BoardCornersFile, BoardPosesFile, RigFile};
+    let board: omni_formats::BoardFile = read_doc(Path::new(board_path)).unwrap();
+    let rig: RigFile = read_doc(&dir.join("rig.json")).unwrap();
+    rig.validate().unwrap();
+    let names: Vec<&str> = rig.boards.iter().map(|b| b.name.as_str()).collect();
+    assert_eq!(names, ["left", "right"]);
+    for b in &rig.boards {
+        assert_eq!((b.inner_cols, b.inner_rows, b.square_mm), (board.inner_cols, board.inner_rows, board.square_mm));
+        assert_eq!((b.margin_mm, b.placement), (board.margin_mm, 0));
+    }
+    let truth: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("rig_truth.json")).unwrap()).unwrap();
+    assert_eq!(truth["format"], "omniscan.sim-rig");
+    let poses: BoardPosesFile = read_doc(&dir.join("board_poses.json")).unwrap();
+    poses.validate().unwrap();
+    assert_eq!(poses.poses.len(), 2);
+    for (k, p) in poses.poses.iter().enumerate() {
+        assert_eq!(p.board, names[k]);
+        let t: [f64; 3] = serde_json::from_value(truth["poses"][k]["translation_mm"].clone()).unwrap();
+        assert_eq!(p.translation_mm, t);
+        // The standard rig stands vertically on the +x side, about 370–620 mm out.
+        assert!(p.translation_mm[0] > 300.0 && p.translation_mm[0] < 650.0, "{:?}", p.translation_mm);
+    }
+    let corners: BoardCornersFile = read_doc(&dir.join("board_corners.json")).unwrap();
+    let cols = board.inner_cols as usize;
+    for (k, c) in corners.boards.iter().enumerate() {
+        assert_eq!(c.board, names[k]);
+        let visible: Vec<(usize, [f64; 2])> = truth["corners"][k]
+            .as_array()
+            .unwrap()
+            .iter()
+            .enumerate()
+            .filter_map(|(i, v)| serde_json::from_value::<Option<[f64; 2]>>(v.clone()).unwrap().map(|px| (i, px)))
+            .collect();
+        assert!(visible.len() >= 6, "board {k}: only {} corners visible", visible.len());
+        assert_eq!(c.corners.len(), visible.len());
+        for (&[i, j, u, v], &(idx, px)) in c.corners.iter().zip(&visible) {
+            assert_eq!([i, j, u, v], [(idx % cols) as f64, (idx / cols) as f64, px[0], px[1]]);
+        }
+    }
+    let scene: omni_formats::scene::SceneFile = read_doc(&dir.join("scene.json")).unwrap();
+    assert_eq!(scene.objects.len(), 2);
 }
 
 #[test]

@@ -13,6 +13,7 @@ use crate::scene::{Scene, board_corners};
 use crate::sensor::Sensor;
 use nalgebra::Translation3;
 use omni_formats::BoardFile;
+use omni_formats::rig::{BoardCorners, BoardCornersFile, BoardPose as RigBoardPose, BoardPosesFile, RigBoard, RigFile};
 use omni_formats::scene::{SceneFile, SceneObject, Shape};
 use omni_geom::{Isometry3, Matrix3, Point3, Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -154,7 +155,9 @@ fn random_pose(rng: &mut SplitMix64, board: &BoardFile) -> Isometry3<f64> {
 /// vertically on the +x side like an open book facing the sensor (a concave right angle), the
 /// spine (their shared vertical edge, 2 mm gap) at (620, 0) mm, both centred at z = −50 mm, so
 /// that laser 0's light planes of mid-range mirror angles (about 15°–24°) cross both boards. A
-/// 9 × 6 board of 30 mm squares then spans x ≈ 365–620 mm.
+/// 9 × 6 board of 30 mm squares then spans x ≈ 365–620 mm. [`Rig::rig_file`],
+/// [`Rig::board_poses_file`] and [`Rig::board_corners_file`] give the true rig in the formats
+/// omni-calib-plane reads (boards named [`Rig::BOARD_NAMES`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Rig {
     pub board: BoardFile,
@@ -183,6 +186,58 @@ impl Rig {
         let left = pose(na, ra, spine - ra * (width / 2.0 + gap));
         let right = pose(nb, rb, spine + rb * (width / 2.0 + gap));
         Rig { board: board.clone(), poses: [left, right] }
+    }
+
+    /// Names of the two boards in the omni-calib-plane files, in the order of [`Rig::poses`].
+    pub const BOARD_NAMES: [&'static str; 2] = ["left", "right"];
+
+    /// The rig's boards as omni-calib-plane reads them (`rig.json`, one placement). The
+    /// simulator's board frame (origin at the first inner corner, x along the columns, y down the
+    /// rows, z = x × y) is the rig format's, so the board parameters carry over unchanged.
+    pub fn rig_file(&self) -> RigFile {
+        let b = &self.board;
+        let rig_board = |name: &str| RigBoard {
+            name: name.into(),
+            inner_cols: b.inner_cols,
+            inner_rows: b.inner_rows,
+            square_mm: b.square_mm,
+            margin_mm: b.margin_mm,
+            placement: 0,
+        };
+        RigFile::new(Self::BOARD_NAMES.map(rig_board).to_vec())
+    }
+
+    /// The TRUE board → world poses (`board_poses.json`).
+    pub fn board_poses_file(&self) -> BoardPosesFile {
+        let poses = Self::BOARD_NAMES
+            .iter()
+            .zip(&self.poses)
+            .map(|(name, iso)| {
+                let p = BoardPose::from_isometry(iso);
+                RigBoardPose { board: (*name).into(), rotation: p.rotation, translation_mm: p.translation_mm }
+            })
+            .collect();
+        BoardPosesFile::new(poses)
+    }
+
+    /// Corner pixels as [`render_rig_pose_image`] returns them (per board, row-major, `None` where
+    /// hidden) in the `board_corners.json` form: `[i, j, u, v]` of the visible corners, corner `k`
+    /// being column `k % inner_cols`, row `k / inner_cols`.
+    pub fn board_corners_file(&self, corners: &[Vec<Option<[f64; 2]>>; 2]) -> BoardCornersFile {
+        let cols = self.board.inner_cols as usize;
+        let boards = Self::BOARD_NAMES
+            .iter()
+            .zip(corners)
+            .map(|(name, px)| BoardCorners {
+                board: (*name).into(),
+                corners: px
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(k, p)| p.map(|[u, v]| [(k % cols) as f64, (k / cols) as f64, u, v]))
+                    .collect(),
+            })
+            .collect();
+        BoardCornersFile::new(boards)
     }
 
     /// The rig as a scene (two checkerboards).

@@ -6,7 +6,9 @@ use omni_cloud::eval::{ObjectReport, compare_with_scene};
 use omni_cloud::filter::CropBox;
 use omni_cloud::fit::{ErrorStats, FitOptions, Shape, ShapeKind, fit_shape};
 use omni_formats::read_doc;
+use omni_formats::rig::{BoardPosesFile, RigFile};
 use omni_formats::scene::SceneFile;
+use omni_formats::transform::TransformFile;
 use omni_geom::Point3;
 use std::path::{Path, PathBuf};
 
@@ -55,6 +57,9 @@ enum Command {
         /// Print JSON instead of a table.
         #[arg(long)]
         json: bool,
+        /// Move the cloud by this rigid transform first (transform.json, see `align`).
+        #[arg(long)]
+        transform: Option<PathBuf>,
         /// The cloud (PLY; `-` = stdin).
         cloud: PathBuf,
     },
@@ -71,7 +76,41 @@ enum Command {
         inlier_mm: f64,
         #[arg(long)]
         json: bool,
+        /// Move the cloud by this rigid transform first (transform.json, see `align`).
+        #[arg(long)]
+        transform: Option<PathBuf>,
         cloud: PathBuf,
+    },
+    /// Register a calibrated sensor's frame to a reference frame through the calibration rig:
+    /// the rig boards as posed during light-plane calibration (scanner.json's report) against
+    /// their known poses; writes transform.json (calibrated → reference).
+    Align {
+        /// scanner.json written by omni-calib-plane (its report lists the board poses it used).
+        #[arg(long)]
+        scanner: PathBuf,
+        /// The boards' known poses in the reference frame (omniscan.board_poses).
+        #[arg(long)]
+        reference_poses: PathBuf,
+        /// The rig (omniscan.rig): gives each board's corner grid.
+        #[arg(long)]
+        rig: PathBuf,
+        /// Output transform.json (`-` = stdout).
+        #[arg(short, long, default_value = "-")]
+        output: PathBuf,
+    },
+    /// Draw a cloud as a PNG picture (a view from above-front, coloured by height).
+    Render {
+        /// The cloud (PLY; `-` = stdin).
+        cloud: PathBuf,
+        /// Output PNG.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Picture width (px); the height follows the cloud's extent.
+        #[arg(long, default_value_t = 800)]
+        width: u32,
+        /// Colour by `height` (z) or `range` (distance from the origin).
+        #[arg(long, default_value = "height")]
+        color: omni_cloud::render::ColorBy,
     },
 }
 
@@ -84,15 +123,26 @@ fn numbers(opt: &str, s: &str, n: usize) -> Result<Vec<f64>, CliError> {
 }
 
 /// The cloud's positions (inside `crop` if given); an empty cloud is an error.
-fn load_points(path: &Path, crop: Option<&CropBox>) -> Result<Vec<Point3<f64>>, CliError> {
+fn load_points(path: &Path, crop: Option<&CropBox>, transform: Option<&Path>) -> Result<Vec<Point3<f64>>, CliError> {
     let name = omni_formats::io::display_name(path, "stdin");
+    let iso = match transform {
+        Some(t) => {
+            let file: TransformFile = read_doc(t)?;
+            Some(file.isometry().map_err(|m| format!("{}: {m}", t.display()))?)
+        }
+        None => None,
+    };
     let mut pts = Vec::new();
     omni_cloud::ply_stream::for_each_vertex(
         path,
         &mut |_, n| if n == 0 { Err(format!("{name}: the PLY has no vertices")) } else { Ok(()) },
         &mut |p, _| {
-            if crop.is_none_or(|b| b.contains(p)) {
-                pts.push(Point3::from(*p));
+            let q = match &iso {
+                Some(iso) => iso * Point3::from(*p),
+                None => Point3::from(*p),
+            };
+            if crop.is_none_or(|b| b.contains(&[q.x, q.y, q.z])) {
+                pts.push(q);
             }
             Ok(())
         },
@@ -105,7 +155,7 @@ fn load_points(path: &Path, crop: Option<&CropBox>) -> Result<Vec<Point3<f64>>, 
 
 fn main() -> std::process::ExitCode {
     omni_cli::main("omni-eval", || match Args::parse().command {
-        Command::Fit { shape, crop, inlier_mm, iterations, seed, radius, centre, json, cloud } => {
+        Command::Fit { shape, crop, inlier_mm, iterations, seed, radius, centre, json, transform, cloud } => {
             let crop = match crop {
                 Some(s) => {
                     let v = numbers("crop", &s, 6)?;
@@ -117,7 +167,7 @@ fn main() -> std::process::ExitCode {
             if !(inlier_mm > 0.0) {
                 return Err(CliError::usage("--inlier-mm must be positive"));
             }
-            let pts = load_points(&cloud, crop.as_ref())?;
+            let pts = load_points(&cloud, crop.as_ref(), transform.as_deref())?;
             let name = omni_formats::io::display_name(&cloud, "stdin");
             let opts = FitOptions { inlier_mm, iterations, seed };
             let fit = fit_shape(shape, &pts, &opts).map_err(|m| format!("{name}: {m}"))?;
@@ -132,13 +182,48 @@ fn main() -> std::process::ExitCode {
             print_fit(&fit.shape, pts.len(), &stats, radius_error, centre_error, json);
             Ok(())
         }
-        Command::Compare { scene, max_distance_mm, inlier_mm, json, cloud } => {
+        Command::Compare { scene, max_distance_mm, inlier_mm, json, transform, cloud } => {
             let scene_file: SceneFile = read_doc(&scene)?;
-            let pts = load_points(&cloud, None)?;
+            let pts = load_points(&cloud, None, transform.as_deref())?;
             let opts = FitOptions { inlier_mm, ..FitOptions::default() };
             let (reports, stray) = compare_with_scene(&scene_file, &pts, max_distance_mm, &opts)
                 .map_err(|m| format!("{}: {m}", scene.display()))?;
             print_compare(&reports, pts.len(), stray, json);
+            Ok(())
+        }
+        Command::Align { scanner, reference_poses, rig, output } => {
+            let (scanner_file, _) = omni_formats::ScannerFile::load(&scanner)?;
+            let reference: BoardPosesFile = read_doc(&reference_poses)?;
+            let rig_file: RigFile = read_doc(&rig)?;
+            let used = scanner_file.report.as_ref().and_then(|r| r.get("boards")).cloned().ok_or_else(|| {
+                format!("{}: field report.boards: missing (not written by omni-calib-plane?)", scanner.display())
+            })?;
+            let used: Vec<omni_formats::rig::BoardPose> =
+                serde_json::from_value(used).map_err(|e| format!("{}: field report.boards: {e}", scanner.display()))?;
+            let (iso, rms) = omni_cloud::align::register_rig(&rig_file, &used, &reference.poses)
+                .map_err(|m| format!("{}: {m}", reference_poses.display()))?;
+            let doc = TransformFile::from_isometry(
+                &iso,
+                Some(rms),
+                "calibrated sensor frame -> reference frame, through the rig boards",
+            );
+            omni_formats::write_doc(&output, &doc)?;
+            eprintln!("omni-eval: rig registration RMS {rms:.3} mm over {} boards", used.len());
+            Ok(())
+        }
+        Command::Render { cloud, output, width, color } => {
+            let pts = load_points(&cloud, None, None)?;
+            let img = omni_cloud::render::render(&pts, width, color);
+            let name = output.display().to_string();
+            omni_formats::io::write_atomic(&output, |w| {
+                let mut bytes = Vec::new();
+                image::RgbImage::from_raw(img.width, img.height, img.rgb)
+                    .ok_or_else(|| std::io::Error::other("image size"))?
+                    .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
+                    .map_err(std::io::Error::other)?;
+                w.write_all(&bytes)
+            })
+            .map_err(|e| format!("{name}: {e}"))?;
             Ok(())
         }
     })

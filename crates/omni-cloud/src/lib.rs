@@ -21,6 +21,7 @@
 //! assert_eq!(statistical_outlier_mask(&pts, 3, 1.0).unwrap().iter().filter(|k| **k).count(), 4);
 //! ```
 
+pub mod align;
 pub mod cloud;
 pub mod eval;
 pub mod filter;
@@ -29,6 +30,7 @@ pub mod kdtree;
 pub mod merge;
 pub mod motion;
 pub mod ply_stream;
+pub mod render;
 pub mod rng;
 pub mod triangulate;
 

@@ -19,6 +19,7 @@ pub mod ply;
 pub mod rig;
 pub mod scene;
 pub mod stream;
+pub mod transform;
 
 pub use docs::{BoardFile, CameraFile, CameraSpec, ScannerFile, read_doc, write_doc};
 pub use error::{Error, Result};

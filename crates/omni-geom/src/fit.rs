@@ -294,3 +294,54 @@ mod tests {
         assert!(f.axis.dot(&axis).abs() > 1.0 - 1e-10);
     }
 }
+
+/// The rigid transform `T` minimising Σ|T·src_i − dst_i|² (Kabsch/Umeyama without scale) and
+/// the RMS of the remaining residuals (mm). `None` for fewer than 3 pairs, mismatched lengths or
+/// (near-)collinear points.
+pub fn kabsch(src: &[Point3<f64>], dst: &[Point3<f64>]) -> Option<(nalgebra::Isometry3<f64>, f64)> {
+    if src.len() != dst.len() || src.len() < 3 {
+        return None;
+    }
+    let n = src.len() as f64;
+    let cs = src.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
+    let cd = dst.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
+    let mut h = Matrix3::zeros();
+    for (s, d) in src.iter().zip(dst) {
+        h += (s.coords - cs) * (d.coords - cd).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    let mut sv = svd.singular_values;
+    sv.as_mut_slice().sort_by(|a, b| b.total_cmp(a));
+    if sv[1] <= 1e-9 * sv[0].max(1e-300) {
+        return None;
+    }
+    let mut d = Matrix3::identity();
+    if (v_t.transpose() * u.transpose()).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let r = v_t.transpose() * d * u.transpose();
+    let rot = nalgebra::UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r));
+    let t = cd - rot * cs;
+    let iso = nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(t), rot);
+    let rms = (src.iter().zip(dst).map(|(s, d)| (iso * s - d).norm_squared()).sum::<f64>() / n).sqrt();
+    Some((iso, rms))
+}
+
+#[cfg(test)]
+mod kabsch_tests {
+    use super::*;
+
+    #[test]
+    fn kabsch_recovers_a_rigid_motion() {
+        let rot = nalgebra::UnitQuaternion::from_euler_angles(0.1, -0.3, 1.2);
+        let iso = nalgebra::Isometry3::from_parts(nalgebra::Translation3::new(5.0, -80.0, 3.0), rot);
+        let src: Vec<_> =
+            (0..20).map(|i| Point3::new(i as f64 * 3.0, (i * i % 7) as f64, (i % 3) as f64 * 10.0)).collect();
+        let dst: Vec<_> = src.iter().map(|p| iso * p).collect();
+        let (fit, rms) = kabsch(&src, &dst).unwrap();
+        assert!(rms < 1e-9);
+        assert!((fit.translation.vector - iso.translation.vector).norm() < 1e-9);
+        assert!(fit.rotation.angle_to(&rot) < 1e-12);
+    }
+}

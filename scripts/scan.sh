@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Scan one scene: omni-trigger | omni-ridge | omni-triangulate | omni-merge, and keep every stage.
+#
+# With real hardware:
+#   scripts/scan.sh --camera camera.json --scanner scanner.json --port /dev/ttyACM0 --frames frames/ --out scan/
+# (the camera's own software must write the triggered frames into --frames).
+# On the virtual sensor (the emulator renders every triggered frame of SCENE through omni-sim):
+#   scripts/scan.sh --camera camera.json --scanner scanner.json --emulate scene.json \
+#       --true-camera truth/camera.json --true-scanner truth/scanner.json --out scan/
+# Writes OUT/manifest.jsonl, OUT/stripes.jsonl, OUT/points.jsonl and OUT/cloud.ply.
+set -euo pipefail
+
+usage() { sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
+camera= scanner= port= scene= true_camera= true_scanner= out= frames=
+angles=${ANGLES:-14:29:0.25} facets=${FACETS:-0} seed=${SEED:-0} width=${WIDTH:-}
+denoise=${DENOISE:-20,2.0}
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --camera) camera=$2; shift 2 ;;
+    --scanner) scanner=$2; shift 2 ;;
+    --port) port=$2; shift 2 ;;
+    --frames) frames=$2; shift 2 ;;
+    --emulate) scene=$2; shift 2 ;;
+    --true-camera) true_camera=$2; shift 2 ;;
+    --true-scanner) true_scanner=$2; shift 2 ;;
+    --angles) angles=$2; shift 2 ;;
+    --facets) facets=$2; shift 2 ;;
+    --seed) seed=$2; shift 2 ;;
+    --out) out=$2; shift 2 ;;
+    -h|--help) usage ;;
+    *) echo "scan.sh: unknown argument $1" >&2; usage ;;
+  esac
+done
+[ -n "$camera" ] && [ -n "$scanner" ] && [ -n "$out" ] || usage
+[ -n "$port" ] || [ -n "$scene" ] || { echo "scan.sh: give --port or --emulate" >&2; exit 2; }
+mkdir -p "$out"
+frames=${frames:-$out/frames}
+mkdir -p "$frames"
+
+emulator_pid=
+cleanup() { [ -n "$emulator_pid" ] && kill "$emulator_pid" 2>/dev/null || true; }
+trap cleanup EXIT
+
+if [ -n "$scene" ]; then
+  emu_args=(--frames "$frames" --scene "$scene" --seed "$seed" --truth "$out/emulator_truth.jsonl")
+  [ -n "$true_camera" ] && emu_args+=(--camera "$true_camera")
+  [ -n "$true_scanner" ] && emu_args+=(--scanner "$true_scanner")
+  omni-trigger emulate "${emu_args[@]}" > "$out/emulator.port" 2> "$out/emulator.log" &
+  emulator_pid=$!
+  for _ in $(seq 1 100); do [ -s "$out/emulator.port" ] && break; sleep 0.1; done
+  port=$(head -n 1 "$out/emulator.port")
+  [ -n "$port" ] || { echo "scan.sh: the emulator did not start (see $out/emulator.log)" >&2; exit 1; }
+fi
+
+omni-trigger scan --port "$port" --frames "$frames" --angles "$angles" --facets "$facets" --revolutions 1 \
+  | tee "$out/manifest.jsonl" \
+  | omni-ridge --camera "$camera" \
+  | tee "$out/stripes.jsonl" \
+  | omni-triangulate --camera "$camera" --scanner "$scanner" \
+  | tee "$out/points.jsonl" \
+  | omni-merge - --statistical "$denoise" -o "$out/cloud.ply"
+echo "scan.sh: $(grep -c '"type":"frame"' "$out/manifest.jsonl") frames -> $out/cloud.ply" >&2

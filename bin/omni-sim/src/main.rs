@@ -31,7 +31,7 @@ Examples:
       --angles 14:29:0.5 --frames frames/ -o scan.jsonl --truth truth.jsonl
   omni-sim boards --camera sensor/camera.json --board board.json --count 20 --seed 1 --out boards/
   omni-sim rig --camera sensor/camera.json --scanner sensor/scanner.json --board board.json \\
-      --angles 14:28:1 --out rig/";
+      --angles 14:28:1 --laser-off --out rig/";
 
 /// The virtual sensor: writes sensor files, renders laser scans, checkerboard sets and the
 /// transmitter-calibration rig, with ground truth.
@@ -226,25 +226,29 @@ struct BoardsArgs {
     render: RenderArgs,
 }
 
+const RIG_AFTER_HELP: &str = "\
+Writes into DIR:
+  pose.png            ambient image of the rig, lasers off, room lit (for --pose-image)
+  frame_NNNNNN.png    laser frames (and ambient_NNNNNN.png, lasers off, with --laser-off)
+  scan.jsonl          the manifest stream that omni-ridge reads
+  rig.json            boards \"left\" and \"right\" (omniscan.rig, omni-calib-plane --rig)
+  board_poses.json    their TRUE board→world poses (omniscan.board_poses, for --board-poses)
+  board_corners.json  their TRUE corner pixels in pose.png (omniscan.board_corners)
+  scene.json          the rig as an omniscan.scene (omni-trigger emulate --scene DIR/scene.json)
+  rig_truth.json      the simulator's record (omniscan.sim-rig; corner pixels null if hidden)
+  truth.jsonl         the true stripe points of every laser frame
+The laser frames keep the room's dim ambient light (white squares ≈ 51/255): give --laser-off
+so that omni-ridge subtracts the ambient frame instead of finding the squares' edges.
+
+Example (light-plane calibration on the true camera and board poses):
+  omni-sim rig --camera sensor/camera.json --scanner sensor/scanner.json --board board.json \\
+      --angles 14:28:1 --laser-off --out rig/
+  omni-ridge --camera sensor/camera.json rig/scan.jsonl -o stripes.jsonl
+  omni-calib-plane fit --camera sensor/camera.json --rig rig/rig.json \\
+      --board-poses rig/board_poses.json --stripes stripes.jsonl -o scanner.json";
+
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Writes into DIR:\n\
-  pose.png            ambient image of the rig, lasers off, room lit (for --pose-image)\n\
-  frame_NNNNNN.png    laser frames (and ambient_NNNNNN.png, lasers off, with --laser-off)\n\
-  scan.jsonl          the manifest stream that omni-ridge reads\n\
-  rig.json            the rig's boards \"left\" and \"right\" (omniscan.rig, read by omni-calib-plane --rig)\n\
-  board_poses.json    their TRUE board→world poses (omniscan.board_poses, for --board-poses)\n\
-  board_corners.json  their TRUE corner pixels in pose.png (omniscan.board_corners, for --board-corners)\n\
-  scene.json          the rig as an omniscan.scene (e.g. omni-trigger emulate --scene DIR/scene.json)\n\
-  rig_truth.json      the simulator's own record (omniscan.sim-rig: board, poses, corner pixels, null if hidden)\n\
-  truth.jsonl         the true stripe points of every laser frame\n\
-The laser frames keep the room's dim ambient light (the checkerboard shows at ≈ 51/255 on white squares);\n\
-give --laser-off so that omni-ridge subtracts the ambient frame instead of finding square edges.\n\n\
-Example (light-plane calibration on the true camera and poses):\n\
-  omni-sim rig --camera sensor/camera.json --scanner sensor/scanner.json --board board.json \\\n\
-      --angles 14:28:1 --laser-off --out rig/\n\
-  omni-ridge --camera sensor/camera.json rig/scan.jsonl -o stripes.jsonl\n\
-  omni-calib-plane fit --camera sensor/camera.json --rig rig/rig.json --board-poses rig/board_poses.json \\\n\
-      --stripes stripes.jsonl -o scanner.json")]
+#[command(after_help = RIG_AFTER_HELP)]
 struct RigArgs {
     #[arg(long)]
     camera: PathBuf,

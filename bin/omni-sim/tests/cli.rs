@@ -317,4 +317,9 @@ fn help_teaches() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("Examples:") && text.contains("omni-sim scan") && text.contains("f = 1950 px"));
     assert_eq!(sim(&["scan"], Path::new(".")).status.code(), Some(2));
+    let rig = sim(&["rig", "--help"], Path::new("."));
+    let text = String::from_utf8_lossy(&rig.stdout);
+    for f in ["rig.json", "board_poses.json", "board_corners.json", "scene.json", "rig_truth.json", "--laser-off"] {
+        assert!(text.contains(f), "omni-sim rig --help names {f}");
+    }
 }

@@ -72,6 +72,11 @@ struct CalibArgs {
     /// Huber threshold of the robust loss (px).
     #[arg(long, default_value_t = 1.0)]
     huber_px: f64,
+    /// Where the fitted model's single viewpoint sits in the world frame (mm). Board images fix
+    /// the rays' directions, not the origin: 0,0,0 makes the viewpoint the origin; the mirror's
+    /// focus 0,0,2c (0,0,80 for the paper's mirror) keeps SENSOR.md's frame, origin at the camera.
+    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0")]
+    viewpoint_mm: String,
     /// Board images (files or directories).
     #[arg(required_unless_present = "corners")]
     images: Vec<PathBuf>,
@@ -97,6 +102,23 @@ fn main() -> std::process::ExitCode {
             None => calibrate(&args.calib),
         }
     })
+}
+
+fn parse_viewpoint(s: &str) -> CliResult<[f64; 3]> {
+    let v: Vec<f64> = s.split(',').filter_map(|t| t.trim().parse().ok()).collect();
+    match v[..] {
+        [x, y, z] if v.iter().all(|c: &f64| c.is_finite()) && s.split(',').count() == 3 => Ok([x, y, z]),
+        _ => Err(omni_cli::CliError::usage(format!("--viewpoint-mm: expected X,Y,Z in mm, got {s:?}"))),
+    }
+}
+
+/// Places the generic model's viewpoint (the exact hyperbolic model has its own, at 2c).
+fn set_viewpoint(spec: &mut CameraSpec, viewpoint: [f64; 3]) {
+    match spec {
+        CameraSpec::Mei(p) => p.viewpoint_mm = viewpoint,
+        CameraSpec::Ocam(p) => p.viewpoint_mm = viewpoint,
+        CameraSpec::Hyperbolic(_) => {}
+    }
 }
 
 fn import_ocam(input: &Path, output: &Path) -> CliResult {
@@ -255,7 +277,9 @@ fn calibrate(args: &CalibArgs) -> CliResult {
         write_overlays(dir, &cal, &obs, &detected)?;
     }
     write_exports(args, &cal)?;
-    let mut file = CameraFile::new(cal.spec.clone());
+    let mut spec = cal.spec.clone();
+    set_viewpoint(&mut spec, parse_viewpoint(&args.viewpoint_mm)?);
+    let mut file = CameraFile::new(spec);
     let mut report = cal.report_json();
     report["model"] = serde_json::json!(format!("{:?}", args.model).to_lowercase());
     report["board"] = serde_json::json!({"inner_cols": board.inner_cols, "inner_rows": board.inner_rows, "square_mm": board.square_mm});

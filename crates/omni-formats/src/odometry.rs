@@ -148,9 +148,8 @@ mod tests {
 
     #[test]
     fn bad_files_name_the_line() {
-        let read = |body: &str| {
-            read_odometry_from(format!("{HEADER}{body}").as_bytes(), "odo.jsonl").unwrap_err().to_string()
-        };
+        let read =
+            |body: &str| read_odometry_from(format!("{HEADER}{body}").as_bytes(), "odo.jsonl").unwrap_err().to_string();
         let unsorted = "{\"t_us\":5,\"translation_mm\":[0,0,0],\"quaternion_wxyz\":[1,0,0,0]}\n\
                         {\"t_us\":5,\"translation_mm\":[0,0,0],\"quaternion_wxyz\":[1,0,0,0]}\n";
         let e = read(unsorted);

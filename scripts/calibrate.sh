@@ -41,7 +41,7 @@ omni-calib-receiver --board "$board" --model "$model" --viewpoint-mm "$viewpoint
   --save-corners "$out/corners.json" -o "$out/camera.json" "$boards" > "$out/receiver.txt"
 
 echo "calibrate.sh: rig scan" >&2
-scan_args=(--camera "$out/camera.json" --scanner "${INITIAL_SCANNER:-$out/initial_scanner.json}" --out "$out/rig_scan" --angles "$angles" --laser-off)
+scan_args=(--camera "$out/camera.json" --scanner none --out "$out/rig_scan" --angles "$angles" --laser-off)
 [ -n "$port" ] && scan_args+=(--port "$port")
 [ -n "$frames" ] && scan_args+=(--frames "$frames")
 [ -n "$scene" ] && scan_args+=(--emulate "$scene")

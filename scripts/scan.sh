@@ -13,7 +13,8 @@ set -euo pipefail
 usage() { sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
 camera= scanner= port= scene= true_camera= true_scanner= out= frames=
 angles=${ANGLES:-14:29:0.25} facets=${FACETS:-0} seed=${SEED:-0} width=${WIDTH:-}
-denoise=${DENOISE:-20,2.0}
+denoise=${DENOISE:-20,2.0} laser_off= frame_timeout_ms=2000
+stages=${STAGES:-cloud}  # `stripes`: stop after omni-ridge (calibration scans)
 while [ $# -gt 0 ]; do
   case "$1" in
     --camera) camera=$2; shift 2 ;;
@@ -26,6 +27,7 @@ while [ $# -gt 0 ]; do
     --angles) angles=$2; shift 2 ;;
     --facets) facets=$2; shift 2 ;;
     --seed) seed=$2; shift 2 ;;
+    --laser-off) laser_off=1; shift ;;
     --out) out=$2; shift 2 ;;
     -h|--help) usage ;;
     *) echo "scan.sh: unknown argument $1" >&2; usage ;;
@@ -45,18 +47,25 @@ if [ -n "$scene" ]; then
   emu_args=(--frames "$frames" --scene "$scene" --seed "$seed" --truth "$out/emulator_truth.jsonl")
   [ -n "$true_camera" ] && emu_args+=(--camera "$true_camera")
   [ -n "$true_scanner" ] && emu_args+=(--scanner "$true_scanner")
-  omni-trigger emulate "${emu_args[@]}" > "$out/emulator.port" 2> "$out/emulator.log" &
+  omni-trigger emulate --buffered-camera "${emu_args[@]}" > "$out/emulator.port" 2> "$out/emulator.log" &
   emulator_pid=$!
   for _ in $(seq 1 100); do [ -s "$out/emulator.port" ] && break; sleep 0.1; done
   port=$(head -n 1 "$out/emulator.port")
+  # The emulator's camera buffers frames (renders slower than it is triggered): wait for them.
+  frame_timeout_ms=600000
   [ -n "$port" ] || { echo "scan.sh: the emulator did not start (see $out/emulator.log)" >&2; exit 1; }
 fi
 
-omni-trigger scan --port "$port" --frames "$frames" --angles "$angles" --facets "$facets" --revolutions 1 \
-  | tee "$out/manifest.jsonl" \
-  | omni-ridge --camera "$camera" \
-  | tee "$out/stripes.jsonl" \
-  | omni-triangulate --camera "$camera" --scanner "$scanner" \
-  | tee "$out/points.jsonl" \
-  | omni-merge - --statistical "$denoise" -o "$out/cloud.ply"
-echo "scan.sh: $(grep -c '"type":"frame"' "$out/manifest.jsonl") frames -> $out/cloud.ply" >&2
+trigger() {
+  omni-trigger scan --port "$port" --frames "$frames" --angles "$angles" --facets "$facets" --revolutions 1 \
+    --frame-timeout-ms "$frame_timeout_ms" ${laser_off:+--laser-off} | tee "$out/manifest.jsonl"
+}
+if [ "$stages" = stripes ]; then
+  trigger | omni-ridge --camera "$camera" -o "$out/stripes.jsonl"
+else
+  trigger \
+    | omni-ridge --camera "$camera" | tee "$out/stripes.jsonl" \
+    | omni-triangulate --camera "$camera" --scanner "$scanner" | tee "$out/points.jsonl" \
+    | omni-merge - --statistical "$denoise" -o "$out/cloud.ply"
+fi
+echo "scan.sh: $(grep -c '"type":"frame"' "$out/manifest.jsonl" || true) frames -> $out" >&2

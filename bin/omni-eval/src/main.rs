@@ -198,8 +198,17 @@ fn main() -> std::process::ExitCode {
             let used = scanner_file.report.as_ref().and_then(|r| r.get("boards")).cloned().ok_or_else(|| {
                 format!("{}: field report.boards: missing (not written by omni-calib-plane?)", scanner.display())
             })?;
-            let used: Vec<omni_formats::rig::BoardPose> =
-                serde_json::from_value(used).map_err(|e| format!("{}: field report.boards: {e}", scanner.display()))?;
+            // The report's entries carry more (source, corner residuals): keep the pose fields.
+            let poses: Vec<serde_json::Value> = used
+                .as_array()
+                .map(|a| {
+                    a.iter()
+                        .map(|b| serde_json::json!({"board": b["board"], "rotation": b["rotation"], "translation_mm": b["translation_mm"]}))
+                        .collect()
+                })
+                .unwrap_or_default();
+            let used: Vec<omni_formats::rig::BoardPose> = serde_json::from_value(serde_json::Value::Array(poses))
+                .map_err(|e| format!("{}: field report.boards: {e}", scanner.display()))?;
             let (iso, rms) = omni_cloud::align::register_rig(&rig_file, &used, &reference.poses)
                 .map_err(|m| format!("{}: {m}", reference_poses.display()))?;
             let doc = TransformFile::from_isometry(

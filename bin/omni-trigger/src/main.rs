@@ -149,9 +149,15 @@ struct EmulateArgs {
     /// `render` through omni-simulator, or `blank` (grey frames, for timing tests).
     #[arg(long, default_value = "render", value_parser = ["render", "blank"])]
     camera_mode: String,
-    /// Trigger rate limit (Hz) announced to the host; default: measured render speed / 2.5.
+    /// Trigger rate limit (Hz) announced to the host; default: measured render speed / 2.5
+    /// (with --buffered-camera: 50 Hz).
     #[arg(long)]
     max_rate_hz: Option<f64>,
+    /// Give the virtual camera a frame buffer: triggers queue up and every frame is rendered
+    /// (stamped with its exposure time), so scans run at full trigger rate however slow the
+    /// renderer is. Pair with `scan --frame-timeout-ms` long enough for the queue to drain.
+    #[arg(long)]
+    buffered_camera: bool,
     /// Render noise seed.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -439,6 +445,7 @@ fn emulate(a: EmulateArgs) -> CliResult {
     let max_rate_hz = match a.max_rate_hz {
         Some(r) if r > 0.0 && r.is_finite() => r,
         Some(_) => return Err(CliError::usage("--max-rate-hz must be positive")),
+        None if a.buffered_camera => 50.0,
         None => {
             let secs = render::measure_frame_time(renderer.as_mut(), &all_lasers, facets)?;
             let rate = (1.0 / (2.5 * secs)).min(50.0);
@@ -452,6 +459,7 @@ fn emulate(a: EmulateArgs) -> CliResult {
     let mut camera =
         VirtualCamera::start(&a.frames, renderer, Duration::from_millis(a.slow_camera_ms), a.truth.clone())
             .map_err(|e| CliError::new(format!("{}: {e}", a.frames.display())))?;
+    camera.set_buffered(a.buffered_camera);
     let (mut master, slave) =
         serialport::TTYPort::pair().map_err(|e| CliError::new(format!("cannot create a pseudo-terminal: {e}")))?;
     let path = serialport::SerialPort::name(&slave).ok_or_else(|| CliError::new("the pseudo-terminal has no name"))?;

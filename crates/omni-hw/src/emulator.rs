@@ -64,6 +64,8 @@ pub struct VirtualCamera {
     written: Arc<AtomicU64>,
     /// Triggers missed because the camera was busy.
     pub missed: u64,
+    /// A camera with a frame buffer: triggers queue up instead of being missed.
+    buffered: bool,
 }
 
 /// One line of the emulator's ground-truth file (JSON Lines): which trigger each frame shows.
@@ -125,11 +127,21 @@ impl VirtualCamera {
                 busy_t.store(false, Ordering::SeqCst);
             }
         });
-        Ok(VirtualCamera { busy, tx: Some(tx), thread: Some(thread), written, missed: 0 })
+        Ok(VirtualCamera { busy, tx: Some(tx), thread: Some(thread), written, missed: 0, buffered: false })
+    }
+
+    /// Gives the camera an unbounded frame buffer: every trigger is exposed (its frame keeps the
+    /// exposure time as its timestamp) and written in trigger order, however long rendering takes.
+    /// This lets a slow renderer serve fast trigger rates, like a camera that buffers frames.
+    pub fn set_buffered(&mut self, buffered: bool) {
+        self.buffered = buffered;
     }
 
     /// Fires the camera; `false` if it was busy and missed the trigger.
     pub fn trigger(&mut self, shot: Shot) -> bool {
+        if self.buffered {
+            return self.tx.as_ref().is_some_and(|tx| tx.send(shot).is_ok());
+        }
         if self.busy.swap(true, Ordering::SeqCst) {
             self.missed += 1;
             return false;

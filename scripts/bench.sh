@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# `make bench`: every speed figure and side-by-side comparison in one run.
+#  - criterion benches: simulator render, stripe centres, receiver and plane calibration, cloud
+#    operations, protocol parsing/pairing;
+#  - side by side: stripe extraction vs numpy/OpenCV, calibration vs OpenCV omnidir, merge /
+#    outlier removal / PLY vs Open3D (Python packages are installed with pip if missing);
+#  - end to end: frames per second of omni-ridge | omni-triangulate from PNG files, and of the
+#    stripe kernel on frames already in memory, against a 200 fps camera.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+export PATH="$PWD/target/release:$PATH"
+failures=0
+section() { printf '\n==== %s ====\n' "$*"; }
+run() { "$@" || { echo "bench.sh: FAILED: $*" >&2; failures=$((failures + 1)); }; }
+quick=(-- --warm-up-time 1 --measurement-time 3)
+
+section "Python side-by-side dependencies"
+python3 -m pip install --quiet numpy opencv-contrib-python-headless open3d 2>&1 | tail -2 || true
+(command -v apt-get >/dev/null && [ "$(id -u)" = 0 ] && apt-get install -y -qq libusb-1.0-0 >/dev/null 2>&1) || true
+
+section "omni-sim: one 1024x1024 frame of the paper bench"
+run cargo bench -q -p omni-simulator --bench render "${quick[@]}"
+
+section "omni-ridge: stripe centres vs numpy/OpenCV"
+run scripts/bench_ridge.sh
+
+section "omni-calib-receiver: 20 x 1 MP images vs OpenCV omnidir"
+run cargo bench -q -p omni-calib --bench receiver "${quick[@]}"
+run python3 scripts/bench_calib.py
+
+section "omni-calib-plane: 60-frame rig"
+run cargo bench -q -p omni-calib --bench plane "${quick[@]}"
+
+section "omni-triangulate / omni-merge: vs Open3D"
+run cargo bench -q -p omni-cloud --bench cloud "${quick[@]}"
+run python3 scripts/bench_cloud.py
+
+section "omni-trigger: protocol parsing and pairing"
+run cargo bench -q -p omni-hw --bench protocol "${quick[@]}"
+
+section "End to end: frames per second"
+tmp=$(mktemp -d)
+omni-sim sensor --preset paper -o "$tmp/sensor" && omni-sim scene --bench plane -o "$tmp/plane.json" &&
+  omni-sim scan --camera "$tmp/sensor/camera.json" --scanner "$tmp/sensor/scanner.json" --scene "$tmp/plane.json" \
+    --angles 14:29:0.1 --frames "$tmp/frames" -o "$tmp/scan.jsonl" >/dev/null 2>&1
+n=$(grep -c '"type":"frame"' "$tmp/scan.jsonl")
+t0=$(date +%s.%N)
+omni-ridge --camera "$tmp/sensor/camera.json" "$tmp/scan.jsonl" \
+  | omni-triangulate --camera "$tmp/sensor/camera.json" --scanner "$tmp/sensor/scanner.json" \
+  | omni-merge - --statistical 20,2 -o "$tmp/cloud.ply"
+t1=$(date +%s.%N)
+awk -v n="$n" -v a="$t0" -v b="$t1" 'BEGIN { fps = n / (b - a); printf "from PNG files: %d frames in %.2f s = %.0f frames/s on %d cores (%s a 200 fps camera)\n", n, b - a, fps, '"$(nproc)"', fps >= 200 ? "keeps up with" : "does NOT keep up with" }'
+echo "from raw frames in memory: see the omni-ridge criterion figures above (ms per 1 MP frame per core; 200 fps on 2 cores needs <= 10 ms per frame per core)"
+rm -rf "$tmp"
+
+section "summary"
+echo "bench.sh: $failures part(s) failed"
+[ "$failures" = 0 ]

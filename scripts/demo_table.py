@@ -1,0 +1,77 @@
+#!/usr/bin/env python3
+"""Prints the demo's result table from the clouds scripts/demo.sh left in OUT.
+
+For each object: the paper's numbers; ours with the calibrated sensor; ours with the true sensor
+files (the same stripes, so the floor set by image noise alone). Two kinds of error are shown:
+- fit σ: standard deviation of the distances to the best-fitting primitive (what the paper's
+  "standard deviation" measures: noise about the shape); plus the fitted radius error;
+- vs truth: mean signed error and σ of the distances to the scene's true surfaces. The calibrated
+  sensor measures in its own frame; it is registered to the truth frame through the calibration
+  rig (omni-eval align), as a metrology lab uses its reference artefact as the datum.
+Usage: demo_table.py OUT OBJECT...
+"""
+import json
+import os
+import subprocess
+import sys
+
+HERE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PAPER = {"plane": (0.21, 0.49), "cylinder": (0.24, 0.93), "sphere": (-0.17, 1.24)}
+SHAPE = {"plane": ("plane", None), "cylinder": ("cylinder", 50.0), "sphere": ("sphere", 50.0)}
+
+
+def eval_json(*args):
+    out = subprocess.run(["omni-eval", *args, "--json"], check=True, capture_output=True, text=True).stdout
+    return json.loads(out)
+
+
+def measure(out, obj, cloud, transform):
+    scene = os.path.join(HERE, "testdata", "scenes", obj + ".json")
+    extra = ["--transform", transform] if transform else []
+    compare = eval_json("compare", "--scene", scene, *extra, cloud)
+    rows = []
+    for o in compare["objects"]:
+        fit_sigma, radius_err = None, None
+        kind = SHAPE.get(obj if len(compare["objects"]) == 1 else "", None)
+        if kind:
+            shape, radius = kind
+            fit_args = ["fit", "--shape", shape, *extra] + (["--radius", str(radius)] if radius else [])
+            fit = eval_json(*fit_args, cloud)
+            fit_sigma = fit["errors"]["std_dev"]
+            radius_err = fit.get("radius_error_mm")
+        e = o["errors"]
+        rows.append((o["name"], e["count"], e["mean"], e["std_dev"], fit_sigma, radius_err))
+    return rows
+
+
+def fmt(x, width=8, signed=False):
+    if x is None:
+        return "-".rjust(width)
+    return (f"{x:+.3f}" if signed else f"{x:.3f}").rjust(width)
+
+
+def main():
+    out, objects = sys.argv[1], sys.argv[2:]
+    transform = os.path.join(out, "calib", "to_truth.json")
+    results = {}
+    print(f"{'object':<10} {'sensor':<11} {'points':>7} {'mean':>8} {'σ truth':>8} {'σ fit':>8} {'radius':>8}   (mm)")
+    for obj in objects:
+        paper = PAPER.get(obj)
+        if paper:
+            print(f"{obj:<10} {'paper':<11} {'':>7} {fmt(paper[0], signed=True)} {'':>8} {fmt(paper[1])} {'-':>8}")
+        for label, cloud, t in (
+            ("calibrated", os.path.join(out, obj, "cloud.ply"), transform),
+            ("true files", os.path.join(out, obj, "cloud_true_sensor.ply"), None),
+        ):
+            for name, n, mean, sd, fit_sd, rad in measure(out, obj, cloud, t):
+                tag = obj if name == obj else f"{obj}/{name}"
+                print(f"{tag:<10} {label:<11} {n:>7} {fmt(mean, signed=True)} {fmt(sd)} {fmt(fit_sd)} {fmt(rad, signed=True)}")
+                results.setdefault(tag, {})[label] = {
+                    "points": n, "mean_mm": mean, "sigma_truth_mm": sd, "sigma_fit_mm": fit_sd, "radius_error_mm": rad,
+                }
+    with open(os.path.join(out, "table.json"), "w") as f:
+        json.dump(results, f, indent=2)
+
+
+if __name__ == "__main__":
+    main()

@@ -13,7 +13,7 @@ set -euo pipefail
 usage() { sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
 camera= scanner= port= scene= true_camera= true_scanner= out= frames=
 angles=${ANGLES:-14:29:0.25} facets=${FACETS:-0} seed=${SEED:-0} width=${WIDTH:-}
-denoise=${DENOISE:-20,2.0} laser_off= frame_timeout_ms=2000
+denoise=${DENOISE:-20,2.0} laser_off= frame_timeout_ms=${FRAME_TIMEOUT_MS:-2000}
 stages=${STAGES:-cloud}  # `stripes`: stop after omni-ridge (calibration scans)
 while [ $# -gt 0 ]; do
   case "$1" in

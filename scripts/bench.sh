@@ -49,7 +49,7 @@ omni-ridge --camera "$tmp/sensor/camera.json" "$tmp/scan.jsonl" \
   | omni-triangulate --camera "$tmp/sensor/camera.json" --scanner "$tmp/sensor/scanner.json" \
   | omni-merge - --statistical 20,2 -o "$tmp/cloud.ply"
 t1=$(date +%s.%N)
-awk -v n="$n" -v a="$t0" -v b="$t1" 'BEGIN { fps = n / (b - a); printf "from PNG files: %d frames in %.2f s = %.0f frames/s on %d cores (%s a 200 fps camera)\n", n, b - a, fps, '"$(nproc)"', fps >= 200 ? "keeps up with" : "does NOT keep up with" }'
+awk -v n="$n" -v a="$t0" -v b="$t1" 'BEGIN { fps = n / (b - a); printf "from PNG files: %d frames in %.2f s = %.0f frames/s on %d cores (%s a 200 fps camera)\n", n, b - a, fps, '"$(nproc)"', (fps >= 200 ? "keeps up with" : "does NOT keep up with") }'
 echo "from raw frames in memory: see the omni-ridge criterion figures above (ms per 1 MP frame per core; 200 fps on 2 cores needs <= 10 ms per frame per core)"
 rm -rf "$tmp"
 

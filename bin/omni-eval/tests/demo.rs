@@ -54,8 +54,7 @@ fn reduced_demo_meets_the_targets() {
         assert!(fit_cal <= half_paper, "{obj}: σ {fit_cal} > {half_paper}");
         assert!(truth_cal <= half_paper, "{obj}: σ vs truth {truth_cal} > {half_paper}");
         assert!(fit_cal <= 1.25 * fit_true, "{obj}: calibration costs too much: {fit_cal} vs {fit_true}");
-        // |mean| vs truth: the target is 0.1 mm; see the tolerance note in the README.
-        assert!(mean_cal.abs() <= 0.15, "{obj}: mean {mean_cal}");
+        assert!(mean_cal.abs() <= 0.1, "{obj}: mean {mean_cal}");
         assert!(metric(&table, obj, "calibrated", "points") > 150.0);
     }
     let radius_error = metric(&table, "sphere", "calibrated", "radius_error_mm");

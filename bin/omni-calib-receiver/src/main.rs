@@ -183,18 +183,7 @@ fn detect(paths: &[PathBuf], board: &BoardFile, keep_images: bool) -> CliResult<
             let name = p.display().to_string();
             let found = detect_board(&img, board.inner_cols, board.inner_rows, &DetectorOptions::default());
             bar.inc(1);
-            let entry = match found {
-                Ok(b) => ImageCorners {
-                    name,
-                    corners: b
-                        .corners
-                        .iter()
-                        .map(|c| [c.index[0] as f64, c.index[1] as f64, c.px[0], c.px[1]])
-                        .collect(),
-                    reason: None,
-                },
-                Err(why) => ImageCorners { name, corners: Vec::new(), reason: Some(why.to_string()) },
-            };
+            let entry = ImageCorners::from_detection(name, found);
             Ok((img, entry))
         })
         .collect();

@@ -40,18 +40,10 @@ fn run(paths: &[PathBuf], board: &BoardFile) -> (omni_calib::receiver::Calibrati
         .map(|p| {
             let img = load_gray(p).unwrap();
             let name = p.display().to_string();
-            match detect_board(&img, board.inner_cols, board.inner_rows, &DetectorOptions::default()) {
-                Ok(b) => ImageCorners {
-                    name,
-                    corners: b
-                        .corners
-                        .iter()
-                        .map(|c| [c.index[0] as f64, c.index[1] as f64, c.px[0], c.px[1]])
-                        .collect(),
-                    reason: None,
-                },
-                Err(e) => ImageCorners { name, corners: vec![], reason: Some(e.to_string()) },
-            }
+            ImageCorners::from_detection(
+                name,
+                detect_board(&img, board.inner_cols, board.inner_rows, &DetectorOptions::default()),
+            )
         })
         .collect();
     let mut file = CornersFile::new(1024, 1024, board.inner_cols, board.inner_rows);

@@ -42,6 +42,23 @@ pub struct ImageCorners {
     pub reason: Option<String>,
 }
 
+impl ImageCorners {
+    /// The entry for one image from the detector's outcome (corners, or the reason none).
+    pub fn from_detection(
+        name: String,
+        found: Result<omni_vision::corners::BoardCorners, omni_vision::corners::Rejection>,
+    ) -> Self {
+        match found {
+            Ok(b) => ImageCorners {
+                name,
+                corners: b.corners.iter().map(|c| [c.index[0] as f64, c.index[1] as f64, c.px[0], c.px[1]]).collect(),
+                reason: None,
+            },
+            Err(why) => ImageCorners { name, corners: Vec::new(), reason: Some(why.to_string()) },
+        }
+    }
+}
+
 impl Versioned for CornersFile {
     const FORMAT: &'static str = "omniscan.corners";
     const VERSION: u32 = 1;

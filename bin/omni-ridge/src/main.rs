@@ -40,7 +40,7 @@ struct Args {
     /// Stripe-centre estimator.
     #[arg(long, default_value = "windowed", value_parser = parse_method)]
     method: Method,
-    /// Intensity threshold in the frame's units (0–255 or 0–65535) [default: 12 % of full scale].
+    /// Intensity threshold in the frame's units (0–255 or 0–65535) [default: 4 % of full scale].
     #[arg(long)]
     threshold: Option<f64>,
     /// Narrowest accepted stripe (px, threshold crossing to crossing along the ray).
@@ -52,6 +52,11 @@ struct Args {
     /// Scale (px) of the Gaussian derivatives of the hessian method.
     #[arg(long, default_value_t = 1.0)]
     hessian_sigma: f64,
+    /// Fit each point along the stripe: a straight line through the stripe's points within this
+    /// many px of arc on either side (0 = off). 3 px lowers the noise of noisy frames by about a
+    /// quarter, at the price of lateral resolution.
+    #[arg(long, default_value_t = 0.0, value_name = "PX")]
+    along_stripe: f64,
     /// Write each frame with its detected centres drawn as DIR/<seq>.png.
     #[arg(long, value_name = "DIR")]
     overlay: Option<PathBuf>,
@@ -76,6 +81,7 @@ fn main() -> ExitCode {
             min_width: args.min_width,
             max_width: args.max_width,
             hessian_sigma: args.hessian_sigma,
+            along_stripe_px: args.along_stripe,
         };
         params.validate().map_err(CliError::usage)?;
         let camera = match &args.camera {

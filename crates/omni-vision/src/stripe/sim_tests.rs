@@ -157,10 +157,13 @@ fn frames(opts: &RenderOptions, laser_off: LaserOff) -> Vec<(GrayImage, Vec<Trut
     out
 }
 
-/// Detects with `method` on all frames and measures against the truth.
-fn measure_method(frames: &[(GrayImage, Vec<TruthPoint>)], method: Method) -> Measured {
+/// Along-stripe fit window (px of arc on either side) of the fitted variants in the reports.
+const ALONG_PX: f64 = 3.0;
+
+/// Detects with `params` on all frames and measures against the truth.
+fn measure_params(frames: &[(GrayImage, Vec<TruthPoint>)], params: RidgeParams) -> Measured {
     let circle = Sensor::paper_scaled(SIZE).camera.mirror_circle();
-    let det = RidgeDetector::new(SIZE, SIZE, circle, RidgeParams { method, ..Default::default() });
+    let det = RidgeDetector::new(SIZE, SIZE, circle, params);
     let mut all = Measured { errors: vec![], azimuths: vec![], false_detections: 0 };
     for (img, truth) in frames {
         let m = measure(&det.detect(img), truth, (circle.centre.x, circle.centre.y));
@@ -171,52 +174,67 @@ fn measure_method(frames: &[(GrayImage, Vec<TruthPoint>)], method: Method) -> Me
     all
 }
 
-/// Measures every method on a case, prints the table and returns (method, measurement) pairs.
-fn report(case: &str, frames: &[(GrayImage, Vec<TruthPoint>)]) -> Vec<(Method, Measured)> {
+/// Name of a measured variant: the method, plus the along-stripe window if any.
+fn variant_name(p: &RidgeParams) -> String {
+    if p.along_stripe_px > 0.0 {
+        format!("{}+along{}", p.method.name(), p.along_stripe_px)
+    } else {
+        p.method.name().into()
+    }
+}
+
+/// Measures every method (per ray, and with the along-stripe fit over ±[`ALONG_PX`]) on a case,
+/// prints the table and returns (settings, measurement) pairs.
+fn report(case: &str, frames: &[(GrayImage, Vec<TruthPoint>)]) -> Vec<(RidgeParams, Measured)> {
     let truth_points: usize = frames.iter().map(|f| f.1.len()).sum();
     let peak = frames.iter().flat_map(|f| f.0.data.iter()).max().copied().unwrap_or(0);
     eprintln!("{case}: {} frames, {truth_points} truth samples, brightest pixel {peak}", frames.len());
-    Method::ALL
+    [0.0, ALONG_PX]
         .into_iter()
-        .map(|method| {
-            let m = measure_method(frames, method);
+        .flat_map(|along| Method::ALL.map(|method| RidgeParams { method, along_stripe_px: along, ..Default::default() }))
+        .map(|params| {
+            let m = measure_params(frames, params);
             let (rms, bias) = m.rms_bias();
             eprintln!(
-                "  {:<12} points {:>5}  rms {rms:.4} px  bias {bias:+.4} px  worst 30° sector rms {:.4} px  false {} ({:.3} %)",
-                method.name(),
+                "  {:<20} points {:>5}  rms {rms:.4} px  bias {bias:+.4} px  worst 30° sector rms {:.4} px  false {} ({:.3} %)",
+                variant_name(&params),
                 m.errors.len(),
                 m.worst_sector_rms(),
                 m.false_detections,
                 100.0 * m.false_rate()
             );
-            (method, m)
+            (params, m)
         })
         .collect()
 }
 
-/// The method with the smallest RMS.
-fn best(results: &[(Method, Measured)]) -> &(Method, Measured) {
+/// The variant with the smallest RMS.
+fn best(results: &[(RidgeParams, Measured)]) -> &(RidgeParams, Measured) {
     results.iter().min_by(|a, b| a.1.rms_bias().0.total_cmp(&b.1.rms_bias().0)).unwrap()
+}
+
+/// The paper's estimator (threshold + centroid, per ray).
+fn paper(results: &[(RidgeParams, Measured)]) -> &Measured {
+    &results.iter().find(|r| r.0.method == Method::Centroid && r.0.along_stripe_px == 0.0).unwrap().1
 }
 
 #[test]
 fn default_noise_unsaturated_stripe() {
     let frames = frames(&RenderOptions::default(), LaserOff::None);
     let results = report("default noise, dim ambient, no laser-off frame", &frames);
-    let (method, m) = best(&results);
+    let (params, m) = best(&results);
     let (rms, bias) = m.rms_bias();
     assert!(m.errors.len() > 1500, "{} points", m.errors.len());
-    assert!(rms <= 0.05 && bias.abs() <= 0.02, "best {method:?}: rms {rms} bias {bias}");
-    for (method, m) in &results {
-        assert!(m.false_rate() <= 0.001, "{method:?}: {} false detections", m.false_detections);
+    assert!(rms <= 0.05 && bias.abs() <= 0.02, "best {}: rms {rms} bias {bias}", variant_name(params));
+    for (params, m) in &results {
+        assert!(m.false_rate() <= 0.001, "{}: {} false detections", variant_name(params), m.false_detections);
         // Uniform around the image: the worst 30° sector within 1.5× the overall RMS.
-        if *method != Method::Centroid {
-            assert!(m.worst_sector_rms() <= 1.5 * m.rms_bias().0, "{method:?}");
+        if params.method != Method::Centroid {
+            assert!(m.worst_sector_rms() <= 1.5 * m.rms_bias().0, "{}", variant_name(params));
         }
     }
     // The paper's estimator is measured and reported beside the best one.
-    let paper = &results.iter().find(|r| r.0 == Method::Centroid).unwrap().1;
-    assert!(paper.rms_bias().0 <= 0.15, "paper's centroid rms {}", paper.rms_bias().0);
+    assert!(paper(&results).rms_bias().0 <= 0.15, "paper's centroid rms {}", paper(&results).rms_bias().0);
 }
 
 #[test]
@@ -224,10 +242,10 @@ fn saturated_stripe() {
     let opts = RenderOptions { laser_strength: 8.0 * omni_simulator::DEFAULT_LASER_STRENGTH, ..Default::default() };
     let frames = frames(&opts, LaserOff::None);
     let results = report("saturated stripe (laser ×8)", &frames);
-    for (method, m) in &results {
+    for (params, m) in &results {
         let (rms, bias) = m.rms_bias();
-        assert!(rms <= 0.1 && bias.abs() <= 0.05, "{method:?}: rms {rms} bias {bias}");
-        assert!(m.false_rate() <= 0.001, "{method:?}: {} false detections", m.false_detections);
+        assert!(rms <= 0.1 && bias.abs() <= 0.05, "{}: rms {rms} bias {bias}", variant_name(params));
+        assert!(m.false_rate() <= 0.001, "{}: {} false detections", variant_name(params), m.false_detections);
     }
 }
 
@@ -237,14 +255,14 @@ fn weak_stripe() {
     let opts = RenderOptions { laser_strength: 0.3 * omni_simulator::DEFAULT_LASER_STRENGTH, ..Default::default() };
     let frames = frames(&opts, LaserOff::None);
     let results = report("weak stripe (laser ×0.3)", &frames);
-    let (method, m) = best(&results);
+    let (params, m) = best(&results);
     let (rms, _) = m.rms_bias();
-    assert!(rms <= 0.1, "best {method:?}: rms {rms}");
+    assert!(rms <= 0.1, "best {}: rms {rms}", variant_name(params));
     // The bench plane's stripes (≈ 90 points per frame) stay above the default threshold; the
     // room's walls, 0.8 m away, give stripes of 5–10 DN that mostly do not.
     assert!(m.errors.len() > 200, "{} points", m.errors.len());
-    for (method, m) in &results {
-        assert!(m.false_rate() <= 0.001, "{method:?}: {} false detections", m.false_detections);
+    for (params, m) in &results {
+        assert!(m.false_rate() <= 0.001, "{}: {} false detections", variant_name(params), m.false_detections);
     }
 }
 
@@ -254,25 +272,37 @@ fn strong_ambient_with_laser_off_frame() {
     let opts = RenderOptions { ambient_e: 8000.0, ..Default::default() };
     let frames = frames(&opts, LaserOff::ZeroPower);
     let results = report("strong ambient, laser-off frame (zero laser power) subtracted", &frames);
-    let (method, m) = best(&results);
+    let (params, m) = best(&results);
     let (rms, _) = m.rms_bias();
-    assert!(rms <= 0.1, "best {method:?}: rms {rms}");
-    for (method, m) in &results {
-        assert!(m.false_rate() <= 0.001, "{method:?}: {} false detections", m.false_detections);
+    assert!(rms <= 0.1, "best {}: rms {rms}", variant_name(params));
+    for (params, m) in &results {
+        assert!(m.false_rate() <= 0.001, "{}: {} false detections", variant_name(params), m.false_detections);
     }
+    // Per ray alone (no along-stripe fit) the best estimator also holds the bound.
+    let per_ray = results.iter().filter(|r| r.0.along_stripe_px == 0.0).map(|r| r.1.rms_bias().0).fold(1.0, f64::min);
+    assert!(per_ray <= 0.1, "best per-ray rms {per_ray}");
 }
 
-/// The same frames with the simulator's own ambient frame subtracted: measured and reported
-/// (see [`LaserOff::ZeroPower`] for why it is worse), with a looser bound.
+/// The same frames with the simulator's own `render_ambient_frame` subtracted.
+///
+/// That frame is not the laser frame's ambient part: with the optical PSF and supersampling on,
+/// the simulator spreads supersampled pixels (those near a light plane, rendered only in the
+/// laser frame) with a kernel 1 px wider than the others, which moves about 3 DN of ambient
+/// from the stripe's pixels to their neighbours. After subtraction that ±3 DN dipole stays on
+/// the stripe and moves its centre: noise-free, the best estimator's RMS is 0.092 px against
+/// 0.011 px with the zero-power laser-off frame (measured; reported to the simulator's owner).
+/// The along-stripe fit averages the noise (σ√2 after the subtraction) enough to stay within
+/// the 0.1 px despite it.
 #[test]
 fn strong_ambient_with_render_ambient_frame() {
     let opts = RenderOptions { ambient_e: 8000.0, ..Default::default() };
     let frames = frames(&opts, LaserOff::Ambient);
     let results = report("strong ambient, render_ambient_frame subtracted", &frames);
-    let (method, m) = best(&results);
+    let (params, m) = best(&results);
     let (rms, _) = m.rms_bias();
-    assert!(rms <= 0.15, "best {method:?}: rms {rms}");
-    for (method, m) in &results {
-        assert!(m.false_rate() <= 0.001, "{method:?}: {} false detections", m.false_detections);
+    assert!(rms <= 0.1, "best {}: rms {rms}", variant_name(params));
+    assert!(paper(&results).rms_bias().0 <= 0.15, "paper's centroid rms {}", paper(&results).rms_bias().0);
+    for (params, m) in &results {
+        assert!(m.false_rate() <= 0.001, "{}: {} false detections", variant_name(params), m.false_detections);
     }
 }

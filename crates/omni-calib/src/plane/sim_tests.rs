@@ -129,80 +129,134 @@ fn rendered_rig(sensor: &Sensor, rig: &Rig) -> RenderedRig {
     (frames, truths, gray)
 }
 
-/// A camera calibrated by `omni_calib::receiver` from `count` rendered 9 × 6 boards.
-fn receiver_camera(sensor: &Sensor, count: usize) -> Box<dyn CameraModel> {
-    use omni_simulator::{random_board_poses, render_board_image};
-    use omni_vision::corners::{DetectorOptions, GrayF32, detect_board};
-    use rayon::prelude::*;
+/// A camera calibrated by `omni_calib::receiver` from the true corner pixels of `count` random
+/// 9 × 6 boards (30 mm, the simulator's board poses and visibility) plus Gaussian noise of
+/// `noise_px`: the rendered boards' detection error without the rendering cost. Returns the
+/// camera and the corner observations used.
+fn projected_receiver_camera(sensor: &Sensor, count: usize, noise_px: f64, seed: u64) -> Box<dyn CameraModel> {
+    use omni_simulator::{Scene, board_corners, board_object, corner_pixels, random_board_poses};
     let board = BoardFile::new(9, 6, 30.0);
-    let poses = random_board_poses(sensor, &board, count, 21).unwrap();
+    let poses = random_board_poses(sensor, &board, count, seed).unwrap();
+    let mut rng = omni_simulator::rng::SplitMix64::new(seed);
+    let grid = board_corners(board.inner_cols, board.inner_rows, board.square_mm);
     let obs: Vec<crate::receiver::Observation> = poses
-        .par_iter()
+        .iter()
         .enumerate()
         .filter_map(|(k, pose)| {
-            let opts = RenderOptions { seed: 500 + k as u64, ..RenderOptions::calibration() };
-            let (frame, _) = render_board_image(sensor, pose, &board, &opts);
-            let img = GrayF32 {
-                width: frame.width as usize,
-                height: frame.height as usize,
-                data: frame.data.iter().map(|&v| v as f32 * 255.0 / frame.max_value() as f32).collect(),
-            };
-            let found = detect_board(&img, 9, 6, &DetectorOptions::default()).ok()?;
-            Some(crate::receiver::Observation::from_corners(&format!("board{k}"), &found, 30.0))
+            let scene =
+                Scene::from_file(omni_formats::scene::SceneFile::new(vec![board_object(&board, pose)])).unwrap();
+            let (board_mm, pixels): (Vec<[f64; 2]>, Vec<[f64; 2]>) = corner_pixels(sensor, &scene, pose, &board)
+                .iter()
+                .zip(&grid)
+                .filter_map(|(px, c)| px.map(|px| ([c.x, c.y], px)))
+                .map(|(xy, px)| (xy, [px[0] + noise_px * rng.normal(), px[1] + noise_px * rng.normal()]))
+                .unzip();
+            // The detector needs a dozen corners to find a board.
+            (pixels.len() >= 12).then(|| crate::receiver::Observation { name: format!("board{k}"), board_mm, pixels })
         })
         .collect();
     let (w, h) = sensor.camera.image_size();
     let cal = crate::receiver::calibrate(w, h, &obs, &crate::receiver::Options::default()).unwrap();
-    eprintln!("receiver: {} boards, reprojection RMS {:.3} px", obs.len(), cal.rms_px);
-    cal.spec.build().unwrap()
+    eprintln!("receiver: {} boards ({noise_px} px noise), reprojection RMS {:.3} px", obs.len(), cal.rms_px);
+    at_true_viewpoint(cal.spec, sensor)
+}
+
+/// Builds a fitted generic model with its viewpoint at the true camera's. Board images fix the
+/// rays' directions, not their origin (the receiver calibration puts it at the world origin and
+/// `omni-calib-receiver --viewpoint-mm` moves it): this is the translation part of the frame
+/// gauge, chosen here so that the paper transmitter is a good initial model in both frames.
+fn at_true_viewpoint(mut spec: omni_formats::CameraSpec, sensor: &Sensor) -> Box<dyn CameraModel> {
+    let circle = sensor.camera.mirror_circle();
+    let px = circle.centre + nalgebra::Vector2::new(0.5 * (circle.inner_radius + circle.outer_radius), 0.0);
+    let viewpoint: [f64; 3] = sensor.camera.pixel_to_ray(&px).unwrap().origin.coords.into();
+    match &mut spec {
+        omni_formats::CameraSpec::Mei(p) => p.viewpoint_mm = viewpoint,
+        omni_formats::CameraSpec::Ocam(p) => p.viewpoint_mm = viewpoint,
+        omni_formats::CameraSpec::Hyperbolic(_) => {}
+    }
+    spec.build().unwrap()
+}
+
+/// The gauge between a fitted central camera's world frame and the true one: the rotation that
+/// best maps true pixel rays onto the fitted model's rays of the same pixels (Kabsch over the
+/// mirror annulus), about the two viewpoints.
+///
+/// Board images cannot observe this rotation: turning every board pose and the model's rays by
+/// the same rotation leaves every pixel where it was, and a small tilt is nearly a principal
+/// point shift plus tangential distortion, so the fit picks one by its parametrisation. Every
+/// later measurement inherits the fitted frame: the board poses, the stripe points and hence
+/// the light planes are all expressed in it, and the scanner's point clouds come out rigidly
+/// turned by it (a datum registration removes that). So the light planes are compared after
+/// carrying them through this rotation; what remains is what the scanner's geometry gets wrong.
+struct FrameAlignment {
+    /// True ray directions → fitted ones.
+    rot: nalgebra::Rotation3<f64>,
+    o_true: Point3<f64>,
+    o_fit: Point3<f64>,
+    /// Median and largest angle between aligned rays over the annulus (degrees): the fitted
+    /// model's own ray error.
+    ray_median_deg: f64,
+    ray_max_deg: f64,
+}
+
+impl FrameAlignment {
+    fn new(truth: &dyn CameraModel, fitted: &dyn CameraModel) -> FrameAlignment {
+        let circle = truth.mirror_circle();
+        let mut pairs = vec![];
+        let (mut o_true, mut o_fit) = (Point3::origin(), Point3::origin());
+        for k in 0..360 {
+            let az = (k as f64).to_radians();
+            for r in [0.1, 0.3, 0.5, 0.7, 0.9] {
+                let rad = circle.inner_radius + r * (circle.outer_radius - circle.inner_radius);
+                let px = circle.centre + nalgebra::Vector2::new(az.cos(), az.sin()) * rad;
+                if let (Some(t), Some(c)) = (truth.pixel_to_ray(&px), fitted.pixel_to_ray(&px)) {
+                    pairs.push((t.dir.into_inner(), c.dir.into_inner()));
+                    (o_true, o_fit) = (t.origin, c.origin);
+                }
+            }
+        }
+        let cross = pairs.iter().fold(nalgebra::Matrix3::zeros(), |a, (t, c)| a + c * t.transpose());
+        let svd = cross.svd(true, true);
+        let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
+        let mut m = u * vt;
+        if m.determinant() < 0.0 {
+            m = u * nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(1.0, 1.0, -1.0)) * vt;
+        }
+        let rot = nalgebra::Rotation3::from_matrix_unchecked(m);
+        let mut errs: Vec<f64> = pairs.iter().map(|(t, c)| (rot * t).angle(c).to_degrees()).collect();
+        errs.sort_by(f64::total_cmp);
+        FrameAlignment { rot, o_true, o_fit, ray_median_deg: errs[errs.len() / 2], ray_max_deg: errs[errs.len() - 1] }
+    }
+
+    /// A true-frame point in the fitted frame.
+    fn to_fitted(&self, p: &Point3<f64>) -> Point3<f64> {
+        self.o_fit + self.rot * (p - self.o_true)
+    }
+
+    /// A fitted-frame plane in the true frame.
+    fn plane_to_true(&self, plane: &omni_geom::Plane) -> omni_geom::Plane {
+        let point = self.o_true + self.rot.inverse() * (plane.project(&self.o_fit) - self.o_fit);
+        omni_geom::Plane::from_point_normal(&point, &(self.rot.inverse() * plane.normal.into_inner()))
+    }
 }
 
 /// Triangulation error (mm) of the simulator's true stripe points, seen through `camera` and cut
 /// with the calibrated light planes: (RMS, max) over the frames. A calibrated model has its own
-/// world frame (origin at its viewpoint, turned by its calibration error), so the truth is first
-/// carried into it: the rotation that best maps true pixel rays onto calibrated ones, about the
-/// viewpoints.
+/// world frame (turned by its calibration error), so the truth is first carried into it.
 fn triangulation_error(
-    truth_camera: &dyn CameraModel,
+    align: &FrameAlignment,
     camera: &dyn CameraModel,
     tx: &Transmitter,
     frames: &[FrameStripes],
     truths: &[Vec<omni_simulator::TruthPoint>],
 ) -> (f64, f64) {
-    // The calibrated frame: the rotation taking true ray directions to calibrated ones over the
-    // mirror annulus (Kabsch), about the viewpoints.
-    let circle = truth_camera.mirror_circle();
-    let mut cross = nalgebra::Matrix3::zeros();
-    let (mut o_true, mut o_cal) = (Point3::origin(), Point3::origin());
-    for k in 0..360 {
-        let az = (k as f64).to_radians();
-        for r in [0.3, 0.5, 0.7, 0.9] {
-            let rad = circle.inner_radius + r * (circle.outer_radius - circle.inner_radius);
-            let px = circle.centre + nalgebra::Vector2::new(az.cos(), az.sin()) * rad;
-            if let (Some(t), Some(c)) = (truth_camera.pixel_to_ray(&px), camera.pixel_to_ray(&px)) {
-                cross += c.dir.into_inner() * t.dir.transpose();
-                (o_true, o_cal) = (t.origin, c.origin);
-            }
-        }
-    }
-    let svd = cross.svd(true, true);
-    let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
-    let mut rot = u * vt;
-    if rot.determinant() < 0.0 {
-        rot = u * nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(1.0, 1.0, -1.0)) * vt;
-    }
-    let to_cal = |p: Point3<f64>| o_cal + rot * (p - o_true);
-    eprintln!(
-        "  calibrated frame turned by {:.4}° from the true one",
-        nalgebra::Rotation3::from_matrix_unchecked(rot).angle().to_degrees()
-    );
     let (mut ss, mut n, mut worst) = (0.0, 0usize, 0.0f64);
     for (f, truth) in frames.iter().zip(truths) {
         let lp = tx.light_plane(f.alpha_rad, f.facet, 0).unwrap();
         for t in truth.iter().step_by(10) {
             let Some(ray) = camera.pixel_to_ray(&nalgebra::Vector2::new(t.pixel[0], t.pixel[1])) else { continue };
             let Ok(hit) = omni_geom::intersect_ray_plane(&ray, &lp.plane, 0.01) else { continue };
-            let e = (hit.point - to_cal(Point3::from(t.xyz))).norm();
+            let e = (hit.point - align.to_fitted(&Point3::from(t.xyz))).norm();
             ss += e * e;
             n += 1;
             worst = worst.max(e);
@@ -211,31 +265,107 @@ fn triangulation_error(
     ((ss / n.max(1) as f64).sqrt(), worst)
 }
 
-#[test]
-fn camera_from_the_receiver_calibration_gives_a_consistent_scanner() {
-    let sensor = Sensor::paper();
-    let board = BoardFile::new(6, 9, 40.0);
-    let rig_file = omni_formats::rig::RigFile::new(vec![rig_board(&board, "left"), rig_board(&board, "right")]);
-    let (frames, truths, gray) = cached_rig();
-    let camera = receiver_camera(&sensor, 20);
-    let mut errors = vec![];
-    for (what, cam) in [("true camera", sensor.camera.as_ref()), ("receiver-calibrated camera", camera.as_ref())] {
-        let boards: Vec<PlacedBoard> =
-            inputs::boards_from_pose_image(cam, &rig_file, gray, 12).unwrap().into_iter().map(|(b, _)| b).collect();
-        let cal =
-            calibrate_planes(cam, &boards, frames, &TransmitterParams::paper(), &PlaneCalibOptions::default()).unwrap();
-        let tx = Transmitter::new(cal.transmitter).unwrap();
-        let (rms, max) = triangulation_error(sensor.camera.as_ref(), cam, &tx, frames, truths);
-        eprintln!(
-            "{what}: model rms {:.3} mm; true stripe points re-triangulated: RMS {rms:.3} mm, max {max:.3} mm",
-            cal.report.model.residual_rms_mm
-        );
-        errors.push(rms);
+/// Worst light-plane error over α = `from`…`to` (every 0.25°, facet 0, laser 0) of a calibrated
+/// transmitter in the fitted camera's frame against the truth: (normal angle in degrees, offset
+/// at 0.5 m in mm, largest distance over 0.5–2 m in mm), see [`synth::plane_error`].
+fn light_plane_errors(
+    align: &FrameAlignment,
+    truth: &Transmitter,
+    fitted: &Transmitter,
+    range: (f64, f64),
+) -> [f64; 3] {
+    let mut worst = [0.0f64; 3];
+    let steps = ((range.1 - range.0) / 0.25).round() as usize;
+    for i in 0..=steps {
+        let a = (range.0 + 0.25 * i as f64).to_radians();
+        let t = truth.light_plane(a, 0, 0).unwrap();
+        let m = align.plane_to_true(&fitted.light_plane(a, 0, 0).unwrap().plane);
+        let (angle, off, far) = synth::plane_error(&t, &m);
+        worst = [worst[0].max(angle), worst[1].max(off), worst[2].max(far)];
     }
-    // Measured: 0.058 mm RMS with the true camera; 0.85 mm with the camera calibrated from 20
-    // rendered boards, whose own ray error (~0.05° here) dominates: the light-plane fit stays
-    // self-consistent (model RMS 0.064 mm). Bounds: 0.2 mm, and 1.5 mm (the paper's ~1 mm overall
-    // accuracy plus room for changes in the receiver calibration).
-    assert!(errors[0] < 0.2, "true camera: {} mm", errors[0]);
-    assert!(errors[1] < 1.5, "receiver camera: {} mm", errors[1]);
+    worst
+}
+
+/// Light-plane calibration of one camera on the rendered rig: board poses from the pose image
+/// (or the true poses carried into the camera's frame), then the errors against the truth in a
+/// common frame: (worst normal angle °, worst offset at 0.5 m mm, stripe re-triangulation RMS mm).
+fn calibrate_with_camera(sensor: &Sensor, camera: &dyn CameraModel, what: &str, true_poses: bool) -> (f64, f64, f64) {
+    let board = BoardFile::new(6, 9, 40.0);
+    let (frames, truths, gray) = cached_rig();
+    let align = FrameAlignment::new(sensor.camera.as_ref(), camera);
+    let boards: Vec<PlacedBoard> = if true_poses {
+        let to_fitted = nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::from(align.o_fit.coords - align.rot * align.o_true.coords),
+            nalgebra::UnitQuaternion::from_rotation_matrix(&align.rot),
+        );
+        let rig = Rig::standard(&board);
+        ["left", "right"]
+            .iter()
+            .zip(&rig.poses)
+            .map(|(n, p)| PlacedBoard::new(&rig_board(&board, n), to_fitted * p))
+            .collect()
+    } else {
+        let rig_file = omni_formats::rig::RigFile::new(vec![rig_board(&board, "left"), rig_board(&board, "right")]);
+        inputs::boards_from_pose_image(camera, &rig_file, gray, 12).unwrap().into_iter().map(|(b, _)| b).collect()
+    };
+    let cal =
+        calibrate_planes(camera, &boards, frames, &TransmitterParams::paper(), &PlaneCalibOptions::default()).unwrap();
+    let tx = Transmitter::new(cal.transmitter).unwrap();
+    // The calibrated range: the rig's frames are at α = 8…24°.
+    let [angle, off, far] = light_plane_errors(&align, &sensor.transmitter, &tx, (8.0, 24.0));
+    let (rms, max) = triangulation_error(&align, camera, &tx, frames, truths);
+    eprintln!(
+        "{what} (rays {:.4}° median, {:.4}° max after turning by {:.4}°), {}: model rms {:.3} mm; light planes \
+         worst normal {angle:.4}°, offset at 0.5 m {off:.4} mm, over 0.5–2 m {far:.3} mm; stripe points \
+         re-triangulated RMS {rms:.3} mm, max {max:.3} mm",
+        align.ray_median_deg,
+        align.ray_max_deg,
+        nalgebra::UnitQuaternion::from_rotation_matrix(&align.rot).angle().to_degrees(),
+        if true_poses { "true board poses" } else { "boards from the pose image" },
+        cal.report.model.residual_rms_mm
+    );
+    (angle, off, rms)
+}
+
+/// The issue's first accuracy target: the ideal build's light planes, calibrated with the camera
+/// from `omni_calib::receiver::calibrate` (not the true one), against the true planes over the
+/// calibrated range, compared in the true frame after the ray-alignment rotation
+/// ([`FrameAlignment`]). The receiver is calibrated from 20 boards' true corner pixels plus
+/// 0.07 px noise (the detector's measured error on rendered boards; rendering and detecting the
+/// 20 boards would take ~18 s of the CI budget), the light planes from the rendered rig (pose
+/// image and detected stripes).
+///
+/// Measured (worst normal, offset at 0.5 m, stripe re-triangulation RMS), by source of error:
+/// * true camera, true board poses (stripe noise alone): 0.0086°, 0.026 mm, 0.061 mm;
+/// * true camera, boards from the pose image: 0.0120°, 0.024 mm, 0.058 mm;
+/// * receiver camera (0.07 px corners: rays 0.030° median, 0.058° max after alignment), true
+///   poses: 0.035°, 0.29 mm, 0.40 mm; boards from the pose image: 0.0137°, 0.235 mm, 0.40 mm
+///   (posing the boards with the same camera absorbs part of its ray error);
+/// * receiver camera from 0.02 px corners (rays 0.0085° median): 0.0052°, 0.065 mm, 0.13 mm;
+/// * receiver camera from 0.005 px corners (rays 0.002° median): 0.0102°, 0.024 mm, 0.064 mm.
+///
+/// So the issue's 0.01° / 0.05 mm is missed with a realistic receiver calibration, and the
+/// receiver model's ray error dominates (its 0.03° median becomes ~0.2 mm of plane offset at
+/// 0.5 m); the plane calibration itself holds the offset target and is at the normal target
+/// (0.010–0.012°, bounded by the boards posed from the pose image) once the camera's rays are
+/// right to a few thousandths of a degree.
+#[test]
+fn camera_from_the_receiver_calibration_gives_the_true_light_planes() {
+    let sensor = Sensor::paper();
+    let (angle, off, rms) = calibrate_with_camera(&sensor, sensor.camera.as_ref(), "true camera", false);
+    assert!(angle < 0.02 && off < 0.05 && rms < 0.1, "true camera: {angle}°, {off} mm, RMS {rms} mm");
+    let realistic = projected_receiver_camera(&sensor, 20, 0.07, 21);
+    let (angle, off, rms) =
+        calibrate_with_camera(&sensor, realistic.as_ref(), "receiver camera, 0.07 px corners", false);
+    // Bounds at about twice the measured values: room for changes in the receiver calibration.
+    assert!(angle < 0.03 && off < 0.5 && rms < 0.8, "receiver camera: {angle}°, {off} mm, RMS {rms} mm");
+    let accurate = projected_receiver_camera(&sensor, 20, 0.005, 21);
+    let (angle, off, rms) =
+        calibrate_with_camera(&sensor, accurate.as_ref(), "receiver camera, 0.005 px corners", false);
+    assert!(angle < 0.015 && off < 0.05 && rms < 0.1, "accurate receiver camera: {angle}°, {off} mm, RMS {rms} mm");
+    if std::env::var("PLANE_BREAKDOWN").is_ok() {
+        calibrate_with_camera(&sensor, sensor.camera.as_ref(), "true camera", true);
+        calibrate_with_camera(&sensor, realistic.as_ref(), "receiver camera, 0.07 px corners", true);
+        calibrate_with_camera(&sensor, accurate.as_ref(), "receiver camera, 0.005 px corners", true);
+    }
 }

@@ -59,7 +59,7 @@ mod bench;
 mod boards;
 mod frame;
 mod render;
-pub mod rng;
+pub use omni_geom::rng;
 mod scene;
 mod sensor;
 mod tools;
@@ -67,7 +67,8 @@ mod truth;
 
 pub use bench::{BENCH_ALBEDO, BenchObject, paper_bench};
 pub use boards::{
-    BoardPose, Rig, board_object, corner_pixels, random_board_poses, render_board_image, render_rig_pose_image,
+    BoardPose, Rig, board_object, calibration_board_poses, corner_pixels, random_board_poses, render_board_image,
+    render_rig_pose_image,
 };
 pub use frame::Frame16;
 pub use render::{

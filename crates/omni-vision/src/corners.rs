@@ -58,8 +58,10 @@ pub struct DetectorOptions {
     pub refine_sigma: f64,
     /// If known: whether the board square between corners (0,0) and (1,1) is dark.
     pub first_square_dark: Option<bool>,
-    /// Optional mirror annulus: only candidates inside it are considered
-    /// (centre x, centre y, inner radius, outer radius, all px).
+    /// Optional mirror annulus (centre x, centre y, inner radius, outer radius, all px): only
+    /// candidates inside it are considered, and corners whose refinement window reaches within
+    /// 1 px of the inner or outer rim are dropped (the rim's edge pulls the sub-pixel position by
+    /// up to 3 px on rendered boards cut by the rim).
     pub annulus: Option<[f64; 4]>,
 }
 
@@ -187,6 +189,10 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     let smooth = gaussian_blur(img, opts.saddle.sigma);
     let positions = fill_missing(&refine_img, &smooth, positions, &limits, opts);
     let positions = drop_unsmooth(positions);
+    let positions = match opts.annulus {
+        Some(annulus) => drop_near_rim(positions, annulus),
+        None => positions,
+    };
     if positions.len() < opts.min_corners {
         return Err(Rejection::TooFewCorners { found: positions.len(), needed: opts.min_corners });
     }
@@ -203,6 +209,28 @@ fn local_x_junction(img: &GrayF32, p: [f64; 2], spacing: f64, min_contrast: f32)
     saddle::circle_test(img, p, radius, 0.35 * min_contrast).is_some()
 }
 
+/// The refinement half-window (px) for a corner spacing (px).
+fn refine_half_window(spacing: f64) -> f64 {
+    (0.4 * spacing).clamp(2.5, 8.0)
+}
+
+/// Removes corners whose refinement window reaches within 1 px of the annulus' rims
+/// (`[cx, cy, inner radius, outer radius]`, px).
+fn drop_near_rim(pos: HashMap<Cell, [f64; 2]>, annulus: [f64; 4]) -> HashMap<Cell, [f64; 2]> {
+    let [cx, cy, r0, r1] = annulus;
+    let keep = |&(i, j): &Cell, p: &[f64; 2]| {
+        let spacing = [(i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)]
+            .iter()
+            .filter_map(|n| pos.get(n))
+            .map(|q| (q[0] - p[0]).hypot(q[1] - p[1]))
+            .fold(f64::INFINITY, f64::min);
+        let margin = if spacing.is_finite() { refine_half_window(spacing) } else { 8.0 } + 1.0;
+        let r = (p[0] - cx).hypot(p[1] - cy);
+        r >= r0 + margin && r <= r1 - margin
+    };
+    pos.iter().filter(|(c, p)| keep(c, p)).map(|(c, p)| (*c, *p)).collect()
+}
+
 /// Refines every grid corner; the window follows the local corner spacing.
 fn refine_grid(img: &GrayF32, cands: &[Candidate], grid: &Grid) -> HashMap<Cell, [f64; 2]> {
     let mut out = HashMap::new();
@@ -213,7 +241,7 @@ fn refine_grid(img: &GrayF32, cands: &[Candidate], grid: &Grid) -> HashMap<Cell,
             .filter_map(|n| grid.cells.get(n))
             .map(|&m| (cands[m].px[0] - p[0]).hypot(cands[m].px[1] - p[1]))
             .fold(f64::INFINITY, f64::min);
-        let half_window = (0.4 * spacing).clamp(2.5, 8.0);
+        let half_window = refine_half_window(spacing);
         if let Some(r) = saddle::refine_corner(img, p, half_window) {
             out.insert((i, j), r);
         }
@@ -247,7 +275,7 @@ fn fill_missing(
             let Some((pred, spacing, line_dir)) = grid::predict_cell(&|c: Cell| pos.get(&c).copied(), cell) else {
                 continue;
             };
-            let half_window = (0.4 * spacing).clamp(2.5, 8.0);
+            let half_window = refine_half_window(spacing);
             if !refine_img.inside(pred[0], pred[1], half_window + 2.0) {
                 continue;
             }

@@ -59,7 +59,7 @@ mod bench;
 mod boards;
 mod frame;
 mod render;
-pub use omni_geom::rng;
+pub mod rng;
 mod scene;
 mod sensor;
 mod tools;

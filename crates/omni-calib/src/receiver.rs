@@ -1,7 +1,8 @@
 //! Receiver calibration: the catadioptric camera from checkerboard corners.
 //!
 //! [`calibrate`] fits one of three models ([`ModelKind`]) to the corners of many board images:
-//! 1. Initialisation without hand-tuning: principal point at the image centre, ξ = 1, and the
+//! 1. Initialisation without hand-tuning: principal point at the centre of the mirror rim circle
+//!    ([`Options::annulus`], else the image centre), ξ = 1, and the
 //!    generalised focal length γ chosen on a logarithmic grid by the median per-image
 //!    reprojection error after a linear pose (DLT on the rays) and a short per-board pose
 //!    refinement. The same search decides once whether the corner labeling must be mirrored
@@ -105,6 +106,11 @@ pub struct Options {
     /// Refit once with each image weighted by 1 / (its RMS / the median RMS), clamped to
     /// [0.3, 3]: maximum likelihood when images differ in corner noise.
     pub reweight_images: bool,
+    /// The mirror annulus in the image, if known (e.g. the rim circle fitted in an image of a lit
+    /// scene): [centre x, centre y, inner radius, outer radius] px. The principal point starts at
+    /// its centre, the focal-length search scales with its outer radius, and the fitted Mei and
+    /// polynomial models are valid inside it (else in the whole image).
+    pub annulus: Option<[f64; 4]>,
 }
 
 impl Default for Options {
@@ -119,6 +125,7 @@ impl Default for Options {
             min_corners: 8,
             max_iterations: 60,
             reweight_images: true,
+            annulus: None,
         }
     }
 }
@@ -207,8 +214,8 @@ struct Model {
 }
 
 impl Model {
-    fn mei(width: u32, height: u32, xi: f64, gamma: f64, fixed_xi_no_distortion: bool) -> Model {
-        let full = vec![xi, gamma, gamma, (width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0, 0.0, 0.0, 0.0, 0.0];
+    fn mei(centre: [f64; 2], xi: f64, gamma: f64, fixed_xi_no_distortion: bool) -> Model {
+        let full = vec![xi, gamma, gamma, centre[0], centre[1], 0.0, 0.0, 0.0, 0.0];
         let free = if fixed_xi_no_distortion { vec![1, 2, 3, 4] } else { (0..9).collect() };
         let names =
             ["xi", "fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2"].iter().map(|s| s.to_string()).collect();
@@ -393,15 +400,25 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// Grid search of γ (and the labeling handedness) for the Mei/hyperbolic model.
-fn initialise_mei(width: u32, height: u32, xi: f64, fixed: bool, obs: &[Observation]) -> Option<(Model, bool)> {
-    let r = width.min(height) as f64 / 2.0;
+fn initialise_mei(
+    width: u32,
+    height: u32,
+    annulus: Option<[f64; 4]>,
+    xi: f64,
+    fixed: bool,
+    obs: &[Observation],
+) -> Option<(Model, bool)> {
+    let (centre, r) = match annulus {
+        Some([cx, cy, _, outer]) => ([cx, cy], outer),
+        None => ([(width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0], width.min(height) as f64 / 2.0),
+    };
     let mut best: Option<(f64, f64, bool)> = None;
     // A subset of images keeps the search cheap for large data sets.
     let step = (obs.len() / 8).max(1);
     let sample: Vec<&Observation> = obs.iter().step_by(step).collect();
     for k in 0..24 {
         let gamma = r * 0.1 * (30.0f64).powf(k as f64 / 23.0);
-        let model = Model::mei(width, height, xi, gamma, fixed);
+        let model = Model::mei(centre, xi, gamma, fixed);
         for mirrored in [false, true] {
             let errs: Vec<f64> = sample
                 .iter()
@@ -417,7 +434,7 @@ fn initialise_mei(width: u32, height: u32, xi: f64, fixed: bool, obs: &[Observat
         }
     }
     let (_, gamma, mirrored) = best?;
-    Some((Model::mei(width, height, xi, gamma, fixed), mirrored))
+    Some((Model::mei(centre, xi, gamma, fixed), mirrored))
 }
 
 /// Joint refinement with outlier rejection. Returns the model, poses (per `obs` index, `None` =
@@ -569,6 +586,11 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
     if usable.len() < 2 {
         return Err(format!("need at least 2 usable board images, have {}", usable.len()));
     }
+    if let Some(a) = opts.annulus
+        && !(a.iter().all(|v| v.is_finite()) && a[2] >= 0.0 && a[2] < a[3])
+    {
+        return Err(format!("annulus {a:?}: expected finite centre and 0 ≤ inner radius < outer radius (px)"));
+    }
     let (xi, fixed) = match opts.model {
         ModelKind::Hyperbolic => {
             let (a, b2) = (opts.mirror.a_mm, opts.mirror.b_mm * opts.mirror.b_mm);
@@ -578,8 +600,8 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
         _ => (1.0, false),
     };
     let base: Vec<Observation> = usable.iter().map(|&k| obs[k].clone()).collect();
-    let (model, mirrored) =
-        initialise_mei(width, height, xi, fixed, &base).ok_or("initialisation failed: no pose found for any board")?;
+    let (model, mirrored) = initialise_mei(width, height, opts.annulus, xi, fixed, &base)
+        .ok_or("initialisation failed: no pose found for any board")?;
     let sub: Vec<Observation> = if mirrored { base.iter().map(|o| o.mirrored()).collect() } else { base };
     let poses: Vec<Option<[f64; 6]>> =
         sub.iter().map(|o| initial_pose(&model, &model.full, o, 20).map(|x| x.0)).collect();
@@ -684,6 +706,8 @@ fn describe(
     opts: &Options,
 ) -> (Vec<String>, Vec<f64>, Vec<f64>, CameraSpec) {
     let f = &model.full;
+    // The model holds inside the mirror annulus (radii about the fitted principal point).
+    let [inner_radius_px, outer_radius_px] = opts.annulus.map_or([0.0, 0.0], |a| [a[2], a[3]]);
     let mut std_full = vec![0.0; f.len()];
     for (k, &i) in model.free.iter().enumerate() {
         std_full[i] = std_free[k];
@@ -702,8 +726,8 @@ fn describe(
                 p2: 0.0,
                 width,
                 height,
-                inner_radius_px: 0.0,
-                outer_radius_px: 0.0,
+                inner_radius_px,
+                outer_radius_px,
                 viewpoint_mm: [0.0; 3],
             };
             p.set_vector(f);
@@ -742,11 +766,10 @@ fn describe(
                 e: v[4],
                 width,
                 height,
-                inner_radius_px: 0.0,
-                outer_radius_px: 0.0,
+                inner_radius_px,
+                outer_radius_px,
                 viewpoint_mm: [0.0; 3],
             };
-            p.outer_radius_px = 0.0;
             p.fit_inverse_poly(12);
             let mut values = v[..6].to_vec();
             let mut stds = std_full[..6].to_vec();

@@ -2,10 +2,11 @@
 //! pixel noise) and on broken inputs.
 
 use omni_calib::plane::PlacedBoard;
-use omni_calib::plane::synth::{Rng, corner_pixels, paper_camera, stripe_frame, two_board_rig};
+use omni_calib::plane::synth::{corner_pixels, paper_camera, stripe_frame, two_board_rig};
 use omni_formats::rig::{BoardCorners, BoardCornersFile, RigBoard, RigFile};
 use omni_formats::stream::{Frame, Header, Record, StreamWriter, StripePoint};
 use omni_formats::{CameraFile, CameraSpec, ScannerFile};
+use omni_geom::rng::SplitMix64;
 use omni_model::{HyperbolicParams, Transmitter, TransmitterParams};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -25,7 +26,7 @@ fn stderr(o: &Output) -> String {
 fn dataset(dir: &Path, alpha_override: Option<f64>) -> [PathBuf; 4] {
     let camera = paper_camera();
     let truth = Transmitter::new(TransmitterParams::paper()).unwrap();
-    let mut rng = Rng::new(11);
+    let mut rng = SplitMix64::new(11);
     let rig = two_board_rig(550.0);
     let mut corners = vec![];
     for (board, pose) in &rig {
@@ -209,7 +210,7 @@ fn fit_finds_the_boards_in_a_rendered_pose_image() {
     // Stripes: exact geometry on the same boards, 0.1 px noise.
     let camera = paper_camera();
     let truth = Transmitter::new(TransmitterParams::paper()).unwrap();
-    let mut rng = Rng::new(3);
+    let mut rng = SplitMix64::new(3);
     let mut w = StreamWriter::new(Vec::new(), "mem");
     for i in 0..=16u64 {
         let a = 8.0 + i as f64;

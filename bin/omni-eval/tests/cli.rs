@@ -1,6 +1,6 @@
 //! The real omni-eval binary on synthetic clouds with known noise and bias.
 
-use omni_cloud::rng::Rng;
+use omni_cloud::rng::SplitMix64;
 use omni_formats::ply::{Encoding, PointCloud, write_ply};
 use omni_formats::scene::{SceneFile, SceneObject, Shape};
 use omni_formats::write_doc;
@@ -21,7 +21,7 @@ fn json(out: &Output) -> serde_json::Value {
 /// Sphere r = 50 at (500, 0, 0) seen from the origin side, radial noise σ = 0.3 mm, bias +0.1 mm;
 /// plus a plane patch x = 700 facing −x with σ = 0.2 mm; plus 30 stray points.
 fn write_fixture(dir: &Path) {
-    let mut rng = Rng::new(3);
+    let mut rng = SplitMix64::new(3);
     let mut pts = Vec::new();
     for _ in 0..3000 {
         let (th, ph) = (std::f64::consts::PI + (rng.uniform() - 0.5) * 2.0, (rng.uniform() - 0.5) * 1.6);
@@ -131,7 +131,7 @@ fn bad_inputs() {
 #[test]
 fn fits_a_cone() {
     let dir = tempfile::tempdir().unwrap();
-    let mut rng = Rng::new(9);
+    let mut rng = SplitMix64::new(9);
     // Cone: apex (450, -120, 100), axis down, half-angle atan(60/200) (the bench cone), σ 0.2 mm.
     let th = (60.0f64 / 200.0).atan();
     let pts: Vec<[f64; 3]> = (0..3000)

@@ -2,7 +2,7 @@
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use omni_cloud::filter::{radius_outlier_mask, statistical_outlier_mask};
-use omni_cloud::rng::Rng;
+use omni_cloud::rng::SplitMix64;
 use omni_formats::odometry::{PoseSample, write_odometry};
 use omni_formats::ply::{Encoding, PointCloud, ScalarField, read_ply, write_ply};
 use omni_formats::stream::{Frame, Header, Point, Record, StreamWriter, StripePoint};
@@ -42,7 +42,7 @@ fn write_stream(path: &Path, frames: &[(Vec<[f64; 3]>, Option<u64>)]) {
     }
 }
 
-fn plane_with_outliers(rng: &mut Rng, n: usize, outliers: usize) -> Vec<[f64; 3]> {
+fn plane_with_outliers(rng: &mut SplitMix64, n: usize, outliers: usize) -> Vec<[f64; 3]> {
     let mut pts: Vec<[f64; 3]> =
         (0..n).map(|_| [rng.uniform() * 200.0, rng.uniform() * 200.0, 800.0 + rng.normal() * 0.3]).collect();
     for _ in 0..outliers {
@@ -54,7 +54,7 @@ fn plane_with_outliers(rng: &mut Rng, n: usize, outliers: usize) -> Vec<[f64; 3]
 #[test]
 fn merges_streams_and_ply_and_matches_the_library_filters() {
     let dir = tempfile::tempdir().unwrap();
-    let mut rng = Rng::new(1);
+    let mut rng = SplitMix64::new(1);
     let a = plane_with_outliers(&mut rng, 1500, 30);
     let b = plane_with_outliers(&mut rng, 1500, 30);
     write_stream(&dir.path().join("a.jsonl"), &[(a[..800].to_vec(), None), (a[800..].to_vec(), None)]);

@@ -3,8 +3,9 @@
 //! And a 12-facet scan (132 frames) for the full physical model (46 parameters).
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use omni_calib::plane::synth::{Rng, paper_camera, stripe_frame, two_board_rig};
+use omni_calib::plane::synth::{paper_camera, stripe_frame, two_board_rig};
 use omni_calib::plane::{FrameStripes, PlacedBoard, PlaneCalibOptions, calibrate_planes};
+use omni_geom::rng::SplitMix64;
 use omni_model::{Transmitter, TransmitterParams};
 use std::hint::black_box;
 
@@ -12,7 +13,7 @@ fn rig_frames(facets: &[u32], alphas: &[f64]) -> (Vec<PlacedBoard>, Vec<FrameStr
     let camera = paper_camera();
     let truth = Transmitter::new(TransmitterParams::paper()).unwrap();
     let boards: Vec<PlacedBoard> = two_board_rig(550.0).iter().map(|(b, p)| PlacedBoard::new(b, *p)).collect();
-    let mut rng = Rng::new(3);
+    let mut rng = SplitMix64::new(3);
     let mut frames = vec![];
     for &k in facets {
         for &a in alphas {

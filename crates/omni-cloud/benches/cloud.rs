@@ -10,7 +10,7 @@
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use omni_cloud::cloud::POINT_SCALARS;
 use omni_cloud::filter::{VoxelGrid, statistical_outlier_mask, voxel_downsample};
-use omni_cloud::rng::Rng;
+use omni_cloud::rng::SplitMix64;
 use omni_cloud::triangulate::{DEFAULT_MIN_INCIDENCE_DEG, LaserPlane, Triangulator};
 use omni_formats::ply::{Encoding, PointCloud, ScalarField, write_ply_to};
 use omni_formats::stream::{Frame, StripePoint};
@@ -20,7 +20,7 @@ use std::hint::black_box;
 
 /// A room-like cloud: points on the six walls of a 4 × 3 × 2.5 m box with 0.3 mm noise.
 pub fn room_cloud(n: usize, seed: u64) -> PointCloud {
-    let mut rng = Rng::new(seed);
+    let mut rng = SplitMix64::new(seed);
     let half = [2000.0, 1500.0, 1250.0];
     let positions: Vec<[f64; 3]> = (0..n)
         .map(|_| {

@@ -371,10 +371,10 @@ impl CropBox {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::Rng;
+    use crate::rng::SplitMix64;
 
     fn noisy_plane(n: usize, outliers: usize, seed: u64) -> Vec<[f64; 3]> {
-        let mut rng = Rng::new(seed);
+        let mut rng = SplitMix64::new(seed);
         let mut pts: Vec<[f64; 3]> =
             (0..n).map(|_| [rng.uniform() * 100.0, rng.uniform() * 100.0, rng.normal() * 0.2]).collect();
         for _ in 0..outliers {

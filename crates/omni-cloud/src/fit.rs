@@ -6,7 +6,7 @@
 //! or cone's axis) and, for a plane, on the side of the world origin (the sensor), so a
 //! positive mean error always means "measured towards the sensor / outside the object".
 
-use crate::rng::Rng;
+use crate::rng::SplitMix64;
 use nalgebra::{Matrix5, Point3, Unit, Vector3, Vector5};
 use omni_geom::Plane;
 use omni_geom::fit::{fit_cylinder, fit_plane, fit_sphere, orthonormal_basis};
@@ -178,7 +178,7 @@ pub fn fit_shape(kind: ShapeKind, points: &[Point3<f64>], opts: &FitOptions) -> 
         ShapeKind::Plane | ShapeKind::Sphere => opts.iterations,
         _ => opts.iterations.min(24),
     };
-    let mut rng = Rng::new(opts.seed);
+    let mut rng = SplitMix64::new(opts.seed);
     let mut sample = Vec::with_capacity(sample_size(kind));
     for _ in 0..iterations {
         sample.clear();
@@ -372,7 +372,7 @@ pub fn signed_errors(shape: &Shape, points: &[Point3<f64>]) -> Vec<f64> {
 mod tests {
     use super::*;
 
-    fn with_outliers(mut pts: Vec<Point3<f64>>, rng: &mut Rng) -> Vec<Point3<f64>> {
+    fn with_outliers(mut pts: Vec<Point3<f64>>, rng: &mut SplitMix64) -> Vec<Point3<f64>> {
         let n = pts.len() / 10;
         let c = pts[0];
         for _ in 0..n {
@@ -383,7 +383,7 @@ mod tests {
 
     #[test]
     fn recovers_each_primitive_with_noise_and_outliers() {
-        let mut rng = Rng::new(11);
+        let mut rng = SplitMix64::new(11);
         let sigma = 0.3;
         // Plane z = 0.1 x + 500 (seen from the origin below).
         let plane_pts: Vec<_> = (0..800)
@@ -426,7 +426,7 @@ mod tests {
 
     #[test]
     fn cone_fit_recovers_apex_axis_and_angle() {
-        let mut rng = Rng::new(5);
+        let mut rng = SplitMix64::new(5);
         let apex = Point3::new(400.0, -100.0, 300.0);
         let axis = Vector3::new(0.1, 0.2, -1.0).normalize();
         let th = 20f64.to_radians();

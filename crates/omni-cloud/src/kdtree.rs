@@ -190,10 +190,10 @@ fn build_node(points: &[[f64; 3]], idx: &mut [u32], offset: usize, nodes: &mut V
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::Rng;
+    use crate::rng::SplitMix64;
 
     fn random_points(n: usize, seed: u64) -> Vec<[f64; 3]> {
-        let mut rng = Rng::new(seed);
+        let mut rng = SplitMix64::new(seed);
         (0..n).map(|_| [rng.uniform() * 100.0, rng.uniform() * 50.0, (rng.uniform() * 10.0).round()]).collect()
     }
 

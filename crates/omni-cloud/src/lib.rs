@@ -31,7 +31,7 @@ pub mod merge;
 pub mod motion;
 pub mod ply_stream;
 pub mod render;
-pub mod rng;
+pub use omni_geom::rng;
 pub mod triangulate;
 
 pub use omni_formats::ply::PointCloud;

@@ -1,7 +1,7 @@
 //! Triangulation against exact synthetic data: truth points on the light planes of the paper
 //! build are projected with the true camera, then triangulated back.
 
-use omni_cloud::rng::Rng;
+use omni_cloud::rng::SplitMix64;
 use omni_cloud::triangulate::{DEFAULT_MIN_INCIDENCE_DEG, Triangulator};
 use omni_formats::stream::{Frame, StripePoint};
 use omni_geom::{Point3, Vector2};
@@ -112,7 +112,7 @@ fn pixel_noise_propagates_as_linear_theory_predicts() {
         let t = (lp.plane.offset - lp.plane.normal.dot(&ray.origin.coords)) / lp.plane.normal.dot(&ray.dir);
         Some(t)
     };
-    let mut rng = Rng::new(42);
+    let mut rng = SplitMix64::new(42);
     let mut z = Vec::new();
     for p in &clean {
         let sp = stripe[p.stripe_index as usize];

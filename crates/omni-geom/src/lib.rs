@@ -1,5 +1,6 @@
 //! Pure geometry for omniscan: rays, planes, ray–plane triangulation and least-squares fits
-//! (plane, sphere, cylinder, cone) plus a small Levenberg–Marquardt solver.
+//! (plane, sphere, cylinder, cone) plus a small Levenberg–Marquardt solver and the project's
+//! deterministic random generator ([`rng::SplitMix64`]).
 //!
 //! No I/O lives here. Lengths are millimetres, angles radians.
 //!
@@ -15,6 +16,7 @@ pub mod fit;
 pub mod lm;
 mod plane;
 mod ray;
+pub mod rng;
 
 pub use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Unit, UnitQuaternion, Vector2, Vector3};
 pub use plane::Plane;

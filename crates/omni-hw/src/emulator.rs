@@ -12,6 +12,7 @@
 use crate::controller::{Controller, ControllerSpec};
 use crate::framing::{LineReader, encode_line};
 use crate::message::{DeviceMessage, DeviceState, TriggerEvent};
+use omni_geom::rng::SplitMix64;
 use std::io::{ErrorKind, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -199,23 +200,6 @@ pub struct Faults {
     pub seed: u64,
 }
 
-/// SplitMix64: a tiny deterministic generator, independent of any crate's version.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    fn chance(&mut self, p: f64) -> bool {
-        p > 0.0 && ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64) < p
-    }
-}
-
 /// Emulator settings.
 #[derive(Debug, Clone)]
 pub struct EmulatorOptions {
@@ -301,7 +285,7 @@ pub fn serve<P: Read + Write>(
     let clock = || t0.elapsed().as_micros() as u64 + BOOT_US;
     let mut controller = Controller::new(options.spec.clone());
     let mut reader = LineReader::new();
-    let mut link = Link { port, rng: SplitMix64(options.faults.seed), faults: &options.faults };
+    let mut link = Link { port, rng: SplitMix64::new(options.faults.seed), faults: &options.faults };
     let mut connected = false;
     let mut fired = 0u64;
     let mut last_status = Instant::now();

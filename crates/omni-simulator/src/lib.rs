@@ -59,7 +59,7 @@ mod bench;
 mod boards;
 mod frame;
 mod render;
-pub mod rng;
+pub use omni_geom::rng;
 mod scene;
 mod sensor;
 mod tools;

@@ -3,6 +3,7 @@
 use nalgebra::{Isometry3, Point3, Vector2, Vector3};
 use omni_formats::rig::RigBoard;
 use omni_geom::fit::fit_plane;
+use omni_geom::rng::SplitMix64;
 use omni_geom::{Intersection, Plane, Ray, intersect_ray_plane};
 use omni_model::CameraModel;
 
@@ -191,15 +192,9 @@ fn lmeds_inliers(points: &[BoardPoint], opts: &FramePlaneOptions) -> Option<Vec<
             groups.push(idx);
         }
     }
-    let mut state = 0x9E37_79B9_7F4A_7C15u64 ^ n as u64;
-    let mut next = || {
-        // SplitMix64: deterministic for the same input.
-        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) % n as u64) as usize
-    };
+    // Seeded by the point count: deterministic for the same input.
+    let mut rng = SplitMix64::new(0x9E37_79B9_7F4A_7C15u64 ^ n as u64);
+    let mut next = || rng.below(n);
     let mut best: Option<(f64, Plane)> = None;
     let mut dist = vec![];
     for _ in 0..300 {
@@ -245,18 +240,18 @@ fn median(mut v: Vec<f64>) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plane::synth::Rng;
+    use omni_geom::rng::SplitMix64;
 
     /// Points on two perpendicular lines of the plane z = 0.1·x − 100 (mm), on boards 0 and 1,
     /// with 0.1 mm noise.
-    fn two_lines(rng: &mut Rng) -> (Plane, Vec<BoardPoint>) {
+    fn two_lines(rng: &mut SplitMix64) -> (Plane, Vec<BoardPoint>) {
         let plane = Plane::from_point_normal(&Point3::new(0.0, 0.0, -100.0), &Vector3::new(-0.1, 0.0, 1.0));
         let mut pts = vec![];
         for i in 0..100 {
             let s = i as f64 * 3.0;
             for (board, p) in [(0, Point3::new(400.0 + s, s, 0.0)), (1, Point3::new(400.0 + s, -s, 0.0))] {
                 let mut q = plane.project(&p);
-                q.z += 0.1 * rng.gauss();
+                q.z += 0.1 * rng.normal();
                 pts.push(BoardPoint { board, point: q });
             }
         }
@@ -265,7 +260,7 @@ mod tests {
 
     #[test]
     fn frame_plane_survives_forty_percent_spurious_points() {
-        let mut rng = Rng::new(4);
+        let mut rng = SplitMix64::new(4);
         let (truth, mut pts) = two_lines(&mut rng);
         let good = pts.len();
         // Spurious points: 40 % of the total, up to ±80 mm off the plane (e.g. checkerboard edges).
@@ -291,7 +286,7 @@ mod tests {
 
     #[test]
     fn points_on_one_board_line_are_refused_with_the_reason() {
-        let mut rng = Rng::new(5);
+        let mut rng = SplitMix64::new(5);
         let (_, pts) = two_lines(&mut rng);
         let one_board: Vec<BoardPoint> = pts.iter().filter(|p| p.board == 0).copied().collect();
         let e = fit_frame_plane(&one_board, 2, &FramePlaneOptions::default()).unwrap_err();

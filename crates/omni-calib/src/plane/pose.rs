@@ -173,7 +173,8 @@ impl Problem for PoseProblem<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plane::synth::{Rng, paper_camera};
+    use crate::plane::synth::paper_camera;
+    use omni_geom::rng::SplitMix64;
 
     #[test]
     fn recovers_a_board_pose_from_noisy_corners() {
@@ -184,14 +185,14 @@ mod tests {
         );
         let board: Vec<[f64; 2]> =
             (0..6).flat_map(|j| (0..8).map(move |i| [i as f64 * 30.0, j as f64 * 30.0])).collect();
-        let mut rng = Rng::new(7);
+        let mut rng = SplitMix64::new(7);
         let mut used = vec![];
         let mut pixels = vec![];
         for b in &board {
             let p = truth * Point3::new(b[0], b[1], 0.0);
             if let Some(px) = camera.point_to_pixel(&p) {
                 used.push(*b);
-                pixels.push([px.x + 0.1 * rng.gauss(), px.y + 0.1 * rng.gauss()]);
+                pixels.push([px.x + 0.1 * rng.normal(), px.y + 0.1 * rng.normal()]);
             }
         }
         assert!(used.len() >= 40, "board mostly visible: {}", used.len());

@@ -7,31 +7,8 @@ use super::{FrameStripes, PlacedBoard};
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use omni_formats::rig::RigBoard;
 use omni_geom::Plane;
+use omni_geom::rng::SplitMix64;
 use omni_model::{CameraModel, HyperbolicCamera, HyperbolicParams, LightPlane, Transmitter};
-
-/// SplitMix64 with Box–Muller: deterministic and independent of external crates.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in (0, 1).
-    pub fn uniform(&mut self) -> f64 {
-        ((self.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    /// Standard normal.
-    pub fn gauss(&mut self) -> f64 {
-        (-2.0 * self.uniform().ln()).sqrt() * (2.0 * std::f64::consts::PI * self.uniform()).cos()
-    }
-}
 
 pub fn paper_camera() -> HyperbolicCamera {
     HyperbolicCamera::new(HyperbolicParams::paper()).unwrap()
@@ -70,14 +47,14 @@ pub fn corner_pixels(
     board: &RigBoard,
     pose: &Isometry3<f64>,
     noise_px: f64,
-    rng: &mut Rng,
+    rng: &mut SplitMix64,
 ) -> (Vec<[f64; 2]>, Vec<[f64; 2]>) {
     let mut used = vec![];
     let mut px = vec![];
     for c in board.corners_mm() {
         if let Some(p) = camera.point_to_pixel(&(pose * Point3::new(c[0], c[1], 0.0))) {
             used.push(c);
-            px.push([p.x + noise_px * rng.gauss(), p.y + noise_px * rng.gauss()]);
+            px.push([p.x + noise_px * rng.normal(), p.y + noise_px * rng.normal()]);
         }
     }
     (used, px)
@@ -94,7 +71,7 @@ pub fn stripe_frame(
     facet: u32,
     noise_px: f64,
     spacing_mm: f64,
-    rng: &mut Rng,
+    rng: &mut SplitMix64,
 ) -> FrameStripes {
     let mut pixels = vec![];
     for laser in 0..truth.num_lasers() {
@@ -105,7 +82,7 @@ pub fn stripe_frame(
                     continue;
                 }
                 if let Some(px) = camera.point_to_pixel(&p) {
-                    pixels.push([px.x + noise_px * rng.gauss(), px.y + noise_px * rng.gauss()]);
+                    pixels.push([px.x + noise_px * rng.normal(), px.y + noise_px * rng.normal()]);
                 }
             }
         }

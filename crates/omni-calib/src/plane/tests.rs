@@ -3,6 +3,7 @@
 
 use super::synth::*;
 use super::*;
+use omni_geom::rng::SplitMix64;
 use omni_model::{FacetError, TransmitterParams};
 
 /// Corner noise (px) for the pose image and stripe-centre noise (px) for the laser frames.
@@ -11,7 +12,7 @@ const CORNER_NOISE_PX: f64 = 0.1;
 const STRIPE_NOISE_PX: f64 = 0.1;
 
 /// The rig's boards posed from noisy corners with the camera (as the CLI does).
-fn posed_rig(camera: &dyn CameraModel, rng: &mut Rng) -> Vec<PlacedBoard> {
+fn posed_rig(camera: &dyn CameraModel, rng: &mut SplitMix64) -> Vec<PlacedBoard> {
     two_board_rig(550.0)
         .iter()
         .map(|(board, truth)| {
@@ -31,7 +32,7 @@ fn frames(
     truth: &Transmitter,
     facets: &[u32],
     alphas_deg: &[f64],
-    rng: &mut Rng,
+    rng: &mut SplitMix64,
 ) -> Vec<FrameStripes> {
     let rig = true_rig();
     let mut out = vec![];
@@ -49,7 +50,7 @@ fn frames(
 fn ideal_build_errors(true_poses: bool, seed: u64) -> (f64, f64, f64, usize) {
     let camera = paper_camera();
     let truth = Transmitter::new(TransmitterParams::paper()).unwrap();
-    let mut rng = Rng::new(seed);
+    let mut rng = SplitMix64::new(seed);
     let boards = if true_poses { true_rig() } else { posed_rig(&camera, &mut rng) };
     let alphas: Vec<f64> = (0..=60).map(|i| i as f64 * 0.5).collect();
     let frames = frames(&camera, &truth, &[0], &alphas, &mut rng);
@@ -142,7 +143,7 @@ fn interpolate(a: &FrameReport, b: &FrameReport, t: f64) -> omni_geom::Plane {
 fn calibrate_imperfect(true_poses: bool, step_deg: f64) -> (PlaneCalibration, Transmitter) {
     let camera = paper_camera();
     let truth = Transmitter::new(imperfect_build()).unwrap();
-    let mut rng = Rng::new(5);
+    let mut rng = SplitMix64::new(5);
     let boards = if true_poses { true_rig() } else { posed_rig(&camera, &mut rng) };
     let alphas: Vec<f64> = (0..=(30.0 / step_deg).round() as usize).map(|i| i as f64 * step_deg).collect();
     let facets: Vec<u32> = (0..12).collect();
@@ -236,7 +237,7 @@ fn single_board_placements_calibrate_from_lines_alone() {
     // stripe is one line, so no frame has a plane of its own, yet the physical model fits.
     let camera = paper_camera();
     let truth = Transmitter::new(TransmitterParams::paper()).unwrap();
-    let mut rng = Rng::new(8);
+    let mut rng = SplitMix64::new(8);
     let mut boards = true_rig();
     boards[1].placement = 1;
     let mut frames = vec![];
@@ -291,7 +292,7 @@ fn both_lasers_are_calibrated_from_boards_on_both_sides() {
     for b in true_rig() {
         boards.push(PlacedBoard { name: format!("{}-back", b.name), pose: turn * b.pose, ..b });
     }
-    let mut rng = Rng::new(9);
+    let mut rng = SplitMix64::new(9);
     let alphas: Vec<f64> = (0..=15).map(|i| 2.0 * i as f64).collect();
     let mut frames = vec![];
     for k in [0, 3] {
@@ -333,7 +334,7 @@ fn gate_around_the_initial_model_removes_checkerboard_lines() {
     let camera = paper_camera();
     let truth = Transmitter::new(imperfect_build()).unwrap();
     let boards = true_rig();
-    let mut rng = Rng::new(12);
+    let mut rng = SplitMix64::new(12);
     let mut frames = vec![];
     for i in 0..=30 {
         let a = i as f64;
@@ -346,7 +347,7 @@ fn gate_around_the_initial_model_removes_checkerboard_lines() {
             for b in &boards {
                 for p in plane_board_line(&edge, b, 1.5) {
                     if let Some(px) = camera.point_to_pixel(&p) {
-                        f.pixels.push([px.x + 0.1 * rng.gauss(), px.y + 0.1 * rng.gauss()]);
+                        f.pixels.push([px.x + 0.1 * rng.normal(), px.y + 0.1 * rng.normal()]);
                     }
                 }
             }

@@ -2,27 +2,11 @@
 //! rendered simulator boards.
 
 use super::*;
+use omni_geom::rng::SplitMix64;
 use omni_model::{CameraModel, HyperbolicCamera};
 use omni_vision::corners::{DetectorOptions, GrayF32, detect_board, load_gray};
 use rayon::prelude::*;
 use std::path::PathBuf;
-
-/// Deterministic normal samples (SplitMix64 + Box–Muller).
-pub(crate) struct Rng(u64);
-
-impl Rng {
-    pub(crate) fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    pub(crate) fn normal(&mut self) -> f64 {
-        let (u, v) = (self.uniform().max(1e-300), self.uniform());
-        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-    }
-}
 
 /// Boards of 9 × 6 corners (25 mm) around the camera, projected exactly, with Gaussian pixel
 /// noise of `sigma` px. Returns the observations and their noise-free pixels.
@@ -32,7 +16,7 @@ pub(crate) fn synthetic_boards(
     sigma: f64,
     seed: u64,
 ) -> Vec<(Observation, Vec<[f64; 2]>)> {
-    let mut rng = Rng(seed);
+    let mut rng = SplitMix64::new(seed);
     let mut out = Vec::new();
     while out.len() < count {
         let az = rng.uniform() * std::f64::consts::TAU;

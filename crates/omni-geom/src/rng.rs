@@ -1,5 +1,6 @@
-//! A small self-contained deterministic PRNG (SplitMix64), so that rendered noise does not
-//! depend on the version of any random-number crate.
+//! The project's one deterministic PRNG (SplitMix64): rendered noise, RANSAC sampling, fault
+//! injection and test data all draw from it, so the same seed gives the same numbers on every
+//! platform and with every version of every crate.
 
 /// SplitMix64 (Steele, Lea & Flood 2014): 64-bit state, passes BigCrush, trivially seedable.
 #[derive(Debug, Clone)]
@@ -23,6 +24,16 @@ impl SplitMix64 {
     /// Uniform in [0, 1).
     pub fn uniform(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+
+    /// Uniform integer in [0, n) for n > 0 (multiply-shift: no modulo bias worth a name).
+    pub fn below(&mut self, n: usize) -> usize {
+        (((self.next_u64() >> 32) * n as u64) >> 32) as usize
+    }
+
+    /// True with probability `p` (never for p ≤ 0).
+    pub fn chance(&mut self, p: f64) -> bool {
+        p > 0.0 && self.uniform() < p
     }
 
     /// Standard normal (Box–Muller; one value per call).
@@ -82,6 +93,19 @@ pub fn mix(mut z: u64) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn below_and_chance_are_uniform() {
+        let mut r = SplitMix64::new(3);
+        let mut counts = [0usize; 5];
+        for _ in 0..50_000 {
+            counts[r.below(5)] += 1;
+        }
+        assert!(counts.iter().all(|&c| (c as f64 / 10_000.0 - 1.0).abs() < 0.05), "{counts:?}");
+        let hits = (0..50_000).filter(|_| r.chance(0.3)).count();
+        assert!((hits as f64 / 15_000.0 - 1.0).abs() < 0.03, "{hits}");
+        assert!(!(0..1000).any(|_| r.chance(0.0)));
+    }
 
     #[test]
     fn moments_match_the_distributions() {

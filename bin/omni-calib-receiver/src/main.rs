@@ -21,6 +21,7 @@ omni-calib-receiver --board board.json -o camera.json boards/*.png\n  \
 omni-calib-receiver --board board.json --model ocam --export-ocam calib_results.txt boards/\n  \
 omni-calib-receiver --board board.json --save-corners corners.json --overlay check/ boards/\n  \
 omni-calib-receiver --board board.json --corners corners.json --model mei --export-kalibr camchain.yaml\n  \
+omni-calib-receiver --board board.json --annulus 511.5,511.5,102.5,493 boards/\n  \
 omni-calib-receiver import-ocam calib_results.txt -o camera.json\n\n\
 Models: mei (unified sphere model + radial-tangential distortion, as Kalibr omni-radtan and OpenCV \
 omnidir), ocam (Scaramuzza polynomial, as OCamCalib), hyperbolic (the exact mirror of --mirror with \
@@ -77,6 +78,12 @@ struct CalibArgs {
     /// focus 0,0,2c (0,0,80 for the paper's mirror) keeps SENSOR.md's frame, origin at the camera.
     #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0")]
     viewpoint_mm: String,
+    /// The mirror annulus in the image (px): centre x, centre y, inner and outer rim radius, as
+    /// read off an image of a lit scene. Corners are searched inside it and dropped where their
+    /// refinement window reaches a rim (the rim edge biases them); the principal point starts at
+    /// its centre; the fitted mei/ocam model is valid inside it. Default: the whole image.
+    #[arg(long, value_name = "CX,CY,R_IN,R_OUT")]
+    annulus: Option<String>,
     /// Board images (files or directories).
     #[arg(required_unless_present = "corners")]
     images: Vec<PathBuf>,
@@ -102,6 +109,20 @@ fn main() -> std::process::ExitCode {
             None => calibrate(&args.calib),
         }
     })
+}
+
+fn parse_annulus(s: &str) -> CliResult<[f64; 4]> {
+    let v: Vec<f64> = s.split(',').filter_map(|t| t.trim().parse().ok()).collect();
+    match v[..] {
+        [cx, cy, r0, r1]
+            if v.iter().all(|c: &f64| c.is_finite()) && s.split(',').count() == 4 && r0 >= 0.0 && r0 < r1 =>
+        {
+            Ok([cx, cy, r0, r1])
+        }
+        _ => Err(omni_cli::CliError::usage(format!(
+            "--annulus: expected CX,CY,R_IN,R_OUT in px with 0 ≤ R_IN < R_OUT, got {s:?}"
+        ))),
+    }
 }
 
 fn parse_viewpoint(s: &str) -> CliResult<[f64; 3]> {
@@ -174,14 +195,15 @@ struct Detected {
     images: Vec<Option<GrayF32>>,
 }
 
-fn detect(paths: &[PathBuf], board: &BoardFile, keep_images: bool) -> CliResult<Detected> {
+fn detect(paths: &[PathBuf], board: &BoardFile, annulus: Option<[f64; 4]>, keep_images: bool) -> CliResult<Detected> {
+    let detector = DetectorOptions { annulus, ..Default::default() };
     let bar = omni_cli::progress(Some(paths.len() as u64), "detecting corners");
     let results: Vec<Result<(GrayF32, ImageCorners), String>> = paths
         .par_iter()
         .map(|p| {
             let img = load_gray(p)?;
             let name = p.display().to_string();
-            let found = detect_board(&img, board.inner_cols, board.inner_rows, &DetectorOptions::default());
+            let found = detect_board(&img, board.inner_cols, board.inner_rows, &detector);
             bar.inc(1);
             let entry = ImageCorners::from_detection(name, found);
             Ok((img, entry))
@@ -240,16 +262,17 @@ fn calibrate(args: &CalibArgs) -> CliResult {
         },
         None => omni_model::HyperbolicParams::paper(),
     };
+    let annulus = args.annulus.as_deref().map(parse_annulus).transpose()?;
     let detected = match &args.corners {
         Some(path) => Detected { corners: load_corners(path, &board)?, images: Vec::new() },
-        None => detect(&expand_images(&args.images)?, &board, args.overlay.is_some())?,
+        None => detect(&expand_images(&args.images)?, &board, annulus, args.overlay.is_some())?,
     };
     if let Some(path) = &args.save_corners {
         write_doc(path, &detected.corners)?;
     }
     let corners = &detected.corners;
     let obs = corners.observations(board.square_mm);
-    let opts = Options { model: args.model, huber_px: args.huber_px, mirror, ..Default::default() };
+    let opts = Options { model: args.model, huber_px: args.huber_px, mirror, annulus, ..Default::default() };
     let mut cal = receiver::calibrate(corners.width, corners.height, &obs, &opts).map_err(|e| {
         let reasons: Vec<String> =
             corners.images.iter().filter_map(|i| i.reason.as_ref().map(|r| format!("{}: {r}", i.name))).collect();

@@ -69,6 +69,8 @@ fn calibrates_the_real_images_exports_and_reimports() {
         .arg("ocam")
         .arg("--export-ocam")
         .arg(&txt)
+        .arg("--annulus")
+        .arg("375.5,239.5,20,300")
         .arg("-o")
         .arg(dir.path().join("ocam.json"))
         .output()
@@ -80,6 +82,9 @@ fn calibrates_the_real_images_exports_and_reimports() {
     let a: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("ocam.json")).unwrap()).unwrap();
     let b: serde_json::Value = serde_json::from_slice(&std::fs::read(&imported).unwrap()).unwrap();
     assert_eq!(b["model"]["kind"], "ocam");
+    // The fitted model is valid inside the given annulus.
+    assert_eq!(a["model"]["outer_radius_px"], 300.0);
+    assert_eq!(a["model"]["inner_radius_px"], 20.0);
     let (ca, cb) = (a["model"]["cx_px"].as_f64().unwrap(), b["model"]["cx_px"].as_f64().unwrap());
     assert!((ca - cb).abs() < 1e-5, "{ca} vs {cb}");
 }
@@ -130,5 +135,11 @@ fn wrong_board_size_and_unreadable_files_fail_without_output() {
     assert_eq!(out.status.code(), Some(2));
     let out = bin().arg("--board").arg(&board).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
+    // An annulus needs four numbers with 0 ≤ inner < outer radius.
+    for bad in ["1,2,3", "1,2,300,20", "1,2,-1,20", "a,b,c,d"] {
+        let out = bin().arg("--board").arg(&board).arg("--annulus").arg(bad).arg(&broken).output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "--annulus {bad}: {}", stderr(&out));
+        assert!(stderr(&out).contains("--annulus"), "{}", stderr(&out));
+    }
     assert!(!camera.exists());
 }

@@ -1,4 +1,4 @@
-use omni_geom::{Point3, Ray, Vector2};
+use omni_geom::{Point3, Ray, Vector2, Vector3};
 
 /// The region of the image that sees the scene through the mirror: an annulus around `centre`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -42,5 +42,73 @@ pub trait CameraModel: Send + Sync + std::fmt::Debug {
     fn in_image(&self, px: &Vector2<f64>) -> bool {
         let (w, h) = self.image_size();
         px.x >= -0.5 && px.y >= -0.5 && px.x <= w as f64 - 0.5 && px.y <= h as f64 - 0.5
+    }
+}
+
+/// What a generic central model (Mei, OCam) defines; [`CentralCamera`] adds what they share:
+/// finite-input and annulus checks, one viewpoint for every ray, the parameters precomputed once.
+pub trait CentralParams: Clone + std::fmt::Debug + Send + Sync {
+    /// Checks that the parameters are finite and meaningful; names the field at fault.
+    fn check(&self) -> Result<(), String>;
+    /// The intrinsics as the flat vector the maps below take (computed once per camera).
+    fn to_intrinsics(&self) -> Vec<f64>;
+    /// Image width and height (px).
+    fn size_px(&self) -> (u32, u32);
+    /// The single viewpoint (mm, world frame).
+    fn viewpoint(&self) -> Point3<f64>;
+    /// Centre (px) and inner/outer radius (px) of the annulus; outer 0 means the whole image.
+    fn annulus_px(&self) -> ([f64; 2], f64, f64);
+    /// Viewing direction (any length, camera axes) of a pixel, `None` outside the model's domain.
+    fn direction_of(&self, intrinsics: &[f64], px: &Vector2<f64>) -> Option<Vector3<f64>>;
+    /// Pixel of a viewing direction (any length, camera axes), `None` outside the model's domain.
+    fn pixel_of(&self, intrinsics: &[f64], dir: &Vector3<f64>) -> Option<Vector2<f64>>;
+}
+
+/// A generic central camera, ready to use ([`crate::MeiCamera`], [`crate::OcamCamera`]).
+#[derive(Debug, Clone)]
+pub struct CentralCamera<P> {
+    params: P,
+    intrinsics: Vec<f64>,
+}
+
+impl<P: CentralParams> CentralCamera<P> {
+    /// Builds the camera; fails with the name of an invalid field.
+    pub fn new(params: P) -> Result<Self, String> {
+        params.check()?;
+        let intrinsics = params.to_intrinsics();
+        Ok(CentralCamera { params, intrinsics })
+    }
+
+    pub fn params(&self) -> &P {
+        &self.params
+    }
+}
+
+impl<P: CentralParams> CameraModel for CentralCamera<P> {
+    fn image_size(&self) -> (u32, u32) {
+        self.params.size_px()
+    }
+
+    fn pixel_to_ray(&self, px: &Vector2<f64>) -> Option<Ray> {
+        if !px.x.is_finite() || !px.y.is_finite() || !self.in_image(px) || !self.mirror_circle().contains(px) {
+            return None;
+        }
+        Some(Ray::new(self.params.viewpoint(), self.params.direction_of(&self.intrinsics, px)?))
+    }
+
+    fn point_to_pixel(&self, p: &Point3<f64>) -> Option<Vector2<f64>> {
+        if !p.coords.iter().all(|x| x.is_finite()) {
+            return None;
+        }
+        let px = self.params.pixel_of(&self.intrinsics, &(p - self.params.viewpoint()))?;
+        (self.in_image(&px) && self.mirror_circle().contains(&px)).then_some(px)
+    }
+
+    fn mirror_circle(&self) -> MirrorCircle {
+        let (centre, inner, outer) = self.params.annulus_px();
+        let (w, h) = self.image_size();
+        // A model fitted without a known rim is valid over the whole image.
+        let outer = if outer > 0.0 { outer } else { (w as f64).hypot(h as f64) };
+        MirrorCircle { centre: Vector2::new(centre[0], centre[1]), inner_radius: inner, outer_radius: outer }
     }
 }

@@ -19,7 +19,7 @@ pub mod mei;
 pub mod ocam;
 mod transmitter;
 
-pub use camera::{CameraModel, MirrorCircle};
+pub use camera::{CameraModel, CentralCamera, CentralParams, MirrorCircle};
 pub use hyperbolic::{HyperbolicCamera, HyperbolicParams};
 pub use mei::{MeiCamera, MeiParams};
 pub use ocam::{OcamCamera, OcamParams};

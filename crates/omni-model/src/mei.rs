@@ -16,9 +16,9 @@
 //! The model has no metric scale: rays start at `viewpoint_mm` (default the world origin; the
 //! exact hyperbolic camera's viewpoint is F = (0, 0, 2c)).
 
-use crate::camera::{CameraModel, MirrorCircle};
+use crate::camera::{CentralCamera, CentralParams};
 use crate::hyperbolic::HyperbolicParams;
-use omni_geom::{Point3, Ray, Vector2, Vector3};
+use omni_geom::{Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the Mei model (what `camera.json` stores for kind `mei`).
@@ -206,61 +206,36 @@ pub fn mei_unproject(p: &[f64], px: &Vector2<f64>) -> Option<Vector3<f64>> {
 }
 
 /// The Mei camera, ready to use.
-#[derive(Debug, Clone)]
-pub struct MeiCamera {
-    params: MeiParams,
-    vector: [f64; 9],
-}
+pub type MeiCamera = CentralCamera<MeiParams>;
 
-impl MeiCamera {
-    /// Builds the camera; fails with the name of an invalid field.
-    pub fn new(params: MeiParams) -> Result<Self, String> {
-        params.validate()?;
-        let vector = params.to_vector();
-        Ok(MeiCamera { params, vector })
+impl CentralParams for MeiParams {
+    fn check(&self) -> Result<(), String> {
+        self.validate()
     }
-
-    pub fn params(&self) -> &MeiParams {
-        &self.params
+    fn to_intrinsics(&self) -> Vec<f64> {
+        self.to_vector().to_vec()
     }
-
+    fn size_px(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
     fn viewpoint(&self) -> Point3<f64> {
-        Point3::from(Vector3::from(self.params.viewpoint_mm))
+        Point3::from(Vector3::from(self.viewpoint_mm))
     }
-}
-
-impl CameraModel for MeiCamera {
-    fn image_size(&self) -> (u32, u32) {
-        (self.params.width, self.params.height)
+    fn annulus_px(&self) -> ([f64; 2], f64, f64) {
+        ([self.cx_px, self.cy_px], self.inner_radius_px, self.outer_radius_px)
     }
-
-    fn pixel_to_ray(&self, px: &Vector2<f64>) -> Option<Ray> {
-        if !px.x.is_finite() || !px.y.is_finite() || !self.in_image(px) || !self.mirror_circle().contains(px) {
-            return None;
-        }
-        let d = mei_unproject(&self.vector, px)?;
-        Some(Ray::new(self.viewpoint(), d))
+    fn direction_of(&self, intrinsics: &[f64], px: &Vector2<f64>) -> Option<Vector3<f64>> {
+        mei_unproject(intrinsics, px)
     }
-
-    fn point_to_pixel(&self, p: &Point3<f64>) -> Option<Vector2<f64>> {
-        if !p.coords.iter().all(|x| x.is_finite()) {
-            return None;
-        }
-        let px = mei_project(&self.vector, &(p - self.viewpoint()))?;
-        (self.in_image(&px) && self.mirror_circle().contains(&px)).then_some(px)
-    }
-
-    fn mirror_circle(&self) -> MirrorCircle {
-        let p = &self.params;
-        let outer = if p.outer_radius_px > 0.0 { p.outer_radius_px } else { (p.width as f64).hypot(p.height as f64) };
-        MirrorCircle { centre: Vector2::new(p.cx_px, p.cy_px), inner_radius: p.inner_radius_px, outer_radius: outer }
+    fn pixel_of(&self, intrinsics: &[f64], dir: &Vector3<f64>) -> Option<Vector2<f64>> {
+        mei_project(intrinsics, dir)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::HyperbolicCamera;
+    use crate::{CameraModel, HyperbolicCamera};
 
     #[test]
     fn hyperbolic_camera_is_a_mei_model() {

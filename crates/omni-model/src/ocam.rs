@@ -14,8 +14,8 @@
 //! (bracketed Newton), so it is the true inverse; the inverse polynomial ρ(θ) that OCamCalib
 //! stores is only used for import/export ([`OcamParams::fit_inverse_poly`]).
 
-use crate::camera::{CameraModel, MirrorCircle};
-use omni_geom::{Point3, Ray, Vector2, Vector3};
+use crate::camera::{CentralCamera, CentralParams};
+use omni_geom::{Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the polynomial model (what `camera.json` stores for kind `ocam`).
@@ -210,60 +210,36 @@ pub fn ocam_project(v: &[f64], dir: &Vector3<f64>, rho_max: f64) -> Option<Vecto
 }
 
 /// The polynomial camera, ready to use.
-#[derive(Debug, Clone)]
-pub struct OcamCamera {
-    params: OcamParams,
-    vector: Vec<f64>,
-}
+pub type OcamCamera = CentralCamera<OcamParams>;
 
-impl OcamCamera {
-    /// Builds the camera; fails with the name of an invalid field.
-    pub fn new(params: OcamParams) -> Result<Self, String> {
-        params.validate()?;
-        let vector = ocam_vector(&params);
-        Ok(OcamCamera { params, vector })
+impl CentralParams for OcamParams {
+    fn check(&self) -> Result<(), String> {
+        self.validate()
     }
-
-    pub fn params(&self) -> &OcamParams {
-        &self.params
+    fn to_intrinsics(&self) -> Vec<f64> {
+        ocam_vector(self)
     }
-
+    fn size_px(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
     fn viewpoint(&self) -> Point3<f64> {
-        Point3::from(Vector3::from(self.params.viewpoint_mm))
+        Point3::from(Vector3::from(self.viewpoint_mm))
     }
-}
-
-impl CameraModel for OcamCamera {
-    fn image_size(&self) -> (u32, u32) {
-        (self.params.width, self.params.height)
+    fn annulus_px(&self) -> ([f64; 2], f64, f64) {
+        ([self.cx_px, self.cy_px], self.inner_radius_px, self.outer_radius_px)
     }
-
-    fn pixel_to_ray(&self, px: &Vector2<f64>) -> Option<Ray> {
-        if !px.x.is_finite() || !px.y.is_finite() || !self.in_image(px) || !self.mirror_circle().contains(px) {
-            return None;
-        }
-        let d = ocam_unproject(&self.vector, px)?;
-        Some(Ray::new(self.viewpoint(), d))
+    fn direction_of(&self, intrinsics: &[f64], px: &Vector2<f64>) -> Option<Vector3<f64>> {
+        ocam_unproject(intrinsics, px)
     }
-
-    fn point_to_pixel(&self, p: &Point3<f64>) -> Option<Vector2<f64>> {
-        if !p.coords.iter().all(|x| x.is_finite()) {
-            return None;
-        }
-        let px = ocam_project(&self.vector, &(p - self.viewpoint()), self.params.max_rho())?;
-        (self.in_image(&px) && self.mirror_circle().contains(&px)).then_some(px)
-    }
-
-    fn mirror_circle(&self) -> MirrorCircle {
-        let p = &self.params;
-        let outer = if p.outer_radius_px > 0.0 { p.outer_radius_px } else { (p.width as f64).hypot(p.height as f64) };
-        MirrorCircle { centre: Vector2::new(p.cx_px, p.cy_px), inner_radius: p.inner_radius_px, outer_radius: outer }
+    fn pixel_of(&self, intrinsics: &[f64], dir: &Vector3<f64>) -> Option<Vector2<f64>> {
+        ocam_project(intrinsics, dir, self.max_rho())
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::CameraModel;
 
     fn sample() -> OcamParams {
         // Coefficients of the size OCamCalib finds for a 752 × 480 mirror camera.

@@ -270,9 +270,17 @@ mod tests {
             pts.push(BoardPoint { point: p, ..pts[i] });
         }
         let fit = fit_frame_plane(&pts, 2, &FramePlaneOptions::default()).unwrap();
+        // The spurious points must not move the plane: it is the least-squares plane of the good
+        // points alone (up to the two noisiest of them, which the rejection may drop).
+        let clean: Vec<Point3<f64>> = pts[..good].iter().map(|p| p.point).collect();
+        let oracle = fit_plane(&clean).unwrap().plane;
+        let to_oracle = fit.plane.angle_to(&oracle).to_degrees();
+        assert!(to_oracle < 0.001, "normal {to_oracle}° from the good points' own plane");
+        // And that plane is as close to the truth as the noise allows: 200 points with 0.1 mm
+        // noise spread ±170 mm and ±86 mm about their centroid give σ ≈ 0.0053° for the normal
+        // (0.0058° measured); the bound is 4σ.
         let angle = fit.plane.angle_to(&truth).to_degrees();
-        // 200 points with 0.1 mm noise over ~300 mm: the normal to a few thousandths of a degree.
-        assert!(angle < 0.005, "normal error {angle}°");
+        assert!(angle < 0.02, "normal error {angle}°");
         assert!(
             (fit.plane.signed_distance(&Point3::new(500.0, 0.0, -50.0))
                 - truth.signed_distance(&Point3::new(500.0, 0.0, -50.0)))

@@ -293,7 +293,10 @@ fn both_lasers_are_calibrated_from_boards_on_both_sides() {
         boards.push(PlacedBoard { name: format!("{}-back", b.name), pose: turn * b.pose, ..b });
     }
     let mut rng = SplitMix64::new(9);
-    let alphas: Vec<f64> = (0..=15).map(|i| 2.0 * i as f64).collect();
+    // α every 1° on two facets: each facet's own errors (pitch, tilt, radius) are fitted from its
+    // 31 frames. With 2° steps (16 frames a facet) the stripe noise alone reached 0.0108° on two of
+    // four seeds; with 1° the worst over seeds 1, 2, 3, 9 is 0.0077° and 0.031 mm.
+    let alphas: Vec<f64> = (0..=30).map(|i| i as f64).collect();
     let mut frames = vec![];
     for k in [0, 3] {
         for &a in &alphas {
@@ -320,7 +323,7 @@ fn both_lasers_are_calibrated_from_boards_on_both_sides() {
             worst.0,
             worst.1
         );
-        assert!(own.len() >= 24, "laser {laser}: {} frames", own.len());
+        assert!(own.len() >= 50, "laser {laser}: {} frames", own.len());
         assert!(worst.0 < 0.01 && worst.1 < 0.05, "laser {laser}: normal {}°, offset {} mm", worst.0, worst.1);
     }
     assert!(cal.report.model.parameters.iter().any(|e| e.name.contains("lasers[1] fan normal turn")));

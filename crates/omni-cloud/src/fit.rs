@@ -1,6 +1,7 @@
 //! Primitive fitting for evaluation: RANSAC (to find the shape among outliers), then geometric
-//! least squares on the inliers. Plane, sphere and cylinder use `omni_geom::fit`; the cone fit
-//! lives here.
+//! least squares on the inliers. Plane, sphere and cylinder are `omni_geom::fit`'s fits; the cone
+//! fit lives here, built from the same pieces (centroid, hemisphere axis search, tilted-axis
+//! parametrisation).
 //!
 //! Signed distances are positive outside a solid (away from a sphere's centre or a cylinder's
 //! or cone's axis) and, for a plane, on the side of the world origin (the sensor), so a
@@ -9,7 +10,9 @@
 use crate::rng::SplitMix64;
 use nalgebra::{Matrix5, Point3, Unit, Vector3, Vector5};
 use omni_geom::Plane;
-use omni_geom::fit::{fit_cylinder, fit_plane, fit_sphere, orthonormal_basis};
+use omni_geom::fit::{
+    centroid, fit_cylinder, fit_plane, fit_sphere, hemisphere_directions, orthonormal_basis, tilted_axis,
+};
 use omni_geom::lm::{self, Problem};
 
 /// Which primitive to fit.
@@ -221,7 +224,7 @@ struct ConeProblem<'a> {
 impl ConeProblem<'_> {
     /// Params: apex (3), axis tilt (tu, tv) about a0, half-angle (radians).
     fn shape(&self, p: &[f64]) -> (Point3<f64>, Vector3<f64>, f64) {
-        let axis = (self.a0 + self.u * p[3] + self.v * p[4]).normalize();
+        let axis = tilted_axis(&self.a0, &self.u, &self.v, p[3], p[4]);
         (Point3::new(p[0], p[1], p[2]), axis, p[5])
     }
 }
@@ -252,7 +255,7 @@ pub fn fit_cone(points: &[Point3<f64>], hint: Option<&Shape>) -> Option<Shape> {
     if points.len() < 7 || points.iter().any(|p| !p.coords.iter().all(|x| x.is_finite())) {
         return None;
     }
-    let c = Point3::from(points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / points.len() as f64);
+    let c = centroid(points);
     let (apex0, axis0, th0) = match hint {
         Some(Shape::Cone { apex, axis, half_angle }) => (*apex, axis.into_inner(), *half_angle),
         _ => cone_initial_guess(points, &c)?,
@@ -276,18 +279,11 @@ fn cone_initial_guess(points: &[Point3<f64>], c: &Point3<f64>) -> Option<(Point3
     let step = (points.len() / 1500).max(1);
     let sample: Vec<Point3<f64>> = points.iter().step_by(step).copied().collect();
     let mut best: Option<(f64, Point3<f64>, Vector3<f64>, f64)> = None;
-    let n_el = 24;
-    for i in 0..=n_el {
-        let el = std::f64::consts::FRAC_PI_2 * i as f64 / n_el as f64;
-        let n_az = ((4.0 * n_el as f64 * el.cos()).ceil() as usize).max(1);
-        for j in 0..n_az {
-            let az = std::f64::consts::PI * j as f64 / n_az as f64;
-            let a = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-            if let Some((rms, apex, axis, th)) = cone_for_axis(&sample, c, &a)
-                && best.is_none_or(|b| rms < b.0)
-            {
-                best = Some((rms, apex, axis, th));
-            }
+    for a in hemisphere_directions(24) {
+        if let Some((rms, apex, axis, th)) = cone_for_axis(&sample, c, &a)
+            && best.is_none_or(|b| rms < b.0)
+        {
+            best = Some((rms, apex, axis, th));
         }
     }
     best.map(|(_, apex, axis, th)| (apex, axis, th))
@@ -406,9 +402,16 @@ mod tests {
                     + Vector3::new(th.cos() * ph.cos(), th.sin() * ph.cos(), ph.sin()) * (75.0 + rng.normal() * sigma)
             })
             .collect();
+        // RANSAC must find the same sphere among the outliers as least squares on the clean cap;
+        // the clean fit itself scatters with the noise: over seeds 1–10 of this 69° × 57° cap
+        // (σ 0.3 mm, 800 points) the radius error spans −0.27..+0.36 mm (σ ≈ 0.2 mm).
+        let Some(Shape::Sphere { center: c0, radius: r0 }) = least_squares(ShapeKind::Sphere, &sphere_pts, None) else {
+            panic!()
+        };
+        assert!((r0 - 75.0).abs() < 0.6 && (c0 - centre).norm() < 0.8, "{c0} {r0}");
         let f = fit_shape(ShapeKind::Sphere, &with_outliers(sphere_pts, &mut rng), &FitOptions::default()).unwrap();
         let Shape::Sphere { center, radius } = f.shape else { panic!() };
-        assert!((radius - 75.0).abs() < 0.1 && (center - centre).norm() < 0.2, "{center} {radius}");
+        assert!((radius - r0).abs() < 0.01 && (center - c0).norm() < 0.02, "{center} {radius} vs {c0} {r0}");
 
         let axis = Vector3::new(0.0, 0.1, 1.0).normalize();
         let (u, v) = orthonormal_basis(&axis);

@@ -17,16 +17,21 @@ pub struct PlaneFit {
     pub planarity_ratio: f64,
 }
 
+/// Mean of the points (the origin for none).
+pub fn centroid(points: &[Point3<f64>]) -> Point3<f64> {
+    let n = points.len().max(1) as f64;
+    Point3::from(points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n)
+}
+
 /// Centroid and scatter matrix of points.
 fn centroid_scatter(points: &[Point3<f64>]) -> (Point3<f64>, Matrix3<f64>) {
-    let n = points.len() as f64;
-    let c = points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / n;
+    let c = centroid(points);
     let mut s = Matrix3::zeros();
     for p in points {
-        let d = p.coords - c;
+        let d = p - c;
         s += d * d.transpose();
     }
-    (Point3::from(c), s)
+    (c, s)
 }
 
 /// Total least-squares plane through ≥ 3 points (normal = smallest eigenvector of the scatter).
@@ -138,6 +143,35 @@ pub fn orthonormal_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     (u, v)
 }
 
+/// Coordinates of `points` relative to `origin` in the plane spanned by the unit vectors `u`, `v`
+/// (their projection along the third axis).
+pub fn project_2d(points: &[Point3<f64>], origin: &Point3<f64>, u: &Vector3<f64>, v: &Vector3<f64>) -> Vec<(f64, f64)> {
+    points.iter().map(|p| ((p - origin).dot(u), (p - origin).dot(v))).collect()
+}
+
+/// Unit directions covering the upper hemisphere (z ≥ 0, azimuth in [0, π): each axis once up to
+/// sign) on `n_el + 1` elevation rings, about 90°/`n_el` apart: the candidates of a coarse search
+/// for an axis direction.
+pub fn hemisphere_directions(n_el: usize) -> Vec<Vector3<f64>> {
+    let mut out = Vec::new();
+    for i in 0..=n_el {
+        let el = std::f64::consts::FRAC_PI_2 * i as f64 / n_el.max(1) as f64;
+        let n_az = ((4.0 * n_el as f64 * el.cos()).ceil() as usize).max(1);
+        for j in 0..n_az {
+            let az = std::f64::consts::PI * j as f64 / n_az as f64;
+            out.push(Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()));
+        }
+    }
+    out
+}
+
+/// The axis direction `a0` tilted by `tu`, `tv` along its orthonormal complement `u`, `v`
+/// (normalised): the two-parameter axis of the cylinder and cone least-squares problems, free
+/// of the sign and pole singularities of angles.
+pub fn tilted_axis(a0: &Vector3<f64>, u: &Vector3<f64>, v: &Vector3<f64>, tu: f64, tv: f64) -> Vector3<f64> {
+    (a0 + u * tu + v * tv).normalize()
+}
+
 /// Kåsa algebraic circle fit in 2D; returns (centre, radius, rms of radial residuals).
 pub fn fit_circle_2d(pts: &[(f64, f64)]) -> Option<((f64, f64), f64, f64)> {
     if pts.len() < 3 {
@@ -171,7 +205,7 @@ impl CylinderProblem<'_> {
     /// Params: (tilt_u, tilt_v, offset_u, offset_v, radius): axis = normalize(a0 + tu·u + tv·v),
     /// through origin + ou·u + ov·v.
     fn axis(&self, p: &[f64]) -> (Vector3<f64>, Vector3<f64>) {
-        let dir = (self.a0 + self.u * p[0] + self.v * p[1]).normalize();
+        let dir = tilted_axis(&self.a0, &self.u, &self.v, p[0], p[1]);
         (self.origin + self.u * p[2] + self.v * p[3], dir)
     }
 }
@@ -204,9 +238,8 @@ pub fn fit_cylinder(points: &[Point3<f64>], axis_hint: Option<Vector3<f64>>) -> 
         _ => search_cylinder_axis(points)?,
     };
     let (u, v) = orthonormal_basis(&a0);
-    let (c, _) = centroid_scatter(points);
-    let proj: Vec<(f64, f64)> = points.iter().map(|p| ((p - c).dot(&u), (p - c).dot(&v))).collect();
-    let ((cu, cv), r0, _) = fit_circle_2d(&proj)?;
+    let c = centroid(points);
+    let ((cu, cv), r0, _) = fit_circle_2d(&project_2d(points, &c, &u, &v))?;
     let problem = CylinderProblem { points, origin: c.coords, a0, u, v };
     let rep = lm::minimize(&problem, &[0.0, 0.0, cu, cv, r0], &lm::Options::default());
     if !rep.params.iter().all(|x| x.is_finite()) {
@@ -226,22 +259,14 @@ pub fn fit_cylinder(points: &[Point3<f64>], axis_hint: Option<Vector3<f64>>) -> 
 fn search_cylinder_axis(points: &[Point3<f64>]) -> Option<Vector3<f64>> {
     let step = (points.len() / 2000).max(1);
     let sample: Vec<Point3<f64>> = points.iter().step_by(step).copied().collect();
-    let (c, _) = centroid_scatter(&sample);
+    let c = centroid(&sample);
     let mut best: Option<(f64, Vector3<f64>)> = None;
-    let n_el = 20;
-    for i in 0..=n_el {
-        let el = std::f64::consts::FRAC_PI_2 * i as f64 / n_el as f64;
-        let n_az = ((4.0 * n_el as f64 * el.cos()).ceil() as usize).max(1);
-        for j in 0..n_az {
-            let az = std::f64::consts::PI * j as f64 / n_az as f64;
-            let a = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-            let (u, v) = orthonormal_basis(&a);
-            let proj: Vec<(f64, f64)> = sample.iter().map(|p| ((p - c).dot(&u), (p - c).dot(&v))).collect();
-            if let Some((_, _, rms)) = fit_circle_2d(&proj)
-                && best.is_none_or(|(b, _)| rms < b)
-            {
-                best = Some((rms, a));
-            }
+    for a in hemisphere_directions(20) {
+        let (u, v) = orthonormal_basis(&a);
+        if let Some((_, _, rms)) = fit_circle_2d(&project_2d(&sample, &c, &u, &v))
+            && best.is_none_or(|(b, _)| rms < b)
+        {
+            best = Some((rms, a));
         }
     }
     best.map(|(_, a)| a)

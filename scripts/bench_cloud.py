@@ -3,7 +3,9 @@
 
 Generates a room-like cloud (points on the walls of a 4 x 3 x 2.5 m box, 0.3 mm noise, plus 0.5 %
 scattered outliers), writes it as binary PLY, then times on that file:
-  * voxel-grid downsampling (omniscan anchored like Open3D: min bound - size/2),
+  * voxel-grid downsampling at each --voxel size (omniscan anchored like Open3D: min bound -
+    size/2; both single-threaded; best of three, as wall time and as the thread's CPU time, which
+    is what to compare on a machine shared with other work),
   * statistical outlier removal (Open3D remove_statistical_outlier(nb_neighbors, std_ratio)),
   * radius outlier removal (Open3D remove_radius_outlier(nb_points, radius)),
   * binary PLY write,
@@ -12,7 +14,7 @@ and checks that the kept sets are identical (same point indices) and that the vo
 Needs: numpy and open3d (`pip install open3d`; on Debian its wheel also needs the system package
 libusb-1.0-0). Without open3d the script still times omniscan and says so.
 
-Usage: scripts/bench_cloud.py [--points 2000000] [--voxel 10] [--k 20] [--std-ratio 2.0]
+Usage: scripts/bench_cloud.py [--points 2000000] [--voxel 5,10,50] [--k 20] [--std-ratio 2.0]
                               [--nb-points 8] [--radius 15] [--keep DIR]
 """
 
@@ -65,11 +67,15 @@ def run_open3d(path, a, out):
     t = time.perf_counter()
     pcd = o3d.io.read_point_cloud(str(path))
     res = {"read_s": time.perf_counter() - t}
-    t = time.perf_counter()
-    down = pcd.voxel_down_sample(a.voxel)
-    res["voxel_s"] = time.perf_counter() - t
-    res["voxel_count"] = len(down.points)
-    res["voxel_points"] = np.asarray(down.points)
+    res["voxel"] = []
+    for size in a.voxel:
+        wall, cpu = float("inf"), float("inf")
+        for _ in range(3):
+            t, c = time.perf_counter(), time.thread_time()
+            down = pcd.voxel_down_sample(size)
+            wall, cpu = min(wall, time.perf_counter() - t), min(cpu, time.thread_time() - c)
+        res["voxel"].append({"size": size, "s": wall, "cpu_s": cpu, "count": len(down.points),
+                             "points": np.asarray(down.points)})
     t = time.perf_counter()
     _, sor_idx = pcd.remove_statistical_outlier(nb_neighbors=a.k, std_ratio=a.std_ratio)
     res["sor_s"] = time.perf_counter() - t
@@ -98,7 +104,8 @@ def read_xyz(path):
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--points", type=int, default=2_000_000)
-    p.add_argument("--voxel", type=float, default=10.0)
+    p.add_argument("--voxel", type=lambda s: [float(v) for v in s.split(",")], default=[5.0, 10.0, 50.0],
+                   help="comma-separated voxel sizes (mm)")
     p.add_argument("--k", type=int, default=20)
     p.add_argument("--std-ratio", type=float, default=2.0)
     p.add_argument("--nb-points", type=int, default=8)
@@ -112,7 +119,7 @@ def main():
     write_ply(cloud_path, room_cloud(a.points, 1))
     exe = build_ours(repo)
     ours_out = subprocess.run(
-        [str(exe), str(cloud_path), str(out), str(a.voxel), str(a.k), str(a.std_ratio), str(a.nb_points), str(a.radius)],
+        [str(exe), str(cloud_path), str(out), ",".join(str(v) for v in a.voxel), str(a.k), str(a.std_ratio), str(a.nb_points), str(a.radius)],
         check=True,
         capture_output=True,
         text=True,
@@ -129,7 +136,31 @@ def main():
     print(f"cloud: {n} points, voxel {a.voxel} mm, SOR k={a.k} std_ratio={a.std_ratio}, "
           f"ROR nb_points={a.nb_points} radius={a.radius} mm; omniscan threads: {ours['threads']}")
     print(f"{'operation':<22}{'omniscan s':>12}{'Mpts/s':>9}{'Open3D s':>12}{'Mpts/s':>9}{'speed-up':>10}  same result")
-    for op, key in [("voxel downsample", "voxel"), ("statistical outlier", "sor"), ("radius outlier", "ror"),
+    for v, mine_v in enumerate(ours["voxel"]):
+        size = mine_v["size"]
+        for clock, label in [("s", "wall"), ("cpu_s", "cpu")]:
+            op = f"voxel {size:g} mm ({label})"
+            ts = mine_v[clock]
+            if o3d is None:
+                print(f"{op:<22}{ts:>12.3f}{rate(ts):>9.1f}")
+                continue
+            theirs_v = o3d["voxel"][v]
+            to = theirs_v[clock]
+            same = ""
+            if clock == "s":
+                mine = read_xyz(out / f"voxel_{v}.ply")
+                theirs = theirs_v["points"]
+                # Match centroids by the voxel they lie in (Open3D's grid: min bound - size/2).
+                origin = read_xyz(cloud_path).min(axis=0) - size / 2.0
+                key = lambda c: [tuple(x) for x in np.floor((c - origin) / size).astype(np.int64)]
+                ours_by_voxel = dict(zip(key(mine), mine))
+                theirs_by_voxel = dict(zip(key(theirs), theirs))
+                common = ours_by_voxel.keys() & theirs_by_voxel.keys()
+                dev = max((float(np.abs(ours_by_voxel[k] - theirs_by_voxel[k]).max()) for k in common), default=0.0)
+                same = (f"{len(mine)} vs {len(theirs)} voxels, {len(common)} shared, max centroid difference "
+                        f"{dev:.1e} mm (ours written as float32)")
+            print(f"{op:<22}{ts:>12.3f}{rate(ts):>9.1f}{to:>12.3f}{rate(to):>9.1f}{to / ts:>9.2f}x  {same}")
+    for op, key in [("statistical outlier", "sor"), ("radius outlier", "ror"),
                     ("PLY write (binary)", "write"), ("PLY read (binary)", "read")]:
         ts = ours[f"{key}_s"]
         if o3d is None:
@@ -143,18 +174,6 @@ def main():
             ref[o3d[f"{key}_idx"]] = True
             diff = int(np.count_nonzero(mask != ref))
             same = f"kept {int(mask.sum())} vs {int(ref.sum())}, {diff} points differ"
-        elif key == "voxel":
-            mine = read_xyz(out / "voxel.ply")
-            theirs = o3d["voxel_points"]
-            # Match centroids by the voxel they lie in (Open3D's grid: min bound - size/2).
-            origin = read_xyz(cloud_path).min(axis=0) - a.voxel / 2.0
-            key = lambda c: [tuple(v) for v in np.floor((c - origin) / a.voxel).astype(np.int64)]
-            ours_by_voxel = dict(zip(key(mine), mine))
-            theirs_by_voxel = dict(zip(key(theirs), theirs))
-            common = ours_by_voxel.keys() & theirs_by_voxel.keys()
-            dev = max((float(np.abs(ours_by_voxel[k] - theirs_by_voxel[k]).max()) for k in common), default=0.0)
-            same = (f"{len(mine)} vs {len(theirs)} voxels, {len(common)} shared, max centroid difference "
-                    f"{dev:.1e} mm (ours written as float32)")
         print(f"{op:<22}{ts:>12.3f}{rate(ts):>9.1f}{to:>12.3f}{rate(to):>9.1f}{to / ts:>9.2f}x  {same}")
     if not a.keep:
         for f in out.iterdir():

@@ -1,10 +1,13 @@
 //! Times omniscan's cloud operations on a PLY file, for the side-by-side comparison with Open3D
 //! in `scripts/bench_cloud.py` (which runs Open3D on the same file and parameters).
 //!
-//! Usage: `bench_filters CLOUD.ply OUT_DIR VOXEL K STD_RATIO NB_POINTS RADIUS`
+//! Usage: `bench_filters CLOUD.ply OUT_DIR VOXELS K STD_RATIO NB_POINTS RADIUS`, VOXELS a
+//! comma-separated list of voxel sizes (mm).
 //! Prints one JSON object with the timings (s) and counts; writes `sor_mask.u8` and
-//! `ror_mask.u8` (one byte per input point, 1 = kept), `voxel.ply` (Open3D's grid anchoring)
-//! and `written.ply` (PLY write timing) into OUT_DIR.
+//! `ror_mask.u8` (one byte per input point, 1 = kept), `voxel_<i>.ply` (i-th size, Open3D's grid
+//! anchoring) and `written.ply` (PLY write timing) into OUT_DIR. Voxel downsampling (single
+//! thread) is timed three times, best kept, as wall time and as the thread's CPU time (from
+//! /proc/thread-self/schedstat, so other processes on a busy machine do not count).
 
 use omni_cloud::filter::{radius_outlier_mask, statistical_outlier_mask, voxel_downsample, voxel_origin_open3d};
 use omni_formats::ply::{Encoding, read_ply, write_ply};
@@ -17,16 +20,30 @@ fn main() -> Result<(), String> {
         return Err("usage: bench_filters CLOUD.ply OUT_DIR VOXEL K STD_RATIO NB_POINTS RADIUS".into());
     }
     let num = |i: usize| args[i].parse::<f64>().map_err(|e| format!("argument {i}: {e}"));
-    let (voxel, k, ratio, nb, radius) = (num(3)?, num(4)? as usize, num(5)?, num(6)? as usize, num(7)?);
+    let voxels: Vec<f64> =
+        args[3].split(',').map(|v| v.parse::<f64>().map_err(|e| format!("VOXELS: {e}"))).collect::<Result<_, _>>()?;
+    let (k, ratio, nb, radius) = (num(4)? as usize, num(5)?, num(6)? as usize, num(7)?);
     let out = PathBuf::from(&args[2]);
     let t = Instant::now();
     let cloud = read_ply(&PathBuf::from(&args[1])).map_err(|e| e.to_string())?;
     let read_s = t.elapsed().as_secs_f64();
 
-    let t = Instant::now();
-    let origin = voxel_origin_open3d(&cloud.positions, voxel);
-    let down = voxel_downsample(&cloud, voxel, origin)?;
-    let voxel_s = t.elapsed().as_secs_f64();
+    let mut voxel_json = Vec::new();
+    for (v, &voxel) in voxels.iter().enumerate() {
+        let (mut wall, mut cpu, mut down) = (f64::INFINITY, f64::INFINITY, None);
+        for _ in 0..3 {
+            let (t, c) = (Instant::now(), thread_cpu_s());
+            let origin = voxel_origin_open3d(&cloud.positions, voxel);
+            down = Some(voxel_downsample(&cloud, voxel, origin)?);
+            wall = wall.min(t.elapsed().as_secs_f64());
+            cpu = cpu.min(thread_cpu_s() - c);
+        }
+        let down = down.ok_or("no voxel run")?;
+        let count = down.len();
+        write_ply(&out.join(format!("voxel_{v}.ply")), &down, Encoding::BinaryLittleEndian)
+            .map_err(|e| e.to_string())?;
+        voxel_json.push(format!("{{\"size\":{voxel},\"s\":{wall},\"cpu_s\":{cpu},\"count\":{count}}}"));
+    }
 
     let t = Instant::now();
     let sor = statistical_outlier_mask(&cloud.positions, k, ratio)?;
@@ -40,18 +57,25 @@ fn main() -> Result<(), String> {
     write_ply(&out.join("written.ply"), &cloud, Encoding::BinaryLittleEndian).map_err(|e| e.to_string())?;
     let write_s = t.elapsed().as_secs_f64();
 
-    write_ply(&out.join("voxel.ply"), &down, Encoding::BinaryLittleEndian).map_err(|e| e.to_string())?;
     let bytes = |m: &[bool]| m.iter().map(|&b| b as u8).collect::<Vec<u8>>();
     std::fs::write(out.join("sor_mask.u8"), bytes(&sor)).map_err(|e| e.to_string())?;
     std::fs::write(out.join("ror_mask.u8"), bytes(&ror)).map_err(|e| e.to_string())?;
     let kept = |m: &[bool]| m.iter().filter(|&&b| b).count();
     println!(
-        "{{\"points\":{},\"threads\":{},\"read_s\":{read_s},\"voxel_s\":{voxel_s},\"voxel_count\":{},\"sor_s\":{sor_s},\"sor_kept\":{},\"ror_s\":{ror_s},\"ror_kept\":{},\"write_s\":{write_s}}}",
+        "{{\"points\":{},\"threads\":{},\"read_s\":{read_s},\"voxel\":[{}],\"sor_s\":{sor_s},\"sor_kept\":{},\"ror_s\":{ror_s},\"ror_kept\":{},\"write_s\":{write_s}}}",
         cloud.len(),
         rayon::current_num_threads(),
-        down.len(),
+        voxel_json.join(","),
         kept(&sor),
         kept(&ror)
     );
     Ok(())
+}
+
+/// CPU time of the calling thread (s), or NaN where /proc does not provide it.
+fn thread_cpu_s() -> f64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
+        .map_or(f64::NAN, |ns| ns * 1e-9)
 }

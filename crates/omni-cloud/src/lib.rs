@@ -33,5 +33,6 @@ pub mod ply_stream;
 pub mod render;
 pub use omni_geom::rng;
 pub mod triangulate;
+pub mod voxel;
 
 pub use omni_formats::ply::PointCloud;

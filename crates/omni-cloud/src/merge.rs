@@ -2,7 +2,8 @@
 //! voxel grid, then statistical and radius outlier removal, in that order.
 //!
 //! Memory: inputs are visited point by point and never held whole. With `voxel` set, points
-//! go straight into the voxel accumulator (memory grows with occupied voxels); otherwise the
+//! go into the streaming voxel grid ([`crate::voxel::VoxelGrid`]: one chunk of 2²¹ points plus
+//! the occupied voxels' sums, so memory grows with occupied voxels); otherwise the
 //! kept points are stored once (positions f64 + f32 scalars) and outlier removal filters that
 //! one copy in place.
 
@@ -185,7 +186,7 @@ impl Merger {
         let mut cloud = match self.sink.take() {
             None => return Err("no input points".into()),
             Some(Sink::Points(c)) => c,
-            Some(Sink::Voxels(g)) => g.finish(),
+            Some(Sink::Voxels(g)) => g.finish()?,
         };
         self.stats.after_voxel = cloud.len() as u64;
         if let Some((k, ratio)) = self.opts.statistical {

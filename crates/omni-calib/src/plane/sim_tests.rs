@@ -129,14 +129,14 @@ fn rendered_rig(sensor: &Sensor, rig: &Rig) -> RenderedRig {
     (frames, truths, gray)
 }
 
-/// A camera calibrated by `omni_calib::receiver` from the true corner pixels of `count` random
-/// 9 × 6 boards (30 mm, the simulator's board poses and visibility) plus Gaussian noise of
-/// `noise_px`: the rendered boards' detection error without the rendering cost. Returns the
-/// camera and the corner observations used.
+/// A camera calibrated by `omni_calib::receiver` from the true corner pixels of `count` 9 × 6
+/// boards (30 mm) placed as a careful user places them ([`omni_simulator::calibration_board_poses`]:
+/// close boards spread over the whole mirror; the simulator's visibility) plus Gaussian noise of
+/// `noise_px`: the rendered boards' detection error without the rendering cost.
 fn projected_receiver_camera(sensor: &Sensor, count: usize, noise_px: f64, seed: u64) -> Box<dyn CameraModel> {
-    use omni_simulator::{Scene, board_corners, board_object, corner_pixels, random_board_poses};
+    use omni_simulator::{Scene, board_corners, board_object, calibration_board_poses, corner_pixels};
     let board = BoardFile::new(9, 6, 30.0);
-    let poses = random_board_poses(sensor, &board, count, seed).unwrap();
+    let poses = calibration_board_poses(sensor, &board, count, seed).unwrap();
     let mut rng = omni_simulator::rng::SplitMix64::new(seed);
     let grid = board_corners(board.inner_cols, board.inner_rows, board.square_mm);
     let obs: Vec<crate::receiver::Observation> = poses
@@ -308,6 +308,21 @@ fn calibrate_with_camera(sensor: &Sensor, camera: &dyn CameraModel, what: &str, 
         let rig_file = omni_formats::rig::RigFile::new(vec![rig_board(&board, "left"), rig_board(&board, "right")]);
         inputs::boards_from_pose_image(camera, &rig_file, gray, 12).unwrap().into_iter().map(|(b, _)| b).collect()
     };
+    // How far the boards are from the truth, in the true frame: the error the planes inherit.
+    let board_errors: Vec<String> = boards
+        .iter()
+        .map(|b| {
+            let plane = align.plane_to_true(&b.plane());
+            // Detection order may swap the boards' names: compare with the nearer true board.
+            let errors = Rig::standard(&board).poses.map(|truth| {
+                let normal = (truth * nalgebra::Vector3::z()).angle(&plane.normal).to_degrees();
+                let centre = truth * Point3::new(140.0, 80.0, 0.0);
+                (normal.min(180.0 - normal), plane.signed_distance(&centre).abs())
+            });
+            let (normal, offset) = if errors[0].0 < errors[1].0 { errors[0] } else { errors[1] };
+            format!("{normal:.4}°/{offset:.3} mm")
+        })
+        .collect();
     let cal =
         calibrate_planes(camera, &boards, frames, &TransmitterParams::paper(), &PlaneCalibOptions::default()).unwrap();
     let tx = Transmitter::new(cal.transmitter).unwrap();
@@ -317,12 +332,13 @@ fn calibrate_with_camera(sensor: &Sensor, camera: &dyn CameraModel, what: &str, 
     eprintln!(
         "{what} (rays {:.4}° median, {:.4}° max after turning by {:.4}°), {}: model rms {:.3} mm; light planes \
          worst normal {angle:.4}°, offset at 0.5 m {off:.4} mm, over 0.5–2 m {far:.3} mm; stripe points \
-         re-triangulated RMS {rms:.3} mm, max {max:.3} mm",
+         re-triangulated RMS {rms:.3} mm, max {max:.3} mm; boards (normal, offset at their centre) {}",
         align.ray_median_deg,
         align.ray_max_deg,
         nalgebra::UnitQuaternion::from_rotation_matrix(&align.rot).angle().to_degrees(),
         if true_poses { "true board poses" } else { "boards from the pose image" },
-        cal.report.model.residual_rms_mm
+        cal.report.model.residual_rms_mm,
+        board_errors.join(", ")
     );
     (angle, off, rms)
 }
@@ -330,28 +346,31 @@ fn calibrate_with_camera(sensor: &Sensor, camera: &dyn CameraModel, what: &str, 
 /// The issue's first accuracy target: the ideal build's light planes, calibrated with the camera
 /// from `omni_calib::receiver::calibrate` (not the true one), against the true planes over the
 /// calibrated range, compared in the true frame after the ray-alignment rotation
-/// ([`FrameAlignment`]). The receiver is calibrated from 20 boards' true corner pixels plus
-/// 0.07 px noise (the detector's measured error on rendered boards; rendering and detecting the
-/// 20 boards would take ~18 s of the CI budget), the light planes from the rendered rig (pose
-/// image and detected stripes).
+/// ([`FrameAlignment`]). The receiver is calibrated from 20 well-placed boards' true corner
+/// pixels plus 0.07 px noise (the detector's measured error on rendered boards; rendering and
+/// detecting 20 boards would take ~18 s of the CI budget), the light planes from the rendered
+/// rig (pose image and detected stripes).
 ///
-/// Measured (worst normal, offset at 0.5 m, stripe re-triangulation RMS), by source of error
-/// (`PLANE_BREAKDOWN=1` prints the true-pose rows):
-/// * true camera, true board poses (stripe noise alone): 0.0086°, 0.026 mm, 0.061 mm;
-/// * true camera, boards from the pose image: 0.0131°, 0.021 mm, 0.059 mm;
-/// * receiver camera from 0.07 px corners (rays 0.030° median, 0.058° max after alignment):
-///   true poses carried into its frame 0.035°, 0.29 mm, 0.40 mm; boards from the pose image
-///   0.0133°, 0.237 mm, 0.40 mm (posing the boards with the same camera absorbs part of its ray
-///   error);
-/// * receiver camera from 0.02 px corners (rays 0.0085° median): 0.0052°, 0.065 mm, 0.13 mm;
-/// * receiver camera from 0.005 px corners (rays 0.002° median): true poses 0.0073°, 0.006 mm,
-///   0.062 mm; boards from the pose image 0.0114°, 0.021 mm, 0.064 mm.
+/// Measured (worst normal, offset at 0.5 m, stripe re-triangulation RMS; then the boards' plane
+/// errors from the pose image, normal and offset at their centre, in the true frame):
+/// * true camera: 0.0131°, 0.021 mm, 0.059 mm; boards 0.010°/0.031 mm, 0.017°/0.047 mm
+///   (with the true board poses, i.e. stripe noise alone: 0.0086°, 0.026 mm, 0.061 mm);
+/// * receiver camera from 0.07 px corners (rays 0.018° median, 0.027° max after alignment):
+///   0.0051°, 0.159 mm, 0.30 mm; boards 0.014°/0.192 mm, 0.032°/0.016 mm. Over the receiver
+///   seeds 5, 7, 8, 21: rays 0.013–0.022° median, light planes 0.005–0.014° and 0.08–0.16 mm;
+/// * receiver camera from 0.005 px corners (rays 0.0013° median): 0.0119°, 0.011 mm, 0.065 mm;
+///   boards 0.010°/0.015 mm, 0.018°/0.042 mm.
 ///
-/// So the issue's 0.01° / 0.05 mm is missed with a realistic receiver calibration, and the
-/// receiver model's ray error dominates (its 0.03° median becomes ~0.2 mm of plane offset at
-/// 0.5 m); the plane calibration itself holds the offset target and comes within 0.0015° of the
-/// normal target (bounded by the boards posed from the pose image) once the camera's rays are
-/// right to a few thousandths of a degree.
+/// So with a realistic receiver calibration the issue's 0.01° holds or nearly (0.005–0.014°) but
+/// 0.05 mm does not (0.08–0.16 mm), and the receiver model's ray error dominates: it puts the
+/// boards posed in the pose image 0.1–0.2 mm off, and even with the true board poses carried
+/// into its frame the light planes are off by 0.0105° and 0.24 mm (the stripe pixels' rays are
+/// wrong by the same few hundredths of a degree, i.e. ~0.2 mm at the rig). The plane
+/// calibration cannot undo an error of the rays it sees everything through (a joint board-pose
+/// refinement was measured not to help, see the module docs). With the camera's rays right to
+/// ~0.001° it holds the offset target and is within 0.002° of the normal target, bounded by the
+/// boards posed from the 1024 px pose image (0.010° and 0.018° of board normal error).
+/// (`PLANE_BREAKDOWN=1` prints the rows with the true board poses carried into each frame.)
 #[test]
 fn camera_from_the_receiver_calibration_gives_the_true_light_planes() {
     let sensor = Sensor::paper();
@@ -360,8 +379,8 @@ fn camera_from_the_receiver_calibration_gives_the_true_light_planes() {
     let realistic = projected_receiver_camera(&sensor, 20, 0.07, 21);
     let (angle, off, rms) =
         calibrate_with_camera(&sensor, realistic.as_ref(), "receiver camera, 0.07 px corners", false);
-    // Bounds at about twice the measured values: room for changes in the receiver calibration.
-    assert!(angle < 0.03 && off < 0.5 && rms < 0.8, "receiver camera: {angle}°, {off} mm, RMS {rms} mm");
+    // Bounds at about twice the worst over the seeds: room for changes in the receiver calibration.
+    assert!(angle < 0.03 && off < 0.3 && rms < 0.6, "receiver camera: {angle}°, {off} mm, RMS {rms} mm");
     let accurate = projected_receiver_camera(&sensor, 20, 0.005, 21);
     let (angle, off, rms) =
         calibrate_with_camera(&sensor, accurate.as_ref(), "receiver camera, 0.005 px corners", false);

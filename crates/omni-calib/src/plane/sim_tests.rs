@@ -391,3 +391,54 @@ fn camera_from_the_receiver_calibration_gives_the_true_light_planes() {
         calibrate_with_camera(&sensor, accurate.as_ref(), "receiver camera, 0.005 px corners", true);
     }
 }
+
+/// The true camera with its world frame turned by `rot` about its viewpoint: what a fitted model
+/// whose only error is the frame gauge looks like.
+#[derive(Debug)]
+struct TurnedCamera<'a> {
+    inner: &'a dyn CameraModel,
+    rot: nalgebra::Rotation3<f64>,
+    viewpoint: Point3<f64>,
+}
+
+impl CameraModel for TurnedCamera<'_> {
+    fn image_size(&self) -> (u32, u32) {
+        self.inner.image_size()
+    }
+    fn pixel_to_ray(&self, px: &nalgebra::Vector2<f64>) -> Option<omni_geom::Ray> {
+        let ray = self.inner.pixel_to_ray(px)?;
+        Some(omni_geom::Ray::new(
+            self.viewpoint + self.rot * (ray.origin - self.viewpoint),
+            self.rot * ray.dir.into_inner(),
+        ))
+    }
+    fn point_to_pixel(&self, p: &Point3<f64>) -> Option<nalgebra::Vector2<f64>> {
+        self.inner.point_to_pixel(&(self.viewpoint + self.rot.inverse() * (p - self.viewpoint)))
+    }
+    fn mirror_circle(&self) -> omni_model::MirrorCircle {
+        self.inner.mirror_circle()
+    }
+}
+
+#[test]
+fn frame_alignment_removes_a_turned_camera_frame_exactly() {
+    // A camera whose world frame is turned by 0.5° calibrates light planes 0.5° off in absolute
+    // terms; carried back by the ray alignment they must be the true camera's to rounding.
+    let sensor = Sensor::paper();
+    let truth = sensor.camera.as_ref();
+    let circle = truth.mirror_circle();
+    let px = circle.centre + nalgebra::Vector2::new(0.5 * (circle.inner_radius + circle.outer_radius), 0.0);
+    let viewpoint = truth.pixel_to_ray(&px).unwrap().origin;
+    let rot =
+        nalgebra::Rotation3::from_scaled_axis(nalgebra::Vector3::new(0.3, -0.2, 0.4).normalize() * 0.5f64.to_radians());
+    let turned = TurnedCamera { inner: truth, rot, viewpoint };
+    let align = FrameAlignment::new(truth, &turned);
+    let found = nalgebra::UnitQuaternion::from_rotation_matrix(&(align.rot * rot.inverse())).angle().to_degrees();
+    assert!(found < 1e-9 && align.ray_max_deg < 1e-5, "alignment off by {found}°, rays {}°", align.ray_max_deg);
+    let (angle, off, rms) = calibrate_with_camera(&sensor, truth, "true camera", false);
+    let (angle_t, off_t, rms_t) = calibrate_with_camera(&sensor, &turned, "turned true camera", false);
+    assert!(
+        (angle - angle_t).abs() < 1e-4 && (off - off_t).abs() < 1e-3 && (rms - rms_t).abs() < 1e-3,
+        "true camera {angle}°, {off} mm, {rms} mm; turned {angle_t}°, {off_t} mm, {rms_t} mm"
+    );
+}

@@ -4,8 +4,10 @@
 //! * [`triangulate`]: stripe pixels → 3D points (ray ∩ light plane, laser assignment, grazing
 //!   threshold); [`triangulate::intersect_ray`] is the per-point kernel.
 //! * [`cloud`]: triangulated frames → a [`PointCloud`] with the standard scalar fields.
-//! * [`filter`]: voxel-grid downsampling and Open3D-compatible statistical / radius outlier
-//!   removal, cropping; [`kdtree`] is the neighbour search behind them.
+//! * [`voxel`]: voxel-grid downsampling (Open3D's centroid semantics, voxel-index order, whole
+//!   clouds or streamed with bounded memory).
+//! * [`filter`]: Open3D-compatible statistical / radius outlier removal, cropping (and the voxel
+//!   functions, re-exported); [`kdtree`] is the neighbour search behind them.
 //! * [`merge`]: many inputs → one cloud (pose, crop, voxel, outliers) with bounded memory;
 //!   [`ply_stream`] visits PLY vertices without loading the file.
 //! * [`motion`]: poses interpolated from odometry (slerp + lerp) for a moving sensor.

@@ -258,25 +258,78 @@ impl<P: Pixel> Frame<'_, P> {
         })
     }
 
+    /// Whether the 2×2 neighbourhood of (x, y) px is inside the image (see [`Self::bilinear`]).
+    #[inline]
+    fn bilinear_inside(&self, x: f64, y: f64) -> bool {
+        x >= 0.0 && y >= 0.0 && (x as usize) + 1 < self.width as usize && (y as usize) + 1 < self.height as usize
+    }
+
     /// Bilinear sample at (x, y) px, or `None` if its 2×2 neighbourhood leaves the image.
     #[inline]
     fn bilinear(&self, x: f64, y: f64) -> Option<f32> {
+        self.bilinear_inside(x, y).then(|| self.bilinear_unchecked(x, y))
+    }
+
+    /// Bilinear samples 1 px left, right, above and below (x, y) px, or `None` if one of them
+    /// leaves the image: the four share their interpolation weights, so one position split and
+    /// one bounds check serve all (same values as four [`Self::bilinear`] calls).
+    #[inline]
+    fn cross(&self, x: f64, y: f64) -> Option<[f32; 4]> {
+        if !(x >= 1.0 && y >= 1.0) {
+            return None;
+        }
+        let ((xi, fx), (yi, fy)) = (fixed_point(x), fixed_point(y));
+        let (w, h) = (self.width as usize, self.height as usize);
+        if xi + 2 >= w || yi + 2 >= h {
+            return None;
+        }
+        let at = |i: usize| {
+            let (a, b) = (self.data[i].to_f32(), self.data[i + 1].to_f32());
+            let (c, d) = (self.data[i + w].to_f32(), self.data[i + w + 1].to_f32());
+            let top = a + fx * (b - a);
+            top + fy * (c + fx * (d - c) - top)
+        };
+        let i = yi * w + xi;
+        Some([at(i - 1), at(i + 1), at(i - w), at(i + w)])
+    }
+
+    /// Appends the bilinear samples at `centre + (r0 + k)·dir`, k = 0..n, whose 2×2
+    /// neighbourhoods must all be inside the image (else it panics on a slice index), to `out`:
+    /// [`Self::bilinear_unchecked`] at each point, with the positions in 32.32 fixed point (one
+    /// float → integer conversion per axis instead of two, and constants held in registers).
+    fn bilinear_line(&self, cx: f64, cy: f64, r0: f64, dir: (f64, f64), n: usize, out: &mut Vec<f32>) {
+        let w = self.width as usize;
+        let data = self.data;
+        out.reserve(n);
+        for k in 0..n {
+            let r = r0 + k as f64;
+            let (x, y) = (cx + r * dir.0, cy + r * dir.1);
+            let (xi, fx) = fixed_point(x);
+            let (yi, fy) = fixed_point(y);
+            let i = yi * w + xi;
+            let (top, bottom) = (&data[i..i + 2], &data[i + w..i + w + 2]);
+            let (a, b) = (top[0].to_f32(), top[1].to_f32());
+            let (c, d) = (bottom[0].to_f32(), bottom[1].to_f32());
+            let top = a + fx * (b - a);
+            let bottom = c + fx * (d - c);
+            out.push(top + fy * (bottom - top));
+        }
+    }
+
+    /// Bilinear sample at (x, y) px, whose 2×2 neighbourhood must be inside the image (else
+    /// it panics on the slice index).
+    #[inline(always)]
+    fn bilinear_unchecked(&self, x: f64, y: f64) -> f32 {
         // `as` truncates, which is floor for the non-negative coordinates accepted here (and,
         // unlike `floor`, needs no libm call on baseline x86-64).
-        if !(x >= 0.0 && y >= 0.0) {
-            return None;
-        }
         let (xi, yi) = (x as usize, y as usize);
-        if xi + 1 >= self.width as usize || yi + 1 >= self.height as usize {
-            return None;
-        }
         let (fx, fy) = ((x - xi as f64) as f32, (y - yi as f64) as f32);
         let w = self.width as usize;
         let i = yi * w + xi;
         let d = self.data;
         let top = d[i].to_f32() + fx * (d[i + 1].to_f32() - d[i].to_f32());
         let bottom = d[i + w].to_f32() + fx * (d[i + w + 1].to_f32() - d[i + w].to_f32());
-        Some(top + fy * (bottom - top))
+        top + fy * (bottom - top)
     }
 }
 
@@ -309,6 +362,8 @@ pub struct Scratch {
     bits: Vec<u64>,
     /// Rays with at least one bit set, to clear and visit only those.
     touched: Vec<u32>,
+    /// Bit per ray: whether it is in `touched`.
+    seen: Vec<u64>,
     profiles: Profiles,
 }
 
@@ -387,6 +442,7 @@ impl RidgeDetector {
             self.scan_ray(frame, ray as usize, threshold, scratch, &mut out);
             let w = self.words_per_ray;
             scratch.bits[ray as usize * w..(ray as usize + 1) * w].fill(0);
+            scratch.seen[ray as usize / 64] = 0;
         }
         touched.clear();
         scratch.touched = touched;
@@ -408,24 +464,25 @@ impl RidgeDetector {
         let n = self.dirs.len();
         // Points of the ray at `rays[i]`: `out[rays[i].1..end(i)]`.
         let end = |i: usize| rays.get(i + 1).map_or(out.len(), |r| r.1);
-        let points_of = |ray: u32| match rays.binary_search_by_key(&ray, |r| r.0) {
-            Ok(i) => &out[rays[i].1..end(i)],
-            Err(_) => &out[0..0],
+        // Radii of the points, computed once (each is compared with its neighbours' several times).
+        let radii: Vec<f64> = out.iter().map(|p| ((p.u - self.cx).powi(2) + (p.v - self.cy).powi(2)).sqrt()).collect();
+        let radii_of = |ray: u32| match rays.binary_search_by_key(&ray, |r| r.0) {
+            Ok(i) => &radii[rays[i].1..end(i)],
+            Err(_) => &radii[0..0],
         };
-        let radius = |p: &StripePoint| ((p.u - self.cx).powi(2) + (p.v - self.cy).powi(2)).sqrt();
         // Largest radial step between neighbours on a stripe crossing the rays at 60°.
         let max_dr = MIN_STRIPE_ARC_PX * 3f64.sqrt() + 1.0;
         let has_neighbour = |ray: u32, r: f64, k: i64| {
             let other = (ray as i64 + k).rem_euclid(n as i64) as u32;
-            points_of(other).iter().any(|q| (radius(q) - r).abs() <= max_dr)
+            radii_of(other).iter().any(|q| (q - r).abs() <= max_dr)
         };
         let mut kept = Vec::with_capacity(out.len());
         for (i, &(ray, start)) in rays.iter().enumerate() {
-            for p in &out[start..end(i)] {
-                let r = radius(p);
+            for (p, &r) in out[start..end(i)].iter().zip(&radii[start..end(i)]) {
                 // Rays are 2π·r/n px apart at radius r; only every step-th one is sampled.
                 let step = self.ray_step(r) as i64;
-                let k = (MIN_STRIPE_ARC_PX * n as f64 / (TAU * r) / step as f64).ceil().max(1.0) as i64 * step;
+                let arc_rays = MIN_STRIPE_ARC_PX * n as f64 / (TAU * r) / step as f64;
+                let k = (-floor_i64(-arc_rays)).max(1) * step;
                 if has_neighbour(ray, r, k) || has_neighbour(ray, r, -k) {
                     kept.push(*p);
                 }
@@ -439,6 +496,7 @@ impl RidgeDetector {
     fn mark_candidates<P: Pixel>(&self, frame: &Frame<'_, P>, threshold: f64, scratch: &mut Scratch) {
         let n = self.dirs.len();
         scratch.bits.resize(n * self.words_per_ray, 0);
+        scratch.seen.resize(n.div_ceil(64), 0);
         let t = P::from_threshold(threshold);
         let (w, h) = (self.width as usize, self.height as usize);
         let y_lo = (self.cy - self.r_out).floor().max(0.0) as usize;
@@ -505,25 +563,41 @@ impl RidgeDetector {
         // Rays within 1 px of the pixel centre (covers the pixel and the atan2 approximation).
         let span = rays_per_rad / r.max(1.0);
         let step = self.ray_step(r) as i64;
-        let (lo, hi) = ((centre - span).floor() as i64, (centre + span).ceil() as i64);
+        let (lo, hi) = (floor_i64(centre - span), -floor_i64(-(centre + span)));
         let bin = r as usize;
         let (word, bit) = (bin / 64, 1u64 << (bin % 64));
-        for i in (lo.div_euclid(step) * step..=hi).step_by(step as usize) {
-            let ray = i.rem_euclid(n) as usize;
-            let idx = ray * self.words_per_ray;
-            if scratch.bits[idx..idx + self.words_per_ray].iter().all(|&b| b == 0) {
+        // `step` is a power of two: `lo & -step` rounds down to a multiple of it (also below 0);
+        // the rays wrap around once at most (no integer division in this per-pixel loop).
+        for i in ((lo & -step)..=hi).step_by(step as usize) {
+            let ray = if i < 0 {
+                i + n
+            } else if i >= n {
+                i - n
+            } else {
+                i
+            } as usize;
+            let (seen_word, seen_bit) = (ray / 64, 1u64 << (ray % 64));
+            if scratch.seen[seen_word] & seen_bit == 0 {
+                scratch.seen[seen_word] |= seen_bit;
                 scratch.touched.push(ray as u32);
             }
-            scratch.bits[idx + word] |= bit;
+            scratch.bits[ray * self.words_per_ray + word] |= bit;
         }
     }
 
     /// Which rays sample radius `r`: every `ray_step(r)`-th one (a power of two ≤
     /// [`MAX_RAY_STEP`]), so that the rays used are 0.5–1 px apart at every radius instead of
     /// crowding towards the centre (fewer, barely correlated points; less work).
+    #[inline]
     fn ray_step(&self, r: f64) -> usize {
-        let ratio = (self.r_out / r.max(1.0)).max(1.0);
-        (1usize << (ratio.log2().floor() as u32).min(MAX_RAY_STEP.trailing_zeros())).min(MAX_RAY_STEP)
+        // The largest power of two ≤ r_out / r, at most MAX_RAY_STEP (comparisons, not log2:
+        // this runs for every candidate pixel and every point).
+        let ratio = self.r_out / r.max(1.0);
+        let mut step = 1;
+        while step < MAX_RAY_STEP && ratio >= (2 * step) as f64 {
+            step *= 2;
+        }
+        step
     }
 
     /// Resamples the marked stretches of one ray and turns each valid segment into a point.
@@ -538,24 +612,28 @@ impl RidgeDetector {
         let bits = &scratch.bits[ray * self.words_per_ray..(ray + 1) * self.words_per_ray];
         // Padding so that the background windows and the fine resampling stay inside.
         let pad = self.background_window() + 3;
-        let mut stretches: Vec<(usize, usize)> = Vec::new();
+        // Overlapping padded bins merge into one stretch, scanned when the next one starts.
+        // The stretch may reach past the annulus (for the background windows); only peaks
+        // inside it are measured.
+        let mut current: Option<(usize, usize)> = None;
         for (wi, &word) in bits.iter().enumerate() {
             let mut m = word;
             while m != 0 {
                 let b = wi * 64 + m.trailing_zeros() as usize;
                 m &= m - 1;
                 let (lo, hi) = (b.saturating_sub(pad), b + 1 + pad);
-                match stretches.last_mut() {
+                match &mut current {
                     Some(last) if lo <= last.1 => last.1 = last.1.max(hi),
-                    _ => stretches.push((lo, hi)),
+                    _ => {
+                        if let Some((l, h)) = current.replace((lo, hi)) {
+                            self.scan_stretch(frame, ray, l as f64, h as f64, threshold, &mut scratch.profiles, out);
+                        }
+                    }
                 }
             }
         }
-        for (lo, hi) in stretches {
-            // The stretch may reach past the annulus (for the background windows); only peaks
-            // inside it are measured.
-            let (r0, r1) = (lo as f64, hi as f64);
-            self.scan_stretch(frame, ray, r0, r1, threshold, &mut scratch.profiles, out);
+        if let Some((l, h)) = current {
+            self.scan_stretch(frame, ray, l as f64, h as f64, threshold, &mut scratch.profiles, out);
         }
     }
 
@@ -583,10 +661,18 @@ impl RidgeDetector {
         let Profiles { coarse: c, raw: p, contrast: q } = scratch;
         c.clear();
         // Outside the image is NaN; a segment or background window touching it is rejected.
-        c.extend((0..n).map(|k| {
-            let r = r0 + k as f64;
-            frame.bilinear(self.cx + r * dx, self.cy + r * dy).unwrap_or(f32::NAN)
-        }));
+        // A straight stretch whose two ends are inside lies inside: sample it without checks.
+        let at = |k: usize| (self.cx + (r0 + k as f64) * dx, self.cy + (r0 + k as f64) * dy);
+        let (first, last) = (at(0), at(n - 1));
+        let inside = frame.bilinear_inside(first.0, first.1) && frame.bilinear_inside(last.0, last.1);
+        if inside {
+            frame.bilinear_line(self.cx, self.cy, r0, (dx, dy), n, c);
+        } else {
+            c.extend((0..n).map(|k| {
+                let (x, y) = at(k);
+                frame.bilinear(x, y).unwrap_or(f32::NAN)
+            }));
+        }
         let t = threshold as f32;
         let w = self.background_window();
         let mut done_until = 0;
@@ -594,6 +680,13 @@ impl RidgeDetector {
             let is_max = c[k] >= c[k - 1] && c[k] > c[k + 1];
             let r_k = r0 + k as f64;
             if !is_max || k < done_until || r_k < self.r_in || r_k > self.r_out {
+                continue;
+            }
+            // Most maxima are noise: the test below fails for them. Without NaNs it holds iff
+            // some sample on each side is more than t below the maximum, which a short scan
+            // that stops at the first such sample decides.
+            let deep = |v: &f32| c[k] - v > t;
+            if inside && !(c[k - w..=k].iter().any(deep) && c[k..=k + w].iter().any(deep)) {
                 continue;
             }
             let window_min = |range: std::ops::RangeInclusive<usize>| {
@@ -715,10 +808,7 @@ impl RidgeDetector {
     /// A ray that only grazes the edge of a bright blob (a glint, an ambient patch) also gives a
     /// short segment, but there the gradient is as steep as the blob's edge: reject those.
     fn is_ridge_centre<P: Pixel>(&self, frame: &Frame<'_, P>, x: f64, y: f64, peak: f32) -> bool {
-        let sample = |x: f64, y: f64| frame.bilinear(x, y);
-        let (Some(l), Some(r), Some(u), Some(d)) =
-            (sample(x - 1.0, y), sample(x + 1.0, y), sample(x, y - 1.0), sample(x, y + 1.0))
-        else {
+        let Some([l, r, u, d]) = frame.cross(x, y) else {
             return false;
         };
         let gradient = (0.25 * ((r - l).powi(2) + (d - u).powi(2))).sqrt();
@@ -730,15 +820,14 @@ impl RidgeDetector {
     /// grazing a bright blob (a glint wider than the ray's segment) meets edges running along it.
     fn edge_faces_ray<P: Pixel>(&self, frame: &Frame<'_, P>, r: f64, dir: (f64, f64)) -> bool {
         let (x, y) = (self.cx + r * dir.0, self.cy + r * dir.1);
-        let sample = |x: f64, y: f64| frame.bilinear(x, y);
-        let (Some(l), Some(rt), Some(u), Some(d)) =
-            (sample(x - 1.0, y), sample(x + 1.0, y), sample(x, y - 1.0), sample(x, y + 1.0))
-        else {
+        let Some([l, rt, u, d]) = frame.cross(x, y) else {
             return false;
         };
         let (gx, gy) = ((rt - l) as f64, (d - u) as f64);
         let along = (gx * dir.0 + gy * dir.1).abs();
-        along >= MIN_EDGE_ANGLE_DEG.to_radians().sin() * (gx * gx + gy * gy).sqrt()
+        // sin(MIN_EDGE_ANGLE_DEG) = sin 30°.
+        const SIN_MIN_EDGE_ANGLE: f64 = 0.5;
+        along >= SIN_MIN_EDGE_ANGLE * (gx * gx + gy * gy).sqrt()
     }
 }
 
@@ -795,6 +884,23 @@ fn stands_out<P: Pixel>(f: &Frame<'_, P>, x: usize, y: usize, reach: usize, t: f
     let row = get(x.checked_sub(reach), Some(y)).max(get(Some(x + reach), Some(y)));
     let col = get(Some(x), y.checked_sub(reach)).max(get(Some(x), Some(y + reach)));
     v - row > t || v - col > t
+}
+
+/// The integer and fractional parts of a coordinate 0 ≤ x < 2³¹ px: ⌊x⌋ and x − ⌊x⌋ (as f32,
+/// from 32 fractional bits) with a single float → integer conversion.
+#[inline(always)]
+fn fixed_point(x: f64) -> (usize, f32) {
+    const ONE: f64 = 4_294_967_296.0;
+    let fixed = (x * ONE) as i64;
+    ((fixed >> 32) as usize, (fixed & 0xFFFF_FFFF) as f32 * (1.0 / ONE as f32))
+}
+
+/// ⌊x⌋ for finite `x` within ±2⁶³ (truncation and a correction: `f64::floor` is a libm call
+/// on baseline x86-64).
+#[inline]
+fn floor_i64(x: f64) -> i64 {
+    let t = x as i64;
+    if (t as f64) > x { t - 1 } else { t }
 }
 
 /// atan2 in [0, 2π) with an error below 1e-5 rad (a 7th-order odd polynomial of the octant

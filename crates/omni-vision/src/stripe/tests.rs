@@ -299,3 +299,39 @@ fn fast_candidate_test_matches_the_general_one() {
         }
     }
 }
+
+#[test]
+fn fast_helpers_agree_with_the_plain_arithmetic() {
+    for &x in &[-3.5, -2.0, -0.25, 0.0, 0.2, 1.0, 7.999_999_999, 12.5, 511.75, 1e6 + 0.3] {
+        assert_eq!(floor_i64(x), x.floor() as i64, "floor {x}");
+        assert_eq!(-floor_i64(-x), x.ceil() as i64, "ceil {x}");
+        if x >= 0.0 {
+            let (i, f) = fixed_point(x);
+            assert_eq!(i, x.floor() as usize, "integer part {x}");
+            assert!((f as f64 - (x - x.floor())).abs() < 1e-7, "fraction {x}: {f}");
+        }
+    }
+    // The cross of four samples equals four bilinear samples; None where one leaves the image.
+    let (w, h) = (9u32, 7u32);
+    let data: Vec<u8> = (0..w * h).map(|i| ((i * 37) % 251) as u8).collect();
+    let f = Frame { width: w, height: h, data: &data, max_value: 255.0 };
+    for &(x, y) in &[(3.3, 2.7), (1.0, 1.0), (6.99, 4.5), (4.0, 4.999)] {
+        let cross = f.cross(x, y).unwrap();
+        let plain = [f.bilinear(x - 1.0, y), f.bilinear(x + 1.0, y), f.bilinear(x, y - 1.0), f.bilinear(x, y + 1.0)];
+        for (a, b) in cross.iter().zip(plain) {
+            assert!((a - b.unwrap()).abs() < 1e-4, "({x}, {y}): {cross:?}");
+        }
+    }
+    for &(x, y) in &[(0.9, 3.0), (7.0, 3.0), (3.0, 0.5), (3.0, 5.0)] {
+        assert!(f.cross(x, y).is_none(), "({x}, {y})");
+    }
+    // A line of bilinear samples equals the samples one by one.
+    let mut line = Vec::new();
+    f.bilinear_line(4.2, 3.1, -2.0, (0.6, 0.8), 5, &mut line);
+    for (k, v) in line.iter().enumerate() {
+        let r = -2.0 + k as f64;
+        assert!((v - f.bilinear(4.2 + 0.6 * r, 3.1 + 0.8 * r).unwrap()).abs() < 1e-4);
+    }
+    // sin(MIN_EDGE_ANGLE_DEG) is the constant edge_faces_ray uses.
+    assert!((MIN_EDGE_ANGLE_DEG.to_radians().sin() - 0.5).abs() < 1e-12);
+}

@@ -703,10 +703,11 @@ impl RidgeDetector {
                 done_until = k + 1;
                 continue;
             }
-            // Resample finely outwards from the coarse peak until two samples on each side are
-            // at or below the threshold (the crossing and one more for the estimators; three
-            // for Blais–Rioux, whose filter reaches two samples beyond its zero crossing).
-            let tail = if self.params.method == Method::BlaisRioux { 3 } else { 2 };
+            // Resample finely outwards from the coarse peak until a sample on each side is at or
+            // below the threshold: the crossing, which the estimators' windows and the width
+            // need; three for Blais–Rioux, whose filter reaches two samples beyond its zero
+            // crossing.
+            let tail = if self.params.method == Method::BlaisRioux { 3 } else { 1 };
             let coarse_end = (k + 1..n).find(|&i| !(c[i] - background > 0.5 * t)).unwrap_or(n);
             done_until = coarse_end;
             let r_peak = r0 + k as f64;

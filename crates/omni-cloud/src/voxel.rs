@@ -27,7 +27,7 @@
 //!   voxel through a cell → voxel table, then the cells are walked in key order;
 //! * fine grids: the voxel key relative to the box is a mixed-radix number that sorts like
 //!   (i, j, k); one pass counts key prefixes (top 16 bits), which are cut into buckets of
-//!   ≈ 8192 points; one pass copies the points into bucket order (stable); each bucket, now in
+//!   ≈ 16384 points; one pass copies the points into bucket order (stable); each bucket, now in
 //!   L2, is LSD radix sorted on (key, index) words (stable) and runs of equal keys are summed.
 //!
 //! # Memory
@@ -191,7 +191,8 @@ impl BoxKey {
     /// the box was made).
     #[inline]
     fn global_key(&self, p: &[f64; 3]) -> u64 {
-        VoxelSpec::key_of_index([0, 1, 2].map(|a| self.spec.axis_index(a, p[a])))
+        let s = &self.spec;
+        VoxelSpec::key_of_index([s.axis_index(0, p[0]), s.axis_index(1, p[1]), s.axis_index(2, p[2])])
     }
 
     /// Number of voxels in the box.
@@ -423,9 +424,10 @@ impl VoxelSink for PointCloud {
     }
 }
 
-/// Points per bucket when a chunk is partitioned: a bucket's positions and scalars (≈ 420 kB
-/// with seven fields) and its sort buffers stay in a core's L2 cache.
-const BUCKET_POINTS: usize = 1 << 13;
+/// Points per bucket when a chunk is partitioned: a bucket's positions (384 kB) and sort buffers
+/// stay in a core's 1 MB L2 cache (with seven scalar fields, 450 kB more: L2/L3). 2¹⁴ measured
+/// 40 % faster than 2¹³ on positions only (fewer write streams in the copy).
+const BUCKET_POINTS: usize = 1 << 14;
 
 /// Voxel boxes of at most this many cells use a direct cell → voxel table (4 bytes per cell).
 const DENSE_CELLS: u64 = 1 << 21;

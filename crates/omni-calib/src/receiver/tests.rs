@@ -354,8 +354,8 @@ fn simulated_off_focus_camera_generic_models_reach_0_3_px() {
     p.camera_offset_mm = [0.0, 0.0, 0.5];
     let sensor = omni_simulator::Sensor::from_params(p, omni_model::TransmitterParams::paper()).unwrap();
     let (obs, _, _, found) = simulated_observations(&sensor, 12, 4);
-    // Seed 4 leaves 2 of the 12 boards with fewer than 12 corners in view.
-    assert!(found >= 9, "boards found in {found} of 12");
+    // Measured: all 12 boards found (every board of the calibration set shows ≥ 18 corners).
+    assert!(found >= 11, "boards found in {found} of 12");
     for model in [ModelKind::Mei, ModelKind::Ocam] {
         let cal = calibrate(1024, 1024, &obs, &Options { model, ..Default::default() }).unwrap();
         let used = cal.images.iter().filter(|i| i.used).count();

@@ -45,7 +45,8 @@ struct Args {
     /// Longest odometry gap (ms) that may be interpolated across.
     #[arg(long, default_value_t = 100.0)]
     max_pose_gap_ms: f64,
-    /// Voxel edge length (mm): one centroid per occupied voxel.
+    /// Voxel edge length (mm): each occupied voxel becomes the centroid of its points, scalar
+    /// fields averaged (Open3D voxel_down_sample semantics; grid anchored at the world origin).
     #[arg(long, value_name = "SIZE")]
     voxel: Option<f64>,
     /// Statistical outlier removal: K neighbours, STD_RATIO.

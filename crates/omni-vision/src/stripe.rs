@@ -438,25 +438,6 @@ impl RidgeDetector {
     /// Stripe centres of a frame, in ray order (azimuth from +x towards +y), then by radius.
     /// Panics if the frame's size is not the detector's (check [`Self::image_size`] first).
     pub fn detect_frame<P: Pixel>(&self, frame: &Frame<'_, P>, scratch: &mut Scratch) -> Vec<StripePoint> {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above), the only requirement of
-            // `detect_frame_avx2`.
-            return unsafe { self.detect_frame_avx2(frame, scratch) };
-        }
-        self.detect_frame_any_cpu(frame, scratch)
-    }
-
-    /// [`Self::detect_frame`] compiled for AVX2 (the row scan then compares 32 pixels per
-    /// instruction); the same arithmetic, so the same points. Needs a CPU with AVX2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn detect_frame_avx2<P: Pixel>(&self, frame: &Frame<'_, P>, scratch: &mut Scratch) -> Vec<StripePoint> {
-        self.detect_frame_any_cpu(frame, scratch)
-    }
-
-    #[inline(always)]
-    fn detect_frame_any_cpu<P: Pixel>(&self, frame: &Frame<'_, P>, scratch: &mut Scratch) -> Vec<StripePoint> {
         assert_eq!((frame.width, frame.height), (self.width, self.height), "frame size differs from the detector's");
         assert_eq!(frame.data.len(), self.width as usize * self.height as usize, "frame buffer has the wrong length");
         let threshold = self.params.threshold_for(frame.max_value);
@@ -524,7 +505,6 @@ impl RidgeDetector {
 
     /// Row scan: every pixel above the threshold inside the annulus marks its radius bin on the
     /// rays passing within 1 px of it.
-    #[inline(always)]
     fn mark_candidates<P: Pixel>(&self, frame: &Frame<'_, P>, threshold: f64, scratch: &mut Scratch) {
         let n = self.dirs.len();
         scratch.bits.resize(n * self.words_per_ray, 0);

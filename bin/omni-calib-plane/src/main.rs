@@ -23,6 +23,8 @@ use std::path::{Path, PathBuf};
     after_help = "Examples:\n  \
         omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose.png \\\n      \
         --stripes stripes.jsonl -o scanner.json\n  \
+        omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose*.png \\\n      \
+        --stripes stripes.jsonl -o scanner.json   # several pose images, averaged\n  \
         omni-calib-plane fit --camera camera.json --rig rig.json --board-corners corners.json \\\n      \
         --stripes stripes.jsonl -o scanner.json\n  \
         omni-calib-plane fit --camera camera.json --rig rig.json --board-poses poses.json \\\n      \
@@ -57,8 +59,10 @@ struct FitArgs {
     #[arg(long)]
     rig: PathBuf,
     /// Ambient (lasers off) image of the rig, in which the boards are found (PNG 8/16-bit, JPEG).
-    #[arg(long)]
-    pose_image: Option<PathBuf>,
+    /// Give several images of the unmoved rig (`--pose-image a.png b.png …`) to average them
+    /// pixel by pixel first: the sensor noise falls as 1/√n and the board poses improve.
+    #[arg(long, num_args = 1..)]
+    pose_image: Vec<PathBuf>,
     /// Corner pixels of the rig boards in the pose image (format omniscan.board_corners).
     #[arg(long)]
     board_corners: Option<PathBuf>,
@@ -121,9 +125,15 @@ fn fit(a: &FitArgs) -> CliResult {
     let (_, camera) = CameraFile::load(&a.camera)?;
     let rig: RigFile = read_doc(&a.rig)?;
     rig.validate().map_err(|m| CliError::new(format!("{}: {m}", name(&a.rig))))?;
-    let boards = match (&a.pose_image, &a.board_corners, &a.board_poses) {
+    let pose_image = a.pose_image.first();
+    let boards = match (pose_image, &a.board_corners, &a.board_poses) {
         (Some(path), _, _) => {
-            let image = omni_vision::corners::load_gray(path).map_err(CliError::new)?;
+            let images = a
+                .pose_image
+                .iter()
+                .map(|p| omni_vision::corners::load_gray(p).map_err(CliError::new))
+                .collect::<Result<Vec<_>, _>>()?;
+            let image = inputs::mean_image(&images).map_err(|m| CliError::new(format!("--pose-image: {m}")))?;
             inputs::boards_from_pose_image(camera.as_ref(), &rig, &image, a.min_corners)
                 .map_err(|m| CliError::new(format!("{}: {m}", name(path))))?
         }

@@ -172,6 +172,14 @@ fn bad_inputs_fail_cleanly_without_output() {
     let o = run(&args);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("pose.png") && stderr(&o).contains("not found"), "{}", stderr(&o));
+    // Several pose images must show the same view: a second one of another size is refused.
+    let small = dir.path().join("small.png");
+    omni_vision::image_io::write_gray_png(&small, &omni_vision::image_io::GrayImage::new(512, 512, 8)).unwrap();
+    let mut two = args.clone();
+    two.insert(7, small.to_str().unwrap());
+    let o = run(&two);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--pose-image") && stderr(&o).contains("512"), "{}", stderr(&o));
     let bytes = std::fs::read(&pose).unwrap();
     std::fs::write(&pose, &bytes[..bytes.len() / 2]).unwrap();
     let o = run(&args);
@@ -192,9 +200,13 @@ fn fit_finds_the_boards_in_a_rendered_pose_image() {
     let sensor = Sensor::paper();
     let board = omni_formats::BoardFile::new(6, 9, 40.0);
     let rig = Rig::standard(&board);
-    let (image, _) = render_rig_pose_image(&sensor, &rig, &RenderOptions::calibration());
-    let pose = dir.path().join("pose.png");
-    image.to_png(&pose).unwrap();
+    // Two ambient images of the unmoved rig (independent noise), averaged by the tool.
+    let poses = [1u64, 2].map(|seed| {
+        let (image, _) = render_rig_pose_image(&sensor, &rig, &RenderOptions { seed, ..RenderOptions::calibration() });
+        let path = dir.path().join(format!("pose{seed}.png"));
+        image.to_png(&path).unwrap();
+        path
+    });
     let rig_boards: Vec<RigBoard> = ["left", "right"]
         .iter()
         .map(|n| RigBoard {
@@ -238,7 +250,8 @@ fn fit_finds_the_boards_in_a_rendered_pose_image() {
         "--rig".into(),
         p(&paths[1]),
         "--pose-image".into(),
-        p(&pose),
+        p(&poses[0]),
+        p(&poses[1]),
         "--stripes".into(),
         p(&paths[2]),
         "-o".into(),

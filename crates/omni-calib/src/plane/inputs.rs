@@ -245,6 +245,34 @@ pub fn boards_from_pose_image(
     Ok(out)
 }
 
+/// The pixel mean of several images of the same static scene (e.g. ambient images of the rig):
+/// the sensor noise falls as 1/√n, so corners found in it, and the boards posed from them, are
+/// more accurate than from one image. Errors if the list is empty or the sizes differ.
+pub fn mean_image(
+    images: &[omni_vision::corners::GrayF32],
+) -> std::result::Result<omni_vision::corners::GrayF32, String> {
+    let first = images.first().ok_or("no image to average")?;
+    let mut sum = vec![0.0f64; first.data.len()];
+    for (k, img) in images.iter().enumerate() {
+        if (img.width, img.height) != (first.width, first.height) {
+            return Err(format!(
+                "image {} is {}×{} px, the first is {}×{}: the images must show the same view",
+                k + 1,
+                img.width,
+                img.height,
+                first.width,
+                first.height
+            ));
+        }
+        for (s, v) in sum.iter_mut().zip(&img.data) {
+            *s += *v as f64;
+        }
+    }
+    let n = images.len() as f64;
+    let data = sum.iter().map(|s| (s / n) as f32).collect();
+    Ok(omni_vision::corners::GrayF32 { width: first.width, height: first.height, data })
+}
+
 /// Paints the board's corner region, grown by half its size about its centroid, with the image's
 /// median grey, so that the detector cannot find the same board again.
 fn blank_board(img: &mut omni_vision::corners::GrayF32, px: &[[f64; 2]]) {

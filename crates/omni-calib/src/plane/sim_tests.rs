@@ -88,45 +88,63 @@ fn rendered_rig_with_detected_stripes_gives_the_true_light_planes() {
 
 type RenderedRig = (Vec<FrameStripes>, Vec<Vec<omni_simulator::TruthPoint>>, omni_vision::corners::GrayF32);
 
+/// Ambient images of the unmoved rig averaged into its pose image (what `omni-calib-plane fit
+/// --pose-image a.png b.png …` does). Measured with the receiver-calibrated camera (rendered
+/// boards, annulus) on the 2° rig: 1 image → light planes 0.0141°/0.053 mm, boards 0.012–0.015°
+/// and up to 0.057 mm; 4 → 0.0163°/0.037 mm; 8 → 0.0151°/0.034 mm (boards 0.011°, up to
+/// 0.063 mm). With the true camera the boards go 0.013° → 0.007° (1 → 8 images): the pose
+/// image's sensor noise is then the boards' main error; with the calibrated camera its ray
+/// error (0.002° median, 0.005° max) tilts the boards by ~0.01° whatever the averaging.
+const POSE_IMAGES: u64 = 8;
+
 /// The paper sensor's rendered standard rig (6 × 9 boards of 40 mm), rendered once for all tests.
 fn cached_rig() -> &'static RenderedRig {
     static RIG: std::sync::OnceLock<RenderedRig> = std::sync::OnceLock::new();
-    RIG.get_or_init(|| rendered_rig(&Sensor::paper(), &Rig::standard(&BoardFile::new(6, 9, 40.0))))
+    RIG.get_or_init(|| rendered_rig(&Sensor::paper(), &Rig::standard(&BoardFile::new(6, 9, 40.0)), 2.0, POSE_IMAGES))
 }
 
-/// The rendered rig's laser frames (α = 8…24° every 2°, ambient subtracted) with their detected
-/// stripe pixels and the simulator's ground-truth stripe points, and the rig's pose image.
-fn rendered_rig(sensor: &Sensor, rig: &Rig) -> RenderedRig {
+/// The rendered rig's laser frames (α = 8…24° every `step_deg`, ambient subtracted) with their
+/// detected stripe pixels and the simulator's ground-truth stripe points, and the rig's pose image:
+/// the pixel mean of `pose_images` ambient images of the static rig (independent sensor noise).
+fn rendered_rig(sensor: &Sensor, rig: &Rig, step_deg: f64, pose_images: u64) -> RenderedRig {
+    use rayon::prelude::*;
     let scene = Scene::from_file(rig.scene()).unwrap();
     let (w, h) = sensor.camera.image_size();
     let detector = RidgeDetector::new(w, h, sensor.camera.mirror_circle(), RidgeParams::default());
     let opts = RenderOptions::default();
     let ambient = render_ambient_frame(sensor, &scene, &RenderOptions { seed: 99, ..opts.clone() });
-    let mut frames = vec![];
-    let mut truths = vec![];
-    for i in 0..9 {
-        let a = 8.0 + 2.0 * i as f64;
-        let f = render_laser_frame(sensor, &scene, a.to_radians(), 0, &[0], &opts);
-        let data: Vec<u16> = f.image.data.iter().zip(&ambient.data).map(|(l, a)| l.saturating_sub(*a)).collect();
-        let frame = Frame { width: w, height: h, data: &data, max_value: f.image.max_value() as f64 };
-        let pts = detector.detect_frame(&frame, &mut Scratch::default());
-        frames.push(FrameStripes {
-            seq: i,
-            alpha_rad: a.to_radians(),
-            facet: 0,
-            placement: 0,
-            lasers: vec![0],
-            pixels: pts.iter().map(|p| [p.u, p.v]).collect(),
-        });
-        truths.push(f.truth);
-    }
-    let (pose_image, _) = render_rig_pose_image(sensor, rig, &RenderOptions::calibration());
-    let gray = omni_vision::corners::GrayF32::from_u8(
-        w as usize,
-        h as usize,
-        &pose_image.data.iter().map(|&v| v.min(255) as u8).collect::<Vec<_>>(),
-    );
-    (frames, truths, gray)
+    let count = (16.0 / step_deg).round() as u64 + 1;
+    let (frames, truths): (Vec<FrameStripes>, Vec<_>) = (0..count)
+        .into_par_iter()
+        .map(|i| {
+            let a = 8.0 + step_deg * i as f64;
+            let f =
+                render_laser_frame(sensor, &scene, a.to_radians(), 0, &[0], &RenderOptions { seed: i, ..opts.clone() });
+            let data: Vec<u16> = f.image.data.iter().zip(&ambient.data).map(|(l, a)| l.saturating_sub(*a)).collect();
+            let frame = Frame { width: w, height: h, data: &data, max_value: f.image.max_value() as f64 };
+            let pts = detector.detect_frame(&frame, &mut Scratch::default());
+            let stripes = FrameStripes {
+                seq: i,
+                alpha_rad: a.to_radians(),
+                facet: 0,
+                placement: 0,
+                lasers: vec![0],
+                pixels: pts.iter().map(|p| [p.u, p.v]).collect(),
+            };
+            (stripes, f.truth)
+        })
+        .unzip();
+    let images: Vec<omni_vision::corners::GrayF32> = (0..pose_images)
+        .into_par_iter()
+        .map(|k| {
+            let opts = RenderOptions { seed: 1000 + k, ..RenderOptions::calibration() };
+            let (image, _) = render_rig_pose_image(sensor, rig, &opts);
+            let scale = 255.0 / image.max_value() as f32;
+            let data = image.data.iter().map(|&v| v as f32 * scale).collect();
+            omni_vision::corners::GrayF32 { width: w as usize, height: h as usize, data }
+        })
+        .collect();
+    (frames, truths, inputs::mean_image(&images).unwrap())
 }
 
 /// A camera calibrated by `omni_calib::receiver` from the true corner pixels of `count` 9 × 6
@@ -156,7 +174,10 @@ fn projected_receiver_camera(sensor: &Sensor, count: usize, noise_px: f64, seed:
         })
         .collect();
     let (w, h) = sensor.camera.image_size();
-    let cal = crate::receiver::calibrate(w, h, &obs, &crate::receiver::Options::default()).unwrap();
+    let c = sensor.camera.mirror_circle();
+    let annulus = [c.centre.x, c.centre.y, c.inner_radius, c.outer_radius];
+    let opts = crate::receiver::Options { annulus: Some(annulus), ..Default::default() };
+    let cal = crate::receiver::calibrate(w, h, &obs, &opts).unwrap();
     eprintln!("receiver: {} boards ({noise_px} px noise), reprojection RMS {:.3} px", obs.len(), cal.rms_px);
     at_true_viewpoint(cal.spec, sensor)
 }
@@ -290,8 +311,18 @@ fn light_plane_errors(
 /// (or the true poses carried into the camera's frame), then the errors against the truth in a
 /// common frame: (worst normal angle °, worst offset at 0.5 m mm, stripe re-triangulation RMS mm).
 fn calibrate_with_camera(sensor: &Sensor, camera: &dyn CameraModel, what: &str, true_poses: bool) -> (f64, f64, f64) {
+    calibrate_on_rig(cached_rig(), sensor, camera, what, true_poses)
+}
+
+fn calibrate_on_rig(
+    rig: &RenderedRig,
+    sensor: &Sensor,
+    camera: &dyn CameraModel,
+    what: &str,
+    true_poses: bool,
+) -> (f64, f64, f64) {
     let board = BoardFile::new(6, 9, 40.0);
-    let (frames, truths, gray) = cached_rig();
+    let (frames, truths, gray) = rig;
     let align = FrameAlignment::new(sensor.camera.as_ref(), camera);
     let boards: Vec<PlacedBoard> = if true_poses {
         let to_fitted = nalgebra::Isometry3::from_parts(
@@ -346,48 +377,48 @@ fn calibrate_with_camera(sensor: &Sensor, camera: &dyn CameraModel, what: &str, 
 /// The first accuracy target: the ideal build's light planes, calibrated with the camera
 /// from `omni_calib::receiver::calibrate` (not the true one), against the true planes over the
 /// calibrated range, compared in the true frame after the ray-alignment rotation
-/// ([`FrameAlignment`]). The receiver is calibrated from 20 well-placed boards' true corner
-/// pixels plus 0.07 px noise (the detector's measured error on rendered boards; rendering and
-/// detecting 20 boards would take ~18 s of the CI budget), the light planes from the rendered
-/// rig (pose image and detected stripes).
+/// ([`FrameAlignment`]). The receiver is calibrated as a user does it ([`rendered_receiver_camera`]:
+/// 20 rendered boards of the simulator's calibration set, corners detected inside the mirror
+/// annulus, the annulus given to the fit), the light planes from the rendered rig (9 frames at
+/// α = 8…24°, detected stripes, boards found in the mean of [`POSE_IMAGES`] pose images).
 ///
-/// Measured (worst normal, offset at 0.5 m, stripe re-triangulation RMS; then the boards' plane
-/// errors from the pose image, normal and offset at their centre, in the true frame):
-/// * true camera: 0.0131°, 0.021 mm, 0.059 mm; boards 0.010°/0.031 mm, 0.017°/0.047 mm
-///   (with the true board poses, i.e. stripe noise alone: 0.0086°, 0.026 mm, 0.061 mm);
-/// * receiver camera from 0.07 px corners (rays 0.018° median, 0.027° max after alignment):
-///   0.0051°, 0.159 mm, 0.30 mm; boards 0.014°/0.192 mm, 0.032°/0.016 mm. Over the receiver
-///   seeds 5, 7, 8, 21: rays 0.013–0.022° median, light planes 0.005–0.014° and 0.08–0.16 mm;
-/// * receiver camera from 0.005 px corners (rays 0.0013° median): 0.0119°, 0.011 mm, 0.065 mm;
-///   boards 0.010°/0.015 mm, 0.018°/0.042 mm.
+/// Measured (worst normal, offset at 0.5 m; boards' plane errors from the pose image, normal and
+/// offset at their centre, in the true frame):
+/// * true camera: 0.0084°, 0.011 mm; boards 0.0066°/0.019 mm, 0.0048°/0.011 mm (true board
+///   poses, i.e. stripe noise alone: 0.0074°, 0.014 mm);
+/// * receiver camera (rays 0.0018° median, 0.0048° max after alignment; reprojection 0.019 px):
+///   0.0125°, 0.028 mm; boards 0.0114°/0.063 mm, 0.0115°/0.022 mm;
+/// * receiver camera from projected corners with 0.005 px noise (rays 0.0012° median):
+///   0.0075°, 0.007 mm; boards 0.0071°/0.007 mm, 0.0038°/0.014 mm.
 ///
-/// So with a realistic receiver calibration the 0.01° holds or nearly (0.005–0.014°) but
-/// 0.05 mm does not (0.08–0.16 mm), and the receiver model's ray error dominates: it puts the
-/// boards posed in the pose image 0.1–0.2 mm off, and even with the true board poses carried
-/// into its frame the light planes are off by 0.0105° and 0.24 mm (the stripe pixels' rays are
-/// wrong by the same few hundredths of a degree, i.e. ~0.2 mm at the rig). The plane
-/// calibration cannot undo an error of the rays it sees everything through (a joint board-pose
-/// refinement was measured not to help, see the module docs). With the camera's rays right to
-/// ~0.001° it holds the offset target and is within 0.002° of the normal target, bounded by the
-/// boards posed from the 1024 px pose image (0.010° and 0.018° of board normal error).
+/// With an earlier stripe detector (model RMS 0.060 mm instead of 0.053) the receiver camera
+/// gave 0.0141°/0.053 mm from one pose image, 0.0163°/0.037 mm from 4 and 0.0151°/0.034 mm from
+/// 8; with 17 frames (α every 1°) 0.0125°/0.057 mm (1 image) and 0.0137°/0.037 mm (8 images).
+/// So the 0.05 mm offset holds with the receiver's camera once a few pose images are
+/// averaged; its 0.01° normal does not (0.0125–0.016°): the light-plane normal inherits the
+/// boards' tilt (~0.011°), which comes from the calibrated camera's remaining ray error
+/// (0.002–0.005°, differential across a board at 0.6 m; with the true camera or a 0.001° one the
+/// same pose images give boards within 0.007° and planes within 0.009°), on top of the stripe
+/// noise's ~0.007°. Averaging pose images removes the pose image's noise share but not that.
+/// The rig file does not state the boards' relative geometry, so they are posed separately.
 /// (`PLANE_BREAKDOWN=1` prints the rows with the true board poses carried into each frame.)
 #[test]
 fn camera_from_the_receiver_calibration_gives_the_true_light_planes() {
     let sensor = Sensor::paper();
     let (angle, off, rms) = calibrate_with_camera(&sensor, sensor.camera.as_ref(), "true camera", false);
-    assert!(angle < 0.02 && off < 0.05 && rms < 0.1, "true camera: {angle}°, {off} mm, RMS {rms} mm");
-    let realistic = projected_receiver_camera(&sensor, 20, 0.07, 21);
-    let (angle, off, rms) =
-        calibrate_with_camera(&sensor, realistic.as_ref(), "receiver camera, 0.07 px corners", false);
-    // Bounds at about twice the worst over the seeds: room for changes in the receiver calibration.
-    assert!(angle < 0.03 && off < 0.3 && rms < 0.6, "receiver camera: {angle}°, {off} mm, RMS {rms} mm");
+    assert!(angle < 0.015 && off < 0.05 && rms < 0.1, "true camera: {angle}°, {off} mm, RMS {rms} mm");
+    let receiver = rendered_receiver_camera(&sensor, 20, 2);
+    let (angle, off, rms) = calibrate_with_camera(&sensor, receiver.as_ref(), "receiver camera", false);
+    // The 0.05 mm; the normal at the measured level (0.0125°, 0.0137–0.0163° with the
+    // earlier stripe detector) with room for the detectors' changes, not the 0.01°.
+    assert!(angle < 0.02 && off < 0.05 && rms < 0.1, "receiver camera: {angle}°, {off} mm, RMS {rms} mm");
     let accurate = projected_receiver_camera(&sensor, 20, 0.005, 21);
     let (angle, off, rms) =
         calibrate_with_camera(&sensor, accurate.as_ref(), "receiver camera, 0.005 px corners", false);
-    assert!(angle < 0.015 && off < 0.05 && rms < 0.1, "accurate receiver camera: {angle}°, {off} mm, RMS {rms} mm");
+    assert!(angle < 0.01 && off < 0.05 && rms < 0.1, "accurate receiver camera: {angle}°, {off} mm, RMS {rms} mm");
     if std::env::var("PLANE_BREAKDOWN").is_ok() {
         calibrate_with_camera(&sensor, sensor.camera.as_ref(), "true camera", true);
-        calibrate_with_camera(&sensor, realistic.as_ref(), "receiver camera, 0.07 px corners", true);
+        calibrate_with_camera(&sensor, receiver.as_ref(), "receiver camera", true);
         calibrate_with_camera(&sensor, accurate.as_ref(), "receiver camera, 0.005 px corners", true);
     }
 }
@@ -441,4 +472,40 @@ fn frame_alignment_removes_a_turned_camera_frame_exactly() {
         (angle - angle_t).abs() < 1e-4 && (off - off_t).abs() < 1e-3 && (rms - rms_t).abs() < 1e-3,
         "true camera {angle}°, {off} mm, {rms} mm; turned {angle_t}°, {off_t} mm, {rms_t} mm"
     );
+}
+
+/// A camera calibrated by `omni_calib::receiver::calibrate` as a user does it: `count` 9 × 6
+/// boards (30 mm) of the simulator's calibration board set rendered, their corners detected
+/// inside the mirror annulus, and the annulus given to the calibration (the rim circle a user
+/// measures in an image of a lit scene; here the true camera's).
+fn rendered_receiver_camera(sensor: &Sensor, count: usize, seed: u64) -> Box<dyn CameraModel> {
+    use omni_simulator::{calibration_board_poses, render_board_image};
+    use omni_vision::corners::{DetectorOptions, GrayF32, detect_board};
+    use rayon::prelude::*;
+    let board = BoardFile::new(9, 6, 30.0);
+    let c = sensor.camera.mirror_circle();
+    let annulus = [c.centre.x, c.centre.y, c.inner_radius, c.outer_radius];
+    let detector = DetectorOptions { annulus: Some(annulus), ..Default::default() };
+    let poses = calibration_board_poses(sensor, &board, count, seed).unwrap();
+    let obs: Vec<crate::receiver::Observation> = poses
+        .par_iter()
+        .enumerate()
+        .filter_map(|(k, pose)| {
+            let opts = RenderOptions { seed: seed + k as u64, ..RenderOptions::calibration() };
+            let (frame, _) = render_board_image(sensor, pose, &board, &opts);
+            let scale = 255.0 / frame.max_value() as f32;
+            let img = GrayF32 {
+                width: frame.width as usize,
+                height: frame.height as usize,
+                data: frame.data.iter().map(|&v| v as f32 * scale).collect(),
+            };
+            let found = detect_board(&img, 9, 6, &detector).ok()?;
+            Some(crate::receiver::Observation::from_corners(&format!("board{k}"), &found, board.square_mm))
+        })
+        .collect();
+    let (w, h) = sensor.camera.image_size();
+    let opts = crate::receiver::Options { annulus: Some(annulus), ..Default::default() };
+    let cal = crate::receiver::calibrate(w, h, &obs, &opts).unwrap();
+    eprintln!("receiver: {} rendered boards, reprojection RMS {:.3} px", obs.len(), cal.rms_px);
+    at_true_viewpoint(cal.spec, sensor)
 }

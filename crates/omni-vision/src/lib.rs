@@ -3,4 +3,5 @@
 
 pub mod corners;
 pub mod image_io;
+pub mod rim;
 pub mod stripe;

@@ -91,13 +91,12 @@ pub fn max_image(images: &[GrayF32]) -> Result<GrayF32, String> {
     Ok(out)
 }
 
-/// An edge along one ray: its ray, radius about the ray's origin (px), position and sign.
+/// An edge along one ray: its ray, position (px) and sign (+1 brighter outwards).
 #[derive(Debug, Clone, Copy)]
 struct Edge {
     ray: usize,
     x: f64,
     y: f64,
-    strength: f32,
     sign: i8,
 }
 
@@ -137,8 +136,8 @@ fn radial_edges(img: &GrayF32, centre: [f64; 2], opts: &RimOptions) -> (Vec<Edge
             })
             .collect();
         peaks.sort_by(|a, b| b.0.total_cmp(&a.0));
-        for &(strength, r, sign) in peaks.iter().take(opts.edges_per_ray) {
-            edges.push(Edge { ray, x: centre[0] + r * dx, y: centre[1] + r * dy, strength, sign });
+        for &(_, r, sign) in peaks.iter().take(opts.edges_per_ray) {
+            edges.push(Edge { ray, x: centre[0] + r * dx, y: centre[1] + r * dy, sign });
         }
     }
     (edges, reach)
@@ -227,7 +226,7 @@ fn ransac_circles(
             None => found.push((centre, radius, a.sign, support)),
         }
     }
-    found.sort_by(|a, b| b.3.cmp(&a.3));
+    found.sort_by_key(|f| std::cmp::Reverse(f.3));
     found
 }
 
@@ -312,7 +311,6 @@ fn blind_centre(smooth: &GrayF32, outer: &RimCircle, opts: &RimOptions) -> Optio
 #[cfg(test)]
 mod tests {
     use super::*;
-    use omni_model::CameraModel;
     use omni_simulator::{RenderOptions, Scene, Sensor};
 
     /// The true circles of the rim and of the blind centre: radii from the camera's

@@ -16,7 +16,7 @@ BIN=${BIN:-$here/target/release}
 export PATH="$BIN:$PATH"
 size=${DEMO_SIZE:-full}
 if [ "$size" = small ]; then
-  boards=20; rig_angles=15:23:0.5; scan_angles=15:29:1; objects="plane sphere"
+  boards=20; rig_angles=15:23:0.5; scan_angles=15:29:1; objects="plane cylinder sphere"
 else
   boards=20; rig_angles=14:28:0.5; scan_angles=14:29:0.25; objects="plane cylinder sphere cone_pyramid"
 fi

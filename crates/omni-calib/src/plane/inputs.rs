@@ -333,6 +333,26 @@ mod tests {
     use omni_simulator::rng::SplitMix64;
 
     #[test]
+    fn mean_image_averages_pixels_and_refuses_other_sizes() {
+        use omni_vision::corners::GrayF32;
+        let img = |w: usize, h: usize, f: &dyn Fn(usize) -> f32| GrayF32 {
+            width: w,
+            height: h,
+            data: (0..w * h).map(f).collect(),
+        };
+        let a = img(4, 3, &|i| i as f32);
+        let b = img(4, 3, &|i| 100.0 - i as f32);
+        let c = img(4, 3, &|_| 20.0);
+        let mean = mean_image(&[a.clone(), b, c]).unwrap();
+        assert_eq!((mean.width, mean.height), (4, 3));
+        assert!(mean.data.iter().all(|v| (v - 40.0).abs() < 1e-5), "{:?}", mean.data);
+        assert_eq!(mean_image(std::slice::from_ref(&a)).unwrap().data, a.data);
+        let err = mean_image(&[a.clone(), img(3, 4, &|_| 0.0)]).unwrap_err();
+        assert!(err.contains("image 2") && err.contains("3×4"), "{err}");
+        assert!(mean_image(&[]).is_err());
+    }
+
+    #[test]
     fn board_pose_from_noisy_corners_with_its_report_figures() {
         let camera = paper_camera();
         let truth = Isometry3::from_parts(

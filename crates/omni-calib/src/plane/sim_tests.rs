@@ -78,12 +78,14 @@ fn rendered_rig_with_detected_stripes_gives_the_true_light_planes() {
         );
         (worst_angle, worst_off)
     };
-    // The bar for the ideal build (0.01° in normal, 0.05 mm in offset) with the true board
-    // poses; with poses from the detected corners the board error (here up to 0.02°) adds to it.
+    // The bar for the ideal build (0.01° in normal, 0.05 mm in offset), with the true
+    // board poses (measured 0.0074°, 0.014 mm) and with the boards found in the mean of
+    // POSE_IMAGES pose images (boards within 0.007°; planes 0.0084°, 0.011 mm; from one pose image
+    // the boards were up to 0.017° off and the planes 0.013°).
     let (angle, off) = errors(&true_boards, "true board poses");
     assert!(angle < 0.01 && off < 0.05, "true poses: normal error {angle}°, offset {off} mm");
     let (angle, off) = errors(&boards, "boards from the pose image");
-    assert!(angle < 0.02 && off < 0.05, "detected poses: normal error {angle}°, offset {off} mm");
+    assert!(angle < 0.01 && off < 0.05, "detected poses: normal error {angle}°, offset {off} mm");
 }
 
 type RenderedRig = (Vec<FrameStripes>, Vec<Vec<omni_simulator::TruthPoint>>, omni_vision::corners::GrayF32);
@@ -387,15 +389,19 @@ fn calibrate_on_rig(
 /// * true camera: 0.0084°, 0.011 mm; boards 0.0066°/0.019 mm, 0.0048°/0.011 mm (true board
 ///   poses, i.e. stripe noise alone: 0.0074°, 0.014 mm);
 /// * receiver camera (rays 0.0018° median, 0.0048° max after alignment; reprojection 0.019 px):
-///   0.0125°, 0.028 mm; boards 0.0114°/0.063 mm, 0.0115°/0.022 mm;
+///   0.0125°, 0.028 mm; boards 0.0114°/0.063 mm, 0.0115°/0.022 mm. This board set (seed 2, as
+///   in the receiver's own test) is a good one: seed 5 gives rays 0.0067°/0.0150° and planes
+///   0.0176°/0.087 mm, seed 9 rays 0.0123°/0.0200° and planes 0.0136°/0.121 mm, 40 boards
+///   (seed 2) rays 0.0036°/0.0077° and planes 0.0123°/0.051 mm;
 /// * receiver camera from projected corners with 0.005 px noise (rays 0.0012° median):
 ///   0.0075°, 0.007 mm; boards 0.0071°/0.007 mm, 0.0038°/0.014 mm.
 ///
 /// With an earlier stripe detector (model RMS 0.060 mm instead of 0.053) the receiver camera
 /// gave 0.0141°/0.053 mm from one pose image, 0.0163°/0.037 mm from 4 and 0.0151°/0.034 mm from
 /// 8; with 17 frames (α every 1°) 0.0125°/0.057 mm (1 image) and 0.0137°/0.037 mm (8 images).
-/// So the 0.05 mm offset holds with the receiver's camera once a few pose images are
-/// averaged; its 0.01° normal does not (0.0125–0.016°): the light-plane normal inherits the
+/// So the 0.05 mm offset holds with this receiver camera once a few pose images are
+/// averaged, but not with every board set (0.05–0.12 mm with the other sets above, whose rays
+/// are 2–7× worse); its 0.01° normal does not hold (0.0123–0.0176°): the light-plane normal inherits the
 /// boards' tilt (~0.011°), which comes from the calibrated camera's remaining ray error
 /// (0.002–0.005°, differential across a board at 0.6 m; with the true camera or a 0.001° one the
 /// same pose images give boards within 0.007° and planes within 0.009°), on top of the stripe
@@ -406,11 +412,12 @@ fn calibrate_on_rig(
 fn camera_from_the_receiver_calibration_gives_the_true_light_planes() {
     let sensor = Sensor::paper();
     let (angle, off, rms) = calibrate_with_camera(&sensor, sensor.camera.as_ref(), "true camera", false);
-    assert!(angle < 0.015 && off < 0.05 && rms < 0.1, "true camera: {angle}°, {off} mm, RMS {rms} mm");
+    assert!(angle < 0.01 && off < 0.05 && rms < 0.1, "true camera: {angle}°, {off} mm, RMS {rms} mm");
     let receiver = rendered_receiver_camera(&sensor, 20, 2);
     let (angle, off, rms) = calibrate_with_camera(&sensor, receiver.as_ref(), "receiver camera", false);
-    // The 0.05 mm; the normal at the measured level (0.0125°, 0.0137–0.0163° with the
-    // earlier stripe detector) with room for the detectors' changes, not the 0.01°.
+    // The 0.05 mm (on this board set, see above); the normal at the measured level
+    // (0.0125°; 0.0137–0.0163° with the earlier stripe detector) with room for the detectors'
+    // changes, not the 0.01°.
     assert!(angle < 0.02 && off < 0.05 && rms < 0.1, "receiver camera: {angle}°, {off} mm, RMS {rms} mm");
     let accurate = projected_receiver_camera(&sensor, 20, 0.005, 21);
     let (angle, off, rms) =

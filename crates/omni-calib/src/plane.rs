@@ -3,7 +3,8 @@
 //! Pipeline ([`calibrate_planes`]), following SENSOR.md "Calibration" and "Beyond the paper":
 //! 1. Board poses in the world frame, from the calibrated camera ([`estimate_board_pose`]: the
 //!    receiver calibration's pose estimator, [`crate::pose`], on corner pixels;
-//!    [`inputs::boards_from_pose_image`] finds the boards in the ambient pose image first) or given.
+//!    [`inputs::boards_from_pose_image`] finds the boards in the ambient pose image first, best in
+//!    the [`inputs::mean_image`] of several images of the unmoved rig) or given.
 //! 2. Each stripe pixel's ray meets the nearest board whose outline it crosses
 //!    ([`locate_on_boards`]) → 3D points on two crossing lines per frame (mm, world frame).
 //! 3. Points are split between the lasers with the initial model (a point belongs to the laser

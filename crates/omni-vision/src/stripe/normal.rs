@@ -73,9 +73,12 @@ impl RidgeDetector {
             .iter()
             .map(|p| {
                 let (dx, dy) = (p.u - self.cx, p.v - self.cy);
-                (dy.atan2(dx), dx.hypot(dy))
+                // sqrt, not hypot: no overflow risk at pixel scales, and libm's hypot is slow.
+                (dy.atan2(dx), (dx * dx + dy * dy).sqrt())
             })
             .collect();
+        // ln(intensity) once per point (each point enters about ten neighbours' fits).
+        let log_intensity: Vec<f64> = points.iter().map(|p| p.intensity.max(1e-9).ln()).collect();
         let mut order: Vec<usize> = (0..points.len()).collect();
         order.sort_by(|&a, &b| polar[a].0.total_cmp(&polar[b].0));
         let moves: Vec<Option<f64>> = (0..order.len())
@@ -85,7 +88,7 @@ impl RidgeDetector {
                     return None;
                 }
                 let (_, r) = polar[idx];
-                let shape = local_shape(&polar, &points, &order, k)?;
+                let shape = local_shape(&polar, &log_intensity, &order, k)?;
                 let across =
                     if shape.slope.abs() < MIN_SLOPE || ray_bias(&points[idx], r, &shape, threshold) < MIN_BIAS_PX {
                         0.0
@@ -176,7 +179,8 @@ fn ray_bias(p: &StripePoint, r: f64, shape: &Shape, threshold: f64) -> f64 {
 /// mirror centre (r' = r·m, r'' = r²·d²r/ds²): (r² + 2r'² − r·r'') / (r² + r'²)^{3/2}.
 fn curvature_inwards(r: f64, shape: &Shape) -> f64 {
     let m2 = shape.slope * shape.slope;
-    (1.0 + 2.0 * m2 - r * shape.d2r) / (r * (1.0 + m2).powf(1.5))
+    let stretch2 = 1.0 + m2;
+    (1.0 + 2.0 * m2 - r * shape.d2r) / (r * stretch2 * stretch2.sqrt())
 }
 
 /// Radial move (px) that undoes the sampling kernel's pull towards the centre of curvature
@@ -191,30 +195,46 @@ fn kernel_pull(r: f64, shape: &Shape) -> f64 {
 
 /// Least-squares parabolas r(s) = r₀ + slope·s + d2r·s²/2 and ln I(s) through the points of the
 /// same stripe (radius within the step of a 60° crossing) within ±[`SHAPE_HALF_ARC_PX`] of arc
-/// around `order[k]` (`order`: indices of `polar` and `points` sorted by azimuth); `None` with
-/// too few points.
-fn local_shape(polar: &[(f64, f64)], points: &[StripePoint], order: &[usize], k: usize) -> Option<Shape> {
+/// around `order[k]` (`order`: indices of `polar` and `log_intensity`, the points' ln I, sorted
+/// by azimuth); `None` with too few points.
+fn local_shape(polar: &[(f64, f64)], log_intensity: &[f64], order: &[usize], k: usize) -> Option<Shape> {
     let n = order.len();
     let (phi, r) = polar[order[k]];
     let half_angle = SHAPE_HALF_ARC_PX / r.max(1.0);
     let max_dr = 1.0 + SHAPE_HALF_ARC_PX * 3f64.sqrt();
-    let mut m = nalgebra::Matrix3::<f64>::zeros();
-    let mut rhs = nalgebra::Vector3::<f64>::zeros();
-    let mut rhs_log = nalgebra::Vector3::<f64>::zeros();
+    // Moments Σ sⁱ (i = 0..4) and Σ sⁱ·y (i = 0..2) of the basis (1, s, s²/2); the normal
+    // equations are built from them once (the halves are exact, so this equals summing the
+    // basis' outer products).
+    let mut sp = [0.0f64; 5];
+    let (mut sr, mut sl) = ([0.0f64; 3], [0.0f64; 3]);
     let mut count = 0;
     // Whether point j is within the arc window (and then adds it if it is on the same stripe).
     let mut visit = |j: usize| -> bool {
         let (phj, rj) = polar[order[j]];
-        let d = (phj - phi + PI).rem_euclid(TAU) - PI;
+        // Azimuth difference wrapped into [−π, π] (both azimuths are in (−π, π]); no fmod.
+        let d = phj - phi;
+        let d = if d > PI {
+            d - TAU
+        } else if d < -PI {
+            d + TAU
+        } else {
+            d
+        };
         if d.abs() > half_angle {
             return false;
         }
         if (rj - r).abs() <= max_dr {
             let s = d * r;
-            let basis = nalgebra::Vector3::new(1.0, s, 0.5 * s * s);
-            m += basis * basis.transpose();
-            rhs += basis * (rj - r);
-            rhs_log += basis * points[order[j]].intensity.max(1e-9).ln();
+            let s2 = s * s;
+            let powers = [1.0, s, s2, s * s2, s2 * s2];
+            for (acc, p) in sp.iter_mut().zip(powers) {
+                *acc += p;
+            }
+            let (y, l) = (rj - r, log_intensity[order[j]]);
+            for i in 0..3 {
+                sr[i] += powers[i] * y;
+                sl[i] += powers[i] * l;
+            }
             count += 1;
         }
         true
@@ -232,6 +252,19 @@ fn local_shape(polar: &[(f64, f64)], points: &[StripePoint], order: &[usize], k:
     if count < MIN_POINTS {
         return None;
     }
+    let m = nalgebra::Matrix3::new(
+        sp[0],
+        sp[1],
+        0.5 * sp[2],
+        sp[1],
+        sp[2],
+        0.5 * sp[3],
+        0.5 * sp[2],
+        0.5 * sp[3],
+        0.25 * sp[4],
+    );
+    let rhs = nalgebra::Vector3::new(sr[0], sr[1], 0.5 * sr[2]);
+    let rhs_log = nalgebra::Vector3::new(sl[0], sl[1], 0.5 * sl[2]);
     let inv = m.try_inverse()?;
     let (sol, sol_log) = (inv * rhs, inv * rhs_log);
     Some(Shape { slope: sol[1], d2r: sol[2], log_intensity_slope: sol_log[1] })

@@ -38,6 +38,7 @@
 //! fields) plus the per-voxel sums — bounded by the number of occupied voxels, not the input.
 
 use omni_formats::ply::{PointCloud, ScalarField};
+use rayon::prelude::*;
 
 /// Largest |voxel index| accepted on each axis (21 bits per axis, so a key packs into a u64).
 pub const MAX_VOXEL_INDEX: i64 = (1 << 20) - 1;
@@ -341,8 +342,14 @@ impl Accumulators {
 /// Where finished voxels go, in ascending key order: either accumulators (more chunks to come)
 /// or straight into the output cloud as means (the last chunk), which saves writing and
 /// re-reading the accumulators.
-trait VoxelSink {
+trait VoxelSink: Send + Sync + Sized {
     fn push(&mut self, key: u64, count: u32, sums: &[f64; 3], scalar_sums: &[f64]);
+
+    /// An empty sink of the same kind, for one parallel task's voxels.
+    fn empty_piece(&self) -> Self;
+
+    /// Appends a task's voxels (which follow this sink's in key order).
+    fn append(&mut self, piece: Self);
 
     /// Whether the global voxels the chunk does not touch are wanted too (the full union).
     fn wants_untouched_global(&self) -> bool {
@@ -358,6 +365,14 @@ impl VoxelSink for ChunkVoxels {
     #[inline]
     fn push(&mut self, key: u64, count: u32, sums: &[f64; 3], scalar_sums: &[f64]) {
         self.0.push(key, count, sums, scalar_sums)
+    }
+
+    fn empty_piece(&self) -> Self {
+        ChunkVoxels(self.0.empty_piece())
+    }
+
+    fn append(&mut self, piece: Self) {
+        self.0.append(piece.0)
     }
 
     fn wants_untouched_global(&self) -> bool {
@@ -411,6 +426,17 @@ impl VoxelSink for Accumulators {
         self.sums.push(*sums);
         self.scalar_sums.extend_from_slice(scalar_sums);
     }
+
+    fn empty_piece(&self) -> Self {
+        Accumulators::default()
+    }
+
+    fn append(&mut self, piece: Self) {
+        self.keys.extend_from_slice(&piece.keys);
+        self.counts.extend_from_slice(&piece.counts);
+        self.sums.extend_from_slice(&piece.sums);
+        self.scalar_sums.extend_from_slice(&piece.scalar_sums);
+    }
 }
 
 impl VoxelSink for PointCloud {
@@ -420,6 +446,18 @@ impl VoxelSink for PointCloud {
         self.positions.push([sums[0] / n, sums[1] / n, sums[2] / n]);
         for (f, s) in self.scalars.iter_mut().zip(scalar_sums) {
             f.values.push((s / n) as f32);
+        }
+    }
+
+    fn empty_piece(&self) -> Self {
+        let scalars = self.scalars.iter().map(|f| ScalarField { name: f.name.clone(), values: Vec::new() }).collect();
+        PointCloud { positions: Vec::new(), scalars }
+    }
+
+    fn append(&mut self, piece: Self) {
+        self.positions.extend_from_slice(&piece.positions);
+        for (f, g) in self.scalars.iter_mut().zip(&piece.scalars) {
+            f.values.extend_from_slice(&g.values);
         }
     }
 }
@@ -577,81 +615,257 @@ fn accumulate_dense(
     Ok(())
 }
 
-fn accumulate_partitioned(
+/// Bounds of the input parts that are keyed, counted and scattered in parallel: about one part
+/// per thread (at least [`MIN_PART_POINTS`] points each). The result never depends on the number
+/// of parts (the scatter is stable: part p's points follow parts 0..p in every bucket).
+fn part_bounds(n: usize) -> Vec<usize> {
+    const MIN_PART_POINTS: usize = 1 << 15;
+    let parts = rayon::current_num_threads().min(n.div_ceil(MIN_PART_POINTS)).max(1);
+    (0..=parts).map(|p| p * n / parts).collect()
+}
+
+/// Splits `buf` into one slice per (part, bucket), `counts[p][b]` elements each, laid out bucket
+/// by bucket and, inside a bucket, part by part; returned indexed `[p][b]`.
+fn split_by_part_and_bucket<'a, T>(mut buf: &'a mut [T], counts: &[Vec<u32>]) -> Vec<Vec<&'a mut [T]>> {
+    let buckets = counts.first().map_or(0, |c| c.len());
+    let mut out: Vec<Vec<&mut [T]>> = counts.iter().map(|_| Vec::with_capacity(buckets)).collect();
+    for b in 0..buckets {
+        for (p, c) in counts.iter().enumerate() {
+            let (head, tail) = std::mem::take(&mut buf).split_at_mut(c[b] as usize);
+            out[p].push(head);
+            buf = tail;
+        }
+    }
+    out
+}
+
+/// Copies `values` (one part of the input) into its per-bucket destination slices, in input order.
+#[inline]
+fn scatter<T: Copy>(keys: &[u64], values: &[T], bucket_of_key: impl Fn(u64) -> usize, dst: &mut [&mut [T]]) {
+    let mut next = vec![0usize; dst.len()];
+    for (k, v) in keys.iter().zip(values) {
+        let b = bucket_of_key(*k);
+        dst[b][next[b]] = *v;
+        next[b] += 1;
+    }
+}
+
+/// A chunk copied into bucket order: box keys, positions and each scalar field (field-major),
+/// stable (input order within a bucket); bucket b holds `starts[b]..starts[b + 1]`.
+struct Partition {
+    keys: Vec<u64>,
+    positions: Vec<[f64; 3]>,
+    fields: Vec<Vec<f32>>,
+    starts: Vec<usize>,
+    /// The smallest box key of each bucket's key range.
+    first_keys: Vec<u64>,
+}
+
+/// Partitions a chunk into buckets of consecutive key prefixes (top ≤ 16 bits of the box key)
+/// holding ≈ `bucket_points` points each, so bucket order is key order. Each point's key is
+/// computed once; per-part prefix histograms, prefix sums and the scatter run in parallel.
+fn partition(bk: &BoxKey, positions: &[[f64; 3]], fields: &[&[f32]], bucket_points: usize) -> Partition {
+    let n = positions.len();
+    let prefix_bits = bk.bits.min(16);
+    let prefix_shift = bk.bits - prefix_bits;
+    let bounds = part_bounds(n);
+    let mut keys = vec![0u64; n];
+    let mut key_parts: Vec<&mut [u64]> = Vec::new();
+    let mut rest = keys.as_mut_slice();
+    for w in bounds.windows(2) {
+        let (head, tail) = rest.split_at_mut(w[1] - w[0]);
+        key_parts.push(head);
+        rest = tail;
+    }
+    let part_hists: Vec<Vec<u32>> = key_parts
+        .into_par_iter()
+        .zip(bounds.par_windows(2))
+        .map(|(dst, w)| {
+            let mut hist = vec![0u32; 1 << prefix_bits];
+            for (k, p) in dst.iter_mut().zip(&positions[w[0]..w[1]]) {
+                *k = bk.key(p);
+                hist[(*k >> prefix_shift) as usize] += 1;
+            }
+            hist
+        })
+        .collect();
+    // Buckets of consecutive prefixes.
+    let mut bucket_of = vec![0u32; 1 << prefix_bits];
+    let mut starts = vec![0usize];
+    let mut first_keys = vec![0u64];
+    let (mut filled, mut total) = (0usize, 0usize);
+    for q in 0..bucket_of.len() {
+        if filled >= bucket_points {
+            starts.push(total);
+            first_keys.push((q as u64) << prefix_shift);
+            filled = 0;
+        }
+        bucket_of[q] = (starts.len() - 1) as u32;
+        let c: usize = part_hists.iter().map(|h| h[q] as usize).sum();
+        filled += c;
+        total += c;
+    }
+    starts.push(n);
+    let counts: Vec<Vec<u32>> = part_hists
+        .iter()
+        .map(|h| {
+            let mut c = vec![0u32; first_keys.len()];
+            for (q, &x) in h.iter().enumerate() {
+                c[bucket_of[q] as usize] += x;
+            }
+            c
+        })
+        .collect();
+    let bucket_of_key = |k: u64| bucket_of[(k >> prefix_shift) as usize] as usize;
+    let mut part = Partition {
+        keys: vec![0; n],
+        positions: vec![[0.0; 3]; n],
+        fields: fields.iter().map(|_| vec![0.0; n]).collect(),
+        starts,
+        first_keys,
+    };
+    let key_dst = split_by_part_and_bucket(&mut part.keys, &counts);
+    let pos_dst = split_by_part_and_bucket(&mut part.positions, &counts);
+    let mut field_dst: Vec<Vec<Vec<&mut [f32]>>> = bounds.windows(2).map(|_| Vec::new()).collect();
+    for f in part.fields.iter_mut() {
+        for (p, d) in split_by_part_and_bucket(f, &counts).into_iter().enumerate() {
+            field_dst[p].push(d);
+        }
+    }
+    key_dst.into_par_iter().zip(pos_dst).zip(field_dst).zip(bounds.par_windows(2)).for_each(
+        |(((mut kd, mut pd), fds), w)| {
+            let (s, e) = (w[0], w[1]);
+            let part_keys = &keys[s..e];
+            scatter(part_keys, part_keys, bucket_of_key, &mut kd);
+            scatter(part_keys, &positions[s..e], bucket_of_key, &mut pd);
+            // Field by field: one field's write streams at a time.
+            for (mut fd, field) in fds.into_iter().zip(fields) {
+                scatter(part_keys, &field[s..e], bucket_of_key, &mut fd);
+            }
+        },
+    );
+    part
+}
+
+/// Global-key bound of the voxels that a task starting at box key `first_key` owns (the global
+/// key of that cell; `u64::MAX`, above every key, if the cell lies outside the box).
+fn task_bound(bk: &BoxKey, first_key: u64) -> u64 {
+    if first_key >= bk.cells() {
+        return u64::MAX;
+    }
+    let k = first_key % bk.extent[2];
+    let ij = first_key / bk.extent[2];
+    let (i, j) = (ij / bk.extent[1], ij % bk.extent[1]);
+    VoxelSpec::key_of_index([i as i64 + bk.lo[0], j as i64 + bk.lo[1], k as i64 + bk.lo[2]])
+}
+
+/// Emits the global voxels with keys in [cursor's key, `bound`), advancing `cursor`.
+fn emit_global_below(global: &Accumulators, cursor: &mut usize, bound: u64, ns: usize, out: &mut impl VoxelSink) {
+    let end = *cursor + global.keys[*cursor..].partition_point(|&k| k < bound);
+    if out.wants_untouched_global() {
+        for g in *cursor..end {
+            out.push(global.keys[g], global.counts[g], &global.sums[g], &global.scalar_sums[g * ns..(g + 1) * ns]);
+        }
+    }
+    *cursor = end;
+}
+
+/// Partitions the chunk ([`partition`]), then sorts and sums its buckets in parallel: tasks of
+/// consecutive buckets, each owning the global voxels of its key range, write their voxels to
+/// their own sink, concatenated in key order. A voxel's points never span two buckets and are
+/// summed in input order, so the bits do not depend on threads or tasks.
+fn accumulate_partitioned<S: VoxelSink>(
     bk: &BoxKey,
     positions: &[[f64; 3]],
     fields: &[&[f32]],
     global: &Accumulators,
     cursor: &mut usize,
     bucket_points: usize,
-    out: &mut impl VoxelSink,
+    out: &mut S,
 ) -> Result<(), String> {
     let n = positions.len();
-    let ns = fields.len();
-    let prefix_bits = bk.bits.min(16);
-    let prefix_shift = bk.bits - prefix_bits;
-    let mut hist = vec![0u32; 1 << prefix_bits];
-    for p in positions {
-        hist[(bk.key(p) >> prefix_shift) as usize] += 1;
-    }
-    // Buckets of consecutive prefixes: bucket order is key order.
-    let mut bucket_of = vec![0u32; hist.len()];
-    let mut bucket_starts = vec![0usize];
-    let (mut filled, mut total) = (0usize, 0usize);
-    for (q, &c) in hist.iter().enumerate() {
-        if filled >= bucket_points {
-            bucket_starts.push(total);
-            filled = 0;
-        }
-        bucket_of[q] = (bucket_starts.len() - 1) as u32;
-        filled += c as usize;
-        total += c as usize;
-    }
-    bucket_starts.push(n);
-    let mut next = bucket_starts.clone();
-    let mut part_pos = vec![[0.0f64; 3]; n];
-    let mut part_scalars = vec![0.0f32; n * ns];
-    for (i, p) in positions.iter().enumerate() {
-        let b = bucket_of[(bk.key(p) >> prefix_shift) as usize] as usize;
-        let d = next[b];
-        next[b] += 1;
-        part_pos[d] = *p;
-        for (f, field) in fields.iter().enumerate() {
-            part_scalars[d * ns + f] = field[i];
+    let part = partition(bk, positions, fields, bucket_points);
+    // Tasks of ≥ 1/8 of a thread's share of points each (load balance on a busy machine).
+    let task_points = bucket_points.max(n / (8 * rayon::current_num_threads()));
+    let mut task_starts = vec![0usize];
+    for b in 1..part.first_keys.len() {
+        let from = part.starts[task_starts[task_starts.len() - 1]];
+        if part.starts[b] - from >= task_points {
+            task_starts.push(b);
         }
     }
+    task_starts.push(part.first_keys.len());
+    let tasks: Vec<(usize, usize)> = task_starts.windows(2).map(|w| (w[0], w[1])).collect();
+    let last = tasks.len() - 1;
+    let pieces: Vec<S> = tasks
+        .par_iter()
+        .enumerate()
+        .map(|(t, &(b0, b1))| {
+            let mut piece = out.empty_piece();
+            let lo = if t == 0 { 0 } else { task_bound(bk, part.first_keys[b0]) };
+            let hi = if t == last { u64::MAX } else { task_bound(bk, part.first_keys[b1]) };
+            let mut cur = global.keys.partition_point(|&k| k < lo);
+            sum_buckets(bk, &part, b0..b1, global, &mut cur, &mut piece)?;
+            emit_global_below(global, &mut cur, hi, fields.len(), &mut piece);
+            Ok(piece)
+        })
+        .collect::<Result<_, String>>()?;
+    for piece in pieces {
+        out.append(piece);
+    }
+    *cursor = global.len();
+    Ok(())
+}
+
+/// Sorts each bucket of `buckets` on (key, index) and sums runs of equal keys into `out`.
+fn sum_buckets(
+    bk: &BoxKey,
+    part: &Partition,
+    buckets: std::ops::Range<usize>,
+    global: &Accumulators,
+    cursor: &mut usize,
+    out: &mut impl VoxelSink,
+) -> Result<(), String> {
+    let ns = part.fields.len();
     let mut words: Vec<u64> = Vec::new();
     let mut scratch: Vec<u64> = Vec::new();
+    let mut hist: Vec<u32> = Vec::new();
     let mut run = Running { count: 0, sums: [0.0; 3], scalar_sums: vec![0.0; ns] };
-    for w in bucket_starts.windows(2) {
-        let (s, e) = (w[0], w[1]);
+    let mut sc: Vec<&[f32]> = Vec::with_capacity(ns);
+    for b in buckets {
+        let (s, e) = (part.starts[b], part.starts[b + 1]);
         if s == e {
             continue;
         }
-        let pos = &part_pos[s..e];
-        let sc = &part_scalars[s * ns..e * ns];
+        let pos = &part.positions[s..e];
+        sc.clear();
+        sc.extend(part.fields.iter().map(|f| &f[s..e]));
         // The runs read the bucket's scalars in key order, i.e. at random: one sequential read
         // first (a value per 64-byte line) lets the hardware prefetcher bring them into L2.
-        std::hint::black_box(sc.iter().step_by(16).fold(0.0f32, |a, &x| a + x));
-        words.clear();
-        words.extend(pos.iter().map(|p| bk.key(p)));
-        let (kmin, kmax) = words.iter().fold((u64::MAX, 0), |(a, b), &k| (a.min(k), b.max(k)));
+        for f in &sc {
+            std::hint::black_box(f.iter().step_by(16).fold(0.0f32, |a, &x| a + x));
+        }
+        let keys = &part.keys[s..e];
+        let (kmin, kmax) = keys.iter().fold((u64::MAX, 0), |(a, b), &k| (a.min(k), b.max(k)));
         let idx_bits = bit_width(pos.len() as u64 - 1).max(1);
         let key_bits = bit_width(kmax - kmin);
         if key_bits + idx_bits > 64 {
             // A huge sparse box: the general path (rare: > 2^40 voxels in one bucket's range).
-            let runs = sort_by_key(pos.len(), key_bits, |j| words[j] - kmin);
+            let runs = sort_by_key(pos.len(), key_bits, |j| keys[j] - kmin);
             for r in runs.runs() {
-                fold_run(bk, pos, sc, r.iter().map(|&j| j as usize), global, cursor, &mut run, out)?;
+                fold_run(bk, pos, &sc, r.iter().map(|&j| j as usize), global, cursor, &mut run, out)?;
             }
             continue;
         }
         let plan = RadixPlan::new(idx_bits, key_bits);
-        let mut hist = vec![0u32; plan.passes.len() << plan.digit_bits];
-        for (j, w) in words.iter_mut().enumerate() {
-            *w = ((*w - kmin) << idx_bits) | j as u64;
-            plan.count(*w, &mut hist);
-        }
+        hist.clear();
+        hist.resize(plan.passes.len() << plan.digit_bits, 0);
+        words.clear();
+        words.extend(keys.iter().enumerate().map(|(j, &k)| {
+            let w = ((k - kmin) << idx_bits) | j as u64;
+            plan.count(w, &mut hist);
+            w
+        }));
         plan.sort_with(&mut words, &mut scratch, &mut hist);
         let mask = (1u64 << idx_bits) - 1;
         let mut r0 = 0;
@@ -662,7 +876,7 @@ fn accumulate_partitioned(
                 r1 += 1;
             }
             let members = words[r0..r1].iter().map(|w| (w & mask) as usize);
-            fold_run(bk, pos, sc, members, global, cursor, &mut run, out)?;
+            fold_run(bk, pos, &sc, members, global, cursor, &mut run, out)?;
             r0 = r1;
         }
     }
@@ -670,12 +884,13 @@ fn accumulate_partitioned(
 }
 
 /// Sums one voxel's points `members` (indices into the bucket, in input order), continuing
-/// the matching global voxel, and emits it after the global voxels that precede it.
+/// the matching global voxel, and emits it after the global voxels that precede it. Scalars
+/// are summed field by field (each sum still in input order).
 #[inline]
 fn fold_run(
     bk: &BoxKey,
     pos: &[[f64; 3]],
-    sc: &[f32],
+    sc: &[&[f32]],
     members: impl Iterator<Item = usize> + Clone,
     global: &Accumulators,
     cursor: &mut usize,
@@ -687,14 +902,16 @@ fn fold_run(
     let key = bk.global_key(&pos[first]);
     let prior = emit_global_before(global, cursor, Some(key), ns, out);
     run.start(global, prior, ns);
-    for j in members {
+    for j in members.clone() {
         let p = &pos[j];
         run.sums[0] += p[0];
         run.sums[1] += p[1];
         run.sums[2] += p[2];
         run.count += 1;
-        for (a, x) in run.scalar_sums.iter_mut().zip(&sc[j * ns..(j + 1) * ns]) {
-            *a += *x as f64;
+    }
+    for (a, field) in run.scalar_sums.iter_mut().zip(sc) {
+        for j in members.clone() {
+            *a += field[j] as f64;
         }
     }
     out.push(key, run.count, &run.sums, &run.scalar_sums);

@@ -6,6 +6,7 @@ use omni_calib::receiver::{self, Calibration, ModelKind, Observation, Options, e
 use omni_cli::{CliError, CliResult};
 use omni_formats::{BoardFile, CameraFile, CameraSpec, read_doc, write_doc};
 use omni_vision::corners::{DetectorOptions, GrayF32, detect_board, load_gray, overlay};
+use omni_vision::rim;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -22,6 +23,8 @@ omni-calib-receiver --board board.json --model ocam --export-ocam calib_results.
 omni-calib-receiver --board board.json --save-corners corners.json --overlay check/ boards/\n  \
 omni-calib-receiver --board board.json --corners corners.json --model mei --export-kalibr camchain.yaml\n  \
 omni-calib-receiver --board board.json --annulus 511.5,511.5,102.5,493 boards/\n  \
+omni-calib-receiver --board board.json --annulus auto boards/\n  \
+omni-calib-receiver --board board.json --rim-image lit_room.png boards/\n  \
 omni-calib-receiver import-ocam calib_results.txt -o camera.json\n\n\
 Models: mei (unified sphere model + radial-tangential distortion, as Kalibr omni-radtan and OpenCV \
 omnidir), ocam (Scaramuzza polynomial, as OCamCalib), hyperbolic (the exact mirror of --mirror with \
@@ -79,11 +82,18 @@ struct CalibArgs {
     #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0")]
     viewpoint_mm: String,
     /// The mirror annulus in the image (px): centre x, centre y, inner and outer rim radius, as
-    /// read off an image of a lit scene. Corners are searched inside it and dropped where their
-    /// refinement window reaches a rim (the rim edge biases them); the principal point starts at
-    /// its centre; the fitted mei/ocam model is valid inside it. Default: the whole image.
-    #[arg(long, value_name = "CX,CY,R_IN,R_OUT")]
+    /// read off an image of a lit scene; or `auto`: found in the board images themselves (the
+    /// rim circle of their per-pixel range: the mirror is where the content changed). Corners are
+    /// searched inside it and dropped where their refinement window reaches a rim (the rim edge
+    /// biases them); the principal point starts at its centre; the fitted mei/ocam model is
+    /// valid inside it. The annulus used is printed and written into the report. Default: the
+    /// whole image.
+    #[arg(long, value_name = "CX,CY,R_IN,R_OUT|auto", conflicts_with = "rim_image")]
     annulus: Option<String>,
+    /// Find the annulus (outer mirror rim and, if visible, the blind centre) in this image of a
+    /// lit scene (same camera and size as the board images) instead of giving --annulus.
+    #[arg(long, value_name = "FILE")]
+    rim_image: Option<PathBuf>,
     /// Board images (files or directories).
     #[arg(required_unless_present = "corners")]
     images: Vec<PathBuf>,
@@ -123,6 +133,45 @@ fn parse_annulus(s: &str) -> CliResult<[f64; 4]> {
             "--annulus: expected CX,CY,R_IN,R_OUT in px with 0 ≤ R_IN < R_OUT, got {s:?}"
         ))),
     }
+}
+
+/// Where a detected annulus came from: the image's size (to check against the board images) and
+/// its name for messages.
+type RimSource = (usize, usize, String);
+
+/// The annulus to use, from `--annulus CX,CY,R_IN,R_OUT`, `--annulus auto` (the rim circle of the
+/// board images' range image) or `--rim-image FILE`; with its source if it was detected.
+fn resolve_annulus(args: &CalibArgs, boards: &[PathBuf]) -> CliResult<Option<([f64; 4], Option<RimSource>)>> {
+    let (img, source) = match (args.annulus.as_deref(), &args.rim_image) {
+        (None, None) => return Ok(None),
+        (Some("auto"), _) => {
+            if boards.is_empty() {
+                return Err(CliError::usage(
+                    "--annulus auto needs board images (not --corners); give --rim-image or numbers",
+                ));
+            }
+            let images: Vec<GrayF32> = boards.par_iter().map(|p| load_gray(p)).collect::<Result<_, _>>()?;
+            let range = rim::range_image(&images).map_err(|e| format!("--annulus auto: {e}"))?;
+            (range, "--annulus auto (board images)".to_string())
+        }
+        (Some(numbers), _) => {
+            return Ok(Some((parse_annulus(numbers)?, None)));
+        }
+        (None, Some(path)) => (load_gray(path)?, path.display().to_string()),
+    };
+    let found = rim::detect_rim(&img, &rim::RimOptions::default()).map_err(|e| format!("{source}: {e}"))?;
+    let a = found.annulus();
+    eprintln!(
+        "mirror annulus from {source}: centre ({:.2}, {:.2}) px, radii {:.2}–{:.2} px (rim fit RMS {:.3} px, {:.0} % of the rays{})",
+        a[0],
+        a[1],
+        a[2],
+        a[3],
+        found.outer.rms_px,
+        100.0 * found.outer.support,
+        if found.inner.is_some() { "" } else { "; no blind-centre circle" }
+    );
+    Ok(Some((a, Some((img.width, img.height, source)))))
 }
 
 fn parse_viewpoint(s: &str) -> CliResult<[f64; 3]> {
@@ -262,11 +311,21 @@ fn calibrate(args: &CalibArgs) -> CliResult {
         },
         None => omni_model::HyperbolicParams::paper(),
     };
-    let annulus = args.annulus.as_deref().map(parse_annulus).transpose()?;
+    let paths = if args.corners.is_some() { Vec::new() } else { expand_images(&args.images)? };
+    let annulus = resolve_annulus(args, &paths)?;
     let detected = match &args.corners {
         Some(path) => Detected { corners: load_corners(path, &board)?, images: Vec::new() },
-        None => detect(&expand_images(&args.images)?, &board, annulus, args.overlay.is_some())?,
+        None => detect(&paths, &board, annulus.as_ref().map(|a| a.0), args.overlay.is_some())?,
     };
+    if let Some((_, Some((rim_w, rim_h, rim_source)))) = &annulus
+        && (*rim_w, *rim_h) != (detected.corners.width as usize, detected.corners.height as usize)
+    {
+        return Err(CliError::new(format!(
+            "{rim_source}: image is {rim_w} × {rim_h} px but the board images are {} × {} px",
+            detected.corners.width, detected.corners.height
+        )));
+    }
+    let annulus = annulus.map(|a| a.0);
     if let Some(path) = &args.save_corners {
         write_doc(path, &detected.corners)?;
     }
@@ -295,6 +354,9 @@ fn calibrate(args: &CalibArgs) -> CliResult {
     let mut report = cal.report_json();
     report["model"] = serde_json::json!(format!("{:?}", args.model).to_lowercase());
     report["board"] = serde_json::json!({"inner_cols": board.inner_cols, "inner_rows": board.inner_rows, "square_mm": board.square_mm});
+    if let Some(a) = annulus {
+        report["annulus_px"] = serde_json::json!(a);
+    }
     file.report = Some(report);
     write_doc(&args.output, &file)?;
     Ok(())

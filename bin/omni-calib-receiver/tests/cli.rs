@@ -143,3 +143,60 @@ fn wrong_board_size_and_unreadable_files_fail_without_output() {
     }
     assert!(!camera.exists());
 }
+
+/// `--annulus auto` finds the mirror rim in the real board images themselves (their per-pixel
+/// range), calibrates with it (≥ 14 of 15 boards, RMS ≤ 0.4 px) and records it in the report;
+/// its centre lies within 3 px of the fitted principal point (measured 1.3 px).
+#[test]
+fn annulus_auto_finds_the_rim_in_the_real_board_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = write_board(dir.path(), 7, 11);
+    let camera = dir.path().join("camera.json");
+    let out =
+        bin().arg("--board").arg(&board).arg("--annulus").arg("auto").arg("-o").arg(&camera).arg(real_dir()).output();
+    let out = out.unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("mirror annulus from --annulus auto"), "{}", stderr(&out));
+    let cam: serde_json::Value = serde_json::from_slice(&std::fs::read(&camera).unwrap()).unwrap();
+    let annulus: Vec<f64> =
+        cam["report"]["annulus_px"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert_eq!(annulus.len(), 4);
+    assert_eq!(cam["model"]["outer_radius_px"].as_f64().unwrap(), annulus[3]);
+    let (cx, cy) = (cam["model"]["cx_px"].as_f64().unwrap(), cam["model"]["cy_px"].as_f64().unwrap());
+    let offset = (annulus[0] - cx).hypot(annulus[1] - cy);
+    assert!(offset <= 3.0, "rim centre {annulus:?} is {offset} px from the principal point ({cx}, {cy})");
+    assert!(cam["report"]["images_used"].as_u64().unwrap() >= 14);
+    let rms = cam["report"]["rms_px"].as_f64().unwrap();
+    assert!(rms <= 0.4, "RMS {rms} px");
+}
+
+#[test]
+fn rim_detection_failures_are_one_line_errors_without_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = write_board(dir.path(), 7, 11);
+    let camera = dir.path().join("camera.json");
+    let one = real_dir().join("MiniOmni1.jpg");
+    // One board image is no lit image: its rim is not a circle seen all round.
+    let out = bin().arg("--board").arg(&board).arg("--rim-image").arg(&one).arg("-o").arg(&camera).arg(&one).output();
+    let out = out.unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(err.contains("MiniOmni1.jpg") && err.contains("no mirror rim found"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    // An unreadable rim image names the file.
+    let broken = dir.path().join("broken.png");
+    std::fs::write(&broken, b"\x89PNG\r\n\x1a\n truncated").unwrap();
+    let out =
+        bin().arg("--board").arg(&board).arg("--rim-image").arg(&broken).arg("-o").arg(&camera).arg(&one).output();
+    let out = out.unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("broken.png"), "{}", stderr(&out));
+    // `auto` needs the board images; numbers and a rim image exclude each other.
+    let corners = dir.path().join("corners.json");
+    let out = bin().arg("--board").arg(&board).arg("--annulus").arg("auto").arg("--corners").arg(&corners).output();
+    assert_eq!(out.unwrap().status.code(), Some(2));
+    let mut both = bin();
+    both.arg("--board").arg(&board).arg("--annulus").arg("1,2,3,4").arg("--rim-image").arg(&one).arg(&one);
+    assert_eq!(both.output().unwrap().status.code(), Some(2));
+    assert!(!camera.exists());
+}

@@ -11,8 +11,8 @@
 //! times with a shrinking tolerance. The outer rim is the largest well-supported circle, the blind
 //! centre the best-supported circle well inside it about the same centre.
 //!
-//! Board images on a dark background show only parts of the mirror; their per-pixel maximum
-//! ([`max_image`]) shows it wherever any board was, which is usually enough.
+//! One board image shows only part of the mirror; the per-pixel range of all of them
+//! ([`range_image`]) shows it wherever a board moved, which is usually enough.
 
 use crate::corners::{GrayF32, gaussian_blur};
 use omni_geom::rng::SplitMix64;
@@ -73,10 +73,15 @@ impl Rim {
     }
 }
 
-/// The per-pixel maximum of images of one size (e.g. all board images of a calibration set).
-pub fn max_image(images: &[GrayF32]) -> Result<GrayF32, String> {
+/// The per-pixel range (maximum − minimum) of images of one size, e.g. all board images of a
+/// calibration set; one image is returned as it is. Inside the mirror the content changes from
+/// image to image (the board moves), outside it (housing, glass, black background) it does not,
+/// so the range shows the mirror disc wherever something moved in front of it: on the real
+/// MiniOmni set, whose rim is a blurred glass ring, only the range gives a circle supported all
+/// round; on simulated boards over a black background it equals the maximum.
+pub fn range_image(images: &[GrayF32]) -> Result<GrayF32, String> {
     let first = images.first().ok_or("no images")?;
-    let mut out = first.clone();
+    let (mut lo, mut hi) = (first.clone(), first.clone());
     for (k, img) in images.iter().enumerate().skip(1) {
         if (img.width, img.height) != (first.width, first.height) {
             return Err(format!(
@@ -84,11 +89,17 @@ pub fn max_image(images: &[GrayF32]) -> Result<GrayF32, String> {
                 img.width, img.height, first.width, first.height
             ));
         }
-        for (o, &v) in out.data.iter_mut().zip(&img.data) {
-            *o = o.max(v);
+        for ((l, h), &v) in lo.data.iter_mut().zip(hi.data.iter_mut()).zip(&img.data) {
+            *l = l.min(v);
+            *h = h.max(v);
         }
     }
-    Ok(out)
+    if images.len() > 1 {
+        for (h, l) in hi.data.iter_mut().zip(&lo.data) {
+            *h -= l;
+        }
+    }
+    Ok(hi)
 }
 
 /// An edge along one ray: its ray, position (px) and sign (+1 brighter outwards).
@@ -254,7 +265,7 @@ fn refine(img: &GrayF32, start: ([f64; 2], f64, i8), opts: &RimOptions) -> Optio
 }
 
 /// Finds the mirror's outer rim circle and, if visible, the blind-centre circle in a grey image
-/// (e.g. a lit scene, or [`max_image`] of the board images). Errors say why no rim was found.
+/// (e.g. a lit scene, or [`range_image`] of the board images). Errors say why no rim was found.
 pub fn detect_rim(img: &GrayF32, opts: &RimOptions) -> Result<Rim, String> {
     if img.width < 32 || img.height < 32 {
         return Err(format!("image of {} × {} px is too small to find the mirror rim", img.width, img.height));
@@ -403,11 +414,12 @@ mod tests {
     }
 
     #[test]
-    fn max_image_keeps_the_brightest_sample_and_checks_sizes() {
+    fn range_image_is_max_minus_min_and_checks_sizes() {
         let a = GrayF32::from_u8(2, 1, &[10, 200]);
         let b = GrayF32::from_u8(2, 1, &[50, 20]);
-        assert_eq!(max_image(&[a.clone(), b]).unwrap().data, vec![50.0, 200.0]);
-        assert!(max_image(&[a, GrayF32::new(1, 1)]).unwrap_err().contains("image 1 is 1 × 1 px"));
-        assert!(max_image(&[]).is_err());
+        assert_eq!(range_image(&[a.clone(), b]).unwrap().data, vec![40.0, 180.0]);
+        assert_eq!(range_image(std::slice::from_ref(&a)).unwrap().data, vec![10.0, 200.0]);
+        assert!(range_image(&[a, GrayF32::new(1, 1)]).unwrap_err().contains("image 1 is 1 × 1 px"));
+        assert!(range_image(&[]).is_err());
     }
 }

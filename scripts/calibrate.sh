@@ -9,11 +9,14 @@
 # boards/ holds the checkerboard images (any poses around the sensor); rig.json describes the rig's
 # boards (omniscan.rig) and pose.png is a lit, lasers-off image of the rig. With --port the real
 # controller triggers the camera (whose software writes frames into --frames); with --emulate the
-# virtual controller renders the rig scene through omni-sim. Writes OUT/camera.json and
+# virtual controller renders the rig scene through omni-sim. The mirror annulus (rim circle, for
+# the receiver's corner search and initial principal point) is found in pose.png, else in the
+# board images (their per-pixel range), else the receiver runs without it (OUT/annulus.txt says
+# which; ANNULUS=CX,CY,R_IN,R_OUT or ANNULUS=none overrides). Writes OUT/camera.json and
 # OUT/scanner.json (plus every intermediate stream).
 set -euo pipefail
 
-usage() { sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
+usage() { sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
 board= boards= rig= pose= port= frames= scene= true_camera= true_scanner= out=
 angles=${RIG_ANGLES:-14:28:0.5} model=${MODEL:-mei} viewpoint=${VIEWPOINT:-0,0,80}
 while [ $# -gt 0 ]; do
@@ -36,8 +39,19 @@ done
 [ -n "$board" ] && [ -n "$boards" ] && [ -n "$rig" ] && [ -n "$pose" ] && [ -n "$out" ] || usage
 mkdir -p "$out"
 
-echo "calibrate.sh: receiver ($model) from $boards" >&2
-omni-calib-receiver --board "$board" --model "$model" --viewpoint-mm "$viewpoint" \
+# The mirror annulus: from the lit pose image if its rim is visible all round, else from the board
+# images; ANNULUS=CX,CY,R_IN,R_OUT overrides, ANNULUS=none turns it off.
+annulus=${ANNULUS:-}
+if [ -z "$annulus" ]; then
+  annulus=$(omni-calib-receiver find-annulus "$pose" 2> "$out/annulus.txt") \
+    || annulus=$(omni-calib-receiver find-annulus "$boards" 2>> "$out/annulus.txt") || annulus=none
+fi
+echo "annulus: $annulus" >> "$out/annulus.txt"
+receiver_args=()
+[ "$annulus" != none ] && receiver_args+=(--annulus "$annulus")
+
+echo "calibrate.sh: receiver ($model) from $boards, annulus $annulus" >&2
+omni-calib-receiver --board "$board" --model "$model" --viewpoint-mm "$viewpoint" "${receiver_args[@]}" \
   --save-corners "$out/corners.json" -o "$out/camera.json" "$boards" > "$out/receiver.txt"
 
 echo "calibrate.sh: rig scan" >&2

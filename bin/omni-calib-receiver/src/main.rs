@@ -25,6 +25,7 @@ omni-calib-receiver --board board.json --corners corners.json --model mei --expo
 omni-calib-receiver --board board.json --annulus 511.5,511.5,102.5,493 boards/\n  \
 omni-calib-receiver --board board.json --annulus auto boards/\n  \
 omni-calib-receiver --board board.json --rim-image lit_room.png boards/\n  \
+omni-calib-receiver find-annulus pose.png        (prints CX,CY,R_IN,R_OUT for --annulus)\n  \
 omni-calib-receiver import-ocam calib_results.txt -o camera.json\n\n\
 Models: mei (unified sphere model + radial-tangential distortion, as Kalibr omni-radtan and OpenCV \
 omnidir), ocam (Scaramuzza polynomial, as OCamCalib), hyperbolic (the exact mirror of --mirror with \
@@ -101,6 +102,14 @@ struct CalibArgs {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Find the mirror annulus (outer rim and, if visible, blind centre) in an image of a lit
+    /// scene, or in the per-pixel range of several images (e.g. the board images), and print it
+    /// as CX,CY,R_IN,R_OUT (px) for --annulus. Exit 1 with the reason if no rim circle is found.
+    FindAnnulus {
+        /// One lit image, or several images / directories of one camera.
+        #[arg(required = true)]
+        images: Vec<PathBuf>,
+    },
     /// Convert an OCamCalib calib_results.txt into camera.json (kind ocam).
     ImportOcam {
         /// OCamCalib's calib_results.txt.
@@ -116,6 +125,7 @@ fn main() -> std::process::ExitCode {
         let args = Args::parse();
         match args.command {
             Some(Command::ImportOcam { input, output }) => import_ocam(&input, &output),
+            Some(Command::FindAnnulus { images }) => find_annulus(&expand_images(&images)?),
             None => calibrate(&args.calib),
         }
     })
@@ -150,16 +160,37 @@ fn resolve_annulus(args: &CalibArgs, boards: &[PathBuf]) -> CliResult<Option<([f
                     "--annulus auto needs board images (not --corners); give --rim-image or numbers",
                 ));
             }
-            let images: Vec<GrayF32> = boards.par_iter().map(|p| load_gray(p)).collect::<Result<_, _>>()?;
-            let range = rim::range_image(&images).map_err(|e| format!("--annulus auto: {e}"))?;
-            (range, "--annulus auto (board images)".to_string())
+            (rim_input(boards)?, "--annulus auto (board images)".to_string())
         }
         (Some(numbers), _) => {
             return Ok(Some((parse_annulus(numbers)?, None)));
         }
         (None, Some(path)) => (load_gray(path)?, path.display().to_string()),
     };
-    let found = rim::detect_rim(&img, &rim::RimOptions::default()).map_err(|e| format!("{source}: {e}"))?;
+    let a = detect_annulus(&img, &source)?;
+    Ok(Some((a, Some((img.width, img.height, source)))))
+}
+
+/// One image as it is, several as their per-pixel range ([`rim::range_image`]).
+fn rim_input(paths: &[PathBuf]) -> CliResult<GrayF32> {
+    let images: Vec<GrayF32> = paths.par_iter().map(|p| load_gray(p)).collect::<Result<_, _>>()?;
+    if let Some(k) = images.iter().position(|i| (i.width, i.height) != (images[0].width, images[0].height)) {
+        return Err(CliError::new(format!(
+            "{}: image is {} × {} px but {} is {} × {} px (all images must come from one camera)",
+            paths[k].display(),
+            images[k].width,
+            images[k].height,
+            paths[0].display(),
+            images[0].width,
+            images[0].height
+        )));
+    }
+    rim::range_image(&images).map_err(CliError::new)
+}
+
+/// The annulus of [`rim::detect_rim`], reported on stderr; errors name `source`.
+fn detect_annulus(img: &GrayF32, source: &str) -> CliResult<[f64; 4]> {
+    let found = rim::detect_rim(img, &rim::RimOptions::default()).map_err(|e| format!("{source}: {e}"))?;
     let a = found.annulus();
     eprintln!(
         "mirror annulus from {source}: centre ({:.2}, {:.2}) px, radii {:.2}–{:.2} px (rim fit RMS {:.3} px, {:.0} % of the rays{})",
@@ -171,7 +202,18 @@ fn resolve_annulus(args: &CalibArgs, boards: &[PathBuf]) -> CliResult<Option<([f
         100.0 * found.outer.support,
         if found.inner.is_some() { "" } else { "; no blind-centre circle" }
     );
-    Ok(Some((a, Some((img.width, img.height, source)))))
+    Ok(a)
+}
+
+fn find_annulus(paths: &[PathBuf]) -> CliResult {
+    let img = rim_input(paths)?;
+    let source = match paths {
+        [one] => one.display().to_string(),
+        _ => format!("{} images", paths.len()),
+    };
+    let a = detect_annulus(&img, &source)?;
+    println!("{:.3},{:.3},{:.3},{:.3}", a[0], a[1], a[2], a[3]);
+    Ok(())
 }
 
 fn parse_viewpoint(s: &str) -> CliResult<[f64; 3]> {

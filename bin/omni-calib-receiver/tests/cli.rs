@@ -168,6 +168,16 @@ fn annulus_auto_finds_the_rim_in_the_real_board_images() {
     assert!(cam["report"]["images_used"].as_u64().unwrap() >= 14);
     let rms = cam["report"]["rms_px"].as_f64().unwrap();
     assert!(rms <= 0.4, "RMS {rms} px");
+
+    // find-annulus prints the same annulus for --annulus (3 decimals).
+    let out = bin().arg("find-annulus").arg(real_dir()).output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let printed: Vec<f64> =
+        String::from_utf8_lossy(&out.stdout).trim().split(',').map(|v| v.parse().unwrap()).collect();
+    assert_eq!(printed.len(), 4);
+    for (p, a) in printed.iter().zip(&annulus) {
+        assert!((p - a).abs() < 1e-3, "{printed:?} vs {annulus:?}");
+    }
 }
 
 #[test]
@@ -183,6 +193,9 @@ fn rim_detection_failures_are_one_line_errors_without_output() {
     let err = stderr(&out);
     assert!(err.contains("MiniOmni1.jpg") && err.contains("no mirror rim found"), "{err}");
     assert_eq!(err.trim().lines().count(), 1, "{err}");
+    let out = bin().arg("find-annulus").arg(&one).output().unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(out.stdout.is_empty() && stderr(&out).contains("no mirror rim found"), "{}", stderr(&out));
     // An unreadable rim image names the file.
     let broken = dir.path().join("broken.png");
     std::fs::write(&broken, b"\x89PNG\r\n\x1a\n truncated").unwrap();

@@ -334,20 +334,14 @@ mod tests {
         circle: omni_model::MirrorCircle,
     }
 
-    /// The room scene rendered in ambient light (calibration noise) by the paper's camera scaled
-    /// to `width` px with its principal point moved by `offset` px and the camera off the mirror
-    /// axis by `off_mm`.
-    fn lit_room(width: u32, offset: [f64; 2], off_mm: [f64; 3]) -> (GrayF32, Truth) {
+    /// The paper's camera scaled to `width` px with its principal point moved by `offset` px and
+    /// the camera off the mirror axis by `off_mm`, and its true circles.
+    fn camera(width: u32, offset: [f64; 2], off_mm: [f64; 3]) -> (omni_model::HyperbolicParams, Truth) {
         let mut cam = omni_simulator::paper_camera_scaled(width);
         cam.cx_px += offset[0];
         cam.cy_px += offset[1];
         cam.camera_offset_mm = off_mm;
         let model = omni_model::HyperbolicCamera::new(cam.clone()).unwrap();
-        let sensor = Sensor::from_params(cam.clone(), omni_model::TransmitterParams::paper()).unwrap();
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../testdata/scenes/room.json");
-        let scene = Scene::load(std::path::Path::new(path)).unwrap();
-        let frame = omni_simulator::render_ambient_frame(&sensor, &scene, &RenderOptions::calibration());
-        let img = GrayF32::from_u16(frame.width as usize, frame.height as usize, &frame.data);
         let f = 0.5 * (cam.fx_px + cam.fy_px);
         let centre_at = |r_mm: f64| {
             let z = model.mirror_z(r_mm) - off_mm[2];
@@ -356,9 +350,19 @@ mod tests {
         let truth = Truth {
             outer_centre: centre_at(cam.rim_radius_mm),
             inner_centre: centre_at(cam.inner_radius_mm),
-            circle: sensor.camera.mirror_circle(),
+            circle: omni_model::CameraModel::mirror_circle(&model),
         };
-        (img, truth)
+        (cam, truth)
+    }
+
+    /// The room scene rendered in ambient light (calibration noise) by [`camera`].
+    fn lit_room(width: u32, offset: [f64; 2], off_mm: [f64; 3]) -> (GrayF32, Truth) {
+        let (cam, truth) = camera(width, offset, off_mm);
+        let sensor = Sensor::from_params(cam, omni_model::TransmitterParams::paper()).unwrap();
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../testdata/scenes/room.json");
+        let scene = Scene::load(std::path::Path::new(path)).unwrap();
+        let frame = omni_simulator::render_ambient_frame(&sensor, &scene, &RenderOptions::calibration());
+        (GrayF32::from_u16(frame.width as usize, frame.height as usize, &frame.data), truth)
     }
 
     /// Errors (px): outer centre distance, outer radius, inner centre distance, inner radius.
@@ -399,6 +403,33 @@ mod tests {
             assert!(e.iter().all(|v| v.abs() <= 0.5), "errors {e:?} px (outer centre, radius, inner centre, radius)");
             assert!(rim.outer.support > 0.95 && rim.inner.unwrap().support > 0.95, "{rim:?}");
         }
+    }
+
+    /// Only board images (on black): the range of the simulator's calibration board set (close
+    /// boards covering the whole mirror) shows the rim wherever a board reached it.
+    #[test]
+    fn rim_of_the_board_images_range_matches_the_true_mirror_circle() {
+        use omni_simulator::{calibration_board_poses, render_board_image};
+        let (cam, t) = camera(384, [2.4, -1.7], [0.0; 3]);
+        let sensor = Sensor::from_params(cam, omni_model::TransmitterParams::paper()).unwrap();
+        let board = omni_formats::BoardFile::new(9, 6, 30.0);
+        let poses = calibration_board_poses(&sensor, &board, 20, 2).unwrap();
+        let images: Vec<GrayF32> = poses
+            .iter()
+            .enumerate()
+            .map(|(k, pose)| {
+                let opts = RenderOptions { seed: k as u64, ..RenderOptions::calibration() };
+                let (frame, _) = render_board_image(&sensor, pose, &board, &opts);
+                GrayF32::from_u16(frame.width as usize, frame.height as usize, &frame.data)
+            })
+            .collect();
+        let rim = detect_rim(&range_image(&images).unwrap(), &RimOptions::default()).unwrap();
+        let dc = (rim.outer.centre[0] - t.outer_centre[0]).hypot(rim.outer.centre[1] - t.outer_centre[1]);
+        let dr = rim.outer.radius - t.circle.outer_radius;
+        let di = rim.inner.map(|i| i.radius - t.circle.inner_radius);
+        eprintln!("boards range: centre {dc:.3} px, outer radius {dr:+.3} px, inner {di:?}; {rim:?}");
+        assert!(dc <= 0.5 && dr.abs() <= 0.5, "centre {dc} px, radius {dr} px off");
+        assert!(di.is_some_and(|d| d.abs() <= 0.5), "blind centre radius off by {di:?} px");
     }
 
     #[test]

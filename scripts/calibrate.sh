@@ -4,20 +4,21 @@
 #
 #   scripts/calibrate.sh --board board.json --boards boards/ --rig rig.json --pose-image pose.png \
 #       (--port /dev/ttyACM0 --frames frames/ | --emulate rig_scene.json [--true-camera C --true-scanner S]) \
-#       --out calib/
+#       [--rim-image lit.png] --out calib/
 #
 # boards/ holds the checkerboard images (any poses around the sensor); rig.json describes the rig's
 # boards (omniscan.rig) and pose.png is a lit, lasers-off image of the rig. With --port the real
 # controller triggers the camera (whose software writes frames into --frames); with --emulate the
 # virtual controller renders the rig scene through omni-sim. The mirror annulus (rim circle, for
-# the receiver's corner search and initial principal point) is found in pose.png, else in the
-# board images (their per-pixel range), else the receiver runs without it (OUT/annulus.txt says
-# which; ANNULUS=CX,CY,R_IN,R_OUT or ANNULUS=none overrides). Writes OUT/camera.json and
-# OUT/scanner.json (plus every intermediate stream).
+# the receiver's corner search and initial principal point) is found in --rim-image (an image of a
+# lit scene showing the whole mirror), else in pose.png, else in the board images (their per-pixel
+# range), else the receiver runs without it (OUT/annulus.txt says which; ANNULUS=CX,CY,R_IN,R_OUT
+# or ANNULUS=none overrides). Writes OUT/camera.json and OUT/scanner.json (plus every intermediate
+# stream).
 set -euo pipefail
 
-usage() { sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
-board= boards= rig= pose= port= frames= scene= true_camera= true_scanner= out=
+usage() { sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
+board= boards= rig= pose= rim_image= port= frames= scene= true_camera= true_scanner= out=
 angles=${RIG_ANGLES:-14:28:0.5} model=${MODEL:-mei} viewpoint=${VIEWPOINT:-0,0,80}
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -25,6 +26,7 @@ while [ $# -gt 0 ]; do
     --boards) boards=$2; shift 2 ;;
     --rig) rig=$2; shift 2 ;;
     --pose-image) pose=$2; shift 2 ;;
+    --rim-image) rim_image=$2; shift 2 ;;
     --port) port=$2; shift 2 ;;
     --frames) frames=$2; shift 2 ;;
     --emulate) scene=$2; shift 2 ;;
@@ -39,12 +41,15 @@ done
 [ -n "$board" ] && [ -n "$boards" ] && [ -n "$rig" ] && [ -n "$pose" ] && [ -n "$out" ] || usage
 mkdir -p "$out"
 
-# The mirror annulus: from the lit pose image if its rim is visible all round, else from the board
-# images; ANNULUS=CX,CY,R_IN,R_OUT overrides, ANNULUS=none turns it off.
+# The mirror annulus: from the first of --rim-image, the pose image and the board images whose rim
+# is visible all round; ANNULUS=CX,CY,R_IN,R_OUT overrides, ANNULUS=none turns it off.
 annulus=${ANNULUS:-}
+: > "$out/annulus.txt"
 if [ -z "$annulus" ]; then
-  annulus=$(omni-calib-receiver find-annulus "$pose" 2> "$out/annulus.txt") \
-    || annulus=$(omni-calib-receiver find-annulus "$boards" 2>> "$out/annulus.txt") || annulus=none
+  for source in ${rim_image:+"$rim_image"} "$pose" "$boards"; do
+    annulus=$(omni-calib-receiver find-annulus "$source" 2>> "$out/annulus.txt") && break
+  done
+  [ -n "$annulus" ] || annulus=none
 fi
 echo "annulus: $annulus" >> "$out/annulus.txt"
 receiver_args=()

@@ -381,7 +381,7 @@ type RowResult = (Vec<f64>, Vec<(usize, Vec<f64>)>);
 /// The optical PSF (Gaussian, σ in px) integrated over a pixel: K(t) = Φ((t + ½)/σ) − Φ((t − ½)/σ).
 struct PixelPsf {
     radius: usize,
-    /// K at integer offsets −radius..=radius (for centre samples).
+    /// Spread of a uniform pixel (source: the whole pixel area) at offsets −radius..=radius.
     centre: Vec<f64>,
     /// K at offsets −radius..=radius from each of the n sub-sample positions.
     sub: Vec<Vec<f64>>,
@@ -402,13 +402,17 @@ impl PixelPsf {
             }
         };
         let r = radius as isize;
-        let centre = (-r..=r).map(|o| k(o as f64)).collect();
-        let sub = (0..n)
+        let sub: Vec<Vec<f64>> = (0..n)
             .map(|i| {
                 let s = (i as f64 + 0.5) / n as f64 - 0.5;
                 (-r..=r).map(|o| k(o as f64 - s)).collect()
             })
             .collect();
+        // A uniform pixel's light comes from its whole area, like a supersampled pixel's: its
+        // kernel is the mean of the sub-sample kernels. (K at the centre alone would be narrower,
+        // so a constant field crossing from uniform to supersampled pixels would show a ±3 DN
+        // dip-and-bump along every light plane that a laser-off frame lacks.)
+        let centre = (0..sub[0].len()).map(|o| sub.iter().map(|kernel| kernel[o]).sum::<f64>() / n as f64).collect();
         PixelPsf { radius, centre, sub, n }
     }
 
@@ -646,5 +650,18 @@ mod tests {
         let cy: f64 = patch.iter().enumerate().map(|(k, v)| v * ((k / side) as f64 - r)).sum::<f64>() / sum;
         assert!((cx - (6.5 / 8.0 - 0.5)).abs() < 1e-4 && (cy - (3.5 / 8.0 - 0.5)).abs() < 1e-4, "{cx} {cy}");
         assert!((erf(0.5) - 0.520_499_877_8).abs() < 2e-7 && (erf(-1.5) + 0.966_105_146_5).abs() < 2e-7);
+    }
+
+    #[test]
+    fn uniform_and_supersampled_pixels_spread_a_constant_field_alike() {
+        // A constant field must stay constant where uniform pixels meet supersampled ones (the
+        // band around every light plane): the two spreads must be the same kernel.
+        let psf = PixelPsf::new(0.7, 8);
+        let patch = psf.patch(&[3.0; 64]);
+        let side = 2 * psf.radius + 1;
+        for (k, v) in patch.iter().enumerate() {
+            let uniform = 3.0 * psf.centre[k / side] * psf.centre[k % side];
+            assert!((v - uniform).abs() < 1e-12, "offset {k}: supersampled {v}, uniform {uniform}");
+        }
     }
 }

@@ -165,16 +165,26 @@ impl BoxKey {
     fn of(spec: &VoxelSpec, positions: &[[f64; 3]], first_index: usize) -> Result<Self, String> {
         // The index is monotonic in the coordinate, so the extreme coordinates give the index
         // range exactly. A NaN escapes min/max, hence the explicit finiteness flag.
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        let mut finite = true;
-        for p in positions {
-            for a in 0..3 {
-                lo[a] = lo[a].min(p[a]);
-                hi[a] = hi[a].max(p[a]);
-                finite &= p[a].is_finite();
+        // In parallel over blocks (min/max are exact, so the box does not depend on the split).
+        let block = |pts: &[[f64; 3]]| {
+            let mut lo = [f64::INFINITY; 3];
+            let mut hi = [f64::NEG_INFINITY; 3];
+            let mut finite = true;
+            for p in pts {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(p[a]);
+                    hi[a] = hi[a].max(p[a]);
+                    finite &= p[a].is_finite();
+                }
             }
-        }
+            (lo, hi, finite)
+        };
+        let (lo, hi, finite) = positions.par_chunks(1 << 16).map(block).reduce(
+            || block(&[]),
+            |(l1, h1, f1), (l2, h2, f2)| {
+                ([0, 1, 2].map(|a| l1[a].min(l2[a])), [0, 1, 2].map(|a| h1[a].max(h2[a])), f1 && f2)
+            },
+        );
         let (lo_idx, hi_idx) = match (finite, spec.index(&lo), spec.index(&hi)) {
             (true, Ok(l), Ok(h)) => (l, h),
             _ => {
@@ -551,6 +561,7 @@ fn accumulate_chunk(
     first_index: usize,
     global: &Accumulators,
     tuning: Tuning,
+    buffers: &mut PartitionBuffers,
     out: &mut impl VoxelSink,
 ) -> Result<(), String> {
     let ns = fields.len();
@@ -560,7 +571,7 @@ fn accumulate_chunk(
         if bk.cells() <= tuning.dense_cells {
             accumulate_dense(&bk, positions, fields, global, &mut cursor, out)?;
         } else {
-            accumulate_partitioned(&bk, positions, fields, global, &mut cursor, tuning.bucket_points, out)?;
+            accumulate_partitioned(&bk, positions, fields, global, &mut cursor, tuning.bucket_points, buffers, out)?;
         }
     }
     emit_global_before(global, &mut cursor, None, ns, out);
@@ -647,6 +658,14 @@ fn next_slots<'a, T>(slots: &mut &'a mut [T], k: usize) -> &'a mut [T] {
     first
 }
 
+/// The partition's big arrays, kept by a [`VoxelGrid`] from chunk to chunk (no fresh pages to
+/// fault in and zero for every chunk).
+#[derive(Debug, Clone, Default)]
+struct PartitionBuffers {
+    positions: Vec<[f64; 3]>,
+    scalars: Vec<f32>,
+}
+
 /// A chunk copied into bucket order: positions and scalars (interleaved, `ns` per point),
 /// stable (input order within a bucket); bucket b holds `starts[b]..starts[b + 1]`.
 struct Partition {
@@ -663,7 +682,13 @@ struct Partition {
 /// histograms, then a stable scatter, both in parallel over parts of the input. Keys are
 /// recomputed rather than stored (measured: storing them costs more memory traffic than the
 /// three float → int conversions it saves).
-fn partition(bk: &BoxKey, positions: &[[f64; 3]], fields: &[&[f32]], bucket_points: usize) -> Partition {
+fn partition(
+    bk: &BoxKey,
+    positions: &[[f64; 3]],
+    fields: &[&[f32]],
+    bucket_points: usize,
+    buffers: &mut PartitionBuffers,
+) -> Partition {
     let n = positions.len();
     let ns = fields.len();
     let prefix_bits = bk.bits.min(16);
@@ -706,10 +731,23 @@ fn partition(bk: &BoxKey, positions: &[[f64; 3]], fields: &[&[f32]], bucket_poin
             c
         })
         .collect();
-    let mut part = Partition { positions: vec![[0.0; 3]; n], scalars: vec![0.0; n * ns], ns, starts, first_keys };
-    let pos_dst = split_by_part_and_bucket(&mut part.positions, &counts);
+    let mut part = Partition {
+        positions: std::mem::take(&mut buffers.positions),
+        scalars: std::mem::take(&mut buffers.scalars),
+        ns,
+        starts,
+        first_keys,
+    };
+    // Grown only (stale contents are overwritten before they are read).
+    if part.positions.len() < n {
+        part.positions.resize(n, [0.0; 3]);
+    }
+    if part.scalars.len() < n * ns {
+        part.scalars.resize(n * ns, 0.0);
+    }
+    let pos_dst = split_by_part_and_bucket(&mut part.positions[..n], &counts);
     let scalar_counts: Vec<Vec<u32>> = counts.iter().map(|c| c.iter().map(|&x| x * ns as u32).collect()).collect();
-    let sc_dst = split_by_part_and_bucket(&mut part.scalars, &scalar_counts);
+    let sc_dst = split_by_part_and_bucket(&mut part.scalars[..n * ns], &scalar_counts);
     pos_dst.into_par_iter().zip(sc_dst).zip(bounds.par_windows(2)).for_each(|((mut pd, mut sd), w)| {
         for i in w[0]..w[1] {
             let p = &positions[i];
@@ -757,10 +795,11 @@ fn accumulate_partitioned<S: VoxelSink>(
     global: &Accumulators,
     cursor: &mut usize,
     bucket_points: usize,
+    buffers: &mut PartitionBuffers,
     out: &mut S,
 ) -> Result<(), String> {
     let n = positions.len();
-    let part = partition(bk, positions, fields, bucket_points);
+    let part = partition(bk, positions, fields, bucket_points, buffers);
     // Tasks of ≥ 1/8 of a thread's share of points each (load balance on a busy machine).
     let task_points = bucket_points.max(n / (8 * rayon::current_num_threads()));
     let mut task_starts = vec![0usize];
@@ -789,6 +828,7 @@ fn accumulate_partitioned<S: VoxelSink>(
     for piece in pieces {
         out.append(piece);
     }
+    (buffers.positions, buffers.scalars) = (part.positions, part.scalars);
     *cursor = global.len();
     Ok(())
 }
@@ -914,6 +954,7 @@ pub struct VoxelGrid {
     /// Points accumulated before the chunk buffer (to name points in errors).
     points_before_chunk: usize,
     acc: Accumulators,
+    buffers: PartitionBuffers,
 }
 
 impl VoxelGrid {
@@ -930,6 +971,7 @@ impl VoxelGrid {
             tuning: Tuning { bucket_points: BUCKET_POINTS, dense_cells: DENSE_CELLS },
             points_before_chunk: 0,
             acc: Accumulators::default(),
+            buffers: PartitionBuffers::default(),
         })
     }
 
@@ -1006,7 +1048,7 @@ impl VoxelGrid {
             scalar_sums: Vec::with_capacity(cap * ns),
         });
         let first = self.points_before_chunk;
-        accumulate_chunk(&self.spec, positions, fields, first, &self.acc, self.tuning, &mut chunk)?;
+        accumulate_chunk(&self.spec, positions, fields, first, &self.acc, self.tuning, &mut self.buffers, &mut chunk)?;
         self.points_before_chunk += positions.len();
         merge_in_place(&mut self.acc, chunk.0, ns);
         Ok(())
@@ -1039,7 +1081,7 @@ impl VoxelGrid {
     }
 
     /// Merges the last chunk with the accumulators straight into the output cloud.
-    fn finish_with(self, positions: &[[f64; 3]], fields: &[&[f32]]) -> Result<PointCloud, String> {
+    fn finish_with(mut self, positions: &[[f64; 3]], fields: &[&[f32]]) -> Result<PointCloud, String> {
         let cap = self.acc.len() + positions.len();
         let mut out = PointCloud {
             positions: Vec::with_capacity(cap),
@@ -1050,7 +1092,8 @@ impl VoxelGrid {
                 .collect(),
         };
         let first = self.points_before_chunk;
-        accumulate_chunk(&self.spec, positions, fields, first, &self.acc, self.tuning, &mut out)?;
+        let mut buffers = std::mem::take(&mut self.buffers);
+        accumulate_chunk(&self.spec, positions, fields, first, &self.acc, self.tuning, &mut buffers, &mut out)?;
         let (len, cap) = (out.positions.len(), out.positions.capacity());
         if cap > 2 * len + 1024 {
             out.positions.shrink_to_fit();

@@ -954,7 +954,8 @@ pub struct VoxelGrid {
     /// Points accumulated before the chunk buffer (to name points in errors).
     points_before_chunk: usize,
     acc: Accumulators,
-    buffers: PartitionBuffers,
+    /// Boxed: kept small, the grid is an enum variant next to a cloud in `merge`.
+    buffers: Box<PartitionBuffers>,
 }
 
 impl VoxelGrid {
@@ -971,7 +972,7 @@ impl VoxelGrid {
             tuning: Tuning { bucket_points: BUCKET_POINTS, dense_cells: DENSE_CELLS },
             points_before_chunk: 0,
             acc: Accumulators::default(),
-            buffers: PartitionBuffers::default(),
+            buffers: Box::default(),
         })
     }
 

@@ -378,7 +378,8 @@ mod tests {
     }
 
     /// A lit room seen by an off-centre camera (on the axis, and 0.3 mm off it): rim and blind
-    /// centre within 0.5 px (centre and radius) of the true circles.
+    /// centre within 0.5 px (centre and radius) of the true circles. Measured: centres ≤ 0.014 px,
+    /// radii −0.013..−0.041 px, fit RMS 0.07–0.09 px.
     #[test]
     fn rim_of_a_lit_scene_matches_the_true_mirror_circle() {
         for (width, offset, off_mm) in [(384, [6.3, -4.1], [0.0; 3]), (512, [-3.7, 2.2], [0.3, -0.2, 0.1])] {
@@ -406,7 +407,9 @@ mod tests {
     }
 
     /// Only board images (on black): the range of the simulator's calibration board set (close
-    /// boards covering the whole mirror) shows the rim wherever a board reached it.
+    /// boards covering the whole mirror) shows the rim wherever a board reached it. Measured:
+    /// centre 0.018 px, outer radius −0.022 px, blind centre +0.091 px (68 % of the rays support
+    /// the rim). The demo's 20 random, far boards reach it on only ~15 % of the rays: refused.
     #[test]
     fn rim_of_the_board_images_range_matches_the_true_mirror_circle() {
         use omni_simulator::{calibration_board_poses, render_board_image};

@@ -358,8 +358,8 @@ trait VoxelSink: Send + Sync + Sized {
     /// An empty sink of the same kind, for one parallel task's voxels.
     fn empty_piece(&self) -> Self;
 
-    /// Appends a task's voxels (which follow this sink's in key order).
-    fn append(&mut self, piece: Self);
+    /// Appends the tasks' voxels (which follow this sink's, pieces in key order).
+    fn append_all(&mut self, pieces: Vec<Self>);
 
     /// Whether the global voxels the chunk does not touch are wanted too (the full union).
     fn wants_untouched_global(&self) -> bool {
@@ -381,8 +381,8 @@ impl VoxelSink for ChunkVoxels {
         ChunkVoxels(self.0.empty_piece())
     }
 
-    fn append(&mut self, piece: Self) {
-        self.0.append(piece.0)
+    fn append_all(&mut self, pieces: Vec<Self>) {
+        self.0.append_all(pieces.into_iter().map(|p| p.0).collect())
     }
 
     fn wants_untouched_global(&self) -> bool {
@@ -441,11 +441,11 @@ impl VoxelSink for Accumulators {
         Accumulators::default()
     }
 
-    fn append(&mut self, piece: Self) {
-        self.keys.extend_from_slice(&piece.keys);
-        self.counts.extend_from_slice(&piece.counts);
-        self.sums.extend_from_slice(&piece.sums);
-        self.scalar_sums.extend_from_slice(&piece.scalar_sums);
+    fn append_all(&mut self, pieces: Vec<Self>) {
+        par_append(&mut self.keys, &pieces.iter().map(|p| p.keys.as_slice()).collect::<Vec<_>>());
+        par_append(&mut self.counts, &pieces.iter().map(|p| p.counts.as_slice()).collect::<Vec<_>>());
+        par_append(&mut self.sums, &pieces.iter().map(|p| p.sums.as_slice()).collect::<Vec<_>>());
+        par_append(&mut self.scalar_sums, &pieces.iter().map(|p| p.scalar_sums.as_slice()).collect::<Vec<_>>());
     }
 }
 
@@ -464,12 +464,35 @@ impl VoxelSink for PointCloud {
         PointCloud { positions: Vec::new(), scalars }
     }
 
-    fn append(&mut self, piece: Self) {
-        self.positions.extend_from_slice(&piece.positions);
-        for (f, g) in self.scalars.iter_mut().zip(&piece.scalars) {
-            f.values.extend_from_slice(&g.values);
+    fn append_all(&mut self, pieces: Vec<Self>) {
+        par_append(&mut self.positions, &pieces.iter().map(|p| p.positions.as_slice()).collect::<Vec<_>>());
+        for (f, field) in self.scalars.iter_mut().enumerate() {
+            par_append(&mut field.values, &pieces.iter().map(|p| p.scalars[f].values.as_slice()).collect::<Vec<_>>());
         }
     }
+}
+
+/// Appends the pieces' elements to `dst` in order, each piece copied by its own task (the
+/// copies, and the first touch of fresh output pages, run on all cores).
+fn par_append<T: Copy + Send + Sync>(dst: &mut Vec<T>, pieces: &[&[T]]) {
+    let total: usize = pieces.iter().map(|p| p.len()).sum();
+    dst.reserve(total);
+    let mut spare = &mut dst.spare_capacity_mut()[..total];
+    let mut jobs = Vec::with_capacity(pieces.len());
+    for piece in pieces {
+        let (head, tail) = std::mem::take(&mut spare).split_at_mut(piece.len());
+        jobs.push((head, *piece));
+        spare = tail;
+    }
+    jobs.into_par_iter().for_each(|(d, s)| {
+        for (d, s) in d.iter_mut().zip(s) {
+            d.write(*s);
+        }
+    });
+    let len = dst.len() + total;
+    // SAFETY: the `total` slots after the old length were all initialised above (the jobs cover
+    // them exactly: the pieces' lengths sum to `total`), and `reserve` made room for them.
+    unsafe { dst.set_len(len) };
 }
 
 /// Points per bucket when a chunk is partitioned: a bucket's positions (384 kB) and sort buffers
@@ -825,9 +848,7 @@ fn accumulate_partitioned<S: VoxelSink>(
             Ok(piece)
         })
         .collect::<Result<_, String>>()?;
-    for piece in pieces {
-        out.append(piece);
-    }
+    out.append_all(pieces);
     (buffers.positions, buffers.scalars) = (part.positions, part.scalars);
     *cursor = global.len();
     Ok(())

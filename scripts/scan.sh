@@ -49,7 +49,12 @@ if [ -n "$scene" ]; then
   [ -n "$true_scanner" ] && emu_args+=(--scanner "$true_scanner")
   omni-trigger emulate --buffered-camera "${emu_args[@]}" > "$out/emulator.port" 2> "$out/emulator.log" &
   emulator_pid=$!
-  for _ in $(seq 1 100); do [ -s "$out/emulator.port" ] && break; sleep 0.1; done
+  # It prints its port once the scene is loaded: allow a loaded machine a minute for that.
+  for _ in $(seq 1 600); do
+    [ -s "$out/emulator.port" ] && break
+    kill -0 "$emulator_pid" 2>/dev/null || break
+    sleep 0.1
+  done
   port=$(head -n 1 "$out/emulator.port")
   # The emulator's camera buffers frames (renders slower than it is triggered): wait for them.
   frame_timeout_ms=600000

@@ -30,12 +30,25 @@
 //!   ≈ 16384 points; one pass copies the points into bucket order (stable); each bucket, now in
 //!   L2, is LSD radix sorted on (key, index) words (stable) and runs of equal keys are summed.
 //!
+//! Fine grids use every core (rayon): the bounding box, the prefix counts and the copy run on
+//! parts of the input (per-part histograms and prefix sums make the copy stable), and the
+//! buckets, independent after the copy, are sorted and summed by tasks of consecutive buckets,
+//! each owning the global voxels of its key range and writing its own piece of the output; the
+//! pieces are concatenated in key order. A voxel never spans two buckets and its points are
+//! summed in input order, so the bits never depend on the number of threads. Coarse grids (the
+//! cell table) run on one thread. Measured on 2 M room points (benches/cloud.rs), in points per
+//! CPU-second of all threads: 12–13 M at 5 mm, 13.5–16 M at 10 mm, positions only (6 and 8 M
+//! with seven scalar fields); on two cores the wall clock gives up to twice that when the cores
+//! are free (on the busy shared machine: 10–13 M/s at 5 mm, 13–15 M/s at 10 mm).
+//!
 //! # Memory
 //! Input is taken in chunks of 2²¹ points; a chunk's voxels are merged in place into sorted
 //! per-voxel sums (8-byte key, 4-byte count, f64 sums: 36 + 8·fields bytes per voxel), each
 //! voxel continuing its sums in input order, so the result never depends on the chunking. Peak
 //! memory besides input and output: about two chunks of points (≈ 110 MB each with seven f32
 //! fields) plus the per-voxel sums — bounded by the number of occupied voxels, not the input.
+//! (A [`VoxelGrid`] keeps the partition's copy from chunk to chunk; the parallel tasks' output
+//! pieces hold at most one chunk's voxels until they are concatenated.)
 
 use omni_formats::ply::{PointCloud, ScalarField};
 use rayon::prelude::*;
@@ -948,7 +961,8 @@ fn fold_run(
 }
 
 /// Voxel-grid downsampling of a whole cloud (module docs: Open3D's semantics, output in voxel
-/// index order, f64 sums in input order), single-threaded. The cloud is processed in chunks of
+/// index order, f64 sums in input order), on all cores for fine grids (module docs: the bits do
+/// not depend on the threads). The cloud is processed in chunks of
 /// 2²¹ points (module docs, Memory); identical to feeding a [`VoxelGrid`].
 pub fn voxel_downsample(cloud: &PointCloud, size: f64, origin: [f64; 3]) -> Result<PointCloud, String> {
     let grid = VoxelGrid::new(size, origin, cloud.scalars.iter().map(|s| s.name.clone()).collect())?;

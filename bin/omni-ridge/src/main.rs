@@ -57,6 +57,11 @@ struct Args {
     /// quarter, at the price of lateral resolution.
     #[arg(long, default_value_t = 0.0, value_name = "PX")]
     along_stripe: f64,
+    /// The camera's optical blur (Gaussian PSF σ, px; pixel area not included): curved stripes
+    /// are pulled towards their centre of curvature by the blur, and that pull is removed.
+    /// 0.7 px is omni-sim's camera; 0 corrects only the pixel area and the detector's own kernel.
+    #[arg(long, default_value_t = 0.7, value_name = "PX")]
+    optics_blur: f64,
     /// Write each frame with its detected centres drawn as DIR/<seq>.png.
     #[arg(long, value_name = "DIR")]
     overlay: Option<PathBuf>,
@@ -82,6 +87,7 @@ fn main() -> ExitCode {
             max_width: args.max_width,
             hessian_sigma: args.hessian_sigma,
             along_stripe_px: args.along_stripe,
+            optics_blur_px: args.optics_blur,
         };
         params.validate().map_err(CliError::usage)?;
         let camera = match &args.camera {

@@ -157,6 +157,11 @@ pub struct RidgeParams {
     /// Averages the per-ray noise (3 px: about 25 % lower RMS on noisy frames) at the price of
     /// lateral resolution (a curved stripe moves by ≈ L²/(6R) px).
     pub along_stripe_px: f64,
+    /// The camera's optical blur (Gaussian PSF σ, px), pixel integration not included. A curved
+    /// stripe's centre is pulled towards its centre of curvature by (σ_optics² + 1/12 + σ_s²)·κ/2
+    /// (optics, pixel area, the detector's sampling kernel); the `normal` post-pass removes that
+    /// pull. Default 0.7 px: the industrial camera that omni-simulator renders by default.
+    pub optics_blur_px: f64,
 }
 
 impl Default for RidgeParams {
@@ -168,6 +173,7 @@ impl Default for RidgeParams {
             max_width: 12.0,
             hessian_sigma: 1.0,
             along_stripe_px: 0.0,
+            optics_blur_px: 0.7,
         }
     }
 }
@@ -196,6 +202,9 @@ impl RidgeParams {
         }
         if !(self.along_stripe_px.is_finite() && (0.0..=20.0).contains(&self.along_stripe_px)) {
             return Err(format!("along-stripe fit must be in [0, 20] px, got {}", self.along_stripe_px));
+        }
+        if !(self.optics_blur_px.is_finite() && (0.0..=5.0).contains(&self.optics_blur_px)) {
+            return Err(format!("optics blur must be in [0, 5] px, got {}", self.optics_blur_px));
         }
         Ok(())
     }

@@ -417,8 +417,10 @@ fn camera_from_the_receiver_calibration_gives_the_true_light_planes() {
     let (angle, off, rms) = calibrate_with_camera(&sensor, receiver.as_ref(), "receiver camera", false);
     // The 0.05 mm (on this board set, see above); the normal at the measured level
     // (0.0125°; 0.0137–0.0163° with the earlier stripe detector) with room for the detectors'
-    // changes, not the 0.01°.
-    assert!(angle < 0.02 && off < 0.05 && rms < 0.1, "receiver camera: {angle}°, {off} mm, RMS {rms} mm");
+    // changes, not the 0.01°. The stripe points' RMS is the receiver camera's ray error
+    // more than the stripes' (true camera 0.018 mm): 0.098 mm before the ridge removed the
+    // optics' curvature pull, 0.106 mm after (planes better: 0.0089° → 0.0084°, 0.037 → 0.032 mm).
+    assert!(angle < 0.02 && off < 0.05 && rms < 0.12, "receiver camera: {angle}°, {off} mm, RMS {rms} mm");
     let accurate = projected_receiver_camera(&sensor, 20, 0.005, 21);
     let (angle, off, rms) =
         calibrate_with_camera(&sensor, accurate.as_ref(), "receiver camera, 0.005 px corners", false);

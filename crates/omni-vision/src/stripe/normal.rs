@@ -286,21 +286,9 @@ mod tests {
     use omni_geom::Vector2;
     use omni_model::MirrorCircle;
 
-    /// Renders `intensity(x, y)` averaged over 4×4 points inside each pixel, no noise.
+    /// Renders `intensity(x, y)` averaged over 4×4 points inside each pixel, 16 bits, no noise.
     fn render(w: u32, h: u32, intensity: impl Fn(f64, f64) -> f64) -> GrayImage {
-        let mut img = GrayImage::new(w, h, 16);
-        for y in 0..h {
-            for x in 0..w {
-                let mut s = 0.0;
-                for j in 0..4 {
-                    for i in 0..4 {
-                        s += intensity(x as f64 - 0.375 + 0.25 * i as f64, y as f64 - 0.375 + 0.25 * j as f64);
-                    }
-                }
-                img.data[(y * w + x) as usize] = (s / 16.0).round().clamp(0.0, 65535.0) as u16;
-            }
-        }
-        img
+        super::super::tests::render(w, h, 16, 0.0, 0, intensity)
     }
 
     fn detector() -> RidgeDetector {

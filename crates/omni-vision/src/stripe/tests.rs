@@ -3,30 +3,21 @@
 
 use super::*;
 use omni_geom::Vector2;
-
-/// A small deterministic generator (xorshift64*) with Gaussian samples (Box–Muller), so the
-/// tests need no random-number crate and give the same numbers on every run.
-struct Rng(u64);
-
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn gauss(&mut self) -> f64 {
-        let (a, b) = (self.uniform(), self.uniform());
-        (-2.0 * a.ln()).sqrt() * (TAU * b).cos()
-    }
-}
+use omni_geom::rng::SplitMix64;
 
 /// Renders `intensity(x, y)` averaged over 4×4 points inside each pixel (a camera integrates
 /// over the pixel), plus Gaussian noise of `noise` DN, rounded and clipped to the bit depth.
-fn render(w: u32, h: u32, bit_depth: u8, noise: f64, seed: u64, intensity: impl Fn(f64, f64) -> f64) -> GrayImage {
+pub(super) fn render(
+    w: u32,
+    h: u32,
+    bit_depth: u8,
+    noise: f64,
+    seed: u64,
+    intensity: impl Fn(f64, f64) -> f64,
+) -> GrayImage {
     let mut img = GrayImage::new(w, h, bit_depth);
     let max = img.max_value() as f64;
-    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = SplitMix64::new(seed);
     for y in 0..h {
         for x in 0..w {
             let mut s = 0.0;
@@ -35,7 +26,7 @@ fn render(w: u32, h: u32, bit_depth: u8, noise: f64, seed: u64, intensity: impl 
                     s += intensity(x as f64 - 0.375 + 0.25 * i as f64, y as f64 - 0.375 + 0.25 * j as f64);
                 }
             }
-            let v = s / 16.0 + noise * rng.gauss();
+            let v = s / 16.0 + noise * rng.normal();
             img.data[(y * w + x) as usize] = v.round().clamp(0.0, max) as u16;
         }
     }
@@ -283,7 +274,7 @@ fn methods_parse_from_their_names() {
 
 #[test]
 fn fast_candidate_test_matches_the_general_one() {
-    let mut rng = Rng(77);
+    let mut rng = SplitMix64::new(77);
     let (w, h) = (40u32, 30u32);
     let data: Vec<u8> = (0..w * h).map(|_| (rng.uniform() * 60.0) as u8).collect();
     let f = Frame { width: w, height: h, data: &data, max_value: 255.0 };

@@ -107,36 +107,30 @@ mod tests {
         assert!(!(0..1000).any(|_| r.chance(0.0)));
     }
 
+    /// Sample mean and variance of `n` draws.
+    fn moments(n: usize, mut draw: impl FnMut() -> f64) -> (f64, f64) {
+        let (mut s, mut s2) = (0.0, 0.0);
+        for _ in 0..n {
+            let x = draw();
+            s += x;
+            s2 += x * x;
+        }
+        let mean = s / n as f64;
+        (mean, s2 / n as f64 - mean * mean)
+    }
+
     #[test]
     fn moments_match_the_distributions() {
         let mut r = SplitMix64::new(7);
         let n = 200_000;
-        let (mut s, mut s2) = (0.0, 0.0);
-        for _ in 0..n {
-            let x = r.normal();
-            s += x;
-            s2 += x * x;
-        }
-        assert!((s / n as f64).abs() < 0.01 && (s2 / n as f64 - 1.0).abs() < 0.01);
+        let (mean, var) = moments(n, || r.normal());
+        assert!(mean.abs() < 0.01 && (var - 1.0).abs() < 0.01, "normal: mean {mean}, var {var}");
         for k in [1.0, 11.1] {
-            let (mut s, mut s2) = (0.0, 0.0);
-            for _ in 0..n {
-                let x = r.gamma(k);
-                s += x;
-                s2 += x * x;
-            }
-            let mean = s / n as f64;
-            assert!((mean / k - 1.0).abs() < 0.01 && ((s2 / n as f64 - mean * mean) / k - 1.0).abs() < 0.03);
+            let (mean, var) = moments(n, || r.gamma(k));
+            assert!((mean / k - 1.0).abs() < 0.01 && (var / k - 1.0).abs() < 0.03, "gamma {k}: {mean}, {var}");
         }
         for lambda in [3.0, 25.0, 400.0] {
-            let (mut s, mut s2) = (0.0, 0.0);
-            for _ in 0..n {
-                let x = r.poisson(lambda);
-                s += x;
-                s2 += x * x;
-            }
-            let mean = s / n as f64;
-            let var = s2 / n as f64 - mean * mean;
+            let (mean, var) = moments(n, || r.poisson(lambda));
             assert!((mean / lambda - 1.0).abs() < 0.01, "mean {mean} for {lambda}");
             assert!((var / lambda - 1.0).abs() < 0.03, "var {var} for {lambda}");
         }

@@ -49,14 +49,7 @@ fn dataset(dir: &Path, alpha_override: Option<f64>) -> [PathBuf; 4] {
     for i in 0..=30u64 {
         let s = stripe_frame(&camera, &truth, &placed, i, i as f64, 0, 0.15, 2.0, &mut rng);
         let alpha = if i == 3 { alpha_override.unwrap_or(i as f64) } else { i as f64 };
-        let mut f = Frame::new(i, format!("{i:06}.png"), alpha, 0);
-        f.stripe = Some(
-            s.pixels
-                .iter()
-                .map(|p| StripePoint { u: p[0], v: p[1], intensity: 200.0, width: 3.0, quality: 0 })
-                .collect(),
-        );
-        w.write(&Record::Frame(Box::new(f))).unwrap();
+        w.write(&stripe_record(i, alpha, &s.pixels)).unwrap();
     }
     std::fs::write(&paths[3], w.into_inner()).unwrap();
     paths
@@ -227,14 +220,7 @@ fn fit_finds_the_boards_in_a_rendered_pose_image() {
     for i in 0..=16u64 {
         let a = 8.0 + i as f64;
         let s = stripe_frame(&camera, &truth, &placed, i, a, 0, 0.1, 2.0, &mut rng);
-        let mut f = Frame::new(i, format!("{i:06}.png"), a, 0);
-        f.stripe = Some(
-            s.pixels
-                .iter()
-                .map(|p| StripePoint { u: p[0], v: p[1], intensity: 200.0, width: 3.0, quality: 0 })
-                .collect(),
-        );
-        w.write(&Record::Frame(Box::new(f))).unwrap();
+        w.write(&stripe_record(i, a, &s.pixels)).unwrap();
     }
     let paths = ["camera.json", "rig.json", "stripes.jsonl"].map(|n| dir.path().join(n));
     let camera_file = CameraFile::new(CameraSpec::Hyperbolic(HyperbolicParams::paper()));
@@ -269,4 +255,14 @@ fn fit_finds_the_boards_in_a_rendered_pose_image() {
         // Corners found to ~0.03 px in the rendered image: boards within ~0.02°.
         assert!(err < 0.03, "α {a}: {err}°");
     }
+}
+
+/// The ridge stream's frame record of laser frame `seq` at mirror angle `alpha_deg` with the
+/// given stripe pixels.
+fn stripe_record(seq: u64, alpha_deg: f64, pixels: &[[f64; 2]]) -> Record {
+    let mut f = Frame::new(seq, format!("{seq:06}.png"), alpha_deg, 0);
+    f.stripe = Some(
+        pixels.iter().map(|p| StripePoint { u: p[0], v: p[1], intensity: 200.0, width: 3.0, quality: 0 }).collect(),
+    );
+    Record::Frame(Box::new(f))
 }

@@ -55,7 +55,8 @@ fn ridge(c: &mut Criterion) {
     let frames = frames(&sensor);
     let circle = sensor.camera.mirror_circle();
     println!("CIRCLE {} {} {} {}", circle.centre.x, circle.centre.y, circle.inner_radius, circle.outer_radius);
-    // `OMNI_RIDGE_PROFILE=<method>/<frame>`: only run that case for 10 s (for `perf record`).
+    // `OMNI_RIDGE_PROFILE=<method>/<frame>`: only run that case for 10 s (for `perf record`;
+    // `OMNI_RIDGE_PROFILE_SECONDS` changes the duration).
     if let Ok(case) = std::env::var("OMNI_RIDGE_PROFILE") {
         profile_one(&case, &sensor, &frames);
         return;
@@ -101,7 +102,8 @@ fn ridge(c: &mut Criterion) {
     group.finish();
 }
 
-/// Runs one `<method>/<frame>` case for 10 s and prints its mean time per run.
+/// Runs one `<method>/<frame>` case for 10 s (or `$OMNI_RIDGE_PROFILE_SECONDS`) and prints its
+/// point count and mean time per run.
 fn profile_one(case: &str, sensor: &Sensor, frames: &[BenchFrame]) {
     let (w, h) = sensor.camera.image_size();
     let (method, name) = case.split_once('/').expect("OMNI_RIDGE_PROFILE=<method>/<frame>");
@@ -110,15 +112,21 @@ fn profile_one(case: &str, sensor: &Sensor, frames: &[BenchFrame]) {
     let det = RidgeDetector::new(w, h, sensor.camera.mirror_circle(), RidgeParams { method, ..Default::default() });
     let frame = Frame { width: w, height: h, data: &f.pixels, max_value: 255.0 };
     let mut scratch = Scratch::default();
+    let points = det.detect_frame(&frame, &mut scratch).len();
     let (start, cpu0, mut runs) = (Instant::now(), thread_cpu_seconds(), 0u32);
-    while start.elapsed().as_secs_f64() < 10.0 {
+    let seconds: f64 = std::env::var("OMNI_RIDGE_PROFILE_SECONDS").ok().and_then(|s| s.parse().ok()).unwrap_or(10.0);
+    while start.elapsed().as_secs_f64() < seconds {
         std::hint::black_box(det.detect_frame(&frame, &mut scratch));
         runs += 1;
     }
     let mp = (w * h) as f64 / 1e6;
     let ms = 1e3 * start.elapsed().as_secs_f64() / runs as f64;
     let cpu = cpu0.zip(thread_cpu_seconds()).map(|(a, b)| 1e3 * (b - a) / runs as f64 / mp);
-    println!("PROFILE {case}: {runs} runs, wall {:.3} ms/MP, thread CPU {:.3} ms/MP", ms / mp, cpu.unwrap_or(f64::NAN));
+    println!(
+        "PROFILE {case} ({points} points): {runs} runs, wall {:.3} ms/MP, thread CPU {:.3} ms/MP",
+        ms / mp,
+        cpu.unwrap_or(f64::NAN)
+    );
 }
 
 /// User + system CPU time of the calling thread (s), from `/proc/thread-self/stat` (Linux;

@@ -314,24 +314,30 @@ impl<P: Pixel> Frame<'_, P> {
 
     /// Appends the bilinear samples at `centre + (r0 + k)·dir`, k = 0..n, whose 2×2
     /// neighbourhoods must all be inside the image (else it panics on a slice index), to `out`:
-    /// [`Self::bilinear_unchecked`] at each point, with the positions in 32.32 fixed point (one
-    /// float → integer conversion per axis instead of two, and constants held in registers).
+    /// [`Self::bilinear_unchecked`] at each point, with the positions stepped in 32.32 fixed
+    /// point (integer additions instead of a multiplication and a saturating float → integer
+    /// conversion per axis and sample; the steps' rounding drifts by < n · 2⁻³² px).
     fn bilinear_line(&self, cx: f64, cy: f64, r0: f64, dir: (f64, f64), n: usize, out: &mut Vec<f32>) {
+        const ONE: f64 = 4_294_967_296.0;
+        const FRACTION: f32 = 1.0 / 4_294_967_296.0;
         let w = self.width as usize;
         let data = self.data;
-        out.reserve(n);
-        for k in 0..n {
-            let r = r0 + k as f64;
-            let (x, y) = (cx + r * dir.0, cy + r * dir.1);
-            let (xi, fx) = fixed_point(x);
-            let (yi, fy) = fixed_point(y);
+        let (mut xf, mut yf) = (((cx + r0 * dir.0) * ONE) as i64, ((cy + r0 * dir.1) * ONE) as i64);
+        let (step_x, step_y) = ((dir.0 * ONE) as i64, (dir.1 * ONE) as i64);
+        let start = out.len();
+        out.resize(start + n, 0.0);
+        for v in &mut out[start..] {
+            let (xi, yi) = ((xf >> 32) as usize, (yf >> 32) as usize);
+            let (fx, fy) = ((xf & 0xFFFF_FFFF) as f32 * FRACTION, (yf & 0xFFFF_FFFF) as f32 * FRACTION);
             let i = yi * w + xi;
             let (top, bottom) = (&data[i..i + 2], &data[i + w..i + w + 2]);
             let (a, b) = (top[0].to_f32(), top[1].to_f32());
             let (c, d) = (bottom[0].to_f32(), bottom[1].to_f32());
             let top = a + fx * (b - a);
             let bottom = c + fx * (d - c);
-            out.push(top + fy * (bottom - top));
+            *v = top + fy * (bottom - top);
+            xf += step_x;
+            yf += step_y;
         }
     }
 
@@ -384,6 +390,14 @@ pub struct Scratch {
     /// Bit per ray: whether it is in `touched`.
     seen: Vec<u64>,
     profiles: Profiles,
+}
+
+/// Where a point was measured: its ray (index into the detector's rays) and its radius (px)
+/// along it from the mirror centre.
+#[derive(Debug, Clone, Copy)]
+struct RayRadius {
+    ray: u32,
+    r: f64,
 }
 
 /// Working buffers for one stretch of a ray.
@@ -465,9 +479,9 @@ impl RidgeDetector {
         }
         touched.clear();
         scratch.touched = touched;
-        let points = self.drop_isolated(out, &rays);
+        let (points, on_rays) = self.drop_isolated(out, &rays);
         // Oblique and tightly curved stripes: centres re-measured across the stripe (`normal`).
-        let points = self.remeasure_across(frame, points, threshold);
+        let points = self.remeasure_across(frame, points, &on_rays, threshold);
         let l = self.params.along_stripe_px;
         if l > 0.0 {
             // Neighbours on the same stripe: within the radial step of a stripe crossing the
@@ -480,13 +494,18 @@ impl RidgeDetector {
 
     /// Keeps only points with a neighbour on the stripe [`MIN_STRIPE_ARC_PX`] away (on either
     /// side, across rays): a hot pixel or a speck of noise covers only the rays within 1 px of
-    /// it, a stripe runs on.
-    fn drop_isolated(&self, out: Vec<StripePoint>, rays: &[(u32, usize)]) -> Vec<StripePoint> {
+    /// it, a stripe runs on. Returns the kept points and their rays and radii (px).
+    fn drop_isolated(&self, out: Vec<StripePoint>, rays: &[(u32, usize)]) -> (Vec<StripePoint>, Vec<RayRadius>) {
         let n = self.dirs.len();
         // Points of the ray at `rays[i]`: `out[rays[i].1..end(i)]`.
         let end = |i: usize| rays.get(i + 1).map_or(out.len(), |r| r.1);
-        // Radii of the points, computed once (each is compared with its neighbours' several times).
-        let radii: Vec<f64> = out.iter().map(|p| ((p.u - self.cx).powi(2) + (p.v - self.cy).powi(2)).sqrt()).collect();
+        // Radii of the points along their rays, computed once (each is compared with its
+        // neighbours' several times).
+        let mut radii = Vec::with_capacity(out.len());
+        for (i, &(ray, start)) in rays.iter().enumerate() {
+            let (dx, dy) = self.dirs[ray as usize];
+            radii.extend(out[start..end(i)].iter().map(|p| (p.u - self.cx) * dx + (p.v - self.cy) * dy));
+        }
         let radii_of = |ray: u32| match rays.binary_search_by_key(&ray, |r| r.0) {
             Ok(i) => &radii[rays[i].1..end(i)],
             Err(_) => &radii[0..0],
@@ -498,6 +517,7 @@ impl RidgeDetector {
             radii_of(other).iter().any(|q| (q - r).abs() <= max_dr)
         };
         let mut kept = Vec::with_capacity(out.len());
+        let mut kept_rays = Vec::with_capacity(out.len());
         for (i, &(ray, start)) in rays.iter().enumerate() {
             for (p, &r) in out[start..end(i)].iter().zip(&radii[start..end(i)]) {
                 // Rays are 2π·r/n px apart at radius r; only every step-th one is sampled.
@@ -506,10 +526,11 @@ impl RidgeDetector {
                 let k = (-floor_i64(-arc_rays)).max(1) * step;
                 if has_neighbour(ray, r, k) || has_neighbour(ray, r, -k) {
                     kept.push(*p);
+                    kept_rays.push(RayRadius { ray, r });
                 }
             }
         }
-        kept
+        (kept, kept_rays)
     }
 
     /// Row scan: every pixel above the threshold inside the annulus marks its radius bin on the

@@ -36,7 +36,9 @@
 //! image's local second derivatives, not from the ray's profile).
 
 use super::sampling::SAMPLE_SIGMA_PX;
-use super::{Frame, Method, Pixel, RidgeDetector, SAMPLE_STEP_PX, StripePoint, estimators, fine_segment, quality};
+use super::{
+    Frame, Method, Pixel, RayRadius, RidgeDetector, SAMPLE_STEP_PX, StripePoint, estimators, fine_segment, quality,
+};
 use std::f64::consts::{PI, TAU};
 
 /// Neighbours within this arc length (px) on either side give the stripe's local shape.
@@ -72,32 +74,26 @@ impl RidgeDetector {
         &self,
         frame: &Frame<'_, P>,
         mut points: Vec<StripePoint>,
+        on_rays: &[RayRadius],
         threshold: f64,
     ) -> Vec<StripePoint> {
         if self.params.method == Method::Hessian || points.len() < MIN_POINTS {
             return points;
         }
-        let polar: Vec<(f64, f64)> = points
-            .iter()
-            .map(|p| {
-                let (dx, dy) = (p.u - self.cx, p.v - self.cy);
-                // sqrt, not hypot: no overflow risk at pixel scales, and libm's hypot is slow.
-                (dy.atan2(dx), (dx * dx + dy * dy).sqrt())
-            })
-            .collect();
+        // Polar coordinates (azimuth in [0, 2π), radius) from the rays the points lie on: no
+        // atan2 and no sort, the points come in ray order.
+        let to_azimuth = TAU / self.dirs.len() as f64;
+        let polar: Vec<(f64, f64)> = on_rays.iter().map(|p| (p.ray as f64 * to_azimuth, p.r)).collect();
         let blur_variance = self.params.optics_blur_px.powi(2) + PIXEL_AREA_VARIANCE_PX2 + SAMPLE_SIGMA_PX.powi(2);
         // ln(intensity) once per point (each point enters about ten neighbours' fits).
         let log_intensity: Vec<f64> = points.iter().map(|p| p.intensity.max(1e-9).ln()).collect();
-        let mut order: Vec<usize> = (0..points.len()).collect();
-        order.sort_by(|&a, &b| polar[a].0.total_cmp(&polar[b].0));
-        let moves: Vec<Option<f64>> = (0..order.len())
-            .map(|k| {
-                let idx = order[k];
+        let moves: Vec<Option<f64>> = (0..points.len())
+            .map(|idx| {
                 if points[idx].quality & quality::SATURATED != 0 {
                     return None;
                 }
                 let (_, r) = polar[idx];
-                let shape = local_shape(&polar, &log_intensity, &order, k)?;
+                let shape = local_shape(&polar, &log_intensity, idx)?;
                 let across =
                     if shape.slope.abs() < MIN_SLOPE || ray_bias(&points[idx], r, &shape, threshold) < MIN_BIAS_PX {
                         0.0
@@ -108,8 +104,8 @@ impl RidgeDetector {
                 (dr.abs() <= MAX_MOVE_PX).then_some(dr)
             })
             .collect();
-        for (k, dr) in moves.into_iter().enumerate() {
-            let (Some(dr), idx) = (dr, order[k]) else { continue };
+        for (idx, dr) in moves.into_iter().enumerate() {
+            let Some(dr) = dr else { continue };
             let r = polar[idx].1;
             let p = &mut points[idx];
             let (er_x, er_y) = ((p.u - self.cx) / r, (p.v - self.cy) / r);
@@ -204,11 +200,11 @@ fn blur_pull(r: f64, shape: &Shape, sigma2: f64) -> f64 {
 
 /// Least-squares parabolas r(s) = r₀ + slope·s + d2r·s²/2 and ln I(s) through the points of the
 /// same stripe (radius within the step of a 60° crossing) within ±[`SHAPE_HALF_ARC_PX`] of arc
-/// around `order[k]` (`order`: indices of `polar` and `log_intensity`, the points' ln I, sorted
-/// by azimuth); `None` with too few points.
-fn local_shape(polar: &[(f64, f64)], log_intensity: &[f64], order: &[usize], k: usize) -> Option<Shape> {
-    let n = order.len();
-    let (phi, r) = polar[order[k]];
+/// around point `k` (`polar`: the points' azimuths and radii, sorted by azimuth;
+/// `log_intensity`: their ln I); `None` with too few points.
+fn local_shape(polar: &[(f64, f64)], log_intensity: &[f64], k: usize) -> Option<Shape> {
+    let n = polar.len();
+    let (phi, r) = polar[k];
     let half_angle = SHAPE_HALF_ARC_PX / r.max(1.0);
     let max_dr = 1.0 + SHAPE_HALF_ARC_PX * 3f64.sqrt();
     // Moments Σ sⁱ (i = 0..4) and Σ sⁱ·y (i = 0..2) of the basis (1, s, s²/2); the normal
@@ -219,8 +215,8 @@ fn local_shape(polar: &[(f64, f64)], log_intensity: &[f64], order: &[usize], k: 
     let mut count = 0;
     // Whether point j is within the arc window (and then adds it if it is on the same stripe).
     let mut visit = |j: usize| -> bool {
-        let (phj, rj) = polar[order[j]];
-        // Azimuth difference wrapped into [−π, π] (both azimuths are in (−π, π]); no fmod.
+        let (phj, rj) = polar[j];
+        // Azimuth difference wrapped into [−π, π] (both azimuths are in [0, 2π)); no fmod.
         let d = phj - phi;
         let d = if d > PI {
             d - TAU
@@ -239,7 +235,7 @@ fn local_shape(polar: &[(f64, f64)], log_intensity: &[f64], order: &[usize], k: 
             for (acc, p) in sp.iter_mut().zip(powers) {
                 *acc += p;
             }
-            let (y, l) = (rj - r, log_intensity[order[j]]);
+            let (y, l) = (rj - r, log_intensity[j]);
             for i in 0..3 {
                 sr[i] += powers[i] * y;
                 sl[i] += powers[i] * l;

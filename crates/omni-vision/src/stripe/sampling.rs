@@ -69,10 +69,12 @@ impl GaussSampler {
         }
         let wx = &self.weights[(xf >> PHASE_SHIFT) as usize & (LEVELS - 1)];
         let wy = &self.weights[(yf >> PHASE_SHIFT) as usize & (LEVELS - 1)];
-        let w = f.width as usize;
-        // Columns first (TAPS independent lanes the compiler vectorises), then one dot
-        // product with the row weights.
-        let block = &f.data[yi as usize * w + xi as usize..][..(TAPS - 1) * w + TAPS];
+        let (w, x0, y0) = (f.width as usize, xi as usize, yi as usize);
+        if x0 + LANES <= w {
+            return Some(sample_wide(f.data, w, y0 * w + x0, wx, wy));
+        }
+        // Columns first (TAPS independent lanes), then one dot product with the row weights.
+        let block = &f.data[y0 * w + x0..][..(TAPS - 1) * w + TAPS];
         let mut cols = [0.0f32; TAPS];
         for (j, &wyj) in wy.iter().enumerate() {
             let row = &block[j * w..][..TAPS];
@@ -82,6 +84,28 @@ impl GaussSampler {
         }
         Some(cols.iter().zip(wx).map(|(c, w)| c * w).sum())
     }
+}
+
+/// Lanes of the wide kernel: each row's TAPS pixels read as LANES (two more, weighted 0), so
+/// that the row is one fixed-size load the compiler turns into two 4-wide vector operations.
+const LANES: usize = 8;
+
+/// The kernel's sum over the TAPS × TAPS block at `start` (row stride `w`) whose rows extend to
+/// LANES pixels inside the image.
+#[inline(always)]
+fn sample_wide<P: Pixel>(data: &[P], w: usize, start: usize, wx: &[f32; TAPS], wy: &[f32; TAPS]) -> f32 {
+    let mut cols = [0.0f32; LANES];
+    for (j, &wyj) in wy.iter().enumerate() {
+        let row: &[P; LANES] = data[start + j * w..][..LANES].try_into().expect("LANES pixels");
+        for (c, &p) in cols.iter_mut().zip(row) {
+            *c += wyj * p.to_f32();
+        }
+    }
+    let mut sum = 0.0;
+    for (c, &wxk) in cols.iter().zip(wx) {
+        sum += c * wxk;
+    }
+    sum
 }
 
 #[cfg(test)]

@@ -189,50 +189,76 @@ pub fn axial_difference(a: f64, b: f64) -> f64 {
 
 /// Refines a corner to sub-pixel precision by gradient orthogonality (as OpenCV's
 /// `cornerSubPix`): every gradient in a window around an X-junction is orthogonal to the vector
-/// from the corner to its pixel, so the corner solves Σ w·g·gᵀ·(q − p) = 0. `half_window` in px.
-/// Returns `None` if the system is singular or the corner drifts more than `half_window`.
+/// from the corner to its pixel, so the corner solves Σ w·g·gᵀ·(q − p) = 0 over the
+/// [`window_samples`]. `half_window` in px. Returns `None` if the system is singular or the
+/// corner drifts more than `half_window`.
 pub fn refine_corner(grad_img: &GrayF32, start: [f64; 2], half_window: f64) -> Option<[f64; 2]> {
     let hw = half_window.max(1.5);
-    let r = hw.ceil() as isize;
     let mut p = start;
-    let sigma_w = hw * 0.6;
     for _ in 0..30 {
         let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
-        for dy in -r..=r {
-            for dx in -r..=r {
-                let qx = p[0] + dx as f64;
-                let qy = p[1] + dy as f64;
-                let d2 = (dx * dx + dy * dy) as f64;
-                if d2 > hw * hw || d2 < 0.5 {
-                    continue;
-                }
-                let gx = 0.5 * (grad_img.bilinear(qx + 1.0, qy) - grad_img.bilinear(qx - 1.0, qy)) as f64;
-                let gy = 0.5 * (grad_img.bilinear(qx, qy + 1.0) - grad_img.bilinear(qx, qy - 1.0)) as f64;
-                let w = (-d2 / (2.0 * sigma_w * sigma_w)).exp();
-                let (gxx, gxy, gyy) = (w * gx * gx, w * gx * gy, w * gy * gy);
-                a11 += gxx;
-                a12 += gxy;
-                a22 += gyy;
-                b1 += gxx * qx + gxy * qy;
-                b2 += gxy * qx + gyy * qy;
-            }
+        for s in window_samples(grad_img, p, hw) {
+            let ([ox, oy], [gx, gy], w) = (s.offset, s.gradient, s.weight);
+            let (gxx, gxy, gyy) = (w * gx * gx, w * gx * gy, w * gy * gy);
+            a11 += gxx;
+            a12 += gxy;
+            a22 += gyy;
+            // Offsets from p keep the sums small (p is added back below).
+            b1 += gxx * ox + gxy * oy;
+            b2 += gxy * ox + gyy * oy;
         }
         let det = a11 * a22 - a12 * a12;
         if !(det.abs() > 1e-9 * (a11 + a22).powi(2).max(1e-30)) {
             return None;
         }
-        let nx = (a22 * b1 - a12 * b2) / det;
-        let ny = (a11 * b2 - a12 * b1) / det;
-        let step = ((nx - p[0]).powi(2) + (ny - p[1]).powi(2)).sqrt();
-        p = [nx, ny];
+        let dx = (a22 * b1 - a12 * b2) / det;
+        let dy = (a11 * b2 - a12 * b1) / det;
+        p = [p[0] + dx, p[1] + dy];
         if ((p[0] - start[0]).powi(2) + (p[1] - start[1]).powi(2)).sqrt() > hw {
             return None;
         }
-        if step < 1e-4 {
+        if dx.hypot(dy) < 1e-4 {
             break;
         }
     }
     Some(p)
+}
+
+/// One gradient sample of the refinement window.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct WindowSample {
+    /// Pixel centre − corner (px).
+    pub offset: [f64; 2],
+    /// Image gradient at the pixel (central differences, grey levels per px).
+    pub gradient: [f64; 2],
+    pub weight: f64,
+}
+
+/// The refinement window around `p`: every pixel within `half_window` (px) of it, with its
+/// gradient from the pixel values themselves and a Gaussian weight (σ = 0.6 × half-window)
+/// tapered to zero over the last pixel.
+///
+/// The samples sit on the pixel grid, not at `p` + integer offsets: interpolated samples would
+/// share `p`'s sub-pixel phase, and bilinear interpolation blurs a sharp edge by an amount that
+/// depends on that phase, which drew refined corners towards the pixel centres by up to
+/// 0.017 px (a `sin 2π·phase` pattern, measured on rendered boards). The taper keeps the sums
+/// continuous in `p` as pixels enter and leave the window.
+pub(crate) fn window_samples(img: &GrayF32, p: [f64; 2], half_window: f64) -> impl Iterator<Item = WindowSample> + '_ {
+    let r = half_window.ceil() as isize + 1;
+    let (x0, y0) = (p[0].round() as isize, p[1].round() as isize);
+    let sigma_w = half_window * 0.6;
+    (-r..=r).flat_map(move |dy| (-r..=r).map(move |dx| (x0 + dx, y0 + dy))).filter_map(move |(x, y)| {
+        let offset = [x as f64 - p[0], y as f64 - p[1]];
+        let d = offset[0].hypot(offset[1]);
+        let taper = (half_window + 0.5 - d).clamp(0.0, 1.0);
+        if taper <= 0.0 {
+            return None;
+        }
+        let gx = 0.5 * (img.at(x + 1, y) - img.at(x - 1, y)) as f64;
+        let gy = 0.5 * (img.at(x, y + 1) - img.at(x, y - 1)) as f64;
+        let weight = taper * (-d * d / (2.0 * sigma_w * sigma_w)).exp();
+        Some(WindowSample { offset, gradient: [gx, gy], weight })
+    })
 }
 
 #[cfg(test)]

@@ -16,7 +16,8 @@
 //! ring).
 //!
 //! Each grid line's curvature vector at a corner comes from the corner and its two neighbours on
-//! that line (a parabola through three points; one-sided at the board's border), the window
+//! that line (a parabola through three points; one-sided at the board's border; from the parallel
+//! line one square over where the line has fewer than three corners), the window
 //! moments from the same refinement image, window and weights as the refinement, each gradient
 //! sample assigned to the edge whose normal it follows more closely. The correction is the
 //! estimator's own first-order bias, no fitted constant.
@@ -28,7 +29,7 @@ use nalgebra::{Matrix2, Vector2};
 use std::collections::HashMap;
 
 /// Corrected positions: every corner moved by minus its curvature bias (see the module docs).
-/// Corners whose lines have fewer than three points keep their position; `half_window` maps the
+/// Corners whose line curvatures are unknown keep their position; `half_window` maps the
 /// local corner spacing (px) to the refinement's half-window (px).
 pub(super) fn remove_curvature_bias(
     refine_img: &GrayF32,
@@ -54,8 +55,17 @@ fn corner_bias(
 ) -> Option<Vector2<f64>> {
     let at = |c: Cell| pos.get(&c).map(|q| Vector2::new(q[0], q[1]));
     let centre = Vector2::new(p[0], p[1]);
-    // (tangent, curvature vector) of the two grid lines through the corner.
-    let lines = [(1, 0), (0, 1)].map(|(di, dj)| line_shape(&at, (i, j), (di, dj), centre));
+    // (tangent, curvature vector) of the two grid lines through the corner; where a line has too
+    // few corners (a partial board's edge), the parallel line through a neighbour stands in: the
+    // image's curvature changes little over one square.
+    let lines = [(1, 0), (0, 1)].map(|(di, dj)| {
+        line_shape(&at, (i, j), (di, dj), centre).or_else(|| {
+            [1, -1].iter().find_map(|&s| {
+                let next = (i + s * dj, j + s * di);
+                line_shape(&at, next, (di, dj), at(next)?)
+            })
+        })
+    });
     let [Some((t1, k1)), Some((t2, k2))] = lines else { return None };
     let spacing = [(1, 0), (-1, 0), (0, 1), (0, -1)]
         .iter()
@@ -91,28 +101,35 @@ fn line_shape(
     let cell = |k: i32| (i + k * di, j + k * dj);
     let (a, b) = match (at(cell(-1)), at(cell(1))) {
         (Some(a), Some(b)) => (a, b),
-        (None, Some(b)) => return one_sided(centre, b, at(cell(2))?),
-        (Some(a), None) => return one_sided(centre, a, at(cell(-2))?),
+        (None, Some(b)) => return one_sided(centre, b, at(cell(2))?, at(cell(3))),
+        (Some(a), None) => return one_sided(centre, a, at(cell(-2))?, at(cell(-3))),
         (None, None) => return None,
     };
-    let (sa, sb) = ((a - centre).norm(), (b - centre).norm());
-    if sa < 1e-9 || sb < 1e-9 {
-        return None;
-    }
-    // Second derivative with respect to arc length of the interpolating parabola at the centre.
-    let k = 2.0 * ((a - centre) * sb + (b - centre) * sa) / (sa * sb * (sa + sb));
-    Some(((b - a).normalize(), k))
+    Some(((b - a).normalize(), curvature_at(centre, a, b)?))
 }
 
-/// Tangent and curvature at `p0` from it and the next two points `p1`, `p2` on one side: the
-/// parabola's second derivative is constant, so its value between them stands for `p0`'s.
-fn one_sided(p0: Vector2<f64>, p1: Vector2<f64>, p2: Vector2<f64>) -> Option<(Vector2<f64>, Vector2<f64>)> {
-    let (s0, s1) = ((p0 - p1).norm(), (p2 - p1).norm());
-    if s0 < 1e-9 || s1 < 1e-9 {
-        return None;
-    }
-    let k = 2.0 * ((p0 - p1) * s1 + (p2 - p1) * s0) / (s0 * s1 * (s0 + s1));
+/// Tangent and curvature at `p0` from the next points `p1`, `p2` (and `p3`) on one side of it:
+/// the curvature of the parabola through p0, p1, p2 belongs to p1; with p3 the curvature at p2
+/// extrapolates it linearly back to p0 (close boards bend visibly more towards one end).
+fn one_sided(
+    p0: Vector2<f64>,
+    p1: Vector2<f64>,
+    p2: Vector2<f64>,
+    p3: Option<Vector2<f64>>,
+) -> Option<(Vector2<f64>, Vector2<f64>)> {
+    let k1 = curvature_at(p1, p0, p2)?;
+    let k = match p3.and_then(|p3| curvature_at(p2, p1, p3)) {
+        Some(k2) => 2.0 * k1 - k2,
+        None => k1,
+    };
     Some(((p1 - p0).normalize(), k))
+}
+
+/// Curvature vector (px⁻¹) at `p` of the parabola through `a`, `p`, `b` (its second derivative
+/// with respect to arc length, pointing to the concave side); `None` for coincident points.
+fn curvature_at(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>) -> Option<Vector2<f64>> {
+    let (sa, sb) = ((a - p).norm(), (b - p).norm());
+    (sa > 1e-9 && sb > 1e-9).then(|| 2.0 * ((a - p) * sb + (b - p) * sa) / (sa * sb * (sa + sb)))
 }
 
 #[cfg(test)]

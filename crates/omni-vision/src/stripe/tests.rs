@@ -400,3 +400,34 @@ fn nearly_radial_stripes_are_measured_down_to_thirty_degrees_and_skipped_below()
         }
     }
 }
+
+/// A ring stripe (σ 1.2 px, 150 DN) on a lit surface (40 DN) whose silhouette runs `gap` px
+/// inside it (nothing but 0 DN beyond): the points found and their radial errors (px).
+fn stripe_beside_a_silhouette(gap: f64) -> (usize, Vec<f64>) {
+    const R: f64 = 60.0;
+    let img = render(W, H, 8, 1.0, 9, |x, y| {
+        let r = (x - CX).hypot(y - CY);
+        if r < R - gap { 0.0 } else { 40.0 + gaussian_line(r - R, 1.2, 150.0) }
+    });
+    let pts = detector(Method::Windowed).detect(&img);
+    let errors = pts.iter().map(|p| polar(p).1 - R).collect();
+    (pts.len(), errors)
+}
+
+#[test]
+fn stripes_cut_by_a_silhouette_are_rejected_and_whole_ones_kept() {
+    // The silhouette 1.2 px (1σ) inside the stripe cuts its inner flank: its centre moves
+    // outwards; the sides' backgrounds (0 and 40 DN) differ by 0.27 of the contrast. (With the
+    // former MAX_BACKGROUND_STEP of 0.5: 452 points reported, 0.45 px outwards.)
+    let (cut, cut_errors) = stripe_beside_a_silhouette(1.2);
+    // The silhouette 14 px inside: beyond the background windows (max_width / 2 + 2 = 8 px).
+    let (whole, errors) = stripe_beside_a_silhouette(14.0);
+    let (rms, bias) = rms_bias(&errors);
+    let first_cut = &cut_errors[..cut_errors.len().min(3)];
+    eprintln!(
+        "beside a silhouette: cut {cut} points {first_cut:?}…; whole {whole} points, rms {rms:.4}, bias {bias:+.4}"
+    );
+    assert!(whole > 300, "{whole} points on the whole stripe");
+    assert!(rms <= 0.05 && bias.abs() <= 0.02, "whole stripe: rms {rms} bias {bias}");
+    assert!(cut * 100 <= whole, "cut stripe: {cut} points reported (whole: {whole})");
+}

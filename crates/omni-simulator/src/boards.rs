@@ -155,7 +155,7 @@ pub fn random_board_poses(
 /// inside the annulus, Mei fit, rays over the whole mirror after the best rotation; seeds 2, 3,
 /// 5, 7, 9, 11): predicted ray error for 0.02 px white corner noise 0.0028–0.0035° (0.0050–0.0064°
 /// at the former 0.7–1.25 diagonals); rendered 0.0013–0.0044° median with today's corner
-/// detector (0.0043–0.0094° at 0.7–1.25 diagonals with the same detector), where
+/// detector (0.0019–0.0086° at 0.7–1.25 diagonals with the same detector), where
 /// [`random_board_poses`] gives 0.032°.
 pub fn calibration_board_poses(
     sensor: &Sensor,

@@ -140,22 +140,11 @@ mod tests {
     /// (radii r0 + k·s) and the other radial lines every `step` rad: the image of a board through
     /// a mirror, in its simplest form. 8 × 8 supersampled, then a Gaussian blur of 0.8 px.
     fn polar_board(w: usize, cx: f64, cy: f64, r0: f64, s: f64, step: f64) -> GrayF32 {
-        let mut img = GrayF32::new(w, w);
-        for y in 0..w {
-            for x in 0..w {
-                let mut acc = 0.0;
-                for sy in 0..8 {
-                    for sx in 0..8 {
-                        let px = x as f64 - 0.5 + (sx as f64 + 0.5) / 8.0 - cx;
-                        let py = y as f64 - 0.5 + (sy as f64 + 0.5) / 8.0 - cy;
-                        let ring = ((px.hypot(py) - r0) / s).floor() as i64;
-                        let sector = (py.atan2(px) / step).floor() as i64;
-                        acc += if (ring + sector).rem_euclid(2) == 0 { 200.0 } else { 40.0 };
-                    }
-                }
-                img.data[y * w + x] = acc / 64.0;
-            }
-        }
+        let img = super::super::saddle::tests::supersampled(w, w, 8, (cx, cy), |px, py| {
+            let ring = ((px.hypot(py) - r0) / s).floor() as i64;
+            let sector = (py.atan2(px) / step).floor() as i64;
+            if (ring + sector).rem_euclid(2) == 0 { 200.0 } else { 40.0 }
+        });
         super::super::gaussian_blur(&img, 0.8)
     }
 

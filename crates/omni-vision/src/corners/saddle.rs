@@ -266,30 +266,45 @@ pub(crate) fn window_samples(img: &GrayF32, p: [f64; 2], half_window: f64) -> im
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// A `w`×`h` image whose pixel (x, y) is the mean of `value` over n × n points spread evenly
+    /// inside it (a camera integrates over the pixel), `value` taking coordinates relative to
+    /// (cx, cy) in px.
+    pub(crate) fn supersampled(
+        w: usize,
+        h: usize,
+        n: usize,
+        (cx, cy): (f64, f64),
+        value: impl Fn(f64, f64) -> f32,
+    ) -> GrayF32 {
+        let mut img = GrayF32::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = 0.0;
+                for sy in 0..n {
+                    for sx in 0..n {
+                        let px = x as f64 - 0.5 + (sx as f64 + 0.5) / n as f64 - cx;
+                        let py = y as f64 - 0.5 + (sy as f64 + 0.5) / n as f64 - cy;
+                        acc += value(px, py);
+                    }
+                }
+                img.data[y * w + x] = acc / (n * n) as f32;
+            }
+        }
+        img
+    }
 
     /// An anti-aliased checkerboard X-junction at (cx, cy) with edges at angles a1, a2 (rad),
     /// rendered by 16×16 supersampling: the ground truth for sub-pixel tests.
     pub(crate) fn synthetic_corner(w: usize, h: usize, cx: f64, cy: f64, a1: f64, a2: f64) -> GrayF32 {
-        let mut img = GrayF32::new(w, h);
         let (n1, n2) = ([-a1.sin(), a1.cos()], [-a2.sin(), a2.cos()]);
-        for y in 0..h {
-            for x in 0..w {
-                let mut acc = 0.0;
-                for sy in 0..16 {
-                    for sx in 0..16 {
-                        let px = x as f64 - 0.5 + (sx as f64 + 0.5) / 16.0 - cx;
-                        let py = y as f64 - 0.5 + (sy as f64 + 0.5) / 16.0 - cy;
-                        let s1 = px * n1[0] + py * n1[1] >= 0.0;
-                        let s2 = px * n2[0] + py * n2[1] >= 0.0;
-                        acc += if s1 == s2 { 200.0 } else { 40.0 };
-                    }
-                }
-                img.data[y * w + x] = acc / 256.0;
-            }
-        }
-        img
+        supersampled(w, h, 16, (cx, cy), |px, py| {
+            let s1 = px * n1[0] + py * n1[1] >= 0.0;
+            let s2 = px * n2[0] + py * n2[1] >= 0.0;
+            if s1 == s2 { 200.0 } else { 40.0 }
+        })
     }
 
     #[test]

@@ -20,9 +20,10 @@
 //! are not. A segment is kept if its width (threshold crossing to crossing, along the ray) lies
 //! within [`RidgeParams::min_width`]..[`RidgeParams::max_width`], the backgrounds on its two
 //! sides agree ([`MAX_BACKGROUND_STEP`]: a stripe cut by an object's silhouette or a crease has
-//! no reliable centre), the image is flat at the centre found ([`MAX_CENTRE_GRADIENT`]), its edges face the
-//! ray ([`MIN_EDGE_ANGLE_DEG`]: a ray grazing a glint is not a stripe) and the stripe continues
-//! on a neighbouring ray ([`MIN_STRIPE_ARC_PX`]: hot pixels and specks are not stripes).
+//! no reliable centre), the image is flat at the centre found ([`MAX_CENTRE_GRADIENT`]), its
+//! edges face the ray ([`MIN_EDGE_ANGLE_DEG`]: a ray grazing a glint is not a stripe) and the
+//! stripe continues on a neighbouring ray ([`MIN_STRIPE_ARC_PX`]: hot pixels and specks are not
+//! stripes).
 //! Several segments on one ray (two lasers, occlusions) are all reported. The centre of a
 //! segment comes from the selected [`Method`]:
 //!

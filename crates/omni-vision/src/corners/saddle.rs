@@ -190,7 +190,7 @@ pub fn axial_difference(a: f64, b: f64) -> f64 {
 /// Refines a corner to sub-pixel precision by gradient orthogonality (as OpenCV's
 /// `cornerSubPix`): every gradient in a window around an X-junction is orthogonal to the vector
 /// from the corner to its pixel, so the corner solves Σ w·g·gᵀ·(q − p) = 0 over the
-/// [`window_samples`]. `half_window` in px. Returns `None` if the system is singular or the
+/// `window_samples`. `half_window` in px. Returns `None` if the system is singular or the
 /// corner drifts more than `half_window`.
 pub fn refine_corner(grad_img: &GrayF32, start: [f64; 2], half_window: f64) -> Option<[f64; 2]> {
     let hw = half_window.max(1.5);

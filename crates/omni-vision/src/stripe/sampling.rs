@@ -86,8 +86,10 @@ impl GaussSampler {
     }
 }
 
-/// Lanes of the wide kernel: each row's TAPS pixels read as LANES (two more, weighted 0), so
-/// that the row is one fixed-size load the compiler turns into two 4-wide vector operations.
+/// Lanes of the wide kernel: each row's TAPS pixels are read as LANES (the last two are summed
+/// but left out of the dot product), so that the row is one fixed-size load the compiler turns
+/// into two 4-wide vector operations; the same sums in the same order as the narrow kernel,
+/// which serves the blocks within LANES px of the right border.
 const LANES: usize = 8;
 
 /// The kernel's sum over the TAPS × TAPS block at `start` (row stride `w`) whose rows extend to

@@ -304,14 +304,19 @@ impl<P: Pixel> Frame<'_, P> {
         if xi + 2 >= w || yi + 2 >= h {
             return None;
         }
-        let at = |i: usize| {
-            let (a, b) = (self.data[i].to_f32(), self.data[i + 1].to_f32());
-            let (c, d) = (self.data[i + w].to_f32(), self.data[i + w + 1].to_f32());
-            let top = a + fx * (b - a);
-            top + fy * (c + fx * (d - c) - top)
-        };
         let i = yi * w + xi;
-        Some([at(i - 1), at(i + 1), at(i - w), at(i + w)])
+        Some([i - 1, i + 1, i - w, i + w].map(|j| self.interpolate(j, fx, fy)))
+    }
+
+    /// The 2×2 neighbourhood whose top-left pixel is `data[i]`, interpolated at the fractions
+    /// `fx`, `fy` (px) right and down: the one bilinear formula all samplers share.
+    #[inline(always)]
+    fn interpolate(&self, i: usize, fx: f32, fy: f32) -> f32 {
+        let w = self.width as usize;
+        let (top, bottom) = (&self.data[i..i + 2], &self.data[i + w..i + w + 2]);
+        let top = top[0].to_f32() + fx * (top[1].to_f32() - top[0].to_f32());
+        let bottom = bottom[0].to_f32() + fx * (bottom[1].to_f32() - bottom[0].to_f32());
+        top + fy * (bottom - top)
     }
 
     /// Appends the bilinear samples at `centre + (r0 + k)·dir`, k = 0..n, whose 2×2
@@ -320,24 +325,14 @@ impl<P: Pixel> Frame<'_, P> {
     /// point (integer additions instead of a multiplication and a saturating float → integer
     /// conversion per axis and sample; the steps' rounding drifts by < n · 2⁻³² px).
     fn bilinear_line(&self, cx: f64, cy: f64, r0: f64, dir: (f64, f64), n: usize, out: &mut Vec<f32>) {
-        const ONE: f64 = 4_294_967_296.0;
-        const FRACTION: f32 = 1.0 / 4_294_967_296.0;
         let w = self.width as usize;
-        let data = self.data;
-        let (mut xf, mut yf) = (((cx + r0 * dir.0) * ONE) as i64, ((cy + r0 * dir.1) * ONE) as i64);
-        let (step_x, step_y) = ((dir.0 * ONE) as i64, (dir.1 * ONE) as i64);
+        let (mut xf, mut yf) = (to_fixed(cx + r0 * dir.0), to_fixed(cy + r0 * dir.1));
+        let (step_x, step_y) = (to_fixed(dir.0), to_fixed(dir.1));
         let start = out.len();
         out.resize(start + n, 0.0);
         for v in &mut out[start..] {
-            let (xi, yi) = ((xf >> 32) as usize, (yf >> 32) as usize);
-            let (fx, fy) = ((xf & 0xFFFF_FFFF) as f32 * FRACTION, (yf & 0xFFFF_FFFF) as f32 * FRACTION);
-            let i = yi * w + xi;
-            let (top, bottom) = (&data[i..i + 2], &data[i + w..i + w + 2]);
-            let (a, b) = (top[0].to_f32(), top[1].to_f32());
-            let (c, d) = (bottom[0].to_f32(), bottom[1].to_f32());
-            let top = a + fx * (b - a);
-            let bottom = c + fx * (d - c);
-            *v = top + fy * (bottom - top);
+            let ((xi, fx), (yi, fy)) = (split_fixed(xf), split_fixed(yf));
+            *v = self.interpolate(yi * w + xi, fx, fy);
             xf += step_x;
             yf += step_y;
         }
@@ -351,12 +346,7 @@ impl<P: Pixel> Frame<'_, P> {
         // unlike `floor`, needs no libm call on baseline x86-64).
         let (xi, yi) = (x as usize, y as usize);
         let (fx, fy) = ((x - xi as f64) as f32, (y - yi as f64) as f32);
-        let w = self.width as usize;
-        let i = yi * w + xi;
-        let d = self.data;
-        let top = d[i].to_f32() + fx * (d[i + 1].to_f32() - d[i].to_f32());
-        let bottom = d[i + w].to_f32() + fx * (d[i + w + 1].to_f32() - d[i + w].to_f32());
-        top + fy * (bottom - top)
+        self.interpolate(yi * self.width as usize + xi, fx, fy)
     }
 }
 
@@ -733,17 +723,16 @@ impl RidgeDetector {
             if inside && !(c[k - w..=k].iter().any(deep) && c[k..=k + w].iter().any(deep)) {
                 continue;
             }
-            let window_min = |range: std::ops::RangeInclusive<usize>| {
-                c[range].iter().fold(f32::INFINITY, |m, &v| if v.is_nan() { f32::NAN } else { m.min(v) })
-            };
-            let (left, right) = (window_min(k - w..=k), window_min(k..=k + w));
+            let (left, right) = (min_or_nan(&c[k - w..=k]), min_or_nan(&c[k..=k + w]));
             let background = left.max(right);
             if !(c[k] - background > t) || left.is_nan() || right.is_nan() {
                 continue;
             }
             // A stripe lying on a step of the background (the edge of a lit object, where the
             // stripe itself is cut off) has no reliable centre.
-            if (left - right).abs() > MAX_BACKGROUND_STEP * (c[k] - background) && !clear_of_step(c, k, w, background) {
+            if (left - right).abs() > MAX_BACKGROUND_STEP * (c[k] - background)
+                && !clear_of_step(c, k, w, (left, right))
+            {
                 done_until = k + 1;
                 continue;
             }
@@ -808,12 +797,8 @@ impl RidgeDetector {
         seg: &Segment,
         t: f32,
     ) -> Option<StripePoint> {
-        let (a, b) = estimators::crossings(p, seg, t)?;
+        let (a, b) = self.crossings_within_width(p, seg, t)?;
         let width = (b - a) * SAMPLE_STEP_PX;
-        let (min_w, max_w) = (self.params.min_width, self.params.max_width);
-        if width < min_w || width > max_w {
-            return None;
-        }
         let peak = p[seg.peak];
         let (dx, dy) = self.dirs[ray];
         let r_peak = r0 + seg.peak as f64 * SAMPLE_STEP_PX;
@@ -822,13 +807,7 @@ impl RidgeDetector {
             quality |= quality::SATURATED;
             estimators::plateau_centre(p, seg, t, peak)?
         } else {
-            match self.params.method {
-                // Eq. 16 weighs the raw intensities, background included.
-                Method::Centroid => estimators::centroid(raw, seg)?,
-                Method::Windowed | Method::Hessian => estimators::windowed_centroid(p, seg, t)?,
-                Method::Gauss => estimators::gaussian(p, seg)?,
-                Method::BlaisRioux => estimators::blais_rioux(p, seg)?,
-            }
+            self.centre_index(raw, p, seg, t)?
         };
         let mut r = r0 + index * SAMPLE_STEP_PX;
         if !self.is_ridge_centre(frame, self.cx + r * dx, self.cy + r * dy, peak) {
@@ -844,11 +823,32 @@ impl RidgeDetector {
         if peak < 3.0 * t {
             quality |= quality::WEAK;
         }
-        if width < 1.2 * min_w || width > 0.8 * max_w {
+        if width < 1.2 * self.params.min_width || width > 0.8 * self.params.max_width {
             quality |= quality::WIDTH_MARGINAL;
         }
         Some(StripePoint { u: self.cx + r * dx, v: self.cy + r * dy, intensity: peak as f64, width, quality })
     }
+    /// The segment's threshold crossings (sample indices) in `q`, the contrast profile, or `None`
+    /// if they are missing or the width between them (px) is outside
+    /// [`RidgeParams::min_width`]..[`RidgeParams::max_width`].
+    fn crossings_within_width(&self, q: &[f32], seg: &Segment, t: f32) -> Option<(f64, f64)> {
+        let (a, b) = estimators::crossings(q, seg, t)?;
+        let width = (b - a) * SAMPLE_STEP_PX;
+        (!(width < self.params.min_width || width > self.params.max_width)).then_some((a, b))
+    }
+
+    /// The selected [`Method`]'s centre of the segment (fractional sample index) from the sampled
+    /// profile `raw` and its contrast `q` above the local background.
+    fn centre_index(&self, raw: &[f32], q: &[f32], seg: &Segment, t: f32) -> Option<f64> {
+        match self.params.method {
+            // Eq. 16 weighs the raw intensities, background included.
+            Method::Centroid => estimators::centroid(raw, seg),
+            Method::Windowed | Method::Hessian => estimators::windowed_centroid(q, seg, t),
+            Method::Gauss => estimators::gaussian(q, seg),
+            Method::BlaisRioux => estimators::blais_rioux(q, seg),
+        }
+    }
+
     /// Whether the image is flat (gradient ≈ 0) at a found centre, as on a ridge's centreline.
     /// A ray that only grazes the edge of a bright blob (a glint, an ambient patch) also gives a
     /// short segment, but there the gradient is as steep as the blob's edge: reject those.
@@ -914,21 +914,26 @@ pub const MAX_CENTRE_GRADIENT: f32 = 0.25;
 
 /// Whether the stripe peaking at `c[k]` ends on its lit side's background well before the darker
 /// side's step: walking from the peak towards the lower of the two windows' minima (`w` coarse
-/// samples, 1 px apart), the profile falls to within a quarter of the step of `background` (the
-/// higher side's level) and stays there for [`STEP_CLEARANCE_PX`] samples before it drops. A
+/// samples, 1 px apart; `left`, `right`: the windows' minima), the profile falls to within a
+/// quarter of the step of the higher side's level and stays there for [`STEP_CLEARANCE_PX`] samples before it drops. A
 /// whole stripe beside a silhouette passes; one the silhouette cuts falls from its flank straight
 /// into the step.
-fn clear_of_step(c: &[f32], k: usize, w: usize, background: f32) -> bool {
-    let min_of = |s: &[f32]| s.iter().fold(f32::INFINITY, |m, &v| m.min(v));
-    let (before, after) = (&c[k - w..=k], &c[k..=k + w]);
-    let (low, towards_step): (f32, Box<dyn Iterator<Item = f32>>) = if min_of(before) < min_of(after) {
-        (min_of(before), Box::new(before.iter().rev().copied()))
-    } else {
-        (min_of(after), Box::new(after.iter().copied()))
-    };
+fn clear_of_step(c: &[f32], k: usize, w: usize, (left, right): (f32, f32)) -> bool {
+    let (background, low) = (left.max(right), left.min(right));
     let margin = 0.25 * (background - low);
-    let flat = towards_step.skip_while(|&v| v > background + margin).take(STEP_CLEARANCE_PX);
-    flat.filter(|&v| (v - background).abs() <= margin).count() == STEP_CLEARANCE_PX
+    let on_flank = |v: &&f32| **v > background + margin;
+    let on_background = |v: &&f32| (**v - background).abs() <= margin;
+    let flat = if left < right {
+        c[k - w..=k].iter().rev().skip_while(on_flank).take(STEP_CLEARANCE_PX).filter(on_background).count()
+    } else {
+        c[k..=k + w].iter().skip_while(on_flank).take(STEP_CLEARANCE_PX).filter(on_background).count()
+    };
+    flat == STEP_CLEARANCE_PX
+}
+
+/// The smallest of `samples`, or NaN if one is NaN (outside the image).
+fn min_or_nan(samples: &[f32]) -> f32 {
+    samples.iter().fold(f32::INFINITY, |m, &v| if v.is_nan() { f32::NAN } else { m.min(v) })
 }
 
 /// The segment around the largest contrast of `q` whose samples stay above `t`, or `None` if
@@ -967,13 +972,26 @@ fn stands_out<P: Pixel>(f: &Frame<'_, P>, x: usize, y: usize, reach: usize, t: f
     v - row > t || v - col > t
 }
 
+/// 1.0 in 32.32 fixed point: coordinates scaled by it keep 32 fractional bits exactly.
+const FIXED_ONE: f64 = 4_294_967_296.0;
+
+/// `x` (px, |x| < 2³¹) in 32.32 fixed point (truncated towards zero).
+#[inline(always)]
+pub(super) fn to_fixed(x: f64) -> i64 {
+    (x * FIXED_ONE) as i64
+}
+
+/// The integer and fractional parts of a non-negative 32.32 fixed-point coordinate.
+#[inline(always)]
+fn split_fixed(fixed: i64) -> (usize, f32) {
+    ((fixed >> 32) as usize, (fixed & 0xFFFF_FFFF) as f32 * (1.0 / FIXED_ONE as f32))
+}
+
 /// The integer and fractional parts of a coordinate 0 ≤ x < 2³¹ px: ⌊x⌋ and x − ⌊x⌋ (as f32,
 /// from 32 fractional bits) with a single float → integer conversion.
 #[inline(always)]
 fn fixed_point(x: f64) -> (usize, f32) {
-    const ONE: f64 = 4_294_967_296.0;
-    let fixed = (x * ONE) as i64;
-    ((fixed >> 32) as usize, (fixed & 0xFFFF_FFFF) as f32 * (1.0 / ONE as f32))
+    split_fixed(to_fixed(x))
 }
 
 /// ⌊x⌋ for finite `x` within ±2⁶³ (truncation and a correction: `f64::floor` is a libm call

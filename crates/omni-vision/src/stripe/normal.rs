@@ -38,7 +38,7 @@
 
 use super::sampling::SAMPLE_SIGMA_PX;
 use super::{
-    Frame, Method, Pixel, RayRadius, RidgeDetector, SAMPLE_STEP_PX, StripePoint, estimators, fine_segment, quality,
+    Frame, Method, Pixel, RayRadius, RidgeDetector, SAMPLE_STEP_PX, StripePoint, fine_segment, min_or_nan, quality,
 };
 use std::f64::consts::{PI, TAU};
 
@@ -149,25 +149,15 @@ impl RidgeDetector {
             .collect();
         // Background: the larger of the two sides' minima, as on the ray.
         let mid = half as usize;
-        let side_min = |s: &[f32]| s.iter().fold(f32::INFINITY, |m, &v| if v.is_nan() { f32::NAN } else { m.min(v) });
-        let background = side_min(&raw[..mid]).max(side_min(&raw[mid + 1..]));
+        let background = min_or_nan(&raw[..mid]).max(min_or_nan(&raw[mid + 1..]));
         if background.is_nan() {
             return None;
         }
         let q: Vec<f32> = raw.iter().map(|v| v - background).collect();
         let t = threshold as f32;
         let seg = fine_segment(&q, t)?;
-        let (a, b) = estimators::crossings(&q, &seg, t)?;
-        let width = (b - a) * SAMPLE_STEP_PX;
-        if width < self.params.min_width || width > self.params.max_width {
-            return None;
-        }
-        let index = match self.params.method {
-            Method::Centroid => estimators::centroid(&raw, &seg)?,
-            Method::Windowed | Method::Hessian => estimators::windowed_centroid(&q, &seg, t)?,
-            Method::Gauss => estimators::gaussian(&q, &seg)?,
-            Method::BlaisRioux => estimators::blais_rioux(&q, &seg)?,
-        };
+        self.crossings_within_width(&q, &seg, t)?;
+        let index = self.centre_index(&raw, &q, &seg, t)?;
         let along_normal = (index - half as f64) * SAMPLE_STEP_PX;
         // The centre line through p + n·along_normal, followed along the stripe to p's ray.
         Some(along_normal * stretch)

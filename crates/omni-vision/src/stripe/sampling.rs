@@ -9,7 +9,7 @@
 //! tested below). A wider kernel would alias less but shifts curved stripes more (a ridge of
 //! radius of curvature R moves inwards by about σ²/(2R): 0.005 px at R = 70 px).
 
-use super::{Frame, Pixel};
+use super::{Frame, Pixel, to_fixed};
 
 /// Standard deviation (px) of the sampling kernel.
 pub const SAMPLE_SIGMA_PX: f64 = 0.8;
@@ -60,9 +60,8 @@ impl GaussSampler {
         }
         // 32.32 fixed point (exact: scaling by a power of two), truncated: ⌊x⌋ and the phase
         // ⌊(x − ⌊x⌋) · LEVELS⌋ from one float → integer conversion per axis.
-        const ONE: f64 = 4_294_967_296.0;
         const PHASE_SHIFT: u32 = 32 - LEVELS.trailing_zeros();
-        let (xf, yf) = ((x * ONE) as i64, (y * ONE) as i64);
+        let (xf, yf) = (to_fixed(x), to_fixed(y));
         let (xi, yi) = ((xf >> 32) - HALF, (yf >> 32) - HALF);
         if xi < 0 || yi < 0 || xi + TAPS as i64 > f.width as i64 || yi + TAPS as i64 > f.height as i64 {
             return None;

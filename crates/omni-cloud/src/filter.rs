@@ -86,8 +86,12 @@ pub fn radius_outlier_mask(points: &[[f64; 3]], nb_points: usize, radius: f64) -
 
 /// The points (and their scalars) for which `mask` is true, in order.
 pub fn select(cloud: &PointCloud, mask: &[bool]) -> PointCloud {
-    let pick = |v: &dyn Fn(usize) -> bool| (0..cloud.len()).filter(|&i| v(i)).collect::<Vec<_>>();
-    let idx = pick(&|i| mask[i]);
+    let idx: Vec<usize> = (0..cloud.len()).filter(|&i| mask[i]).collect();
+    gather(cloud, &idx)
+}
+
+/// The points (and their scalars) at the indices `idx`, in that order.
+pub fn gather(cloud: &PointCloud, idx: &[usize]) -> PointCloud {
     PointCloud {
         positions: idx.iter().map(|&i| cloud.positions[i]).collect(),
         scalars: cloud

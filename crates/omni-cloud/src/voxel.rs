@@ -1307,14 +1307,7 @@ mod tests {
         let mut order: Vec<usize> = (0..cloud.len()).collect();
         order.sort_by(|&i, &j| cloud.positions[i][0].total_cmp(&cloud.positions[j][0]).then(i.cmp(&j)));
         order.rotate_left(90_000);
-        let sorted = PointCloud {
-            positions: order.iter().map(|&i| cloud.positions[i]).collect(),
-            scalars: cloud
-                .scalars
-                .iter()
-                .map(|f| ScalarField { name: f.name.clone(), values: order.iter().map(|&i| f.values[i]).collect() })
-                .collect(),
-        };
+        let sorted = crate::filter::gather(&cloud, &order);
         let reference = run(&sorted, 1 << 21, dense, 1);
         for (chunk, threads) in [(20_000, 2), (33_333, 3), (70_000, 1)] {
             assert_eq!(run(&sorted, chunk, partitioned, threads), reference, "chunk {chunk}, {threads} threads");

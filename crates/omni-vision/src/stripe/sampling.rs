@@ -95,18 +95,50 @@ const LANES: usize = 8;
 /// LANES pixels inside the image.
 #[inline(always)]
 fn sample_wide<P: Pixel>(data: &[P], w: usize, start: usize, wx: &[f32; TAPS], wy: &[f32; TAPS]) -> f32 {
+    let block = &data[start..start + (TAPS - 1) * w + LANES];
+    if let Some(sum) = P::kernel8(block, w, wx, wy) {
+        return sum;
+    }
     let mut cols = [0.0f32; LANES];
     for (j, &wyj) in wy.iter().enumerate() {
-        let row: &[P; LANES] = data[start + j * w..][..LANES].try_into().expect("LANES pixels");
+        let row: &[P; LANES] = block[j * w..][..LANES].try_into().expect("LANES pixels");
         for (c, &p) in cols.iter_mut().zip(row) {
             *c += wyj * p.to_f32();
         }
     }
-    let mut sum = 0.0;
-    for (c, &wxk) in cols.iter().zip(wx) {
-        sum += c * wxk;
+    // The same sums in the same order as `kernel8_sse2`, so that 8- and 16-bit frames give the
+    // same centres to the last bit.
+    let lanes: [f32; 4] = std::array::from_fn(|l| cols[l] * wx[l] + if l < 2 { cols[l + 4] * wx[l + 4] } else { 0.0 });
+    (lanes[0] + lanes[2]) + (lanes[1] + lanes[3])
+}
+
+/// [`sample_wide`] on 8-bit pixels with SSE2 (part of every x86-64 CPU): each row of the block
+/// is one 8-byte load, widened and converted to two 4-wide float vectors. Written out because
+/// the compiler vectorised the generic loop across rows, two columns at a time, at about 200
+/// instructions per sample (callgrind). `block`: the TAPS rows of `w` pixels from the block's
+/// top-left corner, the last one LANES long.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "sse2")]
+#[inline]
+pub(super) fn kernel8_sse2(block: &[u8], w: usize, wx: &[f32; TAPS], wy: &[f32; TAPS]) -> f32 {
+    use std::arch::x86_64::*;
+    let zero = _mm_setzero_si128();
+    let (mut lo, mut hi) = (_mm_setzero_ps(), _mm_setzero_ps());
+    for (j, &wyj) in wy.iter().enumerate() {
+        let row: [u8; LANES] = block[j * w..][..LANES].try_into().expect("LANES pixels");
+        let bytes = _mm_set_epi64x(0, i64::from_le_bytes(row));
+        let words = _mm_unpacklo_epi8(bytes, zero);
+        let weight = _mm_set1_ps(wyj);
+        lo = _mm_add_ps(lo, _mm_mul_ps(_mm_cvtepi32_ps(_mm_unpacklo_epi16(words, zero)), weight));
+        hi = _mm_add_ps(hi, _mm_mul_ps(_mm_cvtepi32_ps(_mm_unpackhi_epi16(words, zero)), weight));
     }
-    sum
+    // Columns 0–3 and 4–5 times their weights (lanes 6, 7 are not part of the kernel).
+    let dot = _mm_add_ps(
+        _mm_mul_ps(lo, _mm_set_ps(wx[3], wx[2], wx[1], wx[0])),
+        _mm_mul_ps(hi, _mm_set_ps(0.0, 0.0, wx[5], wx[4])),
+    );
+    let pairs = _mm_add_ps(dot, _mm_movehl_ps(dot, dot));
+    _mm_cvtss_f32(_mm_add_ss(pairs, _mm_shuffle_ps(pairs, pairs, 1)))
 }
 
 #[cfg(test)]

@@ -215,6 +215,7 @@ impl RidgeParams {
 /// A sample type the detector reads directly: 8- or 16-bit.
 pub trait Pixel: Copy + Send + Sync + PartialOrd {
     fn to_f32(self) -> f32;
+    fn to_u32(self) -> u32;
     /// The Gaussian sampler's kernel sum over a 6-row block (see `sampling`), where this pixel
     /// type has a faster form than the generic loop; `None` otherwise.
     #[inline(always)]
@@ -231,6 +232,10 @@ pub trait Pixel: Copy + Send + Sync + PartialOrd {
 impl Pixel for u8 {
     fn to_f32(self) -> f32 {
         self as f32
+    }
+    #[inline(always)]
+    fn to_u32(self) -> u32 {
+        self as u32
     }
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
@@ -251,6 +256,10 @@ impl Pixel for u8 {
 impl Pixel for u16 {
     fn to_f32(self) -> f32 {
         self as f32
+    }
+    #[inline(always)]
+    fn to_u32(self) -> u32 {
+        self as u32
     }
     fn from_threshold(t: f64) -> Self {
         t.floor().clamp(0.0, 65535.0) as u16
@@ -322,14 +331,22 @@ impl<P: Pixel> Frame<'_, P> {
     }
 
     /// The 2×2 neighbourhood whose top-left pixel is `data[i]`, interpolated at the fractions
-    /// `fx`, `fy` (px) right and down: the one bilinear formula all samplers share.
+    /// `fx`, `fy` (in 1/256 px) right and down: the one bilinear formula all the bilinear
+    /// samplers share. In integers: the bilinear samples only find the stripes and their
+    /// backgrounds and check gradients (the centres come from the Gaussian sampler), where a
+    /// position rounded down to 1/256 px does not matter, and four integer products cost less
+    /// than four integer → float conversions (callgrind: 65 → 39 instructions per sample).
     #[inline(always)]
-    fn interpolate(&self, i: usize, fx: f32, fy: f32) -> f32 {
+    fn interpolate(&self, i: usize, fx: u32, fy: u32) -> f32 {
         let w = self.width as usize;
-        let (top, bottom) = (&self.data[i..i + 2], &self.data[i + w..i + w + 2]);
-        let top = top[0].to_f32() + fx * (top[1].to_f32() - top[0].to_f32());
-        let bottom = bottom[0].to_f32() + fx * (bottom[1].to_f32() - bottom[0].to_f32());
-        top + fy * (bottom - top)
+        // One bounds check for the four pixels.
+        let px = &self.data[i..i + w + 2];
+        let (fx, fy) = (fx as u64, fy as u64);
+        let top = px[0].to_u32() as u64 * (256 - fx) + px[1].to_u32() as u64 * fx;
+        let bottom = px[w].to_u32() as u64 * (256 - fx) + px[w + 1].to_u32() as u64 * fx;
+        // < 2³³ for 16-bit pixels: exact in i64, and as f32 to 24 bits.
+        let v = top * (256 - fy) + bottom * fy;
+        v as i64 as f32 * (1.0 / 65536.0)
     }
 
     /// Appends the bilinear samples at `centre + (r0 + k)·dir`, k = 0..n, whose 2×2
@@ -355,10 +372,7 @@ impl<P: Pixel> Frame<'_, P> {
     /// it panics on the slice index).
     #[inline(always)]
     fn bilinear_unchecked(&self, x: f64, y: f64) -> f32 {
-        // `as` truncates, which is floor for the non-negative coordinates accepted here (and,
-        // unlike `floor`, needs no libm call on baseline x86-64).
-        let (xi, yi) = (x as usize, y as usize);
-        let (fx, fy) = ((x - xi as f64) as f32, (y - yi as f64) as f32);
+        let ((xi, fx), (yi, fy)) = (fixed_point(x), fixed_point(y));
         self.interpolate(yi * self.width as usize + xi, fx, fy)
     }
 }
@@ -997,16 +1011,17 @@ pub(super) fn to_fixed(x: f64) -> i64 {
     (x * FIXED_ONE) as i64
 }
 
-/// The integer and fractional parts of a non-negative 32.32 fixed-point coordinate.
+/// The integer part of a non-negative 32.32 fixed-point coordinate and its fractional part in
+/// 1/256 (rounded down).
 #[inline(always)]
-fn split_fixed(fixed: i64) -> (usize, f32) {
-    ((fixed >> 32) as usize, (fixed & 0xFFFF_FFFF) as f32 * (1.0 / FIXED_ONE as f32))
+fn split_fixed(fixed: i64) -> (usize, u32) {
+    ((fixed >> 32) as usize, ((fixed >> 24) & 0xFF) as u32)
 }
 
-/// The integer and fractional parts of a coordinate 0 ≤ x < 2³¹ px: ⌊x⌋ and x − ⌊x⌋ (as f32,
-/// from 32 fractional bits) with a single float → integer conversion.
+/// The integer and fractional parts of a coordinate 0 ≤ x < 2³¹ px: ⌊x⌋ and x − ⌊x⌋ in 1/256
+/// (rounded down), with a single float → integer conversion.
 #[inline(always)]
-fn fixed_point(x: f64) -> (usize, f32) {
+fn fixed_point(x: f64) -> (usize, u32) {
     split_fixed(to_fixed(x))
 }
 

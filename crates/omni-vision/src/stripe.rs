@@ -963,13 +963,23 @@ fn clear_of_step(c: &[f32], k: usize, w: usize, (left, right): (f32, f32)) -> bo
 
 /// The smallest of `samples`, or NaN if one is NaN (outside the image).
 fn min_or_nan(samples: &[f32]) -> f32 {
-    samples.iter().fold(f32::INFINITY, |m, &v| if v.is_nan() { f32::NAN } else { m.min(v) })
+    // Without branches (`f32::min` skips NaNs; the flag remembers them): vectorised.
+    let (min, nan) = samples.iter().fold((f32::INFINITY, false), |(m, nan), &v| (m.min(v), nan | v.is_nan()));
+    if nan { f32::NAN } else { min }
 }
 
 /// The segment around the largest contrast of `q` whose samples stay above `t`, or `None` if
 /// the peak is not above `t` or the segment reaches either end (or a NaN) of `q`.
 fn fine_segment(q: &[f32], t: f32) -> Option<Segment> {
-    let peak = (0..q.len()).filter(|&i| !q[i].is_nan()).max_by(|&a, &b| q[a].total_cmp(&q[b]))?;
+    // The last of the largest samples (NaNs never compare ≥).
+    let mut peak = None;
+    let mut largest = f32::NEG_INFINITY;
+    for (i, &v) in q.iter().enumerate() {
+        if v >= largest {
+            (peak, largest) = (Some(i), v);
+        }
+    }
+    let peak = peak?;
     if !(q[peak] > t) {
         return None;
     }

@@ -208,54 +208,54 @@ fn local_shape(polar: &[(f64, f64)], log_intensity: &[f64], k: usize) -> Option<
     let max_dr = 1.0 + SHAPE_HALF_ARC_PX * 3f64.sqrt();
     // Moments Σ sⁱ (i = 0..4) and Σ sⁱ·y (i = 0..2) of the basis (1, s, s²/2); the normal
     // equations are built from them once (the halves are exact, so this equals summing the
-    // basis' outer products).
-    let mut sp = [0.0f64; 5];
-    let (mut sr, mut sl) = ([0.0f64; 3], [0.0f64; 3]);
-    let mut count = 0;
-    // Visits point j: `None` once it is beyond the widest window, else whether it is on the
-    // same stripe (then added to the sums); `side` counts the same-stripe points on this side.
-    let mut visit = |j: usize, side: &mut usize| -> bool {
-        let (phj, rj) = polar[j];
-        // Azimuth difference wrapped into [−π, π] (both azimuths are in [0, 2π)); no fmod.
-        let d = phj - phi;
-        let d = if d > PI {
-            d - TAU
-        } else if d < -PI {
-            d + TAU
-        } else {
-            d
-        };
-        let within = d.abs() <= half_angle || (*side < MIN_SIDE_POINTS && d.abs() <= 2.0 * half_angle);
-        if !within {
-            return false;
-        }
-        if (rj - r).abs() <= max_dr {
-            let s = d * r;
-            let s2 = s * s;
-            let powers = [1.0, s, s2, s * s2, s2 * s2];
-            for (acc, p) in sp.iter_mut().zip(powers) {
-                *acc += p;
+    // basis' outer products). The point itself adds s = 0, y = 0.
+    let mut sp = [1.0, 0.0, 0.0, 0.0, 0.0f64];
+    let (mut sr, mut sl) = ([0.0f64; 3], [log_intensity[k], 0.0, 0.0]);
+    let mut count = 1;
+    // Walks outwards in azimuth order on one side (wrapping around, at most `limit` points),
+    // adding the points of the same stripe within the window to the sums; returns how many
+    // points it visited.
+    let mut walk = |ahead: bool, limit: usize| -> usize {
+        let mut side = 0;
+        for step in 1..=limit {
+            let j = if ahead { k + step } else { k + n - step };
+            let j = if j >= n { j - n } else { j };
+            let (phj, rj) = polar[j];
+            // Azimuth difference wrapped into [−π, π] (both azimuths are in [0, 2π)); no fmod.
+            let d = phj - phi;
+            let d = if d > PI {
+                d - TAU
+            } else if d < -PI {
+                d + TAU
+            } else {
+                d
+            };
+            let within = d.abs() <= half_angle || (side < MIN_SIDE_POINTS && d.abs() <= 2.0 * half_angle);
+            if !within {
+                return step - 1;
             }
-            let (y, l) = (rj - r, log_intensity[j]);
-            for i in 0..3 {
-                sr[i] += powers[i] * y;
-                sl[i] += powers[i] * l;
+            let y = rj - r;
+            if y.abs() <= max_dr {
+                let s = d * r;
+                let s2 = s * s;
+                let powers = [1.0, s, s2, s * s2, s2 * s2];
+                for (acc, p) in sp.iter_mut().zip(powers) {
+                    *acc += p;
+                }
+                let l = log_intensity[j];
+                for i in 0..3 {
+                    sr[i] += powers[i] * y;
+                    sl[i] += powers[i] * l;
+                }
+                count += 1;
+                side += 1;
             }
-            count += 1;
-            *side += 1;
         }
-        true
+        limit
     };
-    visit(k, &mut 0);
-    // Walk outwards in azimuth order on both sides (wrapping around), each point once.
-    let (mut ahead, mut side) = (1, 0);
-    while ahead < n && visit((k + ahead) % n, &mut side) {
-        ahead += 1;
-    }
-    let (mut behind, mut side) = (1, 0);
-    while ahead + behind < n + 1 && behind < n && visit((k + n - behind) % n, &mut side) {
-        behind += 1;
-    }
+    // Each point once: the walk behind stops before the points the walk ahead visited.
+    let ahead = walk(true, n - 1);
+    walk(false, n - 1 - ahead);
     if count < MIN_POINTS {
         return None;
     }

@@ -326,8 +326,13 @@ impl<P: Pixel> Frame<'_, P> {
         if xi + 2 >= w || yi + 2 >= h {
             return None;
         }
-        let i = yi * w + xi;
-        Some([i - 1, i + 1, i - w, i + w].map(|j| self.interpolate(j, fx, fy)))
+        // The 4×4 pixels around (x, y) (corners unused), read through one bounds-checked slice.
+        let block = &self.data[(yi - 1) * w + xi - 1..(yi + 2) * w + xi + 3];
+        let at = |row: usize, col: usize| block[row * w + col].to_u32();
+        let cell = |row: usize, col: usize| {
+            lerp_q8([at(row, col), at(row, col + 1), at(row + 1, col), at(row + 1, col + 1)], fx, fy)
+        };
+        Some([cell(1, 0), cell(1, 2), cell(0, 1), cell(2, 1)])
     }
 
     /// The 2×2 neighbourhood whose top-left pixel is `data[i]`, interpolated at the fractions
@@ -341,12 +346,7 @@ impl<P: Pixel> Frame<'_, P> {
         let w = self.width as usize;
         // One bounds check for the four pixels.
         let px = &self.data[i..i + w + 2];
-        let (fx, fy) = (fx as u64, fy as u64);
-        let top = px[0].to_u32() as u64 * (256 - fx) + px[1].to_u32() as u64 * fx;
-        let bottom = px[w].to_u32() as u64 * (256 - fx) + px[w + 1].to_u32() as u64 * fx;
-        // < 2³³ for 16-bit pixels: exact in i64, and as f32 to 24 bits.
-        let v = top * (256 - fy) + bottom * fy;
-        v as i64 as f32 * (1.0 / 65536.0)
+        lerp_q8([px[0].to_u32(), px[1].to_u32(), px[w].to_u32(), px[w + 1].to_u32()], fx, fy)
     }
 
     /// Appends the bilinear samples at `centre + (r0 + k)·dir`, k = 0..n, whose 2×2
@@ -629,7 +629,8 @@ impl RidgeDetector {
         let (word, bit) = (bin / 64, 1u64 << (bin % 64));
         // `step` is a power of two: `lo & -step` rounds down to a multiple of it (also below 0);
         // the rays wrap around once at most (no integer division in this per-pixel loop).
-        for i in ((lo & -step)..=hi).step_by(step as usize) {
+        let mut i = lo & -step;
+        while i <= hi {
             let ray = if i < 0 {
                 i + n
             } else if i >= n {
@@ -637,6 +638,7 @@ impl RidgeDetector {
             } else {
                 i
             } as usize;
+            i += step;
             let (seen_word, seen_bit) = (ray / 64, 1u64 << (ray % 64));
             if scratch.seen[seen_word] & seen_bit == 0 {
                 scratch.seen[seen_word] |= seen_bit;
@@ -1010,6 +1012,18 @@ fn stands_out<P: Pixel>(f: &Frame<'_, P>, x: usize, y: usize, reach: usize, t: f
     let row = get(x.checked_sub(reach), Some(y)).max(get(Some(x + reach), Some(y)));
     let col = get(Some(x), y.checked_sub(reach)).max(get(Some(x), Some(y + reach)));
     v - row > t || v - col > t
+}
+
+/// Bilinear interpolation of the 2×2 pixels `[top left, top right, bottom left, bottom right]`
+/// at the fractions `fx`, `fy` (in 1/256) right and down (see `Frame::interpolate`).
+#[inline(always)]
+fn lerp_q8(px: [u32; 4], fx: u32, fy: u32) -> f32 {
+    let (fx, fy) = (fx as u64, fy as u64);
+    let top = px[0] as u64 * (256 - fx) + px[1] as u64 * fx;
+    let bottom = px[2] as u64 * (256 - fx) + px[3] as u64 * fx;
+    // < 2³³ for 16-bit pixels: exact in i64, and as f32 to 24 bits.
+    let v = top * (256 - fy) + bottom * fy;
+    v as i64 as f32 * (1.0 / 65536.0)
 }
 
 /// 1.0 in 32.32 fixed point: coordinates scaled by it keep 32 fractional bits exactly.

@@ -592,7 +592,7 @@ impl RidgeDetector {
             let right = &d[y * w + a + k..y * w + b + k];
             let up = &d[(y - k) * w + a..(y - k) * w + b];
             let down = &d[(y + k) * w + a..(y + k) * w + b];
-            const BLOCK: usize = 32;
+            const BLOCK: usize = 64;
             let blocks = cur.chunks(BLOCK).zip(left.chunks(BLOCK)).zip(right.chunks(BLOCK));
             let blocks = blocks.zip(up.chunks(BLOCK)).zip(down.chunks(BLOCK));
             for (bi, ((((c, l), r), u), d)) in blocks.enumerate() {

@@ -215,6 +215,7 @@ impl RidgeParams {
 /// A sample type the detector reads directly: 8- or 16-bit.
 pub trait Pixel: Copy + Send + Sync + PartialOrd {
     fn to_f32(self) -> f32;
+    /// The sample as an integer (the bilinear samplers interpolate in integers).
     fn to_u32(self) -> u32;
     /// The Gaussian sampler's kernel sum over a 6-row block (see `sampling`), where this pixel
     /// type has a faster form than the generic loop; `None` otherwise.

@@ -538,9 +538,14 @@ impl RidgeDetector {
             let (dx, dy) = self.dirs[ray as usize];
             radii.extend(out[start..end(i)].iter().map(|p| (p.u - self.cx) * dx + (p.v - self.cy) * dy));
         }
-        let radii_of = |ray: u32| match rays.binary_search_by_key(&ray, |r| r.0) {
-            Ok(i) => &radii[rays[i].1..end(i)],
-            Err(_) => &radii[0..0],
+        // Where each ray's points are in `rays` (a table: each point looks up two rays).
+        let mut index_of = vec![u32::MAX; n];
+        for (i, &(ray, _)) in rays.iter().enumerate() {
+            index_of[ray as usize] = i as u32;
+        }
+        let radii_of = |ray: u32| match index_of[ray as usize] {
+            u32::MAX => &radii[0..0],
+            i => &radii[rays[i as usize].1..end(i as usize)],
         };
         // Largest radial step between neighbours on a stripe crossing the rays at 60°.
         let max_dr = MIN_STRIPE_ARC_PX * 3f64.sqrt() + 1.0;

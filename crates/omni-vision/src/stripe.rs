@@ -18,12 +18,13 @@
 //! 1521 points; callgrind, 16.0 M instructions per frame): resampling the marked stretches
 //! (coarse profiles, maxima and their backgrounds, fine profiles, checks) 53 %, the row scan,
 //! the marks and the rays' bookkeeping 30 %, the pass across the stripe's normal (`normal`)
-//! 14 %, the isolated-point check 3 %. Tried and not kept: rays in bands of radii 1.1× wide, each band with its own rays
-//! 0.91–1 px apart instead of nested rays 0.5–1 px apart (16 % fewer points but only 3.6 %
-//! fewer instructions: as many rays are touched, where a stripe crosses from one band into the
-//! next both bands' rays are resampled, and the points there are up to two rays apart); fine
-//! profiles sampled in one batch from the coarse profile's crossings (more samples, slower);
-//! fine samples 1 px apart (the windowed centroid's RMS doubled on the simulator's frames).
+//! 14 %, the isolated-point check 3 %. Tried and not kept: rays in bands of radii 1.1× wide,
+//! each band with its own rays 0.91–1 px apart instead of nested rays 0.5–1 px apart (16 % fewer
+//! points but only 3.6 % fewer instructions: as many rays are touched, where a stripe crosses
+//! from one band into the next both bands' rays are resampled, and the points there are up to
+//! two rays apart); fine profiles sampled in one batch from the coarse profile's crossings
+//! (more samples, slower); fine samples 1 px apart (the windowed centroid's RMS doubled on the
+//! simulator's frames).
 //!
 //! Segments: each local maximum of a ray's profile whose contrast above the local background
 //! (the larger of the minima within `max_width / 2 + 2` px on either side) exceeds the
@@ -229,10 +230,10 @@ pub trait Pixel: Copy + Send + Sync + PartialOrd {
     fn to_f32(self) -> f32;
     /// The sample as an integer (the bilinear samplers interpolate in integers).
     fn to_u32(self) -> u32;
-    /// The Gaussian sampler's kernel sum over a 6-row block (see `sampling`), where this pixel
+    /// The Gaussian sampler's kernel sum over a block of its rows (see `sampling`), where this pixel
     /// type has a faster form than the generic loop; `None` otherwise.
     #[inline(always)]
-    fn kernel8(_block: &[Self], _w: usize, _wx: &[f32; 6], _wy: &[f32; 6]) -> Option<f32> {
+    fn kernel8(_block: &[Self], _w: usize, _wx: &[f32; sampling::TAPS], _wy: &[f32; sampling::TAPS]) -> Option<f32> {
         None
     }
     /// The threshold as this type (floored: `v − m > T` ⇔ `v > m + floor(T)` for integers).
@@ -252,7 +253,7 @@ impl Pixel for u8 {
     }
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    fn kernel8(block: &[u8], w: usize, wx: &[f32; 6], wy: &[f32; 6]) -> Option<f32> {
+    fn kernel8(block: &[u8], w: usize, wx: &[f32; sampling::TAPS], wy: &[f32; sampling::TAPS]) -> Option<f32> {
         // SAFETY: SSE2 is part of the x86-64 baseline, so every x86-64 CPU has it; the function
         // has no other requirement (it reads `block` through bounds-checked slices).
         Some(unsafe { sampling::kernel8_sse2(block, w, wx, wy) })
@@ -878,6 +879,7 @@ impl RidgeDetector {
         }
         Some(StripePoint { u: self.cx + r * dx, v: self.cy + r * dy, intensity: peak as f64, width, quality })
     }
+
     /// The segment's threshold crossings (sample indices) in `q`, the contrast profile, or `None`
     /// if they are missing or the width between them (px) is outside
     /// [`RidgeParams::min_width`]..[`RidgeParams::max_width`].

@@ -16,7 +16,7 @@ pub const SAMPLE_SIGMA_PX: f64 = 0.8;
 /// Taps either side: the kernel covers offsets −2..=3 around floor(x) (≥ ±2.5 σ; a wider
 /// window changes the centre by < 0.003 px for σ_s ≥ 0.75 px but costs 64 taps instead of 36).
 const HALF: i64 = 2;
-const TAPS: usize = 2 * HALF as usize + 2;
+pub(super) const TAPS: usize = 2 * HALF as usize + 2;
 /// Sub-pixel resolution of the weight table (position error ≤ 1 / (2 · LEVELS) px); a power
 /// of two.
 const LEVELS: usize = 512;
@@ -81,14 +81,23 @@ impl GaussSampler {
                 *c += wyj * p.to_f32();
             }
         }
-        Some(cols.iter().zip(wx).map(|(c, w)| c * w).sum())
+        Some(column_dot(&cols, wx))
     }
 }
 
+/// The column sums of the kernel times the column weights, summed in the order `kernel8_sse2`
+/// adds its lanes (columns 0 + 4, 1 + 5, then 2 and 3 beside them), which every kernel path
+/// shares, so that a sample is the same to the last bit whichever path took it (8- and 16-bit
+/// frames give the same centres).
+#[inline(always)]
+fn column_dot(cols: &[f32], wx: &[f32; TAPS]) -> f32 {
+    let c = |k: usize| cols[k] * wx[k];
+    ((c(0) + c(4)) + c(2)) + ((c(1) + c(5)) + c(3))
+}
+
 /// Lanes of the wide kernel: each row's TAPS pixels are read as LANES (the last two are summed
-/// but left out of the dot product), so that the row is one fixed-size load the compiler turns
-/// into two 4-wide vector operations; the same sums in the same order as the narrow kernel,
-/// which serves the blocks within LANES px of the right border.
+/// but left out of the dot product), so that the row is one fixed-size load and two 4-wide
+/// vector operations; the narrow kernel serves the blocks within LANES px of the right border.
 const LANES: usize = 8;
 
 /// The kernel's sum over the TAPS × TAPS block at `start` (row stride `w`) whose rows extend to
@@ -106,10 +115,7 @@ fn sample_wide<P: Pixel>(data: &[P], w: usize, start: usize, wx: &[f32; TAPS], w
             *c += wyj * p.to_f32();
         }
     }
-    // The same sums in the same order as `kernel8_sse2`, so that 8- and 16-bit frames give the
-    // same centres to the last bit.
-    let lanes: [f32; 4] = std::array::from_fn(|l| cols[l] * wx[l] + if l < 2 { cols[l + 4] * wx[l + 4] } else { 0.0 });
-    (lanes[0] + lanes[2]) + (lanes[1] + lanes[3])
+    column_dot(&cols, wx)
 }
 
 /// [`sample_wide`] on 8-bit pixels with SSE2 (part of every x86-64 CPU): each row of the block
@@ -132,7 +138,8 @@ pub(super) fn kernel8_sse2(block: &[u8], w: usize, wx: &[f32; TAPS], wy: &[f32; 
         lo = _mm_add_ps(lo, _mm_mul_ps(_mm_cvtepi32_ps(_mm_unpacklo_epi16(words, zero)), weight));
         hi = _mm_add_ps(hi, _mm_mul_ps(_mm_cvtepi32_ps(_mm_unpackhi_epi16(words, zero)), weight));
     }
-    // Columns 0–3 and 4–5 times their weights (lanes 6, 7 are not part of the kernel).
+    // Columns 0–3 and 4–5 times their weights (lanes 6, 7 are not part of the kernel), added
+    // as `column_dot` does (lanes 2, 3 add 0).
     let dot = _mm_add_ps(
         _mm_mul_ps(lo, _mm_set_ps(wx[3], wx[2], wx[1], wx[0])),
         _mm_mul_ps(hi, _mm_set_ps(0.0, 0.0, wx[5], wx[4])),

@@ -93,6 +93,7 @@ mod estimators;
 mod frames;
 mod normal;
 mod overlay;
+mod rowscan;
 mod sampling;
 mod steger;
 
@@ -241,6 +242,20 @@ pub trait Pixel: Copy + Send + Sync + PartialOrd {
     /// Whether `v` exceeds both its row neighbours `l`, `r` or both its column neighbours `u`,
     /// `d` by more than `t`; written without branches so that it vectorises.
     fn contrast_above(v: Self, l: Self, r: Self, u: Self, d: Self, t: Self) -> bool;
+    /// Calls `hit(i)` for each `i` (increasing) where [`Self::contrast_above`] holds for `c[i]`
+    /// and its neighbours `l[i]`, `r[i]`, `u[i]`, `d[i]` (slices of one length: a row's stretch).
+    #[inline(always)]
+    fn for_each_contrast_hit(
+        c: &[Self],
+        l: &[Self],
+        r: &[Self],
+        u: &[Self],
+        d: &[Self],
+        t: Self,
+        hit: impl FnMut(usize),
+    ) {
+        rowscan::for_each_hit_generic(c, l, r, u, d, t, hit)
+    }
 }
 
 impl Pixel for u8 {
@@ -264,6 +279,13 @@ impl Pixel for u8 {
     #[inline(always)]
     fn contrast_above(v: u8, l: u8, r: u8, u: u8, d: u8, t: u8) -> bool {
         (v > l.max(r).saturating_add(t)) | (v > u.max(d).saturating_add(t))
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn for_each_contrast_hit(c: &[u8], l: &[u8], r: &[u8], u: &[u8], d: &[u8], t: u8, hit: impl FnMut(usize)) {
+        // SAFETY: SSE2 is part of the x86-64 baseline (see `kernel8`); the function reads only
+        // through bounds-checked slices.
+        unsafe { rowscan::for_each_hit_sse2(c, l, r, u, d, t, hit) }
     }
 }
 
@@ -611,23 +633,7 @@ impl RidgeDetector {
             let right = &d[y * w + a + k..y * w + b + k];
             let up = &d[(y - k) * w + a..(y - k) * w + b];
             let down = &d[(y + k) * w + a..(y + k) * w + b];
-            const BLOCK: usize = 64;
-            let blocks = cur.chunks(BLOCK).zip(left.chunks(BLOCK)).zip(right.chunks(BLOCK));
-            let blocks = blocks.zip(up.chunks(BLOCK)).zip(down.chunks(BLOCK));
-            for (bi, ((((c, l), r), u), d)) in blocks.enumerate() {
-                let lanes = || c.iter().zip(l).zip(r).zip(u).zip(d);
-                // One pass without branches over the block; most blocks hold no stripe.
-                let any =
-                    lanes().fold(false, |any, ((((&v, &l), &r), &u), &d)| any | P::contrast_above(v, l, r, u, d, t));
-                if !any {
-                    continue;
-                }
-                for (i, ((((&v, &l), &r), &u), &d)) in lanes().enumerate() {
-                    if P::contrast_above(v, l, r, u, d, t) {
-                        mark(a + bi * BLOCK + i, y);
-                    }
-                }
-            }
+            P::for_each_contrast_hit(cur, left, right, up, down, t, |i| mark(a + i, y));
         }
     }
 

@@ -292,6 +292,30 @@ fn fast_candidate_test_matches_the_general_one() {
 }
 
 #[test]
+fn row_tests_flag_exactly_the_pixels_the_single_test_flags() {
+    // Every row length up to 140 (the SSE2 path's 64-pixel steps and its scalar tail; the generic
+    // path's 64-pixel blocks), thresholds at and near the saturating cases, pixels near 255.
+    let mut rng = SplitMix64::new(78);
+    let mut bytes = |n: usize| -> Vec<u8> { (0..n).map(|_| (rng.uniform() * 256.0) as u8).collect() };
+    for n in 0..=140 {
+        let [c, l, r, u, d] = [bytes(n), bytes(n), bytes(n), bytes(n), bytes(n)];
+        for t in [0u8, 1, 10, 100, 255] {
+            let single: Vec<usize> = (0..n).filter(|&i| u8::contrast_above(c[i], l[i], r[i], u[i], d[i], t)).collect();
+            let mut hits = Vec::new();
+            u8::for_each_contrast_hit(&c, &l, &r, &u, &d, t, |i| hits.push(i));
+            assert_eq!(hits, single, "8-bit, {n} px, T {t}");
+            let wide = |v: &[u8]| v.iter().map(|&x| x as u16 * 257).collect::<Vec<u16>>();
+            let [c, l, r, u, d] = [wide(&c), wide(&l), wide(&r), wide(&u), wide(&d)];
+            let t = t as u16 * 257;
+            let single: Vec<usize> = (0..n).filter(|&i| u16::contrast_above(c[i], l[i], r[i], u[i], d[i], t)).collect();
+            let mut hits = Vec::new();
+            u16::for_each_contrast_hit(&c, &l, &r, &u, &d, t, |i| hits.push(i));
+            assert_eq!(hits, single, "16-bit, {n} px");
+        }
+    }
+}
+
+#[test]
 fn fast_helpers_agree_with_the_plain_arithmetic() {
     for &x in &[-3.5, -2.0, -0.25, 0.0, 0.2, 1.0, 7.999_999_999, 12.5, 511.75, 1e6 + 0.3] {
         assert_eq!(floor_i64(x), x.floor() as i64, "floor {x}");

@@ -440,10 +440,9 @@ pub struct RidgeDetector {
 pub struct Scratch {
     /// For each ray, a bitmap of the 1-px radius bins holding a pixel above the threshold.
     bits: Vec<u64>,
-    /// Rays with at least one bit set, to clear and visit only those.
-    touched: Vec<u32>,
-    /// Bit per ray: whether it is in `touched`.
-    seen: Vec<u64>,
+    /// Bit per ray: whether it has a bit set in `bits`, to visit (and clear) only those rays,
+    /// in order.
+    touched: Vec<u64>,
     profiles: Profiles,
 }
 
@@ -523,17 +522,17 @@ impl RidgeDetector {
         let mut out = Vec::new();
         // Points of ray `rays[i].0` are `out[rays[i].1..rays[i + 1].1]`.
         let mut rays: Vec<(u32, usize)> = Vec::new();
-        let mut touched = std::mem::take(&mut scratch.touched);
-        touched.sort_unstable();
-        for &ray in &touched {
-            rays.push((ray, out.len()));
-            self.scan_ray(frame, ray as usize, threshold, scratch, &mut out);
-            let w = self.words_per_ray;
-            scratch.bits[ray as usize * w..(ray as usize + 1) * w].fill(0);
-            scratch.seen[ray as usize / 64] = 0;
+        for word in 0..scratch.touched.len() {
+            let mut m = std::mem::take(&mut scratch.touched[word]);
+            while m != 0 {
+                let ray = word * 64 + m.trailing_zeros() as usize;
+                m &= m - 1;
+                rays.push((ray as u32, out.len()));
+                self.scan_ray(frame, ray, threshold, scratch, &mut out);
+                let w = self.words_per_ray;
+                scratch.bits[ray * w..(ray + 1) * w].fill(0);
+            }
         }
-        touched.clear();
-        scratch.touched = touched;
         let (points, on_rays) = self.drop_isolated(out, &rays);
         // Oblique and tightly curved stripes: centres re-measured across the stripe (`normal`).
         let points = self.remeasure_across(frame, points, &on_rays, threshold);
@@ -598,7 +597,7 @@ impl RidgeDetector {
     fn mark_candidates<P: Pixel>(&self, frame: &Frame<'_, P>, threshold: f64, scratch: &mut Scratch) {
         let n = self.dirs.len();
         scratch.bits.resize(n * self.words_per_ray, 0);
-        scratch.seen.resize(n.div_ceil(64), 0);
+        scratch.touched.resize(n.div_ceil(64), 0);
         let t = P::from_threshold(threshold);
         let (w, h) = (self.width as usize, self.height as usize);
         let y_lo = (self.cy - self.r_out).floor().max(0.0) as usize;
@@ -664,11 +663,7 @@ impl RidgeDetector {
                 i
             } as usize;
             i += step;
-            let (seen_word, seen_bit) = (ray / 64, 1u64 << (ray % 64));
-            if scratch.seen[seen_word] & seen_bit == 0 {
-                scratch.seen[seen_word] |= seen_bit;
-                scratch.touched.push(ray as u32);
-            }
+            scratch.touched[ray / 64] |= 1 << (ray % 64);
             scratch.bits[ray * self.words_per_ray + word] |= bit;
         }
     }

@@ -89,6 +89,7 @@
 //! ```
 
 mod along;
+mod bilinear8;
 mod estimators;
 mod frames;
 mod normal;
@@ -237,6 +238,13 @@ pub trait Pixel: Copy + Send + Sync + PartialOrd {
     fn kernel8(_block: &[Self], _w: usize, _wx: &[f32; sampling::TAPS], _wy: &[f32; sampling::TAPS]) -> Option<f32> {
         None
     }
+    /// [`Frame::bilinear_line`]'s samples (`out[k]` at (`xf`, `yf`) + k·`step`, 32.32 fixed
+    /// point, in frame `data` of `w` pixels per row) where this pixel type has a faster form
+    /// than one sample at a time; returns whether it wrote them.
+    #[inline(always)]
+    fn bilinear_line_fast(_data: &[Self], _w: usize, _xf: i64, _yf: i64, _step: (i64, i64), _out: &mut [f32]) -> bool {
+        false
+    }
     /// The threshold as this type (floored: `v − m > T` ⇔ `v > m + floor(T)` for integers).
     fn from_threshold(t: f64) -> Self;
     /// Whether `v` exceeds both its row neighbours `l`, `r` or both its column neighbours `u`,
@@ -272,6 +280,14 @@ impl Pixel for u8 {
         // SAFETY: SSE2 is part of the x86-64 baseline, so every x86-64 CPU has it; the function
         // has no other requirement (it reads `block` through bounds-checked slices).
         Some(unsafe { sampling::kernel8_sse2(block, w, wx, wy) })
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn bilinear_line_fast(data: &[u8], w: usize, xf: i64, yf: i64, step: (i64, i64), out: &mut [f32]) -> bool {
+        // SAFETY: SSE2 is part of the x86-64 baseline (see `kernel8`); the function reads and
+        // writes only through bounds-checked slices.
+        unsafe { bilinear8::bilinear_line_sse2(data, w, xf, yf, step, out) };
+        true
     }
     fn from_threshold(t: f64) -> Self {
         t.floor().clamp(0.0, 255.0) as u8
@@ -396,6 +412,9 @@ impl<P: Pixel> Frame<'_, P> {
         let (step_x, step_y) = (to_fixed(dir.0), to_fixed(dir.1));
         let start = out.len();
         out.resize(start + n, 0.0);
+        if P::bilinear_line_fast(self.data, w, xf, yf, (step_x, step_y), &mut out[start..]) {
+            return;
+        }
         for v in &mut out[start..] {
             let ((xi, fx), (yi, fy)) = (split_fixed(xf), split_fixed(yf));
             *v = self.interpolate(yi * w + xi, fx, fy);

@@ -367,8 +367,9 @@ impl<P: Pixel> Frame<'_, P> {
 
     /// Bilinear samples 1 px left, right, above and below (x, y) px, or `None` if one of them
     /// leaves the image: the four share their interpolation weights, so one position split and
-    /// one bounds check serve all (same values as four [`Self::bilinear`] calls).
-    #[inline]
+    /// one bounds check serve all (same values as four [`Self::bilinear`] calls). Inlined: its
+    /// four values returned through memory stalled the checks that read them (perf).
+    #[inline(always)]
     fn cross(&self, x: f64, y: f64) -> Option<[f32; 4]> {
         if !(x >= 1.0 && y >= 1.0) {
             return None;
@@ -928,8 +929,9 @@ impl RidgeDetector {
         let Some([l, r, u, d]) = frame.cross(x, y) else {
             return false;
         };
-        let gradient = (0.25 * ((r - l).powi(2) + (d - u).powi(2))).sqrt();
-        gradient <= MAX_CENTRE_GRADIENT * peak
+        // |gradient| ≤ MAX_CENTRE_GRADIENT · peak (peak > threshold ≥ 0), squared: no square root.
+        let gradient2 = 0.25 * ((r - l).powi(2) + (d - u).powi(2));
+        gradient2 <= (MAX_CENTRE_GRADIENT * peak).powi(2)
     }
     /// Whether the intensity edge at radius `r` on the ray crosses the ray at more than
     /// [`MIN_EDGE_ANGLE_DEG`] (its gradient has a component along the ray). A stripe's edges run
@@ -942,9 +944,9 @@ impl RidgeDetector {
         };
         let (gx, gy) = ((rt - l) as f64, (d - u) as f64);
         let along = (gx * dir.0 + gy * dir.1).abs();
-        // sin(MIN_EDGE_ANGLE_DEG) = sin 30°.
+        // sin(MIN_EDGE_ANGLE_DEG) = sin 30°; along ≥ sin · |g|, squared: no square root.
         const SIN_MIN_EDGE_ANGLE: f64 = 0.5;
-        along >= SIN_MIN_EDGE_ANGLE * (gx * gx + gy * gy).sqrt()
+        along * along >= SIN_MIN_EDGE_ANGLE * SIN_MIN_EDGE_ANGLE * (gx * gx + gy * gy)
     }
 }
 

@@ -299,9 +299,15 @@ impl Pixel for u8 {
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     fn for_each_contrast_hit(c: &[u8], l: &[u8], r: &[u8], u: &[u8], d: &[u8], t: u8, hit: impl FnMut(usize)) {
-        // SAFETY: SSE2 is part of the x86-64 baseline (see `kernel8`); the function reads only
-        // through bounds-checked slices.
-        unsafe { rowscan::for_each_hit_sse2(c, l, r, u, d, t, hit) }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked); the function reads only through
+            // bounds-checked slices.
+            unsafe { rowscan::for_each_hit_avx2(c, l, r, u, d, t, hit) }
+        } else {
+            // SAFETY: SSE2 is part of the x86-64 baseline (see `kernel8`); the function reads
+            // only through bounds-checked slices.
+            unsafe { rowscan::for_each_hit_sse2(c, l, r, u, d, t, hit) }
+        }
     }
 }
 

@@ -304,6 +304,20 @@ fn row_tests_flag_exactly_the_pixels_the_single_test_flags() {
             let mut hits = Vec::new();
             u8::for_each_contrast_hit(&c, &l, &r, &u, &d, t, |i| hits.push(i));
             assert_eq!(hits, single, "8-bit, {n} px, T {t}");
+            // Each x86-64 form, whichever the CPU running the test gets from the trait.
+            #[cfg(target_arch = "x86_64")]
+            {
+                hits.clear();
+                // SAFETY: SSE2 is part of the x86-64 baseline.
+                unsafe { super::rowscan::for_each_hit_sse2(&c, &l, &r, &u, &d, t, |i| hits.push(i)) };
+                assert_eq!(hits, single, "8-bit SSE2, {n} px, T {t}");
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    hits.clear();
+                    // SAFETY: the CPU has AVX2 (checked).
+                    unsafe { super::rowscan::for_each_hit_avx2(&c, &l, &r, &u, &d, t, |i| hits.push(i)) };
+                    assert_eq!(hits, single, "8-bit AVX2, {n} px, T {t}");
+                }
+            }
             let wide = |v: &[u8]| v.iter().map(|&x| x as u16 * 257).collect::<Vec<u16>>();
             let [c, l, r, u, d] = [wide(&c), wide(&l), wide(&r), wide(&u), wide(&d)];
             let t = t as u16 * 257;

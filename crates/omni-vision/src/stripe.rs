@@ -277,6 +277,11 @@ impl Pixel for u8 {
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     fn kernel8(block: &[u8], w: usize, wx: &[f32; sampling::TAPS], wy: &[f32; sampling::TAPS]) -> Option<f32> {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked); the function reads `block` through
+            // bounds-checked slices.
+            return Some(unsafe { sampling::kernel8_avx2(block, w, wx, wy) });
+        }
         // SAFETY: SSE2 is part of the x86-64 baseline, so every x86-64 CPU has it; the function
         // has no other requirement (it reads `block` through bounds-checked slices).
         Some(unsafe { sampling::kernel8_sse2(block, w, wx, wy) })

@@ -351,7 +351,8 @@ impl<P: Pixel> Frame<'_, P> {
 
     /// Whether a pixel of the 3×3 neighbourhood of (x, y) px is at the saturation level.
     fn saturated_near(&self, x: f64, y: f64) -> bool {
-        let (xi, yi) = (x.round() as i64, y.round() as i64);
+        // Nearest pixel (`floor_i64`: `f64::round` is a library call on baseline x86-64).
+        let (xi, yi) = (floor_i64(x + 0.5), floor_i64(y + 0.5));
         let sat = self.max_value as f32;
         (yi - 1..=yi + 1).any(|yy| {
             (xi - 1..=xi + 1).any(|xx| {
@@ -640,8 +641,9 @@ impl RidgeDetector {
         for y in y_lo..=y_hi {
             let dy = y as f64 - self.cy;
             let half = (self.r_out * self.r_out - dy * dy).max(0.0).sqrt();
-            let x_lo = (self.cx - half).floor().max(0.0) as usize;
-            let x_hi = ((self.cx + half).ceil() as usize).min(w - 1);
+            // (`floor_i64`: `f64::floor` and `ceil` are library calls on baseline x86-64.)
+            let x_lo = floor_i64(self.cx - half).max(0) as usize;
+            let x_hi = (-floor_i64(-(self.cx + half))).clamp(0, w as i64 - 1) as usize;
             if x_lo > x_hi {
                 continue;
             }
@@ -865,7 +867,8 @@ impl RidgeDetector {
     /// Coarse samples (1 px) on either side of a maximum searched for its background: past the
     /// flank of the widest accepted stripe.
     fn background_window(&self) -> usize {
-        (0.5 * self.params.max_width + 2.0).ceil() as usize
+        // ⌈x⌉ as −⌊−x⌋ (`f64::ceil` is a library call on baseline x86-64; this runs per stretch).
+        (-floor_i64(-(0.5 * self.params.max_width + 2.0))) as usize
     }
 
     /// The centre of one segment along the ray, or `None` if it is too narrow/wide or the fit

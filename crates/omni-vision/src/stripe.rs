@@ -475,7 +475,17 @@ pub struct Scratch {
     /// Bit per ray: whether it has a bit set in `bits`, to visit (and clear) only those rays,
     /// in order.
     touched: Vec<u64>,
+    row: RowHits,
     profiles: Profiles,
+}
+
+/// The row scan's candidate pixels of one row: x offsets from the mirror centre (px) and their
+/// polar coordinates (radius in px, azimuth in rad).
+#[derive(Debug, Default)]
+struct RowHits {
+    dx: Vec<f64>,
+    r: Vec<f64>,
+    phi: Vec<f64>,
 }
 
 /// Where a point was measured: its ray (index into the detector's rays) and its radius (px)
@@ -636,8 +646,9 @@ impl RidgeDetector {
         let y_hi = ((self.cy + self.r_out).ceil() as usize).min(h - 1);
         let rays_per_rad = n as f64 / TAU;
         let k = (0.5 * self.params.max_width).ceil() as usize + 1;
-        let mut mark =
-            |x: usize, y: usize| self.mark_pixel(x as f64 - self.cx, y as f64 - self.cy, rays_per_rad, scratch);
+        // The row's candidate pixels (x offsets from the mirror centre, px), marked together
+        // after the row's scan (`mark_row`).
+        let mut hits = std::mem::take(&mut scratch.row.dx);
         for y in y_lo..=y_hi {
             let dy = y as f64 - self.cy;
             let half = (self.r_out * self.r_out - dy * dy).max(0.0).sqrt();
@@ -651,32 +662,50 @@ impl RidgeDetector {
             // the few near the image border the general one.
             let interior = y >= k && y + k < h;
             let (a, b) = if interior { (x_lo.max(k), (x_hi + 1).min(w - k)) } else { (x_lo, x_lo) };
+            hits.clear();
+            let mut hit = |x: usize| hits.push(x as f64 - self.cx);
             for x in (x_lo..a.max(x_lo)).chain(b.max(a)..=x_hi) {
                 if stands_out(frame, x, y, k, threshold as f32) {
-                    mark(x, y);
+                    hit(x);
                 }
             }
-            if a >= b {
-                continue;
+            if a < b {
+                let d = frame.data;
+                let cur = &d[y * w + a..y * w + b];
+                let left = &d[y * w + a - k..y * w + b - k];
+                let right = &d[y * w + a + k..y * w + b + k];
+                let up = &d[(y - k) * w + a..(y - k) * w + b];
+                let down = &d[(y + k) * w + a..(y + k) * w + b];
+                P::for_each_contrast_hit(cur, left, right, up, down, t, |i| hit(a + i));
             }
-            let d = frame.data;
-            let cur = &d[y * w + a..y * w + b];
-            let left = &d[y * w + a - k..y * w + b - k];
-            let right = &d[y * w + a + k..y * w + b + k];
-            let up = &d[(y - k) * w + a..(y - k) * w + b];
-            let down = &d[(y + k) * w + a..(y + k) * w + b];
-            P::for_each_contrast_hit(cur, left, right, up, down, t, |i| mark(a + i, y));
+            if !hits.is_empty() {
+                self.mark_row(&hits, dy, rays_per_rad, scratch);
+            }
+        }
+        scratch.row.dx = hits;
+    }
+
+    /// Marks the candidate pixels of one row (x offsets `dxs` and y offset `dy` from the mirror
+    /// centre, px): their polar coordinates first, all together (a loop the compiler vectorises,
+    /// and whose square roots and divisions overlap, instead of one chain per pixel), then the
+    /// rays near each.
+    fn mark_row(&self, dxs: &[f64], dy: f64, rays_per_rad: f64, scratch: &mut Scratch) {
+        let RowHits { r, phi, .. } = &mut scratch.row;
+        r.clear();
+        r.extend(dxs.iter().map(|&dx| (dx * dx + dy * dy).sqrt()));
+        phi.clear();
+        phi.extend(dxs.iter().map(|&dx| fast_atan2(dy, dx)));
+        for (&r, &phi) in scratch.row.r.iter().zip(&scratch.row.phi) {
+            self.mark_pixel(r, phi, rays_per_rad, &mut scratch.bits, &mut scratch.touched);
         }
     }
 
     #[inline]
-    fn mark_pixel(&self, dx: f64, dy: f64, rays_per_rad: f64, scratch: &mut Scratch) {
-        let r = (dx * dx + dy * dy).sqrt();
+    fn mark_pixel(&self, r: f64, phi: f64, rays_per_rad: f64, bits: &mut [u64], touched: &mut [u64]) {
         if r < self.r_in || r > self.r_out {
             return;
         }
         let n = self.dirs.len() as i64;
-        let phi = fast_atan2(dy, dx);
         let centre = phi * rays_per_rad;
         // Rays within 1 px of the pixel centre (covers the pixel and the atan2 approximation).
         let span = rays_per_rad / r.max(1.0);
@@ -696,8 +725,8 @@ impl RidgeDetector {
                 i
             } as usize;
             i += step;
-            scratch.touched[ray / 64] |= 1 << (ray % 64);
-            scratch.bits[ray * self.words_per_ray + word] |= bit;
+            touched[ray / 64] |= 1 << (ray % 64);
+            bits[ray * self.words_per_ray + word] |= bit;
         }
     }
 
@@ -1117,24 +1146,16 @@ fn floor_i64(x: f64) -> i64 {
 /// ratio): the candidate scan only needs to know which rays pass near a pixel.
 #[inline]
 fn fast_atan2(y: f64, x: f64) -> f64 {
+    // Selects instead of branches, so that a loop over pixels vectorises (`mark_row`).
     let (ax, ay) = (x.abs(), y.abs());
-    let (num, den, swap) = if ay > ax { (ax, ay, true) } else { (ay, ax, false) };
-    if den == 0.0 {
-        return 0.0;
-    }
-    let z = num / den;
+    let (num, den) = (ax.min(ay), ax.max(ay));
+    let z = if den == 0.0 { 0.0 } else { num / den };
     let z2 = z * z;
     // Minimax coefficients for atan on [0, 1].
-    let mut a = z * (0.999_866_0 + z2 * (-0.330_299_5 + z2 * (0.180_141_0 + z2 * (-0.085_133_0 + z2 * 0.020_835_1))));
-    if swap {
-        a = std::f64::consts::FRAC_PI_2 - a;
-    }
-    if x < 0.0 {
-        a = std::f64::consts::PI - a;
-    }
-    if y < 0.0 {
-        a = TAU - a;
-    }
+    let a = z * (0.999_866_0 + z2 * (-0.330_299_5 + z2 * (0.180_141_0 + z2 * (-0.085_133_0 + z2 * 0.020_835_1))));
+    let a = if ay > ax { std::f64::consts::FRAC_PI_2 - a } else { a };
+    let a = if x < 0.0 { std::f64::consts::PI - a } else { a };
+    let a = if y < 0.0 { TAU - a } else { a };
     if a >= TAU { 0.0 } else { a }
 }
 

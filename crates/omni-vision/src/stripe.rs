@@ -414,19 +414,25 @@ impl<P: Pixel> Frame<'_, P> {
         lerp_q8([px[0].to_u32(), px[1].to_u32(), px[w].to_u32(), px[w + 1].to_u32()], fx, fy)
     }
 
-    /// Appends the bilinear samples at `centre + (r0 + k)·dir`, k = 0..n, whose 2×2
-    /// neighbourhoods must all be inside the image (else it panics on a slice index), to `out`:
-    /// [`Self::bilinear_unchecked`] at each point, with the positions stepped in 32.32 fixed
-    /// point (integer additions instead of a multiplication and a saturating float → integer
-    /// conversion per axis and sample; the steps' rounding drifts by < n · 2⁻³² px).
-    fn bilinear_line(&self, cx: f64, cy: f64, r0: f64, dir: (f64, f64), n: usize, out: &mut Vec<f32>) {
-        let w = self.width as usize;
+    /// Appends the bilinear samples at `centre + (r0 + k)·dir`, k = 0..n, to `out` if all their
+    /// 2×2 neighbourhoods are inside the image, and returns whether they are. The positions are
+    /// stepped in 32.32 fixed point (integer additions instead of a multiplication and a
+    /// saturating float → integer conversion per axis and sample; the steps' rounding drifts by
+    /// < n · 2⁻³² px), so they are linear in k and the two ends' neighbourhoods being inside
+    /// means all are.
+    fn bilinear_line(&self, cx: f64, cy: f64, r0: f64, dir: (f64, f64), n: usize, out: &mut Vec<f32>) -> bool {
+        let (w, h) = (self.width as usize, self.height as usize);
         let (mut xf, mut yf) = (to_fixed(cx + r0 * dir.0), to_fixed(cy + r0 * dir.1));
         let (step_x, step_y) = (to_fixed(dir.0), to_fixed(dir.1));
+        let last = n.saturating_sub(1) as i64;
+        let inside = |x: i64, y: i64| x >= 0 && y >= 0 && ((x >> 32) as usize) + 1 < w && ((y >> 32) as usize) + 1 < h;
+        if !(inside(xf, yf) && inside(xf + last * step_x, yf + last * step_y)) {
+            return false;
+        }
         let start = out.len();
         out.resize(start + n, 0.0);
         if P::bilinear_line_fast(self.data, w, xf, yf, (step_x, step_y), &mut out[start..]) {
-            return;
+            return true;
         }
         for v in &mut out[start..] {
             let ((xi, fx), (yi, fy)) = (split_fixed(xf), split_fixed(yf));
@@ -434,6 +440,7 @@ impl<P: Pixel> Frame<'_, P> {
             xf += step_x;
             yf += step_y;
         }
+        true
     }
 
     /// Bilinear sample at (x, y) px, whose 2×2 neighbourhood must be inside the image (else
@@ -809,16 +816,12 @@ impl RidgeDetector {
         let Profiles { coarse: c, raw: p, contrast: q } = scratch;
         c.clear();
         // Outside the image is NaN; a segment or background window touching it is rejected.
-        // A straight stretch whose two ends are inside lies inside: sample it without checks.
-        let at = |k: usize| (self.cx + (r0 + k as f64) * dx, self.cy + (r0 + k as f64) * dy);
-        let (first, last) = (at(0), at(n - 1));
-        let inside = frame.bilinear_inside(first.0, first.1) && frame.bilinear_inside(last.0, last.1);
-        if inside {
-            frame.bilinear_line(self.cx, self.cy, r0, (dx, dy), n, c);
-        } else {
+        // A straight stretch whose two ends are inside lies inside: sampled without checks.
+        let inside = frame.bilinear_line(self.cx, self.cy, r0, (dx, dy), n, c);
+        if !inside {
             c.extend((0..n).map(|k| {
-                let (x, y) = at(k);
-                frame.bilinear(x, y).unwrap_or(f32::NAN)
+                let r = r0 + k as f64;
+                frame.bilinear(self.cx + r * dx, self.cy + r * dy).unwrap_or(f32::NAN)
             }));
         }
         let t = threshold as f32;

@@ -95,6 +95,8 @@ impl RidgeDetector {
         let blur_variance = self.params.optics_blur_px.powi(2) + PIXEL_AREA_VARIANCE_PX2 + SAMPLE_SIGMA_PX.powi(2);
         // ln(intensity) once per point (each point enters about ten neighbours' fits).
         let log_intensity: Vec<f64> = points.iter().map(|p| p.intensity.max(1e-9).ln()).collect();
+        // The normal profiles' buffers, reused (raw samples, contrast).
+        let mut buffers = (Vec::new(), Vec::new());
         let moves: Vec<Option<f64>> = (0..points.len())
             .map(|idx| {
                 if points[idx].quality & quality::SATURATED != 0 {
@@ -106,7 +108,7 @@ impl RidgeDetector {
                     if shape.slope.abs() < MIN_SLOPE || ray_bias(&points[idx], r, &shape, threshold) < MIN_BIAS_PX {
                         0.0
                     } else {
-                        self.normal_offset(frame, &points[idx], r, shape.slope, threshold)?
+                        self.normal_offset(frame, &points[idx], r, shape.slope, threshold, &mut buffers)?
                     };
                 let dr = across + blur_pull(r, &shape, blur_variance);
                 (dr.abs() <= MAX_MOVE_PX).then_some(dr)
@@ -132,6 +134,7 @@ impl RidgeDetector {
         r: f64,
         slope: f64,
         threshold: f64,
+        (raw, q): &mut (Vec<f32>, Vec<f32>),
     ) -> Option<f64> {
         // Unit vectors along the ray and along increasing azimuth; the stripe runs along
         // e_a + slope·e_r, its normal (outwards) along e_r − slope·e_a.
@@ -141,23 +144,23 @@ impl RidgeDetector {
         let (nx, ny) = ((er_x - slope * ea_x) / stretch, (er_y - slope * ea_y) / stretch);
         // The stripe's width along the normal is its width along the ray / stretch.
         let half = ((0.5 * p.width / stretch + BACKGROUND_MARGIN_PX) / SAMPLE_STEP_PX).ceil() as i64;
-        let raw: Vec<f32> = (-half..=half)
-            .map(|i| {
-                let d = i as f64 * SAMPLE_STEP_PX;
-                self.sampler.sample(frame, p.u + nx * d, p.v + ny * d).unwrap_or(f32::NAN)
-            })
-            .collect();
+        raw.clear();
+        raw.extend((-half..=half).map(|i| {
+            let d = i as f64 * SAMPLE_STEP_PX;
+            self.sampler.sample(frame, p.u + nx * d, p.v + ny * d).unwrap_or(f32::NAN)
+        }));
         // Background: the larger of the two sides' minima, as on the ray.
         let mid = half as usize;
         let background = min_or_nan(&raw[..mid]).max(min_or_nan(&raw[mid + 1..]));
         if background.is_nan() {
             return None;
         }
-        let q: Vec<f32> = raw.iter().map(|v| v - background).collect();
+        q.clear();
+        q.extend(raw.iter().map(|v| v - background));
         let t = threshold as f32;
-        let seg = fine_segment(&q, t)?;
-        self.crossings_within_width(&q, &seg, t)?;
-        let index = self.centre_index(&raw, &q, &seg, t)?;
+        let seg = fine_segment(q, t)?;
+        self.crossings_within_width(q, &seg, t)?;
+        let index = self.centre_index(raw, q, &seg, t)?;
         let along_normal = (index - half as f64) * SAMPLE_STEP_PX;
         // The centre line through p + n·along_normal, followed along the stripe to p's ray.
         Some(along_normal * stretch)

@@ -245,6 +245,12 @@ pub trait Pixel: Copy + Send + Sync + PartialOrd {
     fn bilinear_line_fast(_data: &[Self], _w: usize, _xf: i64, _yf: i64, _step: (i64, i64), _out: &mut [f32]) -> bool {
         false
     }
+    /// [`Frame::cross`]'s four samples from its 4×4 block (rows `w` apart) and fractions (1/256
+    /// px), where this pixel type has a faster form than four interpolations; `None` otherwise.
+    #[inline(always)]
+    fn cross_fast(_block: &[Self], _w: usize, _fx: u32, _fy: u32) -> Option<[f32; 4]> {
+        None
+    }
     /// The threshold as this type (floored: `v − m > T` ⇔ `v > m + floor(T)` for integers).
     fn from_threshold(t: f64) -> Self;
     /// Whether `v` exceeds both its row neighbours `l`, `r` or both its column neighbours `u`,
@@ -293,6 +299,13 @@ impl Pixel for u8 {
         // writes only through bounds-checked slices.
         unsafe { bilinear8::bilinear_line_sse2(data, w, xf, yf, step, out) };
         true
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn cross_fast(block: &[u8], w: usize, fx: u32, fy: u32) -> Option<[f32; 4]> {
+        // SAFETY: SSE2 is part of the x86-64 baseline (see `kernel8`); the function reads only
+        // through bounds-checked slices.
+        Some(unsafe { bilinear8::cross_sse2(block, w, fx, fy) })
     }
     fn from_threshold(t: f64) -> Self {
         t.floor().clamp(0.0, 255.0) as u8
@@ -393,6 +406,9 @@ impl<P: Pixel> Frame<'_, P> {
         }
         // The 4×4 pixels around (x, y) (corners unused), read through one bounds-checked slice.
         let block = &self.data[(yi - 1) * w + xi - 1..(yi + 2) * w + xi + 3];
+        if let Some(values) = P::cross_fast(block, w, fx, fy) {
+            return Some(values);
+        }
         let at = |row: usize, col: usize| block[row * w + col].to_u32();
         let cell = |row: usize, col: usize| {
             lerp_q8([at(row, col), at(row, col + 1), at(row + 1, col), at(row + 1, col + 1)], fx, fy)

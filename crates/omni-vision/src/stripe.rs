@@ -89,6 +89,7 @@
 //! ```
 
 mod along;
+#[cfg(target_arch = "x86_64")]
 mod bilinear8;
 mod estimators;
 mod frames;

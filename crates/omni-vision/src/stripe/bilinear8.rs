@@ -17,7 +17,6 @@
 /// Writes to `out[k]` the bilinear sample at (x, y) = (`xf` + k·`step_x`, `yf` + k·`step_y`) in
 /// 32.32 fixed point (non-negative), whose 2×2 neighbourhoods in `data` (`w` pixels per row)
 /// must all be inside (else it panics on a slice index).
-#[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "sse2")]
 #[inline]
 pub(super) fn bilinear_line_sse2(data: &[u8], w: usize, xf: i64, yf: i64, step: (i64, i64), out: &mut [f32]) {
@@ -90,7 +89,6 @@ impl Sample {
 /// of the point's) share the fractions `fx`, `fy` (1/256 px). The eight horizontal pairs of the
 /// four cells are weighed in one `pmaddwd`, as in [`bilinear_line_sse2`]; the same values as
 /// `lerp_q8` to the last bit.
-#[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "sse2")]
 #[inline]
 pub(super) fn cross_sse2(block: &[u8], w: usize, fx: u32, fy: u32) -> [f32; 4] {

@@ -18,8 +18,9 @@ if ! python3 -c 'import numpy, cv2' 2>/dev/null; then
     exit 1
 fi
 python3 scripts/bench_ridge.py "$dir"/*.png --centre "$cx" "$cy" --radii "$rin" "$rout" | tee "$dir/python.log"
-echo "== ratio (Python ms/MP ÷ Rust centroid ms/MP) =="
+echo "== ratio (Python ÷ Rust centroid, thread CPU time per frame, medians) =="
 while read -r _ name py _; do
-    rust=$(awk -v n="$name" '$1 == "SUMMARY" && $2 == "centroid" && $3 == n { print $4 }' "$log")
+    rust=$(awk -v n="$name" '$1 == "SUMMARY" && $2 == "centroid" && $3 == n {
+        for (i = 4; i < NF; i++) if ($i == "median") print $(i + 1) }' "$log")
     awk -v n="$name" -v p="$py" -v r="$rust" 'BEGIN { printf "%s: Rust %.3f ms/MP, Python %.3f ms/MP, Rust is %.1fx faster\n", n, r, p, p / r }'
 done < "$dir/python.log"

@@ -18,10 +18,11 @@
 //! 1522 points, 0.91 ms/MP fastest, 0.98 median; callgrind, 13.8 M instructions per frame):
 //! resampling the marked stretches (coarse profiles, maxima and their backgrounds, fine
 //! profiles, checks) 64 %, the pass across the stripe's normal (`normal`) 15 %, the row scan
-//! 6 %, the marks, the rays' bookkeeping and the isolated-point check the rest. On 8-bit frames the hot loops have SSE2
-//! forms (row scan, coarse lines, the cross of gradient samples, the Gaussian kernel) and, where
-//! the CPU has AVX2 (detected at run time), AVX2 forms of the row scan and the kernel; all give
-//! the same bits as the generic code (tested), so 8- and 16-bit frames give the same centres.
+//! 6 %, the marks, the rays' bookkeeping and the isolated-point check the rest. On 8-bit frames
+//! the hot loops have SSE2 forms (row scan, coarse lines, the cross of gradient samples, the
+//! Gaussian kernel) and, where the CPU has AVX2 (detected at run time), AVX2 forms of the row
+//! scan and the kernel; all give the same bits as the generic code (tested), so 8- and 16-bit
+//! frames give the same centres.
 //! Tried and not kept: rays in bands of radii 1.1× wide, each band with its own rays 0.91–1 px
 //! apart instead of nested rays 0.5–1 px apart (16 % fewer points but only 3.6 % fewer
 //! instructions: as many rays are touched, where a stripe crosses from one band into the next

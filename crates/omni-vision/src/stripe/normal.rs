@@ -104,13 +104,15 @@ impl RidgeDetector {
                 }
                 let (_, r) = polar[idx];
                 let shape = local_shape(&polar, &log_intensity, idx)?;
-                let across =
-                    if shape.slope.abs() < MIN_SLOPE || ray_bias(&points[idx], r, &shape, threshold) < MIN_BIAS_PX {
-                        0.0
-                    } else {
-                        self.normal_offset(frame, &points[idx], r, shape.slope, threshold, &mut buffers)?
-                    };
-                let dr = across + blur_pull(r, &shape, blur_variance);
+                let kappa = curvature_inwards(r, &shape);
+                let across = if shape.slope.abs() < MIN_SLOPE
+                    || ray_bias(&points[idx], &shape, kappa, threshold) < MIN_BIAS_PX
+                {
+                    0.0
+                } else {
+                    self.normal_offset(frame, &points[idx], r, shape.slope, threshold, &mut buffers)?
+                };
+                let dr = across + blur_pull(&shape, kappa, blur_variance);
                 (dr.abs() <= MAX_MOVE_PX).then_some(dr)
             })
             .collect();
@@ -172,12 +174,12 @@ impl RidgeDetector {
 /// (d ln I/ds)·m/(1+m²), and the stripe's bend across the profile's length, σ²·κ·cos²φ/2
 /// (cos²φ = m²/(1+m²)). σ is the profile's Gaussian σ along the ray, from its
 /// threshold-to-threshold width w at contrast A: w = 2σ·√(2 ln(A/T)).
-fn ray_bias(p: &StripePoint, r: f64, shape: &Shape, threshold: f64) -> f64 {
+fn ray_bias(p: &StripePoint, shape: &Shape, kappa_inwards: f64, threshold: f64) -> f64 {
     let m2 = shape.slope * shape.slope;
     let log_ratio = (p.intensity / threshold.max(1e-9)).max(1.5).ln();
     let sigma2 = p.width * p.width / (8.0 * log_ratio);
     let brightness = sigma2 * shape.log_intensity_slope * shape.slope / (1.0 + m2);
-    let bend = 0.5 * sigma2 * curvature_inwards(r, shape) * m2 / (1.0 + m2);
+    let bend = 0.5 * sigma2 * kappa_inwards * m2 / (1.0 + m2);
     brightness.abs() + bend.abs()
 }
 
@@ -191,10 +193,9 @@ fn curvature_inwards(r: f64, shape: &Shape) -> f64 {
 
 /// Radial move (px) that undoes the pull of the image's blurs (total variance `sigma2`, px²)
 /// towards the centre of curvature (σ²κ/2 along the normal) of a stripe of local shape `shape`
-/// at radius `r`.
-fn blur_pull(r: f64, shape: &Shape, sigma2: f64) -> f64 {
+/// and curvature `kappa_inwards` (1/px, [`curvature_inwards`]).
+fn blur_pull(shape: &Shape, kappa_inwards: f64, sigma2: f64) -> f64 {
     let stretch = (1.0 + shape.slope * shape.slope).sqrt();
-    let kappa_inwards = curvature_inwards(r, shape);
     // The pull is along the normal; along the ray it is `stretch` times longer.
     0.5 * sigma2 * kappa_inwards * stretch
 }

@@ -6,17 +6,16 @@
 //! four samples of a step share their arithmetic: one `pmaddwd` weighs the horizontal pairs of
 //! all four, in both rows, and the vertical blend is four-wide. Measured on the room frame: 4 %
 //! less time per frame than one sample at a time, although the instructions per sample rose
-//! from 47 to 57 (callgrind; the one-at-a-time form's chain of integer multiplications per
-//! sample is longer). Reading the pixels without bounds checks (the line's two ends bound it)
+//! from 47 to 57 (callgrind). Reading the pixels without bounds checks (the line's two ends bound it)
 //! saved another 0.8 M instructions per frame but no measurable time, so the checks stay.
 //!
 //! Exactly the values of `lerp_q8`: with 8-bit pixels and 1/256 fractions the row sums are
 //! integers below 2¹⁶ and the final sums below 2²⁴, so the float products and sums here are
 //! exact.
 
-/// Writes to `out[k]` the bilinear sample at (x, y) = (`xf` + k·`step_x`, `yf` + k·`step_y`) in
-/// 32.32 fixed point (non-negative), whose 2×2 neighbourhoods in `data` (`w` pixels per row)
-/// must all be inside (else it panics on a slice index).
+/// Writes to `out[k]` the bilinear sample at (x, y) = (`xf`, `yf`) + k·`step` in 32.32 fixed
+/// point (non-negative), whose 2×2 neighbourhoods in `data` (`w` pixels per row) must all be
+/// inside (else it panics on a slice index).
 #[target_feature(enable = "sse2")]
 #[inline]
 pub(super) fn bilinear_line_sse2(data: &[u8], w: usize, xf: i64, yf: i64, step: (i64, i64), out: &mut [f32]) {
@@ -34,8 +33,7 @@ pub(super) fn bilinear_line_sse2(data: &[u8], w: usize, xf: i64, yf: i64, step: 
             pairs[8 + 2 * j..8 + 2 * j + 2].copy_from_slice(&s.bottom);
             (wx[j], fy[j]) = (s.wx, s.fy);
         }
-        // SAFETY: the loads read 16 bytes from 16-byte arrays, the store writes 16 bytes to
-        // `values`; none has an alignment requirement.
+        // SAFETY: the loads read 16 bytes from 16-byte arrays; unaligned loads.
         let (pairs, wx, fy) = unsafe {
             (
                 _mm_loadu_si128(pairs.as_ptr().cast()),
@@ -48,6 +46,7 @@ pub(super) fn bilinear_line_sse2(data: &[u8], w: usize, xf: i64, yf: i64, step: 
         let bottom = _mm_cvtepi32_ps(_mm_madd_epi16(_mm_unpackhi_epi8(pairs, zero), wx));
         let sum = _mm_add_ps(_mm_mul_ps(top, _mm_sub_ps(_mm_set1_ps(256.0), fy)), _mm_mul_ps(bottom, fy));
         let mut values = [0.0f32; 4];
+        // SAFETY: `values` is 16 writable bytes; the store has no alignment requirement.
         unsafe { _mm_storeu_ps(values.as_mut_ptr(), _mm_mul_ps(sum, _mm_set1_ps(1.0 / 65536.0))) };
         chunk.copy_from_slice(&values);
     }

@@ -4,8 +4,9 @@
 //! per pixel matters even on a frame full of stripes. The generic form, a branch-free pass over
 //! each 64-pixel block to see whether it holds a hit and a scalar pass over the blocks that do,
 //! takes about three instructions per pixel of the ridge benchmark's frames (callgrind); the
-//! SSE2 form for 8-bit frames about one, and the AVX2 form (on CPUs that have it, detected at
-//! run time) half of that.
+//! SSE2 form for 8-bit frames about one. The AVX2 form (on CPUs that have it, detected at run
+//! time) tests 32 pixels per instruction instead of 16: the plane frame, where the scan is most
+//! of the work, took 5 % less time (0.219 → 0.208 ms/MP).
 
 use super::Pixel;
 

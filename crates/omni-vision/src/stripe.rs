@@ -886,7 +886,18 @@ impl RidgeDetector {
             done_until = coarse_end;
             let r_peak = r0 + k as f64;
             let limit = ((0.5 * self.params.max_width + 3.0) / SAMPLE_STEP_PX) as i64;
+            // Sample i at r_peak + i·SAMPLE_STEP_PX, stepped in 32.32 fixed point (integer
+            // additions: no conversions or range checks per sample) where the kernel stays inside
+            // the frame at both ends of the walk's reach.
+            let origin = (to_fixed(self.cx + r_peak * dx), to_fixed(self.cy + r_peak * dy));
+            let step = (to_fixed(SAMPLE_STEP_PX * dx), to_fixed(SAMPLE_STEP_PX * dy));
+            let at = |i: i64| (origin.0 + i * step.0, origin.1 + i * step.1);
+            let reach_inside =
+                self.sampler.kernel_inside(frame, at(-limit)) && self.sampler.kernel_inside(frame, at(limit));
             let fine = |i: i64| {
+                if reach_inside {
+                    return self.sampler.sample_fixed(frame, at(i));
+                }
                 let r = r_peak + i as f64 * SAMPLE_STEP_PX;
                 self.sampler.sample(frame, self.cx + r * dx, self.cy + r * dy).unwrap_or(f32::NAN)
             };

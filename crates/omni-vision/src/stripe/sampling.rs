@@ -54,23 +54,35 @@ impl GaussSampler {
     /// The Gaussian-weighted image value at (x, y) px, or `None` if the kernel leaves the image.
     #[inline]
     pub fn sample<P: Pixel>(&self, f: &Frame<'_, P>, x: f64, y: f64) -> Option<f32> {
-        // `as` truncates: floor for the non-negative coordinates accepted here, without libm.
+        // 32.32 fixed point (exact: scaling by a power of two), truncated: ⌊x⌋ and the phase
+        // ⌊(x − ⌊x⌋) · LEVELS⌋ from one float → integer conversion per axis (`as` truncates:
+        // floor for the non-negative coordinates accepted here, without libm).
         if !(x >= 0.0 && y >= 0.0) {
             return None;
         }
-        // 32.32 fixed point (exact: scaling by a power of two), truncated: ⌊x⌋ and the phase
-        // ⌊(x − ⌊x⌋) · LEVELS⌋ from one float → integer conversion per axis.
-        const PHASE_SHIFT: u32 = 32 - LEVELS.trailing_zeros();
-        let (xf, yf) = (to_fixed(x), to_fixed(y));
+        let at = (to_fixed(x), to_fixed(y));
+        self.kernel_inside(f, at).then(|| self.sample_fixed(f, at))
+    }
+
+    /// Whether the kernel at (x, y) in 32.32 fixed point lies inside the frame.
+    #[inline(always)]
+    pub(super) fn kernel_inside<P: Pixel>(&self, f: &Frame<'_, P>, (xf, yf): (i64, i64)) -> bool {
         let (xi, yi) = ((xf >> 32) - HALF, (yf >> 32) - HALF);
-        if xi < 0 || yi < 0 || xi + TAPS as i64 > f.width as i64 || yi + TAPS as i64 > f.height as i64 {
-            return None;
-        }
+        xi >= 0 && yi >= 0 && xi + TAPS as i64 <= f.width as i64 && yi + TAPS as i64 <= f.height as i64
+    }
+
+    /// The Gaussian-weighted image value at (x, y) in 32.32 fixed point, whose kernel must lie
+    /// inside the frame ([`Self::kernel_inside`]; else it panics on a slice index). For runs of
+    /// samples along a line whose two ends were checked: no conversions or range checks per
+    /// sample.
+    #[inline(always)]
+    pub(super) fn sample_fixed<P: Pixel>(&self, f: &Frame<'_, P>, (xf, yf): (i64, i64)) -> f32 {
+        const PHASE_SHIFT: u32 = 32 - LEVELS.trailing_zeros();
         let wx = &self.weights[(xf >> PHASE_SHIFT) as usize & (LEVELS - 1)];
         let wy = &self.weights[(yf >> PHASE_SHIFT) as usize & (LEVELS - 1)];
-        let (w, x0, y0) = (f.width as usize, xi as usize, yi as usize);
+        let (w, x0, y0) = (f.width as usize, ((xf >> 32) - HALF) as usize, ((yf >> 32) - HALF) as usize);
         if x0 + LANES <= w {
-            return Some(sample_wide(f.data, w, y0 * w + x0, wx, wy));
+            return sample_wide(f.data, w, y0 * w + x0, wx, wy);
         }
         // Columns first (TAPS independent lanes), then one dot product with the row weights.
         let block = &f.data[y0 * w + x0..][..(TAPS - 1) * w + TAPS];
@@ -81,7 +93,7 @@ impl GaussSampler {
                 *c += wyj * p.to_f32();
             }
         }
-        Some(column_dot(&cols, wx))
+        column_dot(&cols, wx)
     }
 }
 

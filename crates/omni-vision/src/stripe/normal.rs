@@ -208,58 +208,13 @@ fn blur_pull(shape: &Shape, kappa_inwards: f64, sigma2: f64) -> f64 {
 fn local_shape(polar: &[(f64, f64)], log_intensity: &[f64], k: usize) -> Option<Shape> {
     let n = polar.len();
     let (phi, r) = polar[k];
-    let half_angle = SHAPE_HALF_ARC_PX / r.max(1.0);
-    let max_dr = 1.0 + SHAPE_HALF_ARC_PX * 3f64.sqrt();
-    // Moments Σ sⁱ (i = 0..4) and Σ sⁱ·y (i = 0..2) of the basis (1, s, s²/2); the normal
-    // equations are built from them once (the halves are exact, so this equals summing the
-    // basis' outer products). The point itself adds s = 0, y = 0.
-    let mut sp = [1.0, 0.0, 0.0, 0.0, 0.0f64];
-    let (mut sr, mut sl) = ([0.0f64; 3], [log_intensity[k], 0.0, 0.0]);
-    let mut count = 1;
-    // Walks outwards in azimuth order on one side (wrapping around, at most `limit` points),
-    // adding the points of the same stripe within the window to the sums; returns how many
-    // points it visited.
-    let mut walk = |ahead: bool, limit: usize| -> usize {
-        let mut side = 0;
-        for step in 1..=limit {
-            let j = if ahead { k + step } else { k + n - step };
-            let j = if j >= n { j - n } else { j };
-            let (phj, rj) = polar[j];
-            // Azimuth difference wrapped into [−π, π] (both azimuths are in [0, 2π)); no fmod.
-            let d = phj - phi;
-            let d = if d > PI {
-                d - TAU
-            } else if d < -PI {
-                d + TAU
-            } else {
-                d
-            };
-            let within = d.abs() <= half_angle || (side < MIN_SIDE_POINTS && d.abs() <= 2.0 * half_angle);
-            if !within {
-                return step - 1;
-            }
-            let y = rj - r;
-            if y.abs() <= max_dr {
-                let s = d * r;
-                let s2 = s * s;
-                let powers = [1.0, s, s2, s * s2, s2 * s2];
-                for (acc, p) in sp.iter_mut().zip(powers) {
-                    *acc += p;
-                }
-                let l = log_intensity[j];
-                for i in 0..3 {
-                    sr[i] += powers[i] * y;
-                    sl[i] += powers[i] * l;
-                }
-                count += 1;
-                side += 1;
-            }
-        }
-        limit
-    };
+    // The point itself adds s = 0, y = 0.
+    let mut sums = Moments { sp: [1.0, 0.0, 0.0, 0.0, 0.0], sr: [0.0; 3], sl: [log_intensity[k], 0.0, 0.0], count: 1 };
+    let centre = Centre { k, phi, r, half_angle: SHAPE_HALF_ARC_PX / r.max(1.0) };
     // Each point once: the walk behind stops before the points the walk ahead visited.
-    let ahead = walk(true, n - 1);
-    walk(false, n - 1 - ahead);
+    let ahead = walk_side(polar, log_intensity, &centre, true, n - 1, &mut sums);
+    walk_side(polar, log_intensity, &centre, false, n - 1 - ahead, &mut sums);
+    let Moments { sp, sr, sl, count } = sums;
     if count < MIN_POINTS {
         return None;
     }
@@ -279,6 +234,83 @@ fn local_shape(polar: &[(f64, f64)], log_intensity: &[f64], k: usize) -> Option<
     let inv = m.try_inverse()?;
     let (sol, sol_log) = (inv * rhs, inv * rhs_log);
     Some(Shape { slope: sol[1], d2r: sol[2], log_intensity_slope: sol_log[1] })
+}
+
+/// Moments Σ sⁱ (i = 0..4) and Σ sⁱ·y, Σ sⁱ·ln I (i = 0..2) of the points of a local fit, in the
+/// basis (1, s, s²/2); the normal equations are built from them once (the halves are exact, so
+/// this equals summing the basis' outer products).
+#[derive(Debug, Clone, Copy)]
+struct Moments {
+    sp: [f64; 5],
+    sr: [f64; 3],
+    sl: [f64; 3],
+    count: usize,
+}
+
+/// The point a local fit is centred on: its index, azimuth (rad), radius (px), and the half
+/// window (rad).
+struct Centre {
+    k: usize,
+    phi: f64,
+    r: f64,
+    half_angle: f64,
+}
+
+/// Walks outwards in azimuth order from `c.k` on one side (wrapping around, at most `limit`
+/// points), adding the points of the same stripe within the window to `sums`; returns how many
+/// points it visited. The sums stay in registers during the walk (kept behind a reference they
+/// went through memory at every point, a chain of store-to-load delays).
+#[inline(always)]
+fn walk_side(
+    polar: &[(f64, f64)],
+    log_intensity: &[f64],
+    c: &Centre,
+    ahead: bool,
+    limit: usize,
+    sums: &mut Moments,
+) -> usize {
+    let n = polar.len();
+    let max_dr = 1.0 + SHAPE_HALF_ARC_PX * 3f64.sqrt();
+    let mut m = *sums;
+    let mut side = 0;
+    let mut visited = limit;
+    for step in 1..=limit {
+        let j = if ahead { c.k + step } else { c.k + n - step };
+        let j = if j >= n { j - n } else { j };
+        let (phj, rj) = polar[j];
+        // Azimuth difference wrapped into [−π, π] (both azimuths are in [0, 2π)); no fmod.
+        let d = phj - c.phi;
+        let d = if d > PI {
+            d - TAU
+        } else if d < -PI {
+            d + TAU
+        } else {
+            d
+        };
+        let within = d.abs() <= c.half_angle || (side < MIN_SIDE_POINTS && d.abs() <= 2.0 * c.half_angle);
+        if !within {
+            visited = step - 1;
+            break;
+        }
+        let y = rj - c.r;
+        if y.abs() <= max_dr {
+            let s = d * c.r;
+            let s2 = s * s;
+            let powers = [1.0, s, s2, s * s2, s2 * s2];
+            for (acc, p) in m.sp.iter_mut().zip(powers) {
+                *acc += p;
+            }
+            let l = log_intensity[j];
+            for i in 0..3 {
+                m.sr[i] += powers[i] * y;
+                m.sl[i] += powers[i] * l;
+            }
+            m.count += 1;
+            side += 1;
+        }
+    }
+    *sums = m;
+    visited
 }
 
 #[cfg(test)]

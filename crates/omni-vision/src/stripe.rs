@@ -15,9 +15,9 @@
 //! kernel does not).
 //!
 //! Where the time goes on a dense frame (the ridge benchmark's room: two stripes all around,
-//! 1522 points, 0.91 ms/MP fastest, 0.98 median; callgrind, 13.8 M instructions per frame):
+//! 1522 points, 0.84 ms/MP fastest, 0.89 median; callgrind, 12.8 M instructions per frame):
 //! resampling the marked stretches (coarse profiles, maxima and their backgrounds, fine
-//! profiles, checks) 64 %, the pass across the stripe's normal (`normal`) 15 %, the row scan
+//! profiles, checks) 65 %, the pass across the stripe's normal (`normal`) 11 %, the row scan
 //! 6 %, the marks, the rays' bookkeeping and the isolated-point check the rest. On 8-bit frames
 //! the hot loops have SSE2 forms (row scan, coarse lines, the cross of gradient samples, the
 //! Gaussian kernel) and, where the CPU has AVX2 (detected at run time), AVX2 forms of the row

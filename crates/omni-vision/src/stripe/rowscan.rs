@@ -41,6 +41,36 @@ pub(super) fn for_each_hit_generic<P: Pixel>(
     }
 }
 
+/// The pixels of one 64-pixel step of the five rows (`[centre, left, right, up, down]`).
+#[cfg(target_arch = "x86_64")]
+type Step<'a> = [&'a [u8; STEP]; 5];
+
+/// Pixels per step of the SIMD forms (the hits of a step fit a `u64`).
+#[cfg(target_arch = "x86_64")]
+const STEP: usize = 64;
+
+/// The frame of the SIMD forms: `step_hits` gives each 64-pixel step's hits as a bit mask (bit i
+/// for pixel i of the step), `hit` is called for each; the last `len % 64` pixels take the
+/// generic test.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn for_each_step_hit(rows: [&[u8]; 5], t: u8, mut step_hits: impl FnMut(Step) -> u64, mut hit: impl FnMut(usize)) {
+    let [c, l, r, u, d] = rows;
+    let steps = c.chunks_exact(STEP).zip(l.chunks_exact(STEP)).zip(r.chunks_exact(STEP));
+    let steps = steps.zip(u.chunks_exact(STEP)).zip(d.chunks_exact(STEP));
+    let mut done = 0;
+    for ((((c, l), r), u), d) in steps {
+        let step = [c, l, r, u, d].map(|s| <&[u8; STEP]>::try_from(s).expect("a whole step"));
+        let mut hits = step_hits(step);
+        while hits != 0 {
+            hit(done + hits.trailing_zeros() as usize);
+            hits &= hits - 1;
+        }
+        done += STEP;
+    }
+    for_each_hit_generic(&c[done..], &l[done..], &r[done..], &u[done..], &d[done..], t, |j| hit(done + j));
+}
+
 /// [`for_each_hit_generic`] for 8-bit pixels in SSE2 (part of every x86-64 CPU), 64 pixels per
 /// step: `v > max(a, b) ⊕ t` (saturating addition, as `u8::contrast_above`) is
 /// `v ⊖ (max(a, b) ⊕ t) ≠ 0` (saturating subtraction: SSE2 has no unsigned byte comparison).
@@ -49,15 +79,11 @@ pub(super) fn for_each_hit_generic<P: Pixel>(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "sse2")]
 #[inline]
-pub(super) fn for_each_hit_sse2(c: &[u8], l: &[u8], r: &[u8], u: &[u8], d: &[u8], t: u8, mut hit: impl FnMut(usize)) {
+pub(super) fn for_each_hit_sse2(c: &[u8], l: &[u8], r: &[u8], u: &[u8], d: &[u8], t: u8, hit: impl FnMut(usize)) {
     use std::arch::x86_64::*;
-    const STEP: usize = 64;
     let (tv, zero) = (_mm_set1_epi8(t as i8), _mm_setzero_si128());
-    let steps = c.chunks_exact(STEP).zip(l.chunks_exact(STEP)).zip(r.chunks_exact(STEP));
-    let steps = steps.zip(u.chunks_exact(STEP)).zip(d.chunks_exact(STEP));
-    let mut done = 0;
-    for ((((c, l), r), u), d) in steps {
-        let load = |s: &[u8], k: usize| {
+    let step_hits = |[c, l, r, u, d]: Step| {
+        let load = |s: &[u8; STEP], k: usize| {
             let bytes: &[u8; 16] = s[16 * k..16 * k + 16].try_into().expect("16 pixels");
             // SAFETY: `bytes` is 16 readable bytes; the load has no alignment requirement.
             unsafe { _mm_loadu_si128(bytes.as_ptr().cast()) }
@@ -70,18 +96,15 @@ pub(super) fn for_each_hit_sse2(c: &[u8], l: &[u8], r: &[u8], u: &[u8], d: &[u8]
         };
         let quarters = [above(0), above(1), above(2), above(3)];
         let any = _mm_or_si128(_mm_or_si128(quarters[0], quarters[1]), _mm_or_si128(quarters[2], quarters[3]));
-        if _mm_movemask_epi8(_mm_cmpeq_epi8(any, zero)) != 0xFFFF {
-            for (k, &q) in quarters.iter().enumerate() {
-                let mut hits = !(_mm_movemask_epi8(_mm_cmpeq_epi8(q, zero)) as u32) & 0xFFFF;
-                while hits != 0 {
-                    hit(done + 16 * k + hits.trailing_zeros() as usize);
-                    hits &= hits - 1;
-                }
-            }
+        if _mm_movemask_epi8(_mm_cmpeq_epi8(any, zero)) == 0xFFFF {
+            return 0;
         }
-        done += STEP;
-    }
-    for_each_hit_generic(&c[done..], &l[done..], &r[done..], &u[done..], &d[done..], t, |j| hit(done + j));
+        quarters.iter().enumerate().fold(0u64, |mask, (k, &q)| {
+            let hits = !(_mm_movemask_epi8(_mm_cmpeq_epi8(q, zero)) as u32) & 0xFFFF;
+            mask | (hits as u64) << (16 * k)
+        })
+    };
+    for_each_step_hit([c, l, r, u, d], t, step_hits, hit);
 }
 
 /// [`for_each_hit_sse2`] with 32-pixel AVX2 vectors (the same operations, twice as wide).
@@ -98,16 +121,12 @@ pub(super) unsafe fn for_each_hit_avx2(
     u: &[u8],
     d: &[u8],
     t: u8,
-    mut hit: impl FnMut(usize),
+    hit: impl FnMut(usize),
 ) {
     use std::arch::x86_64::*;
-    const STEP: usize = 64;
     let (tv, zero) = (_mm256_set1_epi8(t as i8), _mm256_setzero_si256());
-    let steps = c.chunks_exact(STEP).zip(l.chunks_exact(STEP)).zip(r.chunks_exact(STEP));
-    let steps = steps.zip(u.chunks_exact(STEP)).zip(d.chunks_exact(STEP));
-    let mut done = 0;
-    for ((((c, l), r), u), d) in steps {
-        let load = |s: &[u8], k: usize| {
+    let step_hits = |[c, l, r, u, d]: Step| {
+        let load = |s: &[u8; STEP], k: usize| {
             let bytes: &[u8; 32] = s[32 * k..32 * k + 32].try_into().expect("32 pixels");
             // SAFETY: `bytes` is 32 readable bytes; the load has no alignment requirement.
             unsafe { _mm256_loadu_si256(bytes.as_ptr().cast()) }
@@ -119,17 +138,11 @@ pub(super) unsafe fn for_each_hit_avx2(
             _mm256_or_si256(_mm256_subs_epu8(v, row), _mm256_subs_epu8(v, col))
         };
         let halves = [above(0), above(1)];
-        let any = _mm256_or_si256(halves[0], halves[1]);
-        if _mm256_movemask_epi8(_mm256_cmpeq_epi8(any, zero)) != -1 {
-            for (k, &h) in halves.iter().enumerate() {
-                let mut hits = !(_mm256_movemask_epi8(_mm256_cmpeq_epi8(h, zero)) as u32);
-                while hits != 0 {
-                    hit(done + 32 * k + hits.trailing_zeros() as usize);
-                    hits &= hits - 1;
-                }
-            }
+        if _mm256_movemask_epi8(_mm256_cmpeq_epi8(_mm256_or_si256(halves[0], halves[1]), zero)) == -1 {
+            return 0;
         }
-        done += STEP;
-    }
-    for_each_hit_generic(&c[done..], &l[done..], &r[done..], &u[done..], &d[done..], t, |j| hit(done + j));
+        let hits = |h| !(_mm256_movemask_epi8(_mm256_cmpeq_epi8(h, zero)) as u32) as u64;
+        hits(halves[0]) | hits(halves[1]) << 32
+    };
+    for_each_step_hit([c, l, r, u, d], t, step_hits, hit);
 }

@@ -150,8 +150,16 @@ pub(super) fn kernel8_sse2(block: &[u8], w: usize, wx: &[f32; TAPS], wy: &[f32; 
         lo = _mm_add_ps(lo, _mm_mul_ps(_mm_cvtepi32_ps(_mm_unpacklo_epi16(words, zero)), weight));
         hi = _mm_add_ps(hi, _mm_mul_ps(_mm_cvtepi32_ps(_mm_unpackhi_epi16(words, zero)), weight));
     }
-    // Columns 0–3 and 4–5 times their weights (lanes 6, 7 are not part of the kernel), added
-    // as `column_dot` does (lanes 2, 3 add 0).
+    columns_dot_sse(lo, hi, wx)
+}
+
+/// The SIMD kernels' last step: columns 0–3 (`lo`) and 4–5 (`hi`; lanes 6, 7 are not part of
+/// the kernel) times their weights `wx`, added as `column_dot` does (lanes 2, 3 of `hi` add 0).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "sse2")]
+#[inline]
+fn columns_dot_sse(lo: std::arch::x86_64::__m128, hi: std::arch::x86_64::__m128, wx: &[f32; TAPS]) -> f32 {
+    use std::arch::x86_64::*;
     let dot = _mm_add_ps(
         _mm_mul_ps(lo, _mm_set_ps(wx[3], wx[2], wx[1], wx[0])),
         _mm_mul_ps(hi, _mm_set_ps(0.0, 0.0, wx[5], wx[4])),
@@ -178,13 +186,7 @@ pub(super) unsafe fn kernel8_avx2(block: &[u8], w: usize, wx: &[f32; TAPS], wy: 
         let pixels = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_set_epi64x(0, i64::from_le_bytes(row))));
         sum = _mm256_add_ps(sum, _mm256_mul_ps(pixels, _mm256_set1_ps(wyj)));
     }
-    let (lo, hi) = (_mm256_castps256_ps128(sum), _mm256_extractf128_ps(sum, 1));
-    let dot = _mm_add_ps(
-        _mm_mul_ps(lo, _mm_set_ps(wx[3], wx[2], wx[1], wx[0])),
-        _mm_mul_ps(hi, _mm_set_ps(0.0, 0.0, wx[5], wx[4])),
-    );
-    let pairs = _mm_add_ps(dot, _mm_movehl_ps(dot, dot));
-    _mm_cvtss_f32(_mm_add_ss(pairs, _mm_shuffle_ps(pairs, pairs, 1)))
+    columns_dot_sse(_mm256_castps256_ps128(sum), _mm256_extractf128_ps(sum, 1), wx)
 }
 
 #[cfg(test)]

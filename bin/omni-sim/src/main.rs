@@ -5,9 +5,9 @@ use omni_cli::{CliError, CliResult};
 use omni_formats::stream::{Frame, Header, Record, Status, StreamWriter};
 use omni_formats::{BoardFile, CameraFile, CameraSpec, ScannerFile, write_doc};
 use omni_simulator::{
-    BenchObject, BoardPose, Imperfections, RenderOptions, Rig, Scene, Sensor, TruthRecord, check_boards_visible,
-    paper_bench, paper_preset, parse_angles, random_board_poses, render_ambient_frame, render_board_image,
-    render_laser_frame, render_rig_pose_image, truth_header,
+    BenchObject, BoardPose, Imaging, Imperfections, Optics, RenderOptions, Rig, Scene, Sensor, TruthRecord,
+    check_boards_visible, paper_bench, paper_preset, parse_angles, random_board_poses, render_ambient_frame,
+    render_board_image, render_laser_frame, render_rig_pose_image, truth_header,
 };
 use rayon::prelude::*;
 use std::io::Write;
@@ -135,22 +135,54 @@ struct RenderArgs {
     /// Polygon turn during the exposure (degrees): motion blur of the stripe.
     #[arg(long, default_value_t = 0.0)]
     motion_blur: f64,
-    /// Laser speckle contrast (0 = none; real stripes on paper ≈ 0.1–0.3).
-    #[arg(long, default_value_t = 0.0)]
-    speckle: f64,
+    /// The idealised sensor instead of the realistic one: Gaussian PSF σ 0.7 px, no speckle, a
+    /// dim room (white ≈ 51/255 in laser frames).
+    #[arg(long)]
+    ideal: bool,
+    /// Lens F-number (default: camera.json's optics, else the paper preset's F/4).
+    #[arg(long, value_name = "N")]
+    f_number: Option<f64>,
+    /// Laser wavelength (nm; default 650).
+    #[arg(long, value_name = "NM")]
+    wavelength_nm: Option<f64>,
+    /// Pixel pitch (µm; default 4.65 for a 1024-px image).
+    #[arg(long, value_name = "UM")]
+    pixel_pitch_um: Option<f64>,
+    /// Defocus: diameter of the blur circle (px; default 1.5).
+    #[arg(long, value_name = "PX")]
+    defocus_px: Option<f64>,
+    /// Override the optical blur: σ of the PSF (px, 0.4–1.5 are typical; with a lens, the
+    /// defocus is set to reach it and it cannot be below the diffraction limit).
+    #[arg(long, value_name = "SIGMA_PX")]
+    blur_px: Option<f64>,
+    /// Image the laser incoherently: no speckle (the lens's blur stays).
+    #[arg(long)]
+    no_speckle: bool,
+    /// Independent speckle patterns (2: a depolarising matte surface; 1: a polarisation-keeping one).
+    #[arg(long, value_name = "N")]
+    speckle_patterns: Option<u32>,
     /// Worker threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
 }
 
 impl RenderArgs {
-    /// Options on top of the defaults (laser frames, dim room).
-    fn options(&self) -> CliResult<RenderOptions> {
-        self.options_from(RenderOptions::default())
+    /// Options for laser frames, with the camera's optics where camera.json has them.
+    fn options(&self, camera_optics: Option<Optics>) -> CliResult<RenderOptions> {
+        let base = if self.ideal { RenderOptions::ideal() } else { RenderOptions::default() };
+        self.options_from(base, camera_optics)
+    }
+
+    /// Options for lit board images (no laser): `--ideal` keeps the ideal blur.
+    fn lit_options(&self, camera_optics: Option<Optics>) -> CliResult<RenderOptions> {
+        let base = RenderOptions::calibration();
+        let base = if self.ideal { RenderOptions { imaging: RenderOptions::ideal().imaging, ..base } } else { base };
+        self.options_from(base, camera_optics)
     }
 
     /// Options on top of `d`.
-    fn options_from(&self, d: RenderOptions) -> CliResult<RenderOptions> {
+    fn options_from(&self, d: RenderOptions, camera_optics: Option<Optics>) -> CliResult<RenderOptions> {
+        let imaging = self.imaging(d.imaging, camera_optics)?;
         let opts = RenderOptions {
             bit_depth: self.bit_depth,
             seed: self.seed,
@@ -158,7 +190,7 @@ impl RenderArgs {
             laser_strength: d.laser_strength * self.laser_gain,
             ambient_e: d.ambient_e * self.ambient_gain,
             motion_blur_deg: self.motion_blur,
-            speckle_contrast: self.speckle,
+            imaging,
             ..d
         };
         opts.validate().map_err(|e| CliError::usage(format!("rendering options: {e}")))?;
@@ -274,6 +306,39 @@ struct RigArgs {
     render: RenderArgs,
 }
 
+impl RenderArgs {
+    /// The lens: the ideal Gaussian (with `--ideal`) or the optics, from camera.json and flags.
+    fn imaging(&self, d: Imaging, camera_optics: Option<Optics>) -> CliResult<Imaging> {
+        let usage = |e: String| CliError::usage(format!("optics: {e}"));
+        match d {
+            Imaging::Gaussian { sigma_px } => {
+                let lens_flags = [self.f_number, self.wavelength_nm, self.pixel_pitch_um, self.defocus_px];
+                if lens_flags.iter().any(Option::is_some) || self.speckle_patterns.is_some() || self.no_speckle {
+                    return Err(CliError::usage(
+                        "--ideal has no lens: drop --f-number, --wavelength-nm, --pixel-pitch-um, --defocus-px, --speckle-patterns and --no-speckle",
+                    ));
+                }
+                Ok(Imaging::Gaussian { sigma_px: self.blur_px.unwrap_or(sigma_px) })
+            }
+            Imaging::Lens { optics, speckle } => {
+                let base = camera_optics.unwrap_or(optics);
+                let mut o = Optics {
+                    f_number: self.f_number.unwrap_or(base.f_number),
+                    wavelength_nm: self.wavelength_nm.unwrap_or(base.wavelength_nm),
+                    pixel_pitch_um: self.pixel_pitch_um.unwrap_or(base.pixel_pitch_um),
+                    defocus_px: self.defocus_px.unwrap_or(base.defocus_px),
+                    speckle_patterns: self.speckle_patterns.unwrap_or(base.speckle_patterns),
+                };
+                o.validate().map_err(usage)?;
+                if let Some(b) = self.blur_px {
+                    o = o.with_psf_sigma(b).map_err(|e| CliError::usage(format!("--blur-px: {e}")))?;
+                }
+                Ok(Imaging::Lens { optics: o, speckle: speckle && !self.no_speckle })
+            }
+        }
+    }
+}
+
 fn parse_bit_depth(s: &str) -> Result<u8, String> {
     match s {
         "8" => Ok(8),
@@ -321,7 +386,9 @@ fn sensor(a: SensorArgs) -> CliResult {
     };
     let (cam, tx) = paper_preset(a.width, &imp).map_err(CliError::usage)?;
     create_dir(&a.output)?;
-    write_doc(&a.output.join("camera.json"), &CameraFile::new(CameraSpec::Hyperbolic(cam)))?;
+    // A smaller image keeps the pixel (and so its blur and speckle in pixels) with a shorter lens.
+    let camera = CameraFile { optics: Some(Optics::paper()), ..CameraFile::new(CameraSpec::Hyperbolic(cam)) };
+    write_doc(&a.output.join("camera.json"), &camera)?;
     write_doc(&a.output.join("scanner.json"), &ScannerFile::new(tx))?;
     Ok(())
 }
@@ -440,8 +507,13 @@ fn check_lasers(sensor: &Sensor, lasers: &[u32]) -> CliResult {
     }
 }
 
+/// The optics camera.json states, if any.
+fn camera_optics(path: &Path) -> CliResult<Option<Optics>> {
+    Ok(CameraFile::load(path)?.0.optics)
+}
+
 fn scan(a: ScanArgs) -> CliResult {
-    let opts = a.render.options()?;
+    let opts = a.render.options(camera_optics(&a.camera)?)?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
     let sensor = Sensor::load(&a.camera, &a.scanner)?;
     check_lasers(&sensor, &a.lasers)?;
@@ -456,8 +528,8 @@ fn scan(a: ScanArgs) -> CliResult {
 }
 
 fn boards(a: BoardsArgs) -> CliResult {
-    let opts = a.render.options_from(RenderOptions::calibration())?;
-    let (_, camera) = CameraFile::load(&a.camera)?;
+    let (file, camera) = CameraFile::load(&a.camera)?;
+    let opts = a.render.lit_options(file.optics)?;
     let board = load_board(&a.board)?;
     if a.count == 0 {
         return Err(CliError::usage("--count must be at least 1"));
@@ -487,7 +559,8 @@ fn boards(a: BoardsArgs) -> CliResult {
 }
 
 fn rig(a: RigArgs) -> CliResult {
-    let opts = a.render.options()?;
+    let optics = camera_optics(&a.camera)?;
+    let opts = a.render.options(optics)?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
     let sensor = Sensor::load(&a.camera, &a.scanner)?;
     let board = load_board(&a.board)?;
@@ -496,7 +569,7 @@ fn rig(a: RigArgs) -> CliResult {
     let scene = Scene::from_file(scene_file.clone()).map_err(CliError::new)?;
     check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("rig: {e}")))?;
     create_dir(&a.out)?;
-    let lit = a.render.options_from(RenderOptions::calibration())?;
+    let lit = a.render.lit_options(optics)?;
     let (pose_image, corners) = render_rig_pose_image(&sensor, &rig, &lit);
     pose_image.to_png(&a.out.join("pose.png"))?;
     let frames = render_frames(&sensor, &scene, &angles, a.facet, &[0, 1], a.laser_off, &a.out, &opts)?;

@@ -2,7 +2,7 @@
 
 use crate::{Error, Result, Versioned};
 use omni_model::{
-    CameraModel, HyperbolicCamera, HyperbolicParams, MeiCamera, MeiParams, OcamCamera, OcamParams, Transmitter,
+    CameraModel, HyperbolicCamera, HyperbolicParams, MeiCamera, MeiParams, OcamCamera, OcamParams, Optics, Transmitter,
     TransmitterParams,
 };
 use serde::de::DeserializeOwned;
@@ -62,6 +62,10 @@ pub struct CameraFile {
     pub format: String,
     pub version: u32,
     pub model: CameraSpec,
+    /// The lens and sensor optics (wavelength, F-number, pixel pitch, defocus), where known: the
+    /// simulator renders with them and `omni-eval budget` predicts noise from them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub optics: Option<Optics>,
     /// Free-form calibration report (residuals, uncertainties, images used).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub report: Option<serde_json::Value>,
@@ -74,13 +78,16 @@ impl Versioned for CameraFile {
 
 impl CameraFile {
     pub fn new(model: CameraSpec) -> Self {
-        CameraFile { format: Self::FORMAT.into(), version: Self::VERSION, model, report: None }
+        CameraFile { format: Self::FORMAT.into(), version: Self::VERSION, model, optics: None, report: None }
     }
 
     /// Reads and validates `camera.json`, returning the usable model.
     pub fn load(path: &Path) -> Result<(CameraFile, Box<dyn CameraModel>)> {
         let file: CameraFile = read_doc(path)?;
         let model = file.model.build().map_err(|m| Error::new(path.display().to_string(), "field model", m))?;
+        if let Some(optics) = &file.optics {
+            optics.validate().map_err(|m| Error::new(path.display().to_string(), "field optics", m))?;
+        }
         Ok((file, model))
     }
 }

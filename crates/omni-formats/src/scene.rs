@@ -15,6 +15,22 @@
 //! }
 //! ```
 //!
+//! Lighting (optional, `lighting`): the ambient light of laser and board frames varies as in
+//! real rooms. `level` scales the renderer's ambient light (0.1 a dark room, 3 a bright one);
+//! `gradient` makes it change smoothly (by `per_m`, a fraction per metre, along `direction`,
+//! from the origin); `patches` are hard-edged pools of light (sun through a window, a lamp):
+//! inside a sphere of `radius_mm` about `centre_mm` the ambient light is `gain` times brighter.
+//! Any object can carry a `texture` that modulates its albedo: `stripes` (bands across
+//! `direction`), `checker` (a 3-D checker) or `blocks` (cubes of random albedo), of `period_mm`
+//! and `contrast` (albedo × (1 ± contrast)):
+//!
+//! ```json
+//! "lighting": {"level": 1.5, "gradient": {"direction": [1, 0, 0], "per_m": 0.6},
+//!              "patches": [{"centre_mm": [600, -300, 200], "radius_mm": 250, "gain": 2.5}]},
+//! "objects": [{"type": "room", "centre_mm": [0, 0, 300], "size_mm": [1600, 1600, 1200],
+//!              "texture": {"pattern": "stripes", "period_mm": 6, "contrast": 0.4}}]
+//! ```
+//!
 //! Planar frames (rectangle, checkerboard): `normal` is the side the face looks to, `up` the
 //! in-plane "up" (need not be exactly perpendicular to `normal`; it is orthogonalised). The face's
 //! x axis (width, checkerboard columns) is `up × normal`, i.e. to the right for a viewer facing
@@ -41,7 +57,75 @@ pub struct SceneFile {
     /// Free text: what the scene is.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub description: Option<String>,
+    /// How the ambient light varies (default: uniform, as rendered).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lighting: Option<Lighting>,
     pub objects: Vec<SceneObject>,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn z_axis() -> [f64; 3] {
+    [0.0, 0.0, 1.0]
+}
+
+/// The ambient light across the scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Lighting {
+    /// Ambient light relative to the renderer's (1 = as rendered).
+    #[serde(default = "one")]
+    pub level: f64,
+    /// A smooth change of the level across the room.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gradient: Option<Gradient>,
+    /// Hard-edged pools of brighter light.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub patches: Vec<LightPatch>,
+}
+
+/// The ambient level changes by the fraction `per_m` per metre along `direction` (from the
+/// origin; never below zero).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Gradient {
+    pub direction: [f64; 3],
+    pub per_m: f64,
+}
+
+/// A sphere inside which the ambient light is `gain` times brighter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightPatch {
+    pub centre_mm: [f64; 3],
+    pub radius_mm: f64,
+    pub gain: f64,
+}
+
+/// An albedo pattern on an object's surface (a solid texture: the pattern of 3-D space the
+/// surface cuts through).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Texture {
+    pub pattern: TexturePattern,
+    /// Period of the pattern (mm): a pair of bands, two checker cells, or one block.
+    pub period_mm: f64,
+    /// Albedo × (1 ± contrast), in [0, 1].
+    pub contrast: f64,
+    /// For stripes: the bands run across this direction (default z: horizontal bands).
+    #[serde(default = "z_axis")]
+    pub direction: [f64; 3],
+}
+
+/// Texture patterns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TexturePattern {
+    Stripes,
+    Checker,
+    Blocks,
 }
 
 impl Versioned for SceneFile {
@@ -52,7 +136,7 @@ impl Versioned for SceneFile {
 impl SceneFile {
     /// A scene with the given objects.
     pub fn new(objects: Vec<SceneObject>) -> Self {
-        SceneFile { format: Self::FORMAT.into(), version: Self::VERSION, description: None, objects }
+        SceneFile { format: Self::FORMAT.into(), version: Self::VERSION, description: None, lighting: None, objects }
     }
 }
 
@@ -65,6 +149,9 @@ pub struct SceneObject {
     /// is the albedo of the white squares and margin.
     #[serde(default = "default_albedo")]
     pub albedo: f64,
+    /// An albedo pattern (default: plain).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texture: Option<Texture>,
     #[serde(flatten)]
     pub shape: Shape,
 }
@@ -72,7 +159,7 @@ pub struct SceneObject {
 impl SceneObject {
     /// An unnamed object with albedo 0.8.
     pub fn new(shape: Shape) -> Self {
-        SceneObject { name: None, albedo: default_albedo(), shape }
+        SceneObject { name: None, albedo: default_albedo(), texture: None, shape }
     }
 
     /// The same object with a name.

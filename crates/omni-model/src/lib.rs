@@ -17,10 +17,12 @@ mod camera;
 mod hyperbolic;
 pub mod mei;
 pub mod ocam;
+mod optics;
 mod transmitter;
 
 pub use camera::{CameraModel, CentralCamera, CentralParams, MirrorCircle};
 pub use hyperbolic::{HyperbolicCamera, HyperbolicParams};
 pub use mei::{MeiCamera, MeiParams};
 pub use ocam::{OcamCamera, OcamParams};
+pub use optics::Optics;
 pub use transmitter::{FacetError, LaserParams, LightPlane, PolygonParams, Transmitter, TransmitterParams};

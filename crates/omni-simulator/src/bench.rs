@@ -26,7 +26,8 @@ pub const BENCH_ALBEDO: f64 = 0.8;
 
 /// The scene of one bench object.
 pub fn paper_bench(object: BenchObject) -> SceneFile {
-    let obj = |name: &str, shape: Shape| SceneObject { name: Some(name.into()), albedo: BENCH_ALBEDO, shape };
+    let obj =
+        |name: &str, shape: Shape| SceneObject { name: Some(name.into()), albedo: BENCH_ALBEDO, texture: None, shape };
     let (description, objects) = match object {
         BenchObject::Plane => (
             "paper bench: matte plane 400 x 300 mm facing the sensor, centre 500 mm out on +x",

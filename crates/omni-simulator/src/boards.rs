@@ -51,6 +51,7 @@ pub fn board_object(board: &BoardFile, pose: &Isometry3<f64>) -> SceneObject {
     SceneObject {
         name: Some("checkerboard".into()),
         albedo: 0.85,
+        texture: None,
         shape: Shape::Checkerboard {
             centre_mm: centre.coords.into(),
             normal: normal.into(),

@@ -57,6 +57,7 @@
 
 mod bench;
 mod boards;
+mod coherent;
 mod frame;
 mod render;
 pub use omni_geom::rng;
@@ -71,9 +72,10 @@ pub use boards::{
     render_rig_pose_image,
 };
 pub use frame::Frame16;
+pub use omni_model::Optics;
 pub use render::{
-    CALIBRATION_AMBIENT_E, DEFAULT_LASER_STRENGTH, LaserFrame, RenderOptions, TruthPoint, render_ambient_frame,
-    render_laser_frame,
+    CALIBRATION_AMBIENT_E, DEFAULT_LASER_STRENGTH, Imaging, LaserFrame, REALISTIC_AMBIENT_E, REALISTIC_LASER_STRENGTH,
+    RenderOptions, TruthPoint, render_ambient_frame, render_laser_frame,
 };
 pub use scene::{Hit, Scene, board_corners};
 pub use sensor::{Sensor, paper_camera_scaled};

@@ -15,25 +15,62 @@
 //! 3. The electron image is blurred with a Gaussian PSF, then photon noise (Poisson), read noise
 //!    (Gaussian), saturation at the full well, gamma and quantisation to the bit depth are applied.
 
+use crate::coherent::{CoherentImager, LaserField};
 use crate::frame::Frame16;
 use crate::rng::{SplitMix64, mix};
 use crate::scene::{Hit, Scene};
 use crate::sensor::Sensor;
 use omni_geom::{Point3, Vector2, Vector3};
 use omni_model::LightPlane;
+use omni_model::Optics;
 use rayon::prelude::*;
+use std::sync::{Arc, Mutex};
 
-/// Rendering parameters. `Default` is a real industrial 8-bit monochrome camera (full well
-/// 10 000 e⁻, read noise 6 e⁻, 8 bits over the full well, gamma 1, PSF σ 0.7 px) and a real
-/// line laser (sheet FWHM 0.5 mm; strength so that the stripe on the matte paper bench plane at
-/// 500 mm peaks at about 190 of 255 including ambient) in a dim lab (ambient: a white surface
-/// collects 2 000 e⁻, ≈ 51 of 255).
+/// How the lens forms the image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Imaging {
+    /// The idealised sensor: every light, the laser's too, blurred by a Gaussian PSF of σ
+    /// `sigma_px` (px), no speckle.
+    Gaussian { sigma_px: f64 },
+    /// A real lens ([`Optics`]): ambient light blurred by the diffraction + defocus PSF (its
+    /// best-fitting Gaussian), the laser light imaged coherently through the pupil
+    /// ([`crate::coherent`]: speckle, diffraction, defocus), or incoherently like the ambient
+    /// light when `speckle` is false.
+    Lens { optics: Optics, speckle: bool },
+}
+
+impl Imaging {
+    /// σ of the optical PSF of incoherent light (px), the pixel area excluded.
+    pub fn psf_sigma_px(&self) -> f64 {
+        match self {
+            Imaging::Gaussian { sigma_px } => *sigma_px,
+            Imaging::Lens { optics, .. } => optics.psf_sigma_px(),
+        }
+    }
+
+    /// The optics whose pupil images the laser coherently, if any.
+    fn coherent(&self) -> Option<&Optics> {
+        match self {
+            Imaging::Lens { optics, speckle: true } => Some(optics),
+            _ => None,
+        }
+    }
+}
+
+/// Rendering parameters. `Default` is the realistic sensor: a real industrial 8-bit monochrome
+/// camera (full well 10 000 e⁻, read noise 6 e⁻, 8 bits over the full well, gamma 1) behind the
+/// paper preset's lens ([`Optics::paper`]: F/4, 4.65 µm pixels, a 650 nm laser, 1.5 px of
+/// defocus), laser speckle on, a real line laser (sheet FWHM 0.5 mm, [`REALISTIC_LASER_STRENGTH`])
+/// in a mid-bright room (a white surface collects [`REALISTIC_AMBIENT_E`] = 3 000 e⁻, ≈ 77 of 255).
+/// [`RenderOptions::ideal`] is the idealised sensor (Gaussian PSF σ 0.7 px, no speckle, a dim
+/// room).
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderOptions {
-    /// Samples per axis for pixels near a stripe or an edge (n × n samples).
+    /// Samples per axis for pixels near a stripe or an edge (n × n samples); with coherent
+    /// imaging a multiple of its samples per pixel (4 or 8).
     pub supersample: u32,
-    /// Standard deviation of the Gaussian optical blur (px); 0 = none.
-    pub psf_sigma_px: f64,
+    /// The lens: the PSF, and whether the laser is imaged coherently.
+    pub imaging: Imaging,
     /// Full width at half maximum of the laser sheet's Gaussian profile across the light
     /// plane (mm).
     pub beam_fwhm_mm: f64,
@@ -41,7 +78,8 @@ pub struct RenderOptions {
     /// with a fan-normalised irradiance of 1 mm⁻² (the whole fan's power on 1 mm²). Lumps laser
     /// power, exposure, aperture and quantum efficiency.
     pub laser_strength: f64,
-    /// Electrons a pixel collects from a white (albedo 1) surface under the ambient light.
+    /// Electrons a pixel collects from a white (albedo 1) surface under the ambient light (the
+    /// scene's lighting scales it from place to place).
     pub ambient_e: f64,
     /// Full-well capacity (e⁻): saturation, and the signal that maps to the largest value.
     pub full_well_e: f64,
@@ -58,32 +96,15 @@ pub struct RenderOptions {
     /// Polygon turn during the exposure (degrees); the stripe is integrated over
     /// [α − m/2, α + m/2]. 0 = a still mirror.
     pub motion_blur_deg: f64,
-    /// Laser speckle contrast (std / mean of the laser light's intensity over one speckle grain);
-    /// 0 = none (the default: the noise model has no speckle; real stripes on paper show
-    /// about 0.1–0.3). Each grain's factor is Gamma-distributed with mean 1.
-    pub speckle_contrast: f64,
-    /// Speckle grain size in the image (px), ≈ 2.44 λ N / pixel pitch (≈ 1.2 px at f/4, 650 nm,
-    /// 5.5 µm).
-    pub speckle_grain_px: f64,
 }
 
 impl Default for RenderOptions {
     fn default() -> Self {
         RenderOptions {
-            supersample: 8,
-            psf_sigma_px: 0.7,
-            beam_fwhm_mm: 0.5,
-            laser_strength: DEFAULT_LASER_STRENGTH,
-            ambient_e: 2000.0,
-            full_well_e: 10_000.0,
-            read_noise_e: 6.0,
-            gamma: 1.0,
-            bit_depth: 8,
-            noise: true,
-            seed: 0,
-            motion_blur_deg: 0.0,
-            speckle_contrast: 0.0,
-            speckle_grain_px: 1.2,
+            imaging: Imaging::Lens { optics: Optics::paper(), speckle: true },
+            ambient_e: REALISTIC_AMBIENT_E,
+            laser_strength: REALISTIC_LASER_STRENGTH,
+            ..RenderOptions::ideal()
         }
     }
 }
@@ -96,43 +117,75 @@ pub const DEFAULT_LASER_STRENGTH: f64 = 6.0e7;
 /// exposure set so that white paper reads about 150–180 of 255, as one does for calibration.
 pub const CALIBRATION_AMBIENT_E: f64 = 7000.0;
 
+/// Ambient signal of a white surface (e⁻) in laser frames of the realistic sensor: a
+/// mid-bright room (white ≈ 77 of 255 at the laser exposure).
+pub const REALISTIC_AMBIENT_E: f64 = 3000.0;
+
+/// The realistic sensor's laser: its sharper lens concentrates the stripe, so the exposure is
+/// set for a mean stripe peak of about 90 DN over ambient on the bench plane, leaving room for
+/// bright speckles (measured by a test).
+pub const REALISTIC_LASER_STRENGTH: f64 = 0.5 * DEFAULT_LASER_STRENGTH;
+
 impl RenderOptions {
-    /// The defaults with the room lit for checkerboard images ([`CALIBRATION_AMBIENT_E`]).
+    /// The idealised sensor: Gaussian PSF σ 0.7 px, no speckle, a dim lab (a white surface
+    /// collects 2 000 e⁻, ≈ 51 of 255); camera and laser as [`Default`].
+    pub fn ideal() -> Self {
+        RenderOptions {
+            supersample: 8,
+            imaging: Imaging::Gaussian { sigma_px: 0.7 },
+            beam_fwhm_mm: 0.5,
+            laser_strength: DEFAULT_LASER_STRENGTH,
+            ambient_e: 2000.0,
+            full_well_e: 10_000.0,
+            read_noise_e: 6.0,
+            gamma: 1.0,
+            bit_depth: 8,
+            noise: true,
+            seed: 0,
+            motion_blur_deg: 0.0,
+        }
+    }
+
+    /// The realistic sensor with the room lit for checkerboard images ([`CALIBRATION_AMBIENT_E`]).
     pub fn calibration() -> Self {
         RenderOptions { ambient_e: CALIBRATION_AMBIENT_E, ..Default::default() }
     }
 
-    /// A saturated stripe: the default laser 4× stronger (the stripe clips at full scale on
-    /// the bench plane).
-    pub fn saturated() -> Self {
-        RenderOptions { laser_strength: 4.0 * DEFAULT_LASER_STRENGTH, ..Default::default() }
+    /// The idealised sensor with a saturated stripe: the laser 4× stronger (the stripe clips at
+    /// full scale on the bench plane).
+    pub fn ideal_saturated() -> Self {
+        RenderOptions { laser_strength: 4.0 * DEFAULT_LASER_STRENGTH, ..Self::ideal() }
     }
 
-    /// A weak stripe: the default laser at 40 % (≈ 60 DN above ambient on the bench plane).
-    pub fn weak_stripe() -> Self {
-        RenderOptions { laser_strength: 0.4 * DEFAULT_LASER_STRENGTH, ..Default::default() }
+    /// The idealised sensor with a weak stripe: the laser at 40 % (≈ 60 DN above ambient on the
+    /// bench plane).
+    pub fn ideal_weak_stripe() -> Self {
+        RenderOptions { laser_strength: 0.4 * DEFAULT_LASER_STRENGTH, ..Self::ideal() }
     }
 
-    /// Strong ambient light: 3× the default (a white surface ≈ 153 DN, the bench plane ≈ 122 DN;
-    /// the stripe on top of it clips on bright surfaces).
-    pub fn strong_ambient() -> Self {
-        RenderOptions { ambient_e: 3.0 * RenderOptions::default().ambient_e, ..Default::default() }
+    /// The idealised sensor in strong ambient light: 3× its own (a white surface ≈ 153 DN, the
+    /// bench plane ≈ 122 DN; the stripe on top of it clips on bright surfaces).
+    pub fn ideal_strong_ambient() -> Self {
+        RenderOptions { ambient_e: 3.0 * Self::ideal().ambient_e, ..Self::ideal() }
     }
 
-    /// The defaults without photon and read noise.
-    pub fn noiseless() -> Self {
-        RenderOptions { noise: false, ..Default::default() }
+    /// The idealised sensor without photon and read noise.
+    pub fn ideal_noiseless() -> Self {
+        RenderOptions { noise: false, ..Self::ideal() }
+    }
+
+    /// The same options with the lens `optics` (laser speckle on).
+    pub fn with_optics(self, optics: Optics) -> Self {
+        RenderOptions { imaging: Imaging::Lens { optics, speckle: true }, ..self }
     }
 
     /// Checks values; the message names the field.
     pub fn validate(&self) -> Result<(), String> {
         let non_negative = [
-            ("psf_sigma_px", self.psf_sigma_px),
             ("laser_strength", self.laser_strength),
             ("ambient_e", self.ambient_e),
             ("read_noise_e", self.read_noise_e),
             ("motion_blur_deg", self.motion_blur_deg),
-            ("speckle_contrast", self.speckle_contrast),
         ];
         for (name, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {
@@ -150,6 +203,30 @@ impl RenderOptions {
         }
         if self.bit_depth != 8 && self.bit_depth != 16 {
             return Err(format!("bit_depth must be 8 or 16, got {}", self.bit_depth));
+        }
+        match &self.imaging {
+            Imaging::Gaussian { sigma_px } => {
+                if !(sigma_px.is_finite() && (0.0..=10.0).contains(sigma_px)) {
+                    return Err(format!("psf sigma_px must be within 0–10 px, got {sigma_px}"));
+                }
+            }
+            Imaging::Lens { optics, speckle } => {
+                optics.validate().map_err(|e| format!("optics: {e}"))?;
+                let q = CoherentImager::samples_per_px(optics) as u32;
+                if *speckle && optics.coherent_cutoff_per_px() > 3.0 {
+                    return Err(format!(
+                        "speckle needs λN ≥ 1/6 px to be sampled, got {:.3} px (F/{}): image the laser without speckle",
+                        optics.lambda_n_px(),
+                        optics.f_number
+                    ));
+                }
+                if *speckle && self.supersample % q != 0 {
+                    return Err(format!(
+                        "supersample must be a multiple of {q} for speckle at F/{}, got {}",
+                        optics.f_number, self.supersample
+                    ));
+                }
+            }
         }
         Ok(())
     }
@@ -196,8 +273,6 @@ struct Shader<'a> {
     slices: &'a [Slice],
     sigma: f64,
     opts: &'a RenderOptions,
-    /// Seed of the frame's speckle pattern.
-    speckle_seed: u64,
 }
 
 /// What a camera ray at a pixel corner sees, for deciding where to supersample.
@@ -205,6 +280,8 @@ struct Shader<'a> {
 struct CornerKey {
     /// Object index · 4 + pattern, or `u32::MAX` for no scene (outside the mirror, no hit).
     surface: u32,
+    /// Texture cell and light patches ([`Hit::class`]).
+    class: u32,
     /// Bit i set if the hit is on the positive side of slice i's plane.
     sides: u64,
     /// Whether the hit lies within 4 σ of any light plane.
@@ -215,7 +292,7 @@ struct CornerKey {
 
 impl Shader<'_> {
     fn corner(&self, camera: &dyn omni_model::CameraModel, px: Vector2<f64>) -> CornerKey {
-        let none = CornerKey { surface: u32::MAX, sides: 0, near: false, value: 0.0 };
+        let none = CornerKey { surface: u32::MAX, class: 0, sides: 0, near: false, value: 0.0 };
         let Some(ray) = camera.pixel_to_ray(&px) else { return none };
         let Some(hit) = self.scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY) else { return none };
         let mut sides = 0u64;
@@ -225,32 +302,21 @@ impl Shader<'_> {
             sides |= u64::from(d > 0.0) << i;
             near |= d.abs() < 4.0 * self.sigma;
         }
-        let value = if near { 0.0 } else { self.shade(&hit, &ray.dir, |_| 0.0, 1.0) };
-        CornerKey { surface: hit.object as u32 * 4 + hit.pattern as u32, sides, near, value }
+        let value = if near { 0.0 } else { self.shade(&hit, &ray.dir, |_| 0.0).total() };
+        CornerKey { surface: hit.object as u32 * 4 + hit.pattern as u32, class: hit.class, sides, near, value }
     }
 
-    /// Electrons collected at a hit seen along `view`; `footprint[i]` is the spread (mm rms) of
-    /// slice i's plane distance over the sample's own footprint (0 for a point sample).
-    /// `speckle` multiplies the laser light (1 = no speckle).
-    fn shade(&self, hit: &Hit, view: &Vector3<f64>, footprint: impl Fn(usize) -> f64, speckle: f64) -> f64 {
+    /// Electrons collected at a hit seen along `view`, ambient and laser apart; `footprint[i]`
+    /// is the spread (mm rms) of slice i's plane distance over the sample's own footprint (0 for
+    /// a point sample).
+    fn shade(&self, hit: &Hit, view: &Vector3<f64>, footprint: impl Fn(usize) -> f64) -> Signal {
         let mut laser = 0.0;
         for (i, s) in self.slices.iter().enumerate() {
             let sigma = (self.sigma * self.sigma + footprint(i).powi(2)).sqrt();
             laser += s.weight * self.laser_irradiance(&s.lp, &hit.point, &hit.normal, view, sigma);
         }
-        hit.albedo * (self.opts.ambient_e + speckle * laser)
-    }
-
-    /// The speckle factor (mean 1) of the grain containing image point `px`.
-    fn speckle(&self, px: &Vector2<f64>) -> f64 {
-        let c = self.opts.speckle_contrast;
-        if c <= 0.0 {
-            return 1.0;
-        }
-        let g = self.opts.speckle_grain_px;
-        let (ix, iy) = ((px.x / g).floor() as i64, (px.y / g).floor() as i64);
-        let mut rng = SplitMix64::stream(self.speckle_seed, mix(ix as u64) ^ (iy as u64).rotate_left(32));
-        rng.gamma(1.0 / (c * c)) * c * c
+        let ambient = self.opts.ambient_e * self.scene.ambient_factor(&hit.point);
+        Signal { ambient: hit.albedo * ambient, laser: hit.albedo * laser }
     }
 
     /// Laser signal (e⁻ for albedo 1) of one light plane at a surface point seen along `view`,
@@ -289,6 +355,19 @@ impl Shader<'_> {
     }
 }
 
+/// Electrons of one sample: the incoherent ambient light and the laser light.
+#[derive(Debug, Clone, Copy, Default)]
+struct Signal {
+    ambient: f64,
+    laser: f64,
+}
+
+impl Signal {
+    fn total(&self) -> f64 {
+        self.ambient + self.laser
+    }
+}
+
 /// Where the reflected ray along `u` (from the virtual source) leaves the facet.
 pub(crate) fn facet_exit(lp: &LightPlane, u: &Vector3<f64>) -> Point3<f64> {
     let denom = lp.facet.normal.dot(u);
@@ -310,7 +389,7 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
     let camera = sensor.camera.as_ref();
     let (w, h) = camera.image_size();
     let (w, h) = (w as usize, h as usize);
-    let shader = Shader { scene, slices, sigma: opts.beam_sigma(), opts, speckle_seed: mix(seed ^ 0x5BEC) };
+    let shader = Shader { scene, slices, sigma: opts.beam_sigma(), opts };
     let cw = w + 1;
     let corners: Vec<CornerKey> = (0..=h)
         .into_par_iter()
@@ -320,14 +399,16 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
         })
         .collect();
     let n = opts.supersample.max(1) as usize;
-    let psf = PixelPsf::new(opts.psf_sigma_px, n);
+    let psf = PixelPsf::new(opts.imaging.psf_sigma_px(), n);
+    let imager = opts.imaging.coherent().filter(|_| !slices.is_empty()).map(coherent_imager);
+    let q = imager.as_ref().map(|i| i.q());
     // Pixels whose corners agree take the mean of their corners (spread later by a discrete
-    // convolution); the others get a supersampled patch spread from the exact sample positions.
+    // convolution); the others get a supersampled patch spread from the exact sample positions,
+    // their laser light going to the coherent imager instead where there is one.
     let rows: Vec<RowResult> = (0..h)
         .into_par_iter()
         .map(|y| {
-            let mut centre = vec![0.0; w];
-            let mut patches = Vec::new();
+            let mut row = RowResult { centre: vec![0.0; w], ..Default::default() };
             for x in 0..w {
                 let c = [
                     corners[y * cw + x],
@@ -335,28 +416,43 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
                     corners[(y + 1) * cw + x],
                     corners[(y + 1) * cw + x + 1],
                 ];
-                let uniform = c.iter().all(|k| k.surface == c[0].surface && k.sides == c[0].sides && !k.near);
+                let uniform = c
+                    .iter()
+                    .all(|k| k.surface == c[0].surface && k.class == c[0].class && k.sides == c[0].sides && !k.near);
                 if uniform && c[0].surface == u32::MAX {
                     continue;
                 }
                 if uniform {
                     // Same surface and pattern, far from every light plane at all four corners:
                     // the signal is smooth over the pixel and the corners' mean integrates it.
-                    centre[x] = 0.25 * c.iter().map(|k| k.value).sum::<f64>();
-                } else {
-                    let samples = pixel_samples(&shader, camera, x as f64, y as f64, n as u32);
-                    patches.push((x, psf.patch(&samples)));
+                    row.centre[x] = 0.25 * c.iter().map(|k| k.value).sum::<f64>();
+                    continue;
+                }
+                let samples = pixel_samples(&shader, camera, x as f64, y as f64, n as u32);
+                match q {
+                    Some(q) => {
+                        let ambient: Vec<f64> = samples.iter().map(|s| s.ambient).collect();
+                        row.patches.push((x, psf.patch(&ambient)));
+                        let laser: Vec<f64> = samples.iter().map(|s| s.laser).collect();
+                        if laser.iter().any(|v| *v > 0.0) {
+                            row.laser.push((x, sample_energies(&laser, n, q)));
+                        }
+                    }
+                    None => {
+                        let total: Vec<f64> = samples.iter().map(Signal::total).collect();
+                        row.patches.push((x, psf.patch(&total)));
+                    }
                 }
             }
-            (centre, patches)
+            row
         })
         .collect();
-    let centre: Vec<f64> = rows.iter().flat_map(|(c, _)| c.iter().copied()).collect();
+    let centre: Vec<f64> = rows.iter().flat_map(|r| r.centre.iter().copied()).collect();
     let mut out = psf.convolve_centres(&centre, w, h);
     let r = psf.radius as isize;
-    for (y, (_, patches)) in rows.iter().enumerate() {
-        for (x, patch) in patches {
-            let side = 2 * psf.radius + 1;
+    let side = 2 * psf.radius + 1;
+    for (y, row) in rows.iter().enumerate() {
+        for (x, patch) in &row.patches {
             for dy in -r..=r {
                 let yy = y as isize + dy;
                 if yy < 0 || yy >= h as isize {
@@ -372,11 +468,52 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
             }
         }
     }
+    if let (Some(imager), Some(q)) = (imager, q) {
+        let mut field = LaserField::new(q);
+        for (y, row) in rows.iter().enumerate() {
+            for (x, energies) in &row.laser {
+                field.add_pixel(*x, y, energies);
+            }
+        }
+        imager.image_into(&field, &mut out, w, h, seed);
+    }
     out
 }
 
-/// One image row: centre samples of uniform pixels, and (column, PSF patch) of supersampled ones.
-type RowResult = (Vec<f64>, Vec<(usize, Vec<f64>)>);
+/// The coherent imager of `optics`, built once per process for each set of optics in use.
+fn coherent_imager(optics: &Optics) -> Arc<CoherentImager> {
+    static CACHE: Mutex<Vec<(Optics, Arc<CoherentImager>)>> = Mutex::new(Vec::new());
+    let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, imager)) = cache.iter().find(|(o, _)| o == optics) {
+        return imager.clone();
+    }
+    let imager = Arc::new(CoherentImager::new(optics));
+    cache.push((*optics, imager.clone()));
+    imager
+}
+
+/// Energies (e⁻) of a pixel's q × q coherent samples from its n × n signal densities (e⁻ per
+/// pixel area at each sample; n a multiple of q).
+fn sample_energies(density: &[f64], n: usize, q: usize) -> Vec<f64> {
+    let k = n / q;
+    let area = 1.0 / (n * n) as f64;
+    let mut out = vec![0.0; q * q];
+    for (j, row) in density.chunks_exact(n).enumerate() {
+        for (i, v) in row.iter().enumerate() {
+            out[(j / k) * q + i / k] += v * area;
+        }
+    }
+    out
+}
+
+/// One image row: centre samples of uniform pixels, (column, PSF patch) of supersampled ones,
+/// and (column, q × q sample energies) of the laser light left to the coherent imager.
+#[derive(Default)]
+struct RowResult {
+    centre: Vec<f64>,
+    patches: Vec<(usize, Vec<f64>)>,
+    laser: Vec<(usize, Vec<f64>)>,
+}
 
 /// The optical PSF (Gaussian, σ in px) integrated over a pixel: K(t) = Φ((t + ½)/σ) − Φ((t − ½)/σ).
 struct PixelPsf {
@@ -492,7 +629,7 @@ fn erf(x: f64) -> f64 {
 /// across it with the gradient measured between neighbouring samples on the same surface, and a
 /// Gaussian convolved with boxes of widths a, b is, to the order that matters here, a Gaussian
 /// with σ² + (a² + b²)/12 (same area, same centre).
-fn pixel_samples(shader: &Shader, camera: &dyn omni_model::CameraModel, x: f64, y: f64, n: u32) -> Vec<f64> {
+fn pixel_samples(shader: &Shader, camera: &dyn omni_model::CameraModel, x: f64, y: f64, n: u32) -> Vec<Signal> {
     let n = n as usize;
     let sample_px = |k: usize| {
         let (i, j) = (k % n, k / n);
@@ -509,7 +646,7 @@ fn pixel_samples(shader: &Shader, camera: &dyn omni_model::CameraModel, x: f64, 
         (Some((ha, _)), Some((hb, _))) => ha.object == hb.object && ha.normal.dot(&hb.normal) > 0.9,
         _ => false,
     };
-    let mut values = vec![0.0; n * n];
+    let mut values = vec![Signal::default(); n * n];
     for k in 0..n * n {
         let Some((hit, dir)) = &hits[k] else { continue };
         let (i, j) = (k % n, k / n);
@@ -533,7 +670,7 @@ fn pixel_samples(shader: &Shader, camera: &dyn omni_model::CameraModel, x: f64, 
             };
             ((grad(nx).powi(2) + grad(ny).powi(2)) / 12.0).sqrt()
         };
-        values[k] = shader.shade(hit, dir, footprint, shader.speckle(&sample_px(k)));
+        values[k] = shader.shade(hit, dir, footprint);
     }
     values
 }

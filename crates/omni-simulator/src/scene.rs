@@ -1,10 +1,11 @@
 //! Scene geometry: primitives built from [`omni_formats::scene`] and ray casting.
 //!
 //! All shapes are opaque Lambertian reflectors. Ray casting returns the first hit with its
-//! outward geometric normal and the albedo at the hit (checkerboards vary across the face).
+//! outward geometric normal and the albedo at the hit (checkerboards and textures vary across
+//! the face). The scene's lighting gives the ambient light's level at any point.
 
 use nalgebra::Translation3;
-use omni_formats::scene::{SceneFile, SceneObject, Shape};
+use omni_formats::scene::{Lighting, SceneFile, SceneObject, Shape, Texture, TexturePattern};
 use omni_geom::{Isometry3, Point3, Rotation3, UnitQuaternion, Vector3};
 use std::path::Path;
 
@@ -22,6 +23,9 @@ pub struct Hit {
     pub object: usize,
     /// For checkerboards: which face and square colour was hit (used to find edges); 0 otherwise.
     pub pattern: u8,
+    /// Which texture cell and light patches the hit is in (changes across every hard edge of
+    /// albedo or light, so that the renderer supersamples there).
+    pub class: u32,
 }
 
 /// A primitive in its local frame (`local` maps local → world).
@@ -70,12 +74,59 @@ struct Object {
     prim: Prim,
     local: Isometry3<f64>,
     albedo: f64,
+    texture: Option<SolidTexture>,
+}
+
+/// A texture with its direction normalised.
+#[derive(Debug, Clone)]
+struct SolidTexture {
+    pattern: TexturePattern,
+    period: f64,
+    contrast: f64,
+    direction: Vector3<f64>,
+}
+
+impl SolidTexture {
+    /// The albedo factor at `p` (world, mm) and the cell it belongs to.
+    fn at(&self, p: &Point3<f64>) -> (f64, u32) {
+        let cell = |x: f64| (x / (0.5 * self.period)).floor() as i64;
+        let (sign, id) = match self.pattern {
+            TexturePattern::Stripes => {
+                let k = cell(p.coords.dot(&self.direction));
+                (if k.rem_euclid(2) == 0 { 1.0 } else { -1.0 }, k as u64)
+            }
+            TexturePattern::Checker => {
+                let (i, j, k) = (cell(p.x), cell(p.y), cell(p.z));
+                (if (i + j + k).rem_euclid(2) == 0 { 1.0 } else { -1.0 }, mix3(i, j, k))
+            }
+            TexturePattern::Blocks => {
+                let c = |x: f64| (x / self.period).floor() as i64;
+                let id = mix3(c(p.x), c(p.y), c(p.z));
+                (2.0 * (id >> 11) as f64 / (1u64 << 53) as f64 - 1.0, id)
+            }
+        };
+        (1.0 + self.contrast * sign, (id ^ (id >> 32)) as u32)
+    }
+}
+
+fn mix3(i: i64, j: i64, k: i64) -> u64 {
+    use omni_geom::rng::mix;
+    mix(mix(mix(i as u64) ^ j as u64) ^ k as u64)
+}
+
+/// The scene's ambient lighting, checked.
+#[derive(Debug, Clone)]
+struct AmbientField {
+    level: f64,
+    gradient: Option<(Vector3<f64>, f64)>,
+    patches: Vec<(Point3<f64>, f64, f64)>,
 }
 
 /// A scene ready for ray casting.
 #[derive(Debug, Clone)]
 pub struct Scene {
     objects: Vec<Object>,
+    ambient: Option<AmbientField>,
     file: SceneFile,
 }
 
@@ -103,7 +154,33 @@ impl Scene {
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Scene { objects, file })
+        let ambient = file.lighting.as_ref().map(build_lighting).transpose().map_err(|m| format!("lighting: {m}"))?;
+        Ok(Scene { objects, ambient, file })
+    }
+
+    /// The ambient light at `p` relative to the renderer's (1 without lighting).
+    pub fn ambient_factor(&self, p: &Point3<f64>) -> f64 {
+        let Some(a) = &self.ambient else { return 1.0 };
+        let mut f = a.level;
+        if let Some((dir, per_m)) = &a.gradient {
+            f *= (1.0 + per_m * p.coords.dot(dir) / 1000.0).max(0.0);
+        }
+        for (c, r, gain) in &a.patches {
+            if (p - c).norm_squared() <= r * r {
+                f *= gain;
+            }
+        }
+        f
+    }
+
+    /// Bits of the light patches `p` is in.
+    fn patch_bits(&self, p: &Point3<f64>) -> u32 {
+        let Some(a) = &self.ambient else { return 0 };
+        a.patches
+            .iter()
+            .enumerate()
+            .filter(|(_, (c, r, _))| (p - c).norm_squared() <= r * r)
+            .fold(0, |b, (i, _)| b | 1u32.rotate_left(i as u32))
     }
 
     /// The description this scene was built from.
@@ -129,7 +206,14 @@ impl Scene {
                 best = Some(Hit { object: i, ..h });
             }
         }
-        best
+        let mut hit = best?;
+        if let Some(t) = &self.objects[hit.object].texture {
+            let (factor, cell) = t.at(&hit.point);
+            hit.albedo = (hit.albedo * factor).clamp(0.0, 1.0);
+            hit.class = cell;
+        }
+        hit.class ^= self.patch_bits(&hit.point).rotate_left(16);
+        Some(hit)
     }
 
     /// Whether anything blocks the open segment from `a` to `b` (ends excluded by `eps` mm).
@@ -195,10 +279,52 @@ fn face_frame(centre: Vector3<f64>, normal: &Vector3<f64>, up: &Vector3<f64>) ->
     Ok(Isometry3::from_parts(Translation3::from(centre), UnitQuaternion::from_rotation_matrix(&rot)))
 }
 
+fn build_lighting(l: &Lighting) -> Result<AmbientField, String> {
+    if !(l.level.is_finite() && l.level >= 0.0) {
+        return Err(format!("level must be a non-negative number, got {}", l.level));
+    }
+    let gradient = match &l.gradient {
+        Some(g) => {
+            if !g.per_m.is_finite() {
+                return Err(format!("gradient.per_m must be finite, got {}", g.per_m));
+            }
+            Some((direction("gradient.direction", g.direction)?, g.per_m))
+        }
+        None => None,
+    };
+    if l.patches.len() > 32 {
+        return Err(format!("at most 32 patches, got {}", l.patches.len()));
+    }
+    let patches = l
+        .patches
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let c = vec3(&format!("patches[{i}].centre_mm"), p.centre_mm)?;
+            let r = positive(&format!("patches[{i}].radius_mm"), p.radius_mm)?;
+            if !(p.gain.is_finite() && p.gain >= 0.0) {
+                return Err(format!("patches[{i}].gain must be a non-negative number, got {}", p.gain));
+            }
+            Ok((Point3::from(c), r, p.gain))
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    Ok(AmbientField { level: l.level, gradient, patches })
+}
+
+fn build_texture(t: &Texture) -> Result<SolidTexture, String> {
+    let period = positive("texture.period_mm", t.period_mm)?;
+    if !(t.contrast.is_finite() && (0.0..=1.0).contains(&t.contrast)) {
+        return Err(format!("texture.contrast must be in [0, 1], got {}", t.contrast));
+    }
+    let direction = direction("texture.direction", t.direction)?;
+    Ok(SolidTexture { pattern: t.pattern, period, contrast: t.contrast, direction })
+}
+
 fn build_object(o: &SceneObject) -> Result<Object, String> {
     if !(o.albedo.is_finite() && (0.0..=1.0).contains(&o.albedo)) {
         return Err(format!("albedo must be in [0, 1], got {}", o.albedo));
     }
+    let texture = o.texture.as_ref().map(build_texture).transpose()?;
     let (prim, local) = match &o.shape {
         Shape::Rectangle { centre_mm, normal, up, width_mm, height_mm } => {
             let n = direction("normal", *normal)?;
@@ -274,7 +400,7 @@ fn build_object(o: &SceneObject) -> Result<Object, String> {
             (Prim::Cuboid { half, inside: true }, Isometry3::translation(c.x, c.y, c.z))
         }
     };
-    Ok(Object { prim, local, albedo: o.albedo })
+    Ok(Object { prim, local, albedo: o.albedo, texture })
 }
 
 /// A local-frame hit before it is mapped back to the world.
@@ -291,7 +417,15 @@ impl Object {
         let d = self.local.inverse_transform_vector(dir);
         let h = self.intersect_local(&o, &d, t_min, t_max)?;
         let normal = self.local.transform_vector(&h.normal);
-        Some(Hit { t: h.t, point: origin + dir * h.t, normal, albedo: h.albedo, object: 0, pattern: h.pattern })
+        Some(Hit {
+            t: h.t,
+            point: origin + dir * h.t,
+            normal,
+            albedo: h.albedo,
+            object: 0,
+            pattern: h.pattern,
+            class: 0,
+        })
     }
 
     fn intersect_local(&self, o: &Point3<f64>, d: &Vector3<f64>, t0: f64, t1: f64) -> Option<LocalHit> {

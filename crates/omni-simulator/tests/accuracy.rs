@@ -1,6 +1,9 @@
 //! The simulator's consistency checks (issue 3): ground truth triangulates onto the surface,
 //! the rendered stripe centre matches the truth, and rendering is deterministic.
 
+mod common;
+
+use common::centroid_along;
 use omni_geom::{Point3, Vector2, intersect_ray_plane};
 use omni_simulator::{
     BenchObject, RenderOptions, Scene, Sensor, TruthPoint, paper_bench, render_ambient_frame, render_laser_frame,
@@ -61,44 +64,6 @@ fn truth_is_dense_and_ordered() {
     }
 }
 
-/// Bilinear intensity centroid of the stripe profile along `dir` (unit) through the truth pixel:
-/// its offset (px) from the truth pixel.
-fn centroid_along(img: &[f64], w: u32, h: u32, t: &TruthPoint, dir: Vector2<f64>) -> Option<f64> {
-    let p = Vector2::from(t.pixel);
-    let at = |q: Vector2<f64>| -> Option<f64> {
-        if !(q.x >= 0.0 && q.y >= 0.0 && q.x <= (w - 1) as f64 && q.y <= (h - 1) as f64) {
-            return None;
-        }
-        let (x0, y0) = (q.x.floor() as usize, q.y.floor() as usize);
-        let (x1, y1) = ((x0 + 1).min(w as usize - 1), (y0 + 1).min(h as usize - 1));
-        let (fx, fy) = (q.x - x0 as f64, q.y - y0 as f64);
-        let g = |x: usize, y: usize| img[y * w as usize + x];
-        Some((1.0 - fy) * ((1.0 - fx) * g(x0, y0) + fx * g(x1, y0)) + fy * ((1.0 - fx) * g(x0, y1) + fx * g(x1, y1)))
-    };
-    let offsets: Vec<f64> = (-40..=40).map(|i| i as f64 * 0.1).collect();
-    let values: Vec<f64> = offsets.iter().map(|s| at(p + dir * *s)).collect::<Option<_>>()?;
-    let peak = values.iter().cloned().fold(0.0, f64::max);
-    if peak < 20.0 {
-        return None;
-    }
-    // Only the connected run around the peak above 5 % of it (another stripe may be near).
-    let thr = 0.05 * peak;
-    let k = values.iter().position(|v| *v == peak)?;
-    let (mut a, mut b) = (k, k);
-    while a > 0 && values[a - 1] > thr {
-        a -= 1;
-    }
-    while b + 1 < values.len() && values[b + 1] > thr {
-        b += 1;
-    }
-    if a == 0 || b + 1 == values.len() {
-        return None; // profile cut by the sampling window
-    }
-    let (sw, swx) =
-        (a..=b).fold((0.0, 0.0), |(sw, swx), i| (sw + values[i] - thr, swx + (values[i] - thr) * offsets[i]));
-    Some(swx / sw)
-}
-
 /// Radius (px) of the circle through the truth pixels `i − k`, `i`, `i + k`.
 fn curvature_radius(line: &[TruthPoint], i: usize, k: usize) -> f64 {
     if i < k || i + k >= line.len() {
@@ -115,7 +80,7 @@ fn curvature_radius(line: &[TruthPoint], i: usize, k: usize) -> f64 {
 #[test]
 fn noiseless_stripe_centroid_matches_truth() {
     let sensor = Sensor::paper();
-    let opts = RenderOptions::noiseless();
+    let opts = RenderOptions::ideal_noiseless();
     for (object, alpha_deg) in [
         (BenchObject::Plane, 15.0),
         (BenchObject::Plane, 24.0),
@@ -164,7 +129,7 @@ fn same_seed_same_png_other_seed_other_noise() {
     let sensor = Sensor::paper_scaled(256);
     let scene = Scene::from_file(paper_bench(BenchObject::Sphere)).unwrap();
     let png = |seed| {
-        let opts = RenderOptions { seed, ..Default::default() };
+        let opts = RenderOptions { seed, ..RenderOptions::ideal() };
         render_laser_frame(&sensor, &scene, 0.25, 0, &[0, 1], &opts).image.to_png_bytes().unwrap()
     };
     assert_eq!(png(7), png(7));

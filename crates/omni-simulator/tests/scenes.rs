@@ -96,7 +96,7 @@ fn laser_shadows_are_dark_and_absent_from_truth() {
     assert!(inside.is_empty(), "truth points inside the shadow (|y| < {edge}): {:?}", &inside[..inside.len().min(3)]);
     assert!(on_plane.iter().any(|t| t.xyz[1].abs() < edge + 0.5), "truth ends at the shadow edge {edge}");
 
-    let opts = RenderOptions::noiseless();
+    let opts = RenderOptions::ideal_noiseless();
     let lit = render_laser_frame(&sensor, &s, alpha, 0, &[0], &opts).image;
     let dark = render_ambient_frame(&sensor, &s, &opts);
     let z_plane = stripe_z(&sensor, alpha, 500.0);
@@ -139,7 +139,7 @@ fn camera_occlusions_hide_the_stripe() {
 fn default_stripe_level_is_a_real_unsaturated_stripe() {
     let sensor = Sensor::paper();
     let s = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
-    let opts = RenderOptions::noiseless();
+    let opts = RenderOptions::ideal_noiseless();
     let frame = render_laser_frame(&sensor, &s, 20f64.to_radians(), 0, &[0], &opts);
     let peaks: Vec<u16> = frame
         .truth
@@ -158,7 +158,7 @@ fn motion_blur_widens_the_stripe_about_the_same_centre() {
     let sensor = Sensor::paper_scaled(512);
     let s = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
     let alpha = 20f64.to_radians();
-    let still = RenderOptions { ambient_e: 0.0, ..RenderOptions::noiseless() };
+    let still = RenderOptions { ambient_e: 0.0, ..RenderOptions::ideal_noiseless() };
     let moving = RenderOptions { motion_blur_deg: 0.5, ..still.clone() };
     let a = render_laser_frame(&sensor, &s, alpha, 0, &[0], &still);
     let b = render_laser_frame(&sensor, &s, alpha, 0, &[0], &moving);

@@ -3,14 +3,14 @@
 
 use omni_formats::scene::{SceneFile, SceneObject, Shape};
 use omni_simulator::{
-    BenchObject, RenderOptions, Scene, Sensor, paper_bench, render_ambient_frame, render_laser_frame,
+    BenchObject, Imaging, Optics, RenderOptions, Scene, Sensor, paper_bench, render_ambient_frame, render_laser_frame,
 };
 
 /// A room seen in every direction, albedo 0.5: every pixel in the mirror annulus collects
 /// 0.5 · ambient_e electrons.
 fn grey_room() -> Scene {
     let room = Shape::Room { centre_mm: [0.0, 0.0, 0.0], size_mm: [3000.0, 3000.0, 3000.0] };
-    Scene::from_file(SceneFile::new(vec![SceneObject { name: None, albedo: 0.5, shape: room }])).unwrap()
+    Scene::from_file(SceneFile::new(vec![SceneObject { name: None, albedo: 0.5, texture: None, shape: room }])).unwrap()
 }
 
 /// Pixels well inside the mirror annulus (away from the rim and blind centre, blurred there).
@@ -30,7 +30,7 @@ fn annulus_pixels(sensor: &Sensor) -> Vec<usize> {
 fn level_and_noise_follow_photon_and_read_noise() {
     let sensor = Sensor::paper_scaled(192);
     let scene = grey_room();
-    let opts = RenderOptions { bit_depth: 16, ..Default::default() };
+    let opts = RenderOptions { bit_depth: 16, ..RenderOptions::ideal() };
     let gain = 65535.0 / opts.full_well_e; // DN per electron
     let signal_e = 0.5 * opts.ambient_e;
     let a = render_ambient_frame(&sensor, &scene, &RenderOptions { seed: 1, ..opts.clone() });
@@ -50,7 +50,7 @@ fn level_and_noise_follow_photon_and_read_noise() {
 fn gamma_and_quantisation() {
     let sensor = Sensor::paper_scaled(96);
     let scene = grey_room();
-    let opts = RenderOptions { gamma: 2.2, ..RenderOptions::noiseless() };
+    let opts = RenderOptions { gamma: 2.2, ..RenderOptions::ideal_noiseless() };
     let f = render_ambient_frame(&sensor, &scene, &opts);
     let expected = (255.0 * (0.5 * opts.ambient_e / opts.full_well_e).powf(1.0 / 2.2)).round() as u16;
     assert!(annulus_pixels(&sensor).iter().all(|&i| f.data[i] == expected), "expected {expected}");
@@ -60,9 +60,11 @@ fn gamma_and_quantisation() {
 fn strong_laser_saturates_at_full_scale() {
     let sensor = Sensor::paper_scaled(256);
     let scene = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
-    let normal = render_laser_frame(&sensor, &scene, 0.35, 0, &[0], &RenderOptions::noiseless());
-    let strong =
-        RenderOptions { laser_strength: 10.0 * RenderOptions::default().laser_strength, ..RenderOptions::noiseless() };
+    let normal = render_laser_frame(&sensor, &scene, 0.35, 0, &[0], &RenderOptions::ideal_noiseless());
+    let strong = RenderOptions {
+        laser_strength: 10.0 * RenderOptions::ideal().laser_strength,
+        ..RenderOptions::ideal_noiseless()
+    };
     let hot = render_laser_frame(&sensor, &scene, 0.35, 0, &[0], &strong);
     let saturated = |f: &omni_simulator::Frame16| f.data.iter().filter(|v| **v == 255).count();
     assert_eq!(saturated(&normal.image), 0, "the default stripe is unsaturated");
@@ -75,12 +77,22 @@ fn speckle_modulates_the_stripe_and_keeps_its_mean() {
     let sensor = Sensor::paper_scaled(512);
     let scene = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
     let alpha = 20f64.to_radians();
-    let clean = RenderOptions { ambient_e: 0.0, ..RenderOptions::noiseless() };
-    let speckled = RenderOptions { speckle_contrast: 0.3, ..clean.clone() };
+    let lens = |speckle| Imaging::Lens { optics: Optics::paper(), speckle };
+    // A weak laser: no bright speckle may clip at the full well.
+    let clean = RenderOptions {
+        ambient_e: 0.0,
+        noise: false,
+        bit_depth: 16,
+        laser_strength: 0.25 * RenderOptions::default().laser_strength,
+        imaging: lens(false),
+        ..RenderOptions::default()
+    };
+    let speckled = |seed| RenderOptions { seed, imaging: lens(true), ..clean.clone() };
     let a = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &clean);
-    let b = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &speckled);
-    assert_eq!(b.image, render_laser_frame(&sensor, &scene, alpha, 0, &[0], &speckled).image, "deterministic");
-    // Stripe energy across the stripe (3 × 3 sum at each truth pixel, every 4th sample).
+    let b = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &speckled(0));
+    assert_eq!(b.image, render_laser_frame(&sensor, &scene, alpha, 0, &[0], &speckled(0)).image, "deterministic");
+    assert_ne!(b.image, render_laser_frame(&sensor, &scene, alpha, 0, &[0], &speckled(1)).image, "a new pattern");
+    // Stripe energy across the stripe (5 × 5 sum at each truth pixel, every 4th sample).
     let energy = |f: &omni_simulator::Frame16| -> Vec<f64> {
         a.truth
             .iter()
@@ -102,10 +114,18 @@ fn speckle_modulates_the_stripe_and_keeps_its_mean() {
         let m = v.iter().sum::<f64>() / v.len() as f64;
         ((v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt() / m, m)
     };
-    let ((s0, m0), (s1, m1)) = (rel_std(&energy(&a.image)), rel_std(&energy(&b.image)));
-    eprintln!("stripe energy relative std: clean {s0:.3}, speckle 0.3 → {s1:.3}; mean {m0:.0} → {m1:.0}");
-    assert!(s1 > s0 + 0.05, "speckle must modulate the stripe: {s0} → {s1}");
-    assert!((m1 / m0 - 1.0).abs() < 0.1, "speckle keeps the mean: {m0} → {m1}");
+    let (s0, m0) = rel_std(&energy(&a.image));
+    // The total of one stripe's speckle fluctuates by a few % (a few hundred grains): four
+    // patterns are averaged for the mean.
+    let patterns: Vec<(f64, f64)> = (0..4)
+        .map(|seed| rel_std(&energy(&render_laser_frame(&sensor, &scene, alpha, 0, &[0], &speckled(seed)).image)))
+        .collect();
+    let s1 = patterns.iter().map(|p| p.0).sum::<f64>() / 4.0;
+    let m1 = patterns.iter().map(|p| p.1).sum::<f64>() / 4.0;
+    eprintln!("stripe energy relative std: clean {s0:.3}, speckle → {s1:.3}; mean {m0:.0} → {m1:.0}");
+    assert!(s1 > s0 + 0.1, "speckle must modulate the stripe: {s0} → {s1}");
+    // The 5 × 5 sum misses the diffraction rings' far tail (a few %) that the Gaussian lacks.
+    assert!((m1 / m0 - 1.0).abs() < 0.08, "speckle keeps the mean: {m0} → {m1}");
 }
 
 #[test]
@@ -116,12 +136,15 @@ fn named_conditions_are_what_they_say() {
         let f = render_laser_frame(&sensor, &scene, 20f64.to_radians(), 0, &[0], &RenderOptions { noise: false, ..o });
         *f.image.data.iter().max().unwrap()
     };
-    let (normal, weak, hot) =
-        (peak(RenderOptions::default()), peak(RenderOptions::weak_stripe()), peak(RenderOptions::saturated()));
+    let (normal, weak, hot) = (
+        peak(RenderOptions::ideal()),
+        peak(RenderOptions::ideal_weak_stripe()),
+        peak(RenderOptions::ideal_saturated()),
+    );
     eprintln!("peaks at 512 px: default {normal}, weak {weak}, saturated {hot}");
     assert!(hot == 255 && normal < 255 && weak < normal);
     let ambient =
-        render_ambient_frame(&sensor, &scene, &RenderOptions { noise: false, ..RenderOptions::strong_ambient() });
+        render_ambient_frame(&sensor, &scene, &RenderOptions { noise: false, ..RenderOptions::ideal_strong_ambient() });
     let plane_level = *ambient.data.iter().max().unwrap();
     assert!((115..=130).contains(&plane_level), "bench plane under strong ambient: {plane_level}");
 }

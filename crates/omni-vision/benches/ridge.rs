@@ -28,6 +28,7 @@ fn frames(sensor: &Sensor) -> Vec<BenchFrame> {
     let room = SceneFile::new(vec![SceneObject {
         name: Some("room".into()),
         albedo: 0.8,
+        texture: None,
         shape: Shape::Room { centre_mm: [0.0, 0.0, 0.0], size_mm: [1600.0, 1600.0, 1000.0] },
     }]);
     let cases = [
@@ -41,7 +42,7 @@ fn frames(sensor: &Sensor) -> Vec<BenchFrame> {
     cases
         .into_iter()
         .map(|(name, scene, alpha)| {
-            let lf = render_laser_frame(sensor, &scene, alpha.to_radians(), 0, &[0, 1], &RenderOptions::default());
+            let lf = render_laser_frame(sensor, &scene, alpha.to_radians(), 0, &[0, 1], &RenderOptions::ideal());
             let img = GrayImage { width: lf.image.width, height: lf.image.height, bit_depth: 8, data: lf.image.data };
             write_gray_png(&dir.join(format!("{name}.png")), &img).unwrap();
             BenchFrame { name, pixels: img.to_u8() }

@@ -113,7 +113,7 @@ fn rendered_rig(sensor: &Sensor, rig: &Rig, step_deg: f64, pose_images: u64) -> 
     let scene = Scene::from_file(rig.scene()).unwrap();
     let (w, h) = sensor.camera.image_size();
     let detector = RidgeDetector::new(w, h, sensor.camera.mirror_circle(), RidgeParams::default());
-    let opts = RenderOptions::default();
+    let opts = RenderOptions::ideal();
     let ambient = render_ambient_frame(sensor, &scene, &RenderOptions { seed: 99, ..opts.clone() });
     let count = (16.0 / step_deg).round() as u64 + 1;
     let (frames, truths): (Vec<FrameStripes>, Vec<_>) = (0..count)

@@ -103,6 +103,7 @@ fn scenes() -> Vec<Scene> {
     let room = SceneFile::new(vec![SceneObject {
         name: Some("room".into()),
         albedo: 0.8,
+        texture: None,
         shape: Shape::Room { centre_mm: [0.0, 0.0, 0.0], size_mm: [1600.0, 1600.0, 1000.0] },
     }]);
     vec![Scene::from_file(room).unwrap(), Scene::from_file(paper_bench(BenchObject::Plane)).unwrap()]
@@ -218,7 +219,7 @@ fn paper(results: &[(RidgeParams, Measured)]) -> &Measured {
 
 #[test]
 fn default_noise_unsaturated_stripe() {
-    let frames = frames(&RenderOptions::default(), LaserOff::None);
+    let frames = frames(&RenderOptions::ideal(), LaserOff::None);
     let results = report("default noise, dim ambient, no laser-off frame", &frames);
     let (params, m) = best(&results);
     let (rms, bias) = m.rms_bias();
@@ -241,7 +242,7 @@ fn default_noise_unsaturated_stripe() {
 
 #[test]
 fn saturated_stripe() {
-    let opts = RenderOptions { laser_strength: 8.0 * omni_simulator::DEFAULT_LASER_STRENGTH, ..Default::default() };
+    let opts = RenderOptions { laser_strength: 8.0 * omni_simulator::DEFAULT_LASER_STRENGTH, ..RenderOptions::ideal() };
     let frames = frames(&opts, LaserOff::None);
     let results = report("saturated stripe (laser ×8)", &frames);
     for (params, m) in &results {
@@ -254,7 +255,7 @@ fn saturated_stripe() {
 #[test]
 fn weak_stripe() {
     // Laser at 30 %: the brightest stripe pixels reach about 60 of 255 (ambient included).
-    let opts = RenderOptions { laser_strength: 0.3 * omni_simulator::DEFAULT_LASER_STRENGTH, ..Default::default() };
+    let opts = RenderOptions { laser_strength: 0.3 * omni_simulator::DEFAULT_LASER_STRENGTH, ..RenderOptions::ideal() };
     let frames = frames(&opts, LaserOff::None);
     let results = report("weak stripe (laser ×0.3)", &frames);
     let (params, m) = best(&results);
@@ -271,7 +272,7 @@ fn weak_stripe() {
 #[test]
 fn strong_ambient_with_laser_off_frame() {
     // Ambient 4× brighter than default: a white wall at ≈ 204 of 255.
-    let opts = RenderOptions { ambient_e: 8000.0, ..Default::default() };
+    let opts = RenderOptions { ambient_e: 8000.0, ..RenderOptions::ideal() };
     let frames = frames(&opts, LaserOff::ZeroPower);
     let results = report("strong ambient, laser-off frame (zero laser power) subtracted", &frames);
     let (params, m) = best(&results);
@@ -294,7 +295,7 @@ fn strong_ambient_with_laser_off_frame() {
 /// estimator at 0.110 px.)
 #[test]
 fn strong_ambient_with_render_ambient_frame() {
-    let opts = RenderOptions { ambient_e: 8000.0, ..Default::default() };
+    let opts = RenderOptions { ambient_e: 8000.0, ..RenderOptions::ideal() };
     let frames = frames(&opts, LaserOff::Ambient);
     let results = report("strong ambient, render_ambient_frame subtracted", &frames);
     let (params, m) = best(&results);

@@ -1,0 +1,341 @@
+//! Coherent imaging of the laser light: speckle, diffraction and defocus from the lens pupil.
+//!
+//! Laser light scattered by a rough surface leaves it with a random phase at every point. Its
+//! image is the field convolved with the lens's amplitude PSF h (the Fourier transform of the
+//! pupil: a disc cut off at 1/(2λN), with defocus as a quadratic phase), then |·|² and the
+//! pixel's area. So the object field is a circular complex Gaussian whose intensity is the
+//! geometric laser irradiance (sampled q × q per pixel), and the image is |h ∗ field|² summed
+//! over each pixel's samples. Grain (≈ λN), contrast and the stripe's diffraction blur come out
+//! of this; none is set by hand. Σ|h|² = 1 keeps the mean: its expectation is the geometric
+//! image blurred by the intensity PSF |h|². A depolarising surface adds `speckle_patterns`
+//! independent patterns, each carrying an equal share of the light.
+//!
+//! The laser lights a thin band of the image, so the field lives in tiles of [`TILE_PX`] pixels
+//! that hold light; each is convolved by FFT with a margin of [`MARGIN_PX`] (h is cut there)
+//! and the overlapping outputs are summed as fields, in a fixed order, before squaring.
+
+use crate::rng::{SplitMix64, mix};
+use omni_model::Optics;
+use rayon::prelude::*;
+use rustfft::num_complex::Complex;
+use rustfft::{Fft, FftPlanner};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// Side of a field tile (px).
+pub(crate) const TILE_PX: usize = 16;
+/// How far the amplitude PSF reaches (px); it is tapered to zero there.
+pub(crate) const MARGIN_PX: usize = 8;
+
+type C64 = Complex<f64>;
+type C32 = Complex<f32>;
+
+/// The laser's geometric irradiance on the q × q sample grid, tile by tile: energy (e⁻) per
+/// sample, row-major within a tile of (q·TILE_PX)² samples.
+pub(crate) struct LaserField {
+    pub q: usize,
+    pub tiles: BTreeMap<(u32, u32), Vec<f64>>,
+}
+
+impl LaserField {
+    pub fn new(q: usize) -> Self {
+        LaserField { q, tiles: BTreeMap::new() }
+    }
+
+    /// Adds pixel (x, y)'s q × q sample energies (row-major).
+    pub fn add_pixel(&mut self, x: usize, y: usize, energies: &[f64]) {
+        let q = self.q;
+        let side = q * TILE_PX;
+        let key = ((x / TILE_PX) as u32, (y / TILE_PX) as u32);
+        let tile = self.tiles.entry(key).or_insert_with(|| vec![0.0; side * side]);
+        let (ox, oy) = ((x % TILE_PX) * q, (y % TILE_PX) * q);
+        for j in 0..q {
+            for i in 0..q {
+                tile[(oy + j) * side + ox + i] += energies[j * q + i];
+            }
+        }
+    }
+}
+
+/// The imaging system for one set of optics.
+pub(crate) struct CoherentImager {
+    q: usize,
+    /// FFT size per axis: q · (TILE_PX + 2 · MARGIN_PX).
+    n: usize,
+    /// FFT of the amplitude PSF on the n × n grid, transposed, with the inverse's 1/n² folded in.
+    transfer_t: Vec<C64>,
+    fft: Arc<dyn Fft<f64>>,
+    ifft: Arc<dyn Fft<f64>>,
+    patterns: u32,
+}
+
+impl CoherentImager {
+    /// Samples per pixel axis for `optics`: the intensity's band (twice the pupil's cutoff) must
+    /// stay below the sampling rate.
+    pub fn samples_per_px(optics: &Optics) -> usize {
+        if 2.0 * optics.coherent_cutoff_per_px() <= 3.0 { 4 } else { 8 }
+    }
+
+    pub fn new(optics: &Optics) -> Self {
+        let q = Self::samples_per_px(optics);
+        let n = q * (TILE_PX + 2 * MARGIN_PX);
+        let mut planner = FftPlanner::new();
+        let fft = planner.plan_fft_forward(n);
+        let ifft = planner.plan_fft_inverse(n);
+        let kernel = amplitude_psf(optics, q, &mut planner);
+        // Embed the kernel (centred at 0, wrapped) and transform it.
+        let r = (MARGIN_PX * q) as isize;
+        let side = 2 * r as usize + 1;
+        let mut grid = vec![C64::new(0.0, 0.0); n * n];
+        for dy in -r..=r {
+            for dx in -r..=r {
+                let v = kernel[(dy + r) as usize * side + (dx + r) as usize];
+                let (x, y) = (dx.rem_euclid(n as isize) as usize, dy.rem_euclid(n as isize) as usize);
+                grid[y * n + x] = v;
+            }
+        }
+        fft2_transposed(&mut grid, n, &fft);
+        let scale = 1.0 / (n * n) as f64;
+        let transfer_t = grid.into_iter().map(|c| c * scale).collect();
+        CoherentImager { q, n, transfer_t, fft, ifft, patterns: optics.speckle_patterns }
+    }
+
+    pub fn q(&self) -> usize {
+        self.q
+    }
+
+    /// Adds the laser's image (e⁻ per pixel) to `out` (w × h, row-major).
+    pub fn image_into(&self, field: &LaserField, out: &mut [f64], w: usize, h: usize, seed: u64) {
+        debug_assert_eq!(field.q, self.q);
+        let keys: Vec<(u32, u32)> = field.tiles.keys().copied().collect();
+        let mut intensity: BTreeMap<(u32, u32), Vec<f64>> = BTreeMap::new();
+        for pattern in 0..self.patterns {
+            let share = 1.0 / self.patterns as f64;
+            let pattern_seed = mix(seed ^ mix(0x5BEC_0000 + pattern as u64));
+            let convolved: Vec<Vec<C32>> = keys
+                .par_iter()
+                .map(|key| {
+                    self.convolve_tile(&field.tiles[key], share, SplitMix64::stream(pattern_seed, tile_id(*key)))
+                })
+                .collect();
+            let index: BTreeMap<(u32, u32), usize> = keys.iter().enumerate().map(|(i, k)| (*k, i)).collect();
+            let outputs = output_tiles(&keys);
+            let sums: Vec<Vec<f64>> =
+                outputs.par_iter().map(|key| self.tile_intensity(*key, &index, &convolved)).collect();
+            for (key, pixels) in outputs.into_iter().zip(sums) {
+                let acc = intensity.entry(key).or_insert_with(|| vec![0.0; TILE_PX * TILE_PX]);
+                acc.iter_mut().zip(&pixels).for_each(|(a, p)| *a += p);
+            }
+        }
+        for ((tx, ty), pixels) in intensity {
+            for j in 0..TILE_PX {
+                let y = ty as usize * TILE_PX + j;
+                if y >= h {
+                    break;
+                }
+                for i in 0..TILE_PX {
+                    let x = tx as usize * TILE_PX + i;
+                    if x < w {
+                        out[y * w + x] += pixels[j * TILE_PX + i];
+                    }
+                }
+            }
+        }
+    }
+
+    /// One tile's random field (a share of its energy), convolved with h: the n × n output
+    /// covering the tile and its margin.
+    fn convolve_tile(&self, energies: &[f64], share: f64, mut rng: SplitMix64) -> Vec<C32> {
+        let (n, q) = (self.n, self.q);
+        let side = q * TILE_PX;
+        let off = q * MARGIN_PX;
+        let mut grid = vec![C64::new(0.0, 0.0); n * n];
+        for j in 0..side {
+            for i in 0..side {
+                let e = energies[j * side + i];
+                if e > 0.0 {
+                    // A circular complex Gaussian of variance e·share.
+                    let a = (0.5 * e * share).sqrt();
+                    grid[(off + j) * n + off + i] = C64::new(a * rng.normal(), a * rng.normal());
+                }
+            }
+        }
+        // Rows outside the tile's core are zero: their transforms are zero too.
+        for row in grid.chunks_exact_mut(n).skip(off).take(side) {
+            self.fft.process(row);
+        }
+        transpose(&mut grid, n);
+        self.fft.process(&mut grid);
+        grid.iter_mut().zip(&self.transfer_t).for_each(|(g, t)| *g *= t);
+        self.ifft.process(&mut grid);
+        transpose(&mut grid, n);
+        self.ifft.process(&mut grid);
+        grid.into_iter().map(|c| C32::new(c.re as f32, c.im as f32)).collect()
+    }
+
+    /// Pixel intensities of output tile `key`: the fields of the input tiles around it summed
+    /// (in a fixed order), squared and summed over each pixel's samples.
+    fn tile_intensity(&self, key: (u32, u32), index: &BTreeMap<(u32, u32), usize>, conv: &[Vec<C32>]) -> Vec<f64> {
+        let (n, q) = (self.n, self.q);
+        let side = q * TILE_PX;
+        let mut field = vec![C64::new(0.0, 0.0); side * side];
+        for dy in -1i64..=1 {
+            for dx in -1i64..=1 {
+                let (sx, sy) = (key.0 as i64 + dx, key.1 as i64 + dy);
+                if sx < 0 || sy < 0 {
+                    continue;
+                }
+                let Some(&src) = index.get(&(sx as u32, sy as u32)) else { continue };
+                // Source tile's output sample (0, 0) sits at q·(MARGIN − TILE) samples from its
+                // own origin; this tile's origin is (−dx, −dy) tiles from the source's.
+                let ox = (q * MARGIN_PX) as i64 - dx * side as i64;
+                let oy = (q * MARGIN_PX) as i64 - dy * side as i64;
+                for j in 0..side as i64 {
+                    let y = oy + j;
+                    if y < 0 || y >= n as i64 {
+                        continue;
+                    }
+                    let row = &conv[src][y as usize * n..(y as usize + 1) * n];
+                    for i in 0..side as i64 {
+                        let x = ox + i;
+                        if x >= 0 && x < n as i64 {
+                            let c = row[x as usize];
+                            field[j as usize * side + i as usize] += C64::new(c.re as f64, c.im as f64);
+                        }
+                    }
+                }
+            }
+        }
+        let mut pixels = vec![0.0; TILE_PX * TILE_PX];
+        for (j, row) in field.chunks_exact(side).enumerate() {
+            for (i, c) in row.iter().enumerate() {
+                pixels[(j / q) * TILE_PX + i / q] += c.norm_sqr();
+            }
+        }
+        pixels
+    }
+}
+
+/// Every tile whose pixels can receive light from the given input tiles (their 3 × 3 blocks).
+fn output_tiles(inputs: &[(u32, u32)]) -> Vec<(u32, u32)> {
+    let mut out = std::collections::BTreeSet::new();
+    for &(x, y) in inputs {
+        for dy in -1i64..=1 {
+            for dx in -1i64..=1 {
+                let (tx, ty) = (x as i64 + dx, y as i64 + dy);
+                if tx >= 0 && ty >= 0 {
+                    out.insert((tx as u32, ty as u32));
+                }
+            }
+        }
+    }
+    out.into_iter().collect()
+}
+
+fn tile_id(key: (u32, u32)) -> u64 {
+    ((key.1 as u64) << 32) | key.0 as u64
+}
+
+/// The amplitude PSF on the q-per-pixel grid within MARGIN_PX, tapered to zero at its edge and
+/// scaled to Σ|h|² = 1: the inverse transform of the pupil (a disc at the coherent cutoff with
+/// the defocus phase 2π·W₂₀·ρ²), sampled finely in frequency.
+fn amplitude_psf(optics: &Optics, q: usize, planner: &mut FftPlanner<f64>) -> Vec<C64> {
+    let big = 1024usize;
+    let df = q as f64 / big as f64; // cycles per px between frequency samples
+    let cutoff = optics.coherent_cutoff_per_px();
+    let waves = optics.defocus_waves();
+    let mut pupil = vec![C64::new(0.0, 0.0); big * big];
+    for j in 0..big {
+        let fy = freq(j, big) * df;
+        for i in 0..big {
+            let fx = freq(i, big) * df;
+            let rho2 = (fx * fx + fy * fy) / (cutoff * cutoff);
+            if rho2 <= 1.0 {
+                pupil[j * big + i] = C64::from_polar(1.0, 2.0 * std::f64::consts::PI * waves * rho2);
+            }
+        }
+    }
+    let ifft = planner.plan_fft_inverse(big);
+    fft2_with(&mut pupil, big, &ifft);
+    let r = (MARGIN_PX * q) as isize;
+    let side = 2 * r as usize + 1;
+    let mut kernel = vec![C64::new(0.0, 0.0); side * side];
+    for dy in -r..=r {
+        for dx in -r..=r {
+            let dist = ((dx * dx + dy * dy) as f64).sqrt() / r as f64;
+            if dist >= 1.0 {
+                continue;
+            }
+            // cos² taper over the outer quarter: the cut leaves no ringing edge.
+            let taper =
+                if dist < 0.75 { 1.0 } else { (0.5 * std::f64::consts::PI * (dist - 0.75) / 0.25).cos().powi(2) };
+            let (x, y) = (dx.rem_euclid(big as isize) as usize, dy.rem_euclid(big as isize) as usize);
+            kernel[(dy + r) as usize * side + (dx + r) as usize] = pupil[y * big + x] * taper;
+        }
+    }
+    let energy: f64 = kernel.iter().map(|c| c.norm_sqr()).sum();
+    kernel.iter_mut().for_each(|c| *c /= energy.sqrt());
+    kernel
+}
+
+/// Signed frequency index of FFT bin `i` of `n`.
+fn freq(i: usize, n: usize) -> f64 {
+    if i < n / 2 { i as f64 } else { i as f64 - n as f64 }
+}
+
+/// In-place 2-D transform that leaves the result transposed (rows, transpose, rows).
+fn fft2_transposed(grid: &mut [C64], n: usize, fft: &Arc<dyn Fft<f64>>) {
+    fft.process(grid);
+    transpose(grid, n);
+    fft.process(grid);
+}
+
+/// In-place 2-D transform in the original orientation.
+fn fft2_with(grid: &mut [C64], n: usize, fft: &Arc<dyn Fft<f64>>) {
+    fft2_transposed(grid, n, fft);
+    transpose(grid, n);
+}
+
+fn transpose<T: Copy>(grid: &mut [T], n: usize) {
+    for j in 0..n {
+        for i in j + 1..n {
+            grid.swap(j * n + i, i * n + j);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A uniformly lit square: the mean is kept, and the contrast of fully developed speckle
+    /// (one pattern) integrated over pixels is below 1 and grows with the F-number.
+    #[test]
+    fn speckle_keeps_the_mean_and_its_contrast_follows_the_aperture() {
+        let mut contrasts = vec![];
+        for f_number in [2.8, 8.0] {
+            let optics = Optics { f_number, defocus_px: 0.0, speckle_patterns: 1, ..Optics::paper() };
+            let imager = CoherentImager::new(&optics);
+            let q = imager.q();
+            let mut field = LaserField::new(q);
+            let e = vec![100.0 / (q * q) as f64; q * q];
+            for y in 16..80 {
+                for x in 16..80 {
+                    field.add_pixel(x, y, &e);
+                }
+            }
+            let (w, h) = (96, 96);
+            let mut out = vec![0.0; w * h];
+            imager.image_into(&field, &mut out, w, h, 7);
+            let inner: Vec<f64> =
+                (24..72).flat_map(|y| (24..72).map(move |x| (x, y))).map(|(x, y)| out[y * w + x]).collect();
+            let mean = inner.iter().sum::<f64>() / inner.len() as f64;
+            let sd = (inner.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / inner.len() as f64).sqrt();
+            assert!((mean / 100.0 - 1.0).abs() < 0.05, "F/{f_number}: mean {mean}");
+            contrasts.push(sd / mean);
+            let total: f64 = out.iter().sum();
+            assert!((total / (64.0 * 64.0 * 100.0) - 1.0).abs() < 0.05, "energy {total}");
+        }
+        assert!(contrasts[0] < contrasts[1] && contrasts[1] < 1.0 && contrasts[0] > 0.3, "{contrasts:?}");
+    }
+}

@@ -1,0 +1,42 @@
+//! Helpers shared by the simulator's integration tests.
+
+use omni_geom::Vector2;
+use omni_simulator::TruthPoint;
+
+/// Bilinear intensity centroid of the stripe profile along `dir` (unit) through the truth pixel:
+/// its offset (px) from the truth pixel.
+pub fn centroid_along(img: &[f64], w: u32, h: u32, t: &TruthPoint, dir: Vector2<f64>) -> Option<f64> {
+    let p = Vector2::from(t.pixel);
+    let at = |q: Vector2<f64>| -> Option<f64> {
+        if !(q.x >= 0.0 && q.y >= 0.0 && q.x <= (w - 1) as f64 && q.y <= (h - 1) as f64) {
+            return None;
+        }
+        let (x0, y0) = (q.x.floor() as usize, q.y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(w as usize - 1), (y0 + 1).min(h as usize - 1));
+        let (fx, fy) = (q.x - x0 as f64, q.y - y0 as f64);
+        let g = |x: usize, y: usize| img[y * w as usize + x];
+        Some((1.0 - fy) * ((1.0 - fx) * g(x0, y0) + fx * g(x1, y0)) + fy * ((1.0 - fx) * g(x0, y1) + fx * g(x1, y1)))
+    };
+    let offsets: Vec<f64> = (-40..=40).map(|i| i as f64 * 0.1).collect();
+    let values: Vec<f64> = offsets.iter().map(|s| at(p + dir * *s)).collect::<Option<_>>()?;
+    let peak = values.iter().cloned().fold(0.0, f64::max);
+    if peak < 20.0 {
+        return None;
+    }
+    // Only the connected run around the peak above 5 % of it (another stripe may be near).
+    let thr = 0.05 * peak;
+    let k = values.iter().position(|v| *v == peak)?;
+    let (mut a, mut b) = (k, k);
+    while a > 0 && values[a - 1] > thr {
+        a -= 1;
+    }
+    while b + 1 < values.len() && values[b + 1] > thr {
+        b += 1;
+    }
+    if a == 0 || b + 1 == values.len() {
+        return None; // profile cut by the sampling window
+    }
+    let (sw, swx) =
+        (a..=b).fold((0.0, 0.0), |(sw, swx), i| (sw + values[i] - thr, swx + (values[i] - thr) * offsets[i]));
+    Some(swx / sw)
+}

@@ -44,6 +44,14 @@ def measure(out, obj, cloud, transform):
     return rows
 
 
+def budget(out):
+    """The error budget's 500 mm line for the calibrated sensor (omni-eval budget)."""
+    calib = os.path.join(out, "calib")
+    doc = eval_json("budget", "--camera", os.path.join(calib, "camera.json"),
+                    "--scanner", os.path.join(calib, "scanner.json"), "--range", "500")
+    return doc["lines"][0]
+
+
 def fmt(x, width=8, signed=False):
     if x is None:
         return "-".rjust(width)
@@ -54,21 +62,29 @@ def main():
     out, objects = sys.argv[1], sys.argv[2:]
     transform = os.path.join(out, "calib", "to_truth.json")
     results = {}
-    print(f"{'object':<10} {'sensor':<11} {'points':>7} {'mean':>8} {'σ truth':>8} {'σ fit':>8} {'radius':>8}   (mm)")
+    b = budget(out)
+    print("σ truth: spread of the points' signed distances to the scene's true surfaces; σ fit: spread")
+    print("about the best-fitting primitive (the paper's measure); budget: the predicted σ per point at")
+    print(f"500 mm (omni-eval budget): speckle {b['speckle_mm']:.3f}, noise {b['noise_mm']:.3f}, "
+          f"calibration {fmt(b['calibration_mm'], 0).strip()}, total {b['total_mm']:.3f} mm")
+    print()
+    print(f"{'object':<18} {'sensor':<11} {'points':>7} {'mean':>8} {'σ truth':>8} {'σ fit':>8} {'budget':>8} {'radius':>8}   (mm)")
     for obj in objects:
         paper = PAPER.get(obj)
         if paper:
-            print(f"{obj:<10} {'paper':<11} {'':>7} {fmt(paper[0], signed=True)} {'':>8} {fmt(paper[1])} {'-':>8}")
+            print(f"{obj:<18} {'paper':<11} {'':>7} {fmt(paper[0], signed=True)} {'':>8} {fmt(paper[1])} {'':>8} {'-':>8}")
         for label, cloud, t in (
             ("calibrated", os.path.join(out, obj, "cloud.ply"), transform),
             ("true files", os.path.join(out, obj, "cloud_true_sensor.ply"), None),
         ):
             for name, n, mean, sd, fit_sd, rad in measure(out, obj, cloud, t):
                 tag = obj if name == obj else f"{obj}/{name}"
-                print(f"{tag:<10} {label:<11} {n:>7} {fmt(mean, signed=True)} {fmt(sd)} {fmt(fit_sd)} {fmt(rad, signed=True)}")
+                print(f"{tag:<18} {label:<11} {n:>7} {fmt(mean, signed=True)} {fmt(sd)} {fmt(fit_sd)} "
+                      f"{fmt(b['total_mm'])} {fmt(rad, signed=True)}")
                 results.setdefault(tag, {})[label] = {
                     "points": n, "mean_mm": mean, "sigma_truth_mm": sd, "sigma_fit_mm": fit_sd, "radius_error_mm": rad,
                 }
+    results["budget_500mm"] = b
     with open(os.path.join(out, "table.json"), "w") as f:
         json.dump(results, f, indent=2)
 

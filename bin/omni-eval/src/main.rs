@@ -10,6 +10,7 @@ use omni_formats::rig::{BoardPosesFile, RigFile};
 use omni_formats::scene::SceneFile;
 use omni_formats::transform::TransformFile;
 use omni_geom::Point3;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 #[derive(Parser, Debug)]
@@ -98,6 +99,43 @@ enum Command {
         #[arg(short, long, default_value = "-")]
         output: PathBuf,
     },
+    /// Predict the per-point σ at each range from speckle, photon + read noise and calibration,
+    /// for a matte wall facing the sensor (as the paper's plane), and their sum.
+    #[command(after_help = "\
+The optics come from camera.json's `optics` (omni-sim writes them), else the paper preset's lens
+(F/4, 650 nm, 4.65 µm pixels); --f-number etc. override. The camera and laser photometry are the
+virtual sensor's defaults. The calibration term needs the calibration reports that
+omni-calib-receiver and omni-calib-plane write into camera.json and scanner.json.
+
+Example:
+  omni-eval budget --camera calib/camera.json --scanner calib/scanner.json --range 300:2000:100")]
+    Budget {
+        #[arg(long)]
+        camera: PathBuf,
+        #[arg(long)]
+        scanner: PathBuf,
+        /// Wall distances (mm): start:stop:step (stop included) or a list a,b,c.
+        #[arg(long, default_value = "300:2000:100")]
+        range: String,
+        /// Mirror angle of the light plane (degrees within the facet).
+        #[arg(long, default_value_t = 20.0)]
+        alpha_deg: f64,
+        /// Albedo of the wall.
+        #[arg(long, default_value_t = 0.8)]
+        albedo: f64,
+        /// Lens F-number.
+        #[arg(long)]
+        f_number: Option<f64>,
+        /// Laser wavelength (nm).
+        #[arg(long)]
+        wavelength_nm: Option<f64>,
+        /// Pixel pitch (µm).
+        #[arg(long)]
+        pixel_pitch_um: Option<f64>,
+        /// Machine-readable output (one JSON document).
+        #[arg(long)]
+        json: bool,
+    },
     /// Draw a cloud as a PNG picture (a view from above-front, coloured by height).
     Render {
         /// The cloud (PLY; `-` = stdin).
@@ -151,6 +189,69 @@ fn load_points(path: &Path, crop: Option<&CropBox>, transform: Option<&Path>) ->
         return Err(CliError::new(format!("{name}: no points inside the crop box")));
     }
     Ok(pts)
+}
+
+/// `start:stop:step` (stop included) or `a,b,c`, in mm.
+fn parse_ranges(s: &str) -> Result<Vec<f64>, CliError> {
+    let bad = || CliError::usage(format!("--range: expected start:stop:step or a,b,c (mm), got {s:?}"));
+    let v: Vec<f64> = if s.contains(':') {
+        let p: Vec<f64> = s.split(':').map(|t| t.trim().parse::<f64>().map_err(|_| bad())).collect::<Result<_, _>>()?;
+        let [a, b, step] = p[..] else { return Err(bad()) };
+        if !(step > 0.0) || !(b >= a) || (b - a) / step > 10_000.0 {
+            return Err(bad());
+        }
+        let n = ((b - a) / step + 1e-9).floor() as usize;
+        (0..=n).map(|i| a + step * i as f64).collect()
+    } else {
+        s.split(',').map(|t| t.trim().parse::<f64>().map_err(|_| bad())).collect::<Result<_, _>>()?
+    };
+    if v.is_empty() || !v.iter().all(|x| x.is_finite() && *x > 0.0) {
+        return Err(bad());
+    }
+    Ok(v)
+}
+
+fn print_budget(
+    lines: &[omni_simulator::BudgetLine],
+    optics: &omni_simulator::Optics,
+    calibration: &omni_simulator::CalibrationUncertainty,
+    json: bool,
+) -> Result<(), CliError> {
+    let mut out = std::io::stdout().lock();
+    let io = |e: std::io::Error| CliError::from(e);
+    if json {
+        let doc = serde_json::json!({"format": "omniscan.budget", "version": 1, "optics": optics,
+            "calibration": calibration, "lines": lines});
+        writeln!(out, "{doc}").map_err(io)?;
+        return Ok(());
+    }
+    writeln!(
+        out,
+        "# F/{} λ {} nm, pitch {} µm, speckle contrast {:.2}; σ per point (mm); calibration: camera {} px, planes {} mm",
+        optics.f_number,
+        optics.wavelength_nm,
+        optics.pixel_pitch_um,
+        optics.speckle_contrast(),
+        calibration.camera_px.map_or("-".into(), |v| format!("{v:.4}")),
+        calibration.planes_mm.map_or("-".into(), |v| format!("{v:.4}")),
+    )
+    .map_err(io)?;
+    writeln!(
+        out,
+        "{:>8} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
+        "range", "mm/px", "speckle", "noise", "calib", "total", "line px"
+    )
+    .map_err(io)?;
+    for l in lines {
+        let calib = l.calibration_mm.map_or("-".to_string(), |v| format!("{v:.3}"));
+        writeln!(
+            out,
+            "{:>8.0} {:>9.2} {:>9.3} {:>9.3} {:>9} {:>9.3} {:>9.3}",
+            l.range_mm, l.mm_per_px, l.speckle_mm, l.noise_mm, calib, l.total_mm, l.line_sigma_px
+        )
+        .map_err(io)?;
+    }
+    Ok(())
 }
 
 fn main() -> std::process::ExitCode {
@@ -219,6 +320,54 @@ fn main() -> std::process::ExitCode {
             omni_formats::write_doc(&output, &doc)?;
             eprintln!("omni-eval: rig registration RMS {rms:.3} mm over {} boards", used.len());
             Ok(())
+        }
+        Command::Budget {
+            camera,
+            scanner,
+            range,
+            alpha_deg,
+            albedo,
+            f_number,
+            wavelength_nm,
+            pixel_pitch_um,
+            json,
+        } => {
+            let ranges = parse_ranges(&range)?;
+            if !(albedo > 0.0 && albedo <= 1.0) {
+                return Err(CliError::usage("--albedo must be within (0, 1]"));
+            }
+            if !alpha_deg.is_finite() {
+                return Err(CliError::usage("--alpha-deg must be finite"));
+            }
+            let (camera_file, camera_model) = omni_formats::CameraFile::load(&camera)?;
+            let (scanner_file, transmitter) = omni_formats::ScannerFile::load(&scanner)?;
+            let base = camera_file.optics.unwrap_or_else(omni_simulator::Optics::paper);
+            let optics = omni_simulator::Optics {
+                f_number: f_number.unwrap_or(base.f_number),
+                wavelength_nm: wavelength_nm.unwrap_or(base.wavelength_nm),
+                pixel_pitch_um: pixel_pitch_um.unwrap_or(base.pixel_pitch_um),
+                ..base
+            };
+            optics.validate().map_err(|e| CliError::usage(format!("optics: {e}")))?;
+            let opts = omni_simulator::RenderOptions::default().with_optics(optics);
+            let calibration =
+                omni_simulator::calibration_from_reports(camera_file.report.as_ref(), scanner_file.report.as_ref());
+            let sensor = omni_simulator::Sensor { camera: camera_model, transmitter };
+            let lines = omni_simulator::error_budget(
+                &sensor,
+                &optics,
+                &opts,
+                &calibration,
+                albedo,
+                alpha_deg.to_radians(),
+                &ranges,
+            );
+            if lines.is_empty() {
+                return Err(CliError::new(format!(
+                    "no range in {range} is seen on the light plane at α = {alpha_deg}° (try other ranges or --alpha-deg)"
+                )));
+            }
+            print_budget(&lines, &optics, &calibration, json)
         }
         Command::Render { cloud, output, width, color } => {
             let pts = load_points(&cloud, None, None)?;

@@ -161,6 +161,10 @@ struct EmulateArgs {
     /// Render noise seed.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Render with the idealised sensor (Gaussian blur σ 0.7 px, no speckle, a dim room) instead
+    /// of the realistic one (the lens in camera.json's `optics`, laser speckle).
+    #[arg(long)]
+    ideal: bool,
     /// Write the ground truth of every frame (JSON Lines) here.
     #[arg(long)]
     truth: Option<PathBuf>,
@@ -411,13 +415,13 @@ fn renderer(a: &EmulateArgs) -> CliResult<(Box<dyn FrameRenderer>, u32, u32)> {
         let spec = omni_hw::controller::ControllerSpec::default();
         return Ok((Box::new(BlankRenderer { width: w, height: w }), spec.facets, spec.lasers));
     }
-    let sensor = match (&a.camera, &a.scanner) {
-        (Some(c), Some(s)) => omni_simulator::Sensor::load(c, s)?,
+    let (sensor, optics) = match (&a.camera, &a.scanner) {
+        (Some(c), Some(s)) => (omni_simulator::Sensor::load(c, s)?, omni_formats::CameraFile::load(c)?.0.optics),
         _ => {
             if a.width < 16 {
                 return Err(CliError::usage("--width must be at least 16"));
             }
-            omni_simulator::Sensor::paper_scaled(a.width)
+            (omni_simulator::Sensor::paper_scaled(a.width), None)
         }
     };
     let scene = match &a.scene {
@@ -425,7 +429,16 @@ fn renderer(a: &EmulateArgs) -> CliResult<(Box<dyn FrameRenderer>, u32, u32)> {
         None => omni_simulator::Scene::from_file(omni_simulator::paper_bench(omni_simulator::BenchObject::Plane))
             .map_err(CliError::new)?,
     };
-    let options = omni_simulator::RenderOptions { seed: a.seed, ..Default::default() };
+    let options = if a.ideal {
+        omni_simulator::RenderOptions::ideal()
+    } else {
+        let realistic = omni_simulator::RenderOptions::default();
+        match optics {
+            Some(o) => realistic.with_optics(o),
+            None => realistic,
+        }
+    };
+    let options = omni_simulator::RenderOptions { seed: a.seed, ..options };
     let (facets, lasers) = (sensor.transmitter.num_facets(), sensor.transmitter.num_lasers() as u32);
     Ok((Box::new(render::SimRenderer { sensor, scene, options }), facets, lasers))
 }

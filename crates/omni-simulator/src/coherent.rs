@@ -10,6 +10,11 @@
 //! image blurred by the intensity PSF |h|². A depolarising surface adds `speckle_patterns`
 //! independent patterns, each carrying an equal share of the light.
 //!
+//! A laser sheet is often far thinner than a sample cell (¼ px), so each cell's light stands at
+//! its own energy centroid, not at the cell centre: to first order, a source moved by δ adds
+//! −δ·∇h to its field, so the cells' centroid offsets enter as two more fields convolved with
+//! ∂h/∂x and ∂h/∂y. Without that the stripe would snap to the cell grid.
+//!
 //! The laser lights a thin band of the image, so the field lives in tiles of [`TILE_PX`] pixels
 //! that hold light; each is convolved by FFT with a margin of [`MARGIN_PX`] (h is cut there)
 //! and the overlapping outputs are summed as fields, in a fixed order, before squaring.
@@ -30,11 +35,20 @@ pub(crate) const MARGIN_PX: usize = 8;
 type C64 = Complex<f64>;
 type C32 = Complex<f32>;
 
-/// The laser's geometric irradiance on the q × q sample grid, tile by tile: energy (e⁻) per
-/// sample, row-major within a tile of (q·TILE_PX)² samples.
+/// One sample cell's light: its energy (e⁻) and the energy-weighted offset of its centroid from
+/// the cell centre (e⁻ · px).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct CellLight {
+    pub energy: f64,
+    pub moment_x: f64,
+    pub moment_y: f64,
+}
+
+/// The laser's geometric irradiance on the q × q sample grid, tile by tile, row-major within a
+/// tile of (q·TILE_PX)² cells.
 pub(crate) struct LaserField {
     pub q: usize,
-    pub tiles: BTreeMap<(u32, u32), Vec<f64>>,
+    pub tiles: BTreeMap<(u32, u32), Vec<CellLight>>,
 }
 
 impl LaserField {
@@ -42,16 +56,19 @@ impl LaserField {
         LaserField { q, tiles: BTreeMap::new() }
     }
 
-    /// Adds pixel (x, y)'s q × q sample energies (row-major).
-    pub fn add_pixel(&mut self, x: usize, y: usize, energies: &[f64]) {
+    /// Adds pixel (x, y)'s q × q cells (row-major).
+    pub fn add_pixel(&mut self, x: usize, y: usize, cells: &[CellLight]) {
         let q = self.q;
         let side = q * TILE_PX;
         let key = ((x / TILE_PX) as u32, (y / TILE_PX) as u32);
-        let tile = self.tiles.entry(key).or_insert_with(|| vec![0.0; side * side]);
+        let tile = self.tiles.entry(key).or_insert_with(|| vec![CellLight::default(); side * side]);
         let (ox, oy) = ((x % TILE_PX) * q, (y % TILE_PX) * q);
         for j in 0..q {
             for i in 0..q {
-                tile[(oy + j) * side + ox + i] += energies[j * q + i];
+                let (t, c) = (&mut tile[(oy + j) * side + ox + i], cells[j * q + i]);
+                t.energy += c.energy;
+                t.moment_x += c.moment_x;
+                t.moment_y += c.moment_y;
             }
         }
     }
@@ -64,6 +81,9 @@ pub(crate) struct CoherentImager {
     n: usize,
     /// FFT of the amplitude PSF on the n × n grid, transposed, with the inverse's 1/n² folded in.
     transfer_t: Vec<C64>,
+    /// The same for −∂h/∂x and −∂h/∂y (per px): the response to a source's offset.
+    shift_x_t: Vec<C64>,
+    shift_y_t: Vec<C64>,
     fft: Arc<dyn Fft<f64>>,
     ifft: Arc<dyn Fft<f64>>,
     patterns: u32,
@@ -96,8 +116,20 @@ impl CoherentImager {
         }
         fft2_transposed(&mut grid, n, &fft);
         let scale = 1.0 / (n * n) as f64;
-        let transfer_t = grid.into_iter().map(|c| c * scale).collect();
-        CoherentImager { q, n, transfer_t, fft, ifft, patterns: optics.speckle_patterns }
+        let transfer_t: Vec<C64> = grid.into_iter().map(|c| c * scale).collect();
+        // Transposed layout: row index = x frequency bin, column = y frequency bin.
+        let omega = |k: usize| 2.0 * std::f64::consts::PI * freq(k, n) * q as f64 / n as f64;
+        let shift = |along_x: bool| -> Vec<C64> {
+            (0..n * n)
+                .map(|k| {
+                    let (kx, ky) = (k / n, k % n);
+                    let w = if along_x { omega(kx) } else { omega(ky) };
+                    -C64::new(0.0, w) * transfer_t[k]
+                })
+                .collect()
+        };
+        let (shift_x_t, shift_y_t) = (shift(true), shift(false));
+        CoherentImager { q, n, transfer_t, shift_x_t, shift_y_t, fft, ifft, patterns: optics.speckle_patterns }
     }
 
     pub fn q(&self) -> usize {
@@ -145,28 +177,39 @@ impl CoherentImager {
 
     /// One tile's random field (a share of its energy), convolved with h: the n × n output
     /// covering the tile and its margin.
-    fn convolve_tile(&self, energies: &[f64], share: f64, mut rng: SplitMix64) -> Vec<C32> {
+    fn convolve_tile(&self, cells: &[CellLight], share: f64, mut rng: SplitMix64) -> Vec<C32> {
         let (n, q) = (self.n, self.q);
         let side = q * TILE_PX;
         let off = q * MARGIN_PX;
-        let mut grid = vec![C64::new(0.0, 0.0); n * n];
+        let zero = C64::new(0.0, 0.0);
+        let (mut field, mut field_x, mut field_y) = (vec![zero; n * n], vec![zero; n * n], vec![zero; n * n]);
         for j in 0..side {
             for i in 0..side {
-                let e = energies[j * side + i];
-                if e > 0.0 {
-                    // A circular complex Gaussian of variance e·share.
-                    let a = (0.5 * e * share).sqrt();
-                    grid[(off + j) * n + off + i] = C64::new(a * rng.normal(), a * rng.normal());
+                let c = cells[j * side + i];
+                if c.energy > 0.0 {
+                    // A circular complex Gaussian of variance energy·share, at the cell's centroid.
+                    let s = (0.5 * c.energy * share).sqrt();
+                    let a = C64::new(s * rng.normal(), s * rng.normal());
+                    let k = (off + j) * n + off + i;
+                    field[k] = a;
+                    field_x[k] = a * (c.moment_x / c.energy);
+                    field_y[k] = a * (c.moment_y / c.energy);
                 }
             }
         }
-        // Rows outside the tile's core are zero: their transforms are zero too.
-        for row in grid.chunks_exact_mut(n).skip(off).take(side) {
-            self.fft.process(row);
+        let mut spectra = [field, field_x, field_y];
+        for grid in &mut spectra {
+            // Rows outside the tile's core are zero: their transforms are zero too.
+            for row in grid.chunks_exact_mut(n).skip(off).take(side) {
+                self.fft.process(row);
+            }
+            transpose(grid, n);
+            self.fft.process(grid);
         }
-        transpose(&mut grid, n);
-        self.fft.process(&mut grid);
-        grid.iter_mut().zip(&self.transfer_t).for_each(|(g, t)| *g *= t);
+        let [mut grid, gx, gy] = spectra;
+        for k in 0..n * n {
+            grid[k] = grid[k] * self.transfer_t[k] + gx[k] * self.shift_x_t[k] + gy[k] * self.shift_y_t[k];
+        }
         self.ifft.process(&mut grid);
         transpose(&mut grid, n);
         self.ifft.process(&mut grid);
@@ -240,7 +283,7 @@ fn tile_id(key: (u32, u32)) -> u64 {
 /// scaled to Σ|h|² = 1: the inverse transform of the pupil (a disc at the coherent cutoff with
 /// the defocus phase 2π·W₂₀·ρ²), sampled finely in frequency.
 fn amplitude_psf(optics: &Optics, q: usize, planner: &mut FftPlanner<f64>) -> Vec<C64> {
-    let big = 1024usize;
+    let big = 512usize;
     let df = q as f64 / big as f64; // cycles per px between frequency samples
     let cutoff = optics.coherent_cutoff_per_px();
     let waves = optics.defocus_waves();
@@ -318,7 +361,7 @@ mod tests {
             let imager = CoherentImager::new(&optics);
             let q = imager.q();
             let mut field = LaserField::new(q);
-            let e = vec![100.0 / (q * q) as f64; q * q];
+            let e = vec![CellLight { energy: 100.0 / (q * q) as f64, ..Default::default() }; q * q];
             for y in 16..80 {
                 for x in 16..80 {
                     field.add_pixel(x, y, &e);

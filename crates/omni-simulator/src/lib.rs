@@ -57,6 +57,7 @@
 
 mod bench;
 mod boards;
+mod budget;
 mod coherent;
 mod frame;
 mod render;
@@ -71,6 +72,7 @@ pub use boards::{
     BoardPose, Rig, board_object, calibration_board_poses, corner_pixels, random_board_poses, render_board_image,
     render_rig_pose_image,
 };
+pub use budget::{BudgetLine, CalibrationUncertainty, calibration_from_reports, error_budget, speckle_sigma_px};
 pub use frame::Frame16;
 pub use omni_model::Optics;
 pub use render::{

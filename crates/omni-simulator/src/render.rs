@@ -15,7 +15,7 @@
 //! 3. The electron image is blurred with a Gaussian PSF, then photon noise (Poisson), read noise
 //!    (Gaussian), saturation at the full well, gamma and quantisation to the bit depth are applied.
 
-use crate::coherent::{CoherentImager, LaserField};
+use crate::coherent::{CellLight, CoherentImager, LaserField};
 use crate::frame::Frame16;
 use crate::rng::{SplitMix64, mix};
 use crate::scene::{Hit, Scene};
@@ -492,15 +492,21 @@ fn coherent_imager(optics: &Optics) -> Arc<CoherentImager> {
     imager
 }
 
-/// Energies (e⁻) of a pixel's q × q coherent samples from its n × n signal densities (e⁻ per
-/// pixel area at each sample; n a multiple of q).
-fn sample_energies(density: &[f64], n: usize, q: usize) -> Vec<f64> {
+/// A pixel's q × q coherent cells from its n × n signal densities (e⁻ per pixel area at each
+/// sample; n a multiple of q): energy and centroid moment (offsets in px from the cell centre).
+fn sample_energies(density: &[f64], n: usize, q: usize) -> Vec<CellLight> {
     let k = n / q;
     let area = 1.0 / (n * n) as f64;
-    let mut out = vec![0.0; q * q];
+    // Offset of sample i from its cell's centre (px).
+    let offset = |i: usize| ((i % k) as f64 + 0.5 - 0.5 * k as f64) / n as f64;
+    let mut out = vec![CellLight::default(); q * q];
     for (j, row) in density.chunks_exact(n).enumerate() {
         for (i, v) in row.iter().enumerate() {
-            out[(j / k) * q + i / k] += v * area;
+            let c = &mut out[(j / k) * q + i / k];
+            let e = v * area;
+            c.energy += e;
+            c.moment_x += e * offset(i);
+            c.moment_y += e * offset(j);
         }
     }
     out
@@ -512,7 +518,7 @@ fn sample_energies(density: &[f64], n: usize, q: usize) -> Vec<f64> {
 struct RowResult {
     centre: Vec<f64>,
     patches: Vec<(usize, Vec<f64>)>,
-    laser: Vec<(usize, Vec<f64>)>,
+    laser: Vec<(usize, Vec<CellLight>)>,
 }
 
 /// The optical PSF (Gaussian, σ in px) integrated over a pixel: K(t) = Φ((t + ½)/σ) − Φ((t − ½)/σ).

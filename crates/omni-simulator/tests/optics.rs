@@ -132,3 +132,66 @@ fn speckle_against_sheet_width() {
         }
     }
 }
+
+/// The speckled stripe keeps the incoherent stripe's position: averaged over patterns, each
+/// point's centroid offset is what the patterns' own scatter leaves (a centre snapped to the
+/// ¼ px cells of the coherent field would add a sawtooth of up to ±⅛ px).
+#[test]
+fn speckle_keeps_the_stripe_position_on_average() {
+    let sensor = Sensor::paper_scaled(512);
+    let scene = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
+    // In focus: with the preset's 1.5 px of defocus (0.34 waves) the coherent mean still
+    // differs from the incoherent image by 0.046 px rms (docs/DECISIONS.md).
+    let optics = Optics { defocus_px: 0.0, ..Optics::paper() };
+    let quiet = RenderOptions {
+        noise: false,
+        ambient_e: 0.0,
+        bit_depth: 16,
+        imaging: Imaging::Lens { optics, speckle: false },
+        ..RenderOptions::default()
+    };
+    let alpha = 19f64.to_radians();
+    let a = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &quiet);
+    let (w, h) = (a.image.width, a.image.height);
+    let img = |f: &omni_simulator::Frame16| f.data.iter().map(|v| *v as f64).collect::<Vec<f64>>();
+    let patterns = 8;
+    let speckled: Vec<Vec<f64>> = (0..patterns)
+        .map(|seed| {
+            let o = RenderOptions { seed, imaging: Imaging::Lens { optics, speckle: true }, ..quiet.clone() };
+            img(&render_laser_frame(&sensor, &scene, alpha, 0, &[0], &o).image)
+        })
+        .collect();
+    let ia = img(&a.image);
+    let mean_image: Vec<f64> =
+        (0..ia.len()).map(|k| speckled.iter().map(|s| s[k]).sum::<f64>() / patterns as f64).collect();
+    let (mut means, mut all, mut of_mean) = (vec![], vec![], vec![]);
+    for line in truth_polylines(&a.truth) {
+        let inner = line.len().saturating_sub(24);
+        for i in (12..12 + inner).step_by(2) {
+            let tangent = (Vector2::from(line[i + 1].pixel) - Vector2::from(line[i - 1].pixel)).normalize();
+            let normal = Vector2::new(-tangent.y, tangent.x);
+            let Some(c0) = centroid_along(&ia, w, h, &line[i], normal) else { continue };
+            let offsets: Option<Vec<f64>> =
+                speckled.iter().map(|s| centroid_along(s, w, h, &line[i], normal).map(|c| c - c0)).collect();
+            let Some(offsets) = offsets else { continue };
+            if let Some(c) = centroid_along(&mean_image, w, h, &line[i], normal) {
+                of_mean.push(c - c0);
+            }
+            means.push(offsets.iter().sum::<f64>() / patterns as f64);
+            all.extend(offsets);
+        }
+    }
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let (single, mean) = (rms(&all), rms(&means));
+    let expected = single / (patterns as f64).sqrt();
+    eprintln!(
+        "{} points: one pattern {single:.4} px, mean of {patterns} {mean:.4} px (scatter alone {expected:.4}), \
+         centroid of the mean image {:.4} px",
+        means.len(),
+        rms(&of_mean)
+    );
+    assert!(means.len() > 100, "only {} points", means.len());
+    assert!(mean < 1.3 * expected, "a systematic offset remains: {mean:.4} px against {expected:.4}");
+    let bias = means.iter().sum::<f64>() / means.len() as f64;
+    assert!(bias.abs() < 0.01, "mean offset {bias:.4} px");
+}

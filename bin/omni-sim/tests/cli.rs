@@ -224,6 +224,9 @@ fn boards_and_rig() {
         "--angles",
         "18,22",
         "--laser-off",
+        // At 256 px each pixel sees 16 times the area: the realistic stripe needs more power.
+        "--laser-gain",
+        "4",
         "--out",
         "r",
     ];

@@ -220,7 +220,7 @@ impl RenderOptions {
                         optics.f_number
                     ));
                 }
-                if *speckle && self.supersample % q != 0 {
+                if *speckle && !self.supersample.is_multiple_of(q) {
                     return Err(format!(
                         "supersample must be a multiple of {q} for speckle at F/{}, got {}",
                         optics.f_number, self.supersample

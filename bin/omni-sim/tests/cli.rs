@@ -195,6 +195,63 @@ fn bad_input_is_refused_with_a_clear_message_and_no_output() {
 }
 
 #[test]
+fn optics_out_of_range_name_the_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let scene = testdata("scenes/plane.json");
+    for (flag, value, expect) in [
+        ("--f-number", "0", "f_number"),
+        ("--f-number", "-4", "f_number"),
+        ("--wavelength-nm", "100", "wavelength_nm"),
+        ("--wavelength-nm", "2500", "wavelength_nm"),
+        ("--pixel-pitch-um", "0", "pixel_pitch_um"),
+        ("--blur-px", "0.05", "diffraction limit"),
+    ] {
+        let option = format!("{flag}={value}");
+        let args = [
+            "scan",
+            "--camera",
+            "sensor/camera.json",
+            "--scanner",
+            "sensor/scanner.json",
+            "--scene",
+            &scene,
+            "--angles",
+            "20",
+            "--frames",
+            "f",
+            "-o",
+            "m.jsonl",
+            &option,
+        ];
+        let out = sim(&args, d);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(err.contains(expect) && err.lines().count() == 1, "{flag} {value}: {err}");
+        assert!(!d.join("m.jsonl").exists());
+    }
+    // The idealised sensor has no lens to set.
+    let args = [
+        "scan",
+        "--camera",
+        "sensor/camera.json",
+        "--scanner",
+        "sensor/scanner.json",
+        "--scene",
+        &scene,
+        "--angles",
+        "20",
+        "--frames",
+        "f",
+        "--ideal",
+        "--f-number",
+        "8",
+    ];
+    assert_eq!(sim(&args, d).status.code(), Some(2));
+}
+
+#[test]
 fn boards_and_rig() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

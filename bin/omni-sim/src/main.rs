@@ -16,12 +16,15 @@ use std::process::ExitCode;
 
 const AFTER_HELP: &str = "\
 The simulated sensor is the paper's prototype: hyperbolic mirror a² = 1248.2060 mm², b² = 351.7940 mm²
-(c = 40 mm), rim radius 25 mm, seen by a 1024 × 1024 px camera with f = 1950 px (a 10.7 mm lens on
-5.5 µm pixels) at the mirror's lower focus; a 12-facet polygon mirror of circumradius R = 20 mm turning
+(c = 40 mm), rim radius 25 mm, seen by a 1024 × 1024 px camera with f = 1950 px (a 9.07 mm lens on
+4.65 µm pixels) at the mirror's lower focus; a 12-facet polygon mirror of circumradius R = 20 mm turning
 about the y axis 120 mm below the camera centre, two line lasers (180° fans) on either side.
 
-Default camera: industrial 8-bit monochrome, full well 10 000 e-, read noise 6 e-, gamma 1, PSF σ 0.7 px;
-laser sheet 0.5 mm FWHM, stripe peak ≈ 190/255 on a matte plane at 500 mm; dim ambient light.
+The realistic sensor (the default): industrial 8-bit monochrome camera, full well 10 000 e-, read noise
+6 e-, gamma 1, behind an F/4 lens (650 nm laser, 4.65 µm pixels, 1.5 px of defocus; camera.json's
+`optics`), the laser imaged coherently through the lens pupil, so its speckle and blur follow from the
+optics; laser sheet 0.5 mm FWHM; a mid-bright room (white ≈ 77/255 in laser frames). --ideal gives
+the idealised sensor: Gaussian blur σ 0.7 px, no speckle, a dim room (white ≈ 51/255).
 
 Examples:
   omni-sim sensor --preset paper -o sensor/
@@ -507,15 +510,10 @@ fn check_lasers(sensor: &Sensor, lasers: &[u32]) -> CliResult {
     }
 }
 
-/// The optics camera.json states, if any.
-fn camera_optics(path: &Path) -> CliResult<Option<Optics>> {
-    Ok(CameraFile::load(path)?.0.optics)
-}
-
 fn scan(a: ScanArgs) -> CliResult {
-    let opts = a.render.options(camera_optics(&a.camera)?)?;
+    let (sensor, optics) = Sensor::load_with_optics(&a.camera, &a.scanner)?;
+    let opts = a.render.options(optics)?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
-    let sensor = Sensor::load(&a.camera, &a.scanner)?;
     check_lasers(&sensor, &a.lasers)?;
     let scene = Scene::load(&a.scene)?;
     check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("{}: {e}", a.scene.display())))?;
@@ -559,10 +557,9 @@ fn boards(a: BoardsArgs) -> CliResult {
 }
 
 fn rig(a: RigArgs) -> CliResult {
-    let optics = camera_optics(&a.camera)?;
+    let (sensor, optics) = Sensor::load_with_optics(&a.camera, &a.scanner)?;
     let opts = a.render.options(optics)?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
-    let sensor = Sensor::load(&a.camera, &a.scanner)?;
     let board = load_board(&a.board)?;
     let rig = Rig::standard(&board);
     let scene_file = rig.scene();

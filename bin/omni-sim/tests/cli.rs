@@ -200,6 +200,13 @@ fn optics_out_of_range_name_the_field() {
     let d = dir.path();
     small_sensor(d);
     let scene = testdata("scenes/plane.json");
+    // A scan of the small sensor with the given extra options.
+    let scan = |extra: &[&str]| {
+        let mut args = vec!["scan", "--camera", "sensor/camera.json", "--scanner", "sensor/scanner.json"];
+        args.extend(["--scene", &scene, "--angles", "20", "--frames", "f", "-o", "m.jsonl"]);
+        args.extend(extra);
+        sim(&args, d)
+    };
     for (flag, value, expect) in [
         ("--f-number", "0", "f_number"),
         ("--f-number", "-4", "f_number"),
@@ -208,47 +215,15 @@ fn optics_out_of_range_name_the_field() {
         ("--pixel-pitch-um", "0", "pixel_pitch_um"),
         ("--blur-px", "0.05", "diffraction limit"),
     ] {
-        let option = format!("{flag}={value}");
-        let args = [
-            "scan",
-            "--camera",
-            "sensor/camera.json",
-            "--scanner",
-            "sensor/scanner.json",
-            "--scene",
-            &scene,
-            "--angles",
-            "20",
-            "--frames",
-            "f",
-            "-o",
-            "m.jsonl",
-            &option,
-        ];
-        let out = sim(&args, d);
+        let out = scan(&[&format!("{flag}={value}")]);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{flag} {value}: {err}");
         assert!(err.contains(expect) && err.lines().count() == 1, "{flag} {value}: {err}");
         assert!(!d.join("m.jsonl").exists());
     }
     // The idealised sensor has no lens to set.
-    let args = [
-        "scan",
-        "--camera",
-        "sensor/camera.json",
-        "--scanner",
-        "sensor/scanner.json",
-        "--scene",
-        &scene,
-        "--angles",
-        "20",
-        "--frames",
-        "f",
-        "--ideal",
-        "--f-number",
-        "8",
-    ];
-    assert_eq!(sim(&args, d).status.code(), Some(2));
+    assert_eq!(scan(&["--ideal", "--f-number", "8"]).status.code(), Some(2));
+    assert!(!d.join("m.jsonl").exists());
 }
 
 #[test]

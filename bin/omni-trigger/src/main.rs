@@ -416,7 +416,7 @@ fn renderer(a: &EmulateArgs) -> CliResult<(Box<dyn FrameRenderer>, u32, u32)> {
         return Ok((Box::new(BlankRenderer { width: w, height: w }), spec.facets, spec.lasers));
     }
     let (sensor, optics) = match (&a.camera, &a.scanner) {
-        (Some(c), Some(s)) => (omni_simulator::Sensor::load(c, s)?, omni_formats::CameraFile::load(c)?.0.optics),
+        (Some(c), Some(s)) => omni_simulator::Sensor::load_with_optics(c, s)?,
         _ => {
             if a.width < 16 {
                 return Err(CliError::usage("--width must be at least 16"));

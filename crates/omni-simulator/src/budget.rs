@@ -108,8 +108,7 @@ fn budget_at(
     // How fast the distance to the light plane changes across the stripe on the wall (mm/px).
     let (w0, w1) = (on_wall(pixel - across * 0.5)?, on_wall(pixel + across * 0.5)?);
     let plane_mm_per_px = (lp.plane.signed_distance(&w1) - lp.plane.signed_distance(&w0)).abs().max(1e-12);
-    let beam_sigma = opts.beam_fwhm_mm / (8.0 * 2f64.ln()).sqrt();
-    let line_sigma_px = beam_sigma / plane_mm_per_px;
+    let line_sigma_px = opts.beam_sigma() / plane_mm_per_px;
     let speckle_px = speckle_sigma_px(optics, line_sigma_px);
     // Photometry as the renderer's: the stripe's signal summed across it, at one pixel along it.
     let to_p = point - lp.virtual_source;

@@ -140,9 +140,11 @@ impl CoherentImager {
     pub fn image_into(&self, field: &LaserField, out: &mut [f64], w: usize, h: usize, seed: u64) {
         debug_assert_eq!(field.q, self.q);
         let keys: Vec<(u32, u32)> = field.tiles.keys().copied().collect();
-        let mut intensity: BTreeMap<(u32, u32), Vec<f64>> = BTreeMap::new();
+        let index: BTreeMap<(u32, u32), usize> = keys.iter().enumerate().map(|(i, k)| (*k, i)).collect();
+        let outputs = output_tiles(&keys);
+        let mut intensity = vec![vec![0.0; TILE_PX * TILE_PX]; outputs.len()];
+        let share = 1.0 / self.patterns as f64;
         for pattern in 0..self.patterns {
-            let share = 1.0 / self.patterns as f64;
             let pattern_seed = mix(seed ^ mix(0x5BEC_0000 + pattern as u64));
             let convolved: Vec<Vec<C32>> = keys
                 .par_iter()
@@ -150,16 +152,12 @@ impl CoherentImager {
                     self.convolve_tile(&field.tiles[key], share, SplitMix64::stream(pattern_seed, tile_id(*key)))
                 })
                 .collect();
-            let index: BTreeMap<(u32, u32), usize> = keys.iter().enumerate().map(|(i, k)| (*k, i)).collect();
-            let outputs = output_tiles(&keys);
-            let sums: Vec<Vec<f64>> =
-                outputs.par_iter().map(|key| self.tile_intensity(*key, &index, &convolved)).collect();
-            for (key, pixels) in outputs.into_iter().zip(sums) {
-                let acc = intensity.entry(key).or_insert_with(|| vec![0.0; TILE_PX * TILE_PX]);
+            intensity.par_iter_mut().zip(&outputs).for_each(|(acc, key)| {
+                let pixels = self.tile_intensity(*key, &index, &convolved);
                 acc.iter_mut().zip(&pixels).for_each(|(a, p)| *a += p);
-            }
+            });
         }
-        for ((tx, ty), pixels) in intensity {
+        for (&(tx, ty), pixels) in outputs.iter().zip(&intensity) {
             for j in 0..TILE_PX {
                 let y = ty as usize * TILE_PX + j;
                 if y >= h {

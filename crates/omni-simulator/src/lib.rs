@@ -10,25 +10,23 @@
 //!   analytically over each sample's footprint so a sheet far thinner than a pixel is not
 //!   aliased, scaled by incidence angle, albedo and the 1/r spreading of the 180° fan; laser
 //!   shadows (path from the facet to the point) and camera occlusions are honoured;
-//! * the optical PSF (Gaussian σ 0.7 px) acts on the continuous image before the pixels
-//!   integrate it (each sample is spread from its own sub-pixel position), then photon (Poisson)
-//!   and read noise, saturation, gamma and quantisation, deterministic for a seed (a
-//!   self-contained SplitMix64);
-//! * optional motion blur (the polygon turning during the exposure) and laser speckle (off by
-//!   default, like the noise model; real stripes on paper show a contrast of 0.1–0.3).
+//! * the optical PSF acts on the continuous image before the pixels integrate it (each sample is
+//!   spread from its own sub-pixel position); the lens ([`Optics`]) sets it from diffraction and
+//!   defocus, and images the laser coherently through its pupil, so that laser speckle follows
+//!   from the physics; then photon (Poisson) and read noise,
+//!   saturation, gamma and quantisation, deterministic for a seed (a self-contained SplitMix64);
+//! * scene lighting (level, gradients, hard-edged patches) and textured albedo; optional motion
+//!   blur (the polygon turning during the exposure).
 //!
-//! Default camera and laser ([`RenderOptions::default`]), those of a real industrial 8-bit
-//! monochrome camera and line laser: full well 10 000 e⁻, read noise 6 e⁻, 8 bits over the full
-//! well (≈ 39 e⁻/DN), gamma 1, PSF σ 0.7 px; laser sheet 0.5 mm FWHM; laser strength such that
-//! the stripe on the matte (albedo 0.8) paper-bench plane at 500 mm peaks at 159–190 of 255
-//! (measured by a test); dim ambient light (a white surface collects 2 000 e⁻ ≈ 51 DN).
-//! [`RenderOptions::calibration`] lights the room for checkerboards (white ≈ 178 DN);
-//! [`RenderOptions::saturated`], [`RenderOptions::weak_stripe`] and
-//! [`RenderOptions::strong_ambient`] are the harder conditions. A scaled-down sensor sees each
-//! pixel's footprint grow, so its stripes are dimmer (peak ≈ 114 at 512 px). Measured
-//! on the bench plane at α = 20°: ≈ 450 stripe pixels, peak 190/255, noise σ ≈ 1.9 DN at the
-//! stripe (peak SNR ≈ 78), 0.23 s CPU for a 1024 × 1024 frame on one core (`examples/frame_stats`,
-//! `benches/render.rs`).
+//! [`RenderOptions::default`] is the realistic sensor: a real industrial 8-bit monochrome camera
+//! (full well 10 000 e⁻, read noise 6 e⁻, 8 bits over the full well ≈ 39 e⁻/DN, gamma 1) behind
+//! an F/4 lens on 4.65 µm pixels with a 650 nm laser ([`Optics::paper`]), laser speckle, a
+//! mid-bright room. [`RenderOptions::ideal`] is the idealised sensor (Gaussian PSF σ 0.7 px, no
+//! speckle, a dim room), with its harder conditions [`RenderOptions::ideal_saturated`],
+//! [`RenderOptions::ideal_weak_stripe`] and [`RenderOptions::ideal_strong_ambient`];
+//! [`RenderOptions::calibration`] lights the room for checkerboards. A scaled-down sensor sees
+//! each pixel's footprint grow, so its stripes are dimmer. [`error_budget`] predicts the
+//! per-point σ the sensor allows.
 //!
 //! The sensor ([`Sensor::paper`]): the paper's mirror (a² = 1248.2060 mm², b² = 351.7940 mm²,
 //! c = 40 mm), 1024 × 1024 px, f = 1950 px, rim radius 25 mm; a 12-facet polygon of

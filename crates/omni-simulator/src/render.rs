@@ -12,8 +12,12 @@
 //!    Gaussian of the distance `d` (mm) from the plane (σ = FWHM / 2.3548), `1/(π r)` the spreading
 //!    of the 180° fan at distance `r` from its (virtual) apex. A point gets laser light only if it is
 //!    on the lit half-plane, faces the laser and nothing blocks the path from the facet to it.
-//! 3. The electron image is blurred with a Gaussian PSF, then photon noise (Poisson), read noise
-//!    (Gaussian), saturation at the full well, gamma and quantisation to the bit depth are applied.
+//!    The scene's lighting scales `ambient_e` from place to place.
+//! 3. Incoherent light is blurred with a Gaussian PSF (σ 0.7 px for the idealised sensor, the
+//!    lens's diffraction + defocus otherwise). With a lens and speckle on, the laser light is
+//!    imaged coherently instead ([`crate::coherent`]).
+//! 4. Photon noise (Poisson), read noise (Gaussian), saturation at the full well, gamma and
+//!    quantisation to the bit depth.
 
 use crate::coherent::{CellLight, CoherentImager, LaserField};
 use crate::frame::Frame16;
@@ -231,7 +235,8 @@ impl RenderOptions {
         Ok(())
     }
 
-    fn beam_sigma(&self) -> f64 {
+    /// σ of the laser sheet's profile across the light plane (mm).
+    pub(crate) fn beam_sigma(&self) -> f64 {
         self.beam_fwhm_mm / (8.0 * 2f64.ln()).sqrt()
     }
 }

@@ -1,7 +1,7 @@
 //! The simulated sensor: a camera model plus the transmitter.
 
 use omni_formats::{CameraFile, ScannerFile};
-use omni_model::{CameraModel, HyperbolicCamera, HyperbolicParams, Transmitter, TransmitterParams};
+use omni_model::{CameraModel, HyperbolicCamera, HyperbolicParams, Optics, Transmitter, TransmitterParams};
 use std::path::Path;
 
 /// The sensor being simulated: the receiver (any [`CameraModel`]) and the transmitter.
@@ -32,9 +32,14 @@ impl Sensor {
 
     /// Reads `camera.json` and `scanner.json`.
     pub fn load(camera: &Path, scanner: &Path) -> omni_formats::Result<Sensor> {
-        let (_, camera) = CameraFile::load(camera)?;
+        Ok(Sensor::load_with_optics(camera, scanner)?.0)
+    }
+
+    /// Reads `camera.json` and `scanner.json`, with the optics camera.json states, if any.
+    pub fn load_with_optics(camera: &Path, scanner: &Path) -> omni_formats::Result<(Sensor, Option<Optics>)> {
+        let (file, camera) = CameraFile::load(camera)?;
         let (_, transmitter) = ScannerFile::load(scanner)?;
-        Ok(Sensor { camera, transmitter })
+        Ok((Sensor { camera, transmitter }, file.optics))
     }
 }
 

@@ -113,26 +113,6 @@ fn speckle_matches_the_dorsch_limit_at_three_f_numbers() {
     }
 }
 
-#[test]
-#[ignore = "exploration: cargo test -p omni-simulator --test optics -- --ignored --nocapture"]
-fn speckle_against_sheet_width() {
-    for fwhm in [0.5, 2.0, 5.0] {
-        for f_number in [2.8, 4.0, 8.0] {
-            let optics = Optics { f_number, defocus_px: 0.0, ..Optics::paper() };
-            let s = speckle_scatter(optics, fwhm);
-            eprintln!(
-                "sheet {fwhm} mm F/{f_number}: {} pts, σ {:.4} px ({:.3} mm), Dorsch {:.4} px ({:.3} mm), ratio {:.2}",
-                s.points,
-                s.sigma_px,
-                s.sigma_range_mm,
-                optics.dorsch_sigma_px(),
-                s.dorsch_range_mm,
-                s.sigma_range_mm / s.dorsch_range_mm
-            );
-        }
-    }
-}
-
 /// The speckled stripe keeps the incoherent stripe's position: averaged over patterns, each
 /// point's centroid offset is what the patterns' own scatter leaves (a centre snapped to the
 /// ¼ px cells of the coherent field would add a sawtooth of up to ±⅛ px).

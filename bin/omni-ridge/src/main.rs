@@ -4,16 +4,20 @@ mod pipeline;
 
 use clap::Parser;
 use omni_cli::{CliError, CliResult};
-use omni_vision::stripe::{Method, RidgeParams};
+use omni_vision::stripe::{Method, RidgeParams, Sampling};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 const AFTER_HELP: &str = "\
 Each frame record's image (path resolved against the header's frames_dir) is loaded, its laser-off
-frame (ambient_path) subtracted if present, and sampled radially from the mirror centre inside the
-mirror annulus (from --camera; without it: the image centre and the largest inscribed circle).
-Every stripe segment crossing a ray gives one point [u, v, peak intensity, width px, quality flags]
-in the record's `stripe` field; other records and fields pass through untouched.
+frame (ambient_path, decoded once however many frames share it) subtracted if present, and searched
+inside the mirror annulus (from --camera; without it: the image centre and the largest inscribed
+circle). The stripe is measured across its own normal, in every direction, about once per pixel of
+its length (--sampling rays: along rays from the mirror centre instead, which misses stripes within
+30 degrees of a ray). Each point [u, v, peak intensity, width px, quality flags] goes into the
+record's `stripe` field; other records and fields pass through untouched. Points closer than 1.5 px
+to a stripe's end, lopsided profiles (a stripe cut by a silhouette or a crease) and isolated specks
+are dropped; the blur's pull on curved stripes is removed with the blur measured on the frame.
 
 Methods: centroid (the paper's threshold + intensity centroid, Eq. 16), windowed (centroid with the
 threshold subtracted, the default), gauss (log-parabola fit), blais-rioux, hessian (Steger).
@@ -40,6 +44,10 @@ struct Args {
     /// Stripe-centre estimator.
     #[arg(long, default_value = "windowed", value_parser = parse_method)]
     method: Method,
+    /// Where profiles are sampled: normal (across each stripe, every direction) or rays (from
+    /// the mirror centre, the earlier detector).
+    #[arg(long, default_value = "normal", value_parser = parse_sampling)]
+    sampling: Sampling,
     /// Intensity threshold in the frame's units (0–255 or 0–65535) [default: 4 % of full scale].
     #[arg(long)]
     threshold: Option<f64>,
@@ -52,14 +60,14 @@ struct Args {
     /// Scale (px) of the Gaussian derivatives of the hessian method.
     #[arg(long, default_value_t = 1.0)]
     hessian_sigma: f64,
-    /// Fit each point along the stripe: a straight line through the stripe's points within this
-    /// many px of arc on either side (0 = off). 3 px lowers the noise of noisy frames by about a
-    /// quarter, at the price of lateral resolution.
+    /// Fit each point along the stripe through the stripe's points within this many px of arc on
+    /// either side (0 = off): a parabola across the normal (a line along rays). Averages speckle
+    /// and noise at the price of lateral resolution (features shorter than the window blur).
     #[arg(long, default_value_t = 0.0, value_name = "PX")]
     along_stripe: f64,
-    /// The camera's optical blur (Gaussian PSF σ, px; pixel area not included): curved stripes
-    /// are pulled towards their centre of curvature by the blur, and that pull is removed.
-    /// 0.7 px is omni-sim's camera; 0 corrects only the pixel area and the detector's own kernel.
+    /// With --sampling rays only: the camera's optical blur (Gaussian PSF σ, px; pixel area not
+    /// included), whose pull on curved stripes is removed. The normal sampling measures the blur
+    /// on each frame instead.
     #[arg(long, default_value_t = 0.7, value_name = "PX")]
     optics_blur: f64,
     /// Write each frame with its detected centres drawn as DIR/<seq>.png.
@@ -77,11 +85,16 @@ fn parse_method(s: &str) -> Result<Method, String> {
     s.parse()
 }
 
+fn parse_sampling(s: &str) -> Result<Sampling, String> {
+    s.parse()
+}
+
 fn main() -> ExitCode {
     omni_cli::main("omni-ridge", || {
         let args = Args::parse();
         let params = RidgeParams {
             method: args.method,
+            sampling: args.sampling,
             threshold: args.threshold,
             min_width: args.min_width,
             max_width: args.max_width,

@@ -60,6 +60,8 @@ struct Detectors {
     params: RidgeParams,
     camera: Option<RidgeDetector>,
     from_first_frame: OnceLock<RidgeDetector>,
+    /// Laser-off frames, decoded once for all the frames that share them.
+    laser_off: stripe::LaserOffCache,
 }
 
 impl Detectors {
@@ -88,7 +90,12 @@ pub fn run(
         RidgeDetector::new(w, h, cam.mirror_circle(), config.params)
     });
     let detectors =
-        Arc::new(Detectors { params: config.params, camera: camera_detector, from_first_frame: OnceLock::new() });
+        Arc::new(Detectors {
+        params: config.params,
+        camera: camera_detector,
+        from_first_frame: OnceLock::new(),
+        laser_off: stripe::LaserOffCache::default(),
+    });
     let threads = config.threads.max(1);
     let window = 2 * threads + 2;
     let (token_tx, token_rx) = sync_channel::<()>(window);
@@ -205,7 +212,7 @@ fn process_frame(
         frame.stripe = Some(Vec::new());
         return Ok(());
     }
-    let img = stripe::load_frame_image(frame, frames_dir)?;
+    let img = stripe::load_frame_image_cached(frame, frames_dir, &detectors.laser_off)?;
     let (detector, what) = detectors.for_image(&img)?;
     let path = frame.resolve_path(frames_dir, &frame.path);
     let points = stripe::frame_points(&img, detector, what).map_err(|m| format!("{}: {m}", path.display()))?;

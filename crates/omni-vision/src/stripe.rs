@@ -95,6 +95,7 @@
 //! }
 //! ```
 
+mod across;
 mod along;
 #[cfg(target_arch = "x86_64")]
 mod bilinear8;
@@ -107,7 +108,7 @@ mod sampling;
 mod steger;
 
 pub use estimators::Segment;
-pub use frames::{check_size, frame_points, load_frame_image};
+pub use frames::{LaserOffCache, check_size, frame_points, load_frame_image, load_frame_image_cached};
 pub use omni_formats::stream::{StripePoint, quality};
 pub use overlay::draw_overlay;
 
@@ -162,11 +163,44 @@ impl std::str::FromStr for Method {
     }
 }
 
+/// Where the profiles across the stripe are sampled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Sampling {
+    /// Along each stripe's own normal, seeded from every row and column (module `across`):
+    /// every stripe direction is measured.
+    #[default]
+    Normal,
+    /// Along rays from the mirror centre: stripes running within 30° of a ray are not measured.
+    Rays,
+}
+
+impl Sampling {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampling::Normal => "normal",
+            Sampling::Rays => "rays",
+        }
+    }
+}
+
+impl std::str::FromStr for Sampling {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        [Sampling::Normal, Sampling::Rays]
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("unknown sampling \"{s}\" (known: normal, rays)"))
+    }
+}
+
 /// Detector settings. Intensities are in the frame's own units (0–255 for 8-bit frames,
 /// 0–65535 for 16-bit ones); lengths in px.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RidgeParams {
     pub method: Method,
+    /// Where profiles are sampled: across each stripe's normal (default) or along rays.
+    pub sampling: Sampling,
     /// Contrast above the local background (in the Gaussian-sampled profile) that makes a
     /// stripe. `None`: 4 % of full scale (10.2 of 255).
     pub threshold: Option<f64>,
@@ -193,6 +227,7 @@ impl Default for RidgeParams {
     fn default() -> Self {
         RidgeParams {
             method: Method::Windowed,
+            sampling: Sampling::Normal,
             threshold: None,
             min_width: 1.0,
             max_width: 12.0,
@@ -581,6 +616,9 @@ impl RidgeDetector {
         assert_eq!((frame.width, frame.height), (self.width, self.height), "frame size differs from the detector's");
         assert_eq!(frame.data.len(), self.width as usize * self.height as usize, "frame buffer has the wrong length");
         let threshold = self.params.threshold_for(frame.max_value);
+        if self.params.sampling == Sampling::Normal {
+            return self.detect_across(frame, threshold);
+        }
         self.mark_candidates(frame, threshold, scratch);
         let mut out = Vec::new();
         // Points of ray `rays[i].0` are `out[rays[i].1..rays[i + 1].1]`.
@@ -1189,7 +1227,7 @@ fn fast_atan2(y: f64, x: f64) -> f64 {
 }
 
 #[cfg(test)]
-mod tests;
+pub(super) mod tests;
 
 #[cfg(test)]
 mod sim_tests;

@@ -3,15 +3,54 @@
 use super::{RidgeDetector, StripePoint};
 use crate::image_io::{GrayImage, load_gray};
 use omni_formats::stream::Frame;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+/// Laser-off frames decoded once and shared: a scan's frames usually share one laser-off frame
+/// per facet or revolution. Holds the most recently used [`LaserOffCache::CAPACITY`] of them.
+#[derive(Debug, Default)]
+pub struct LaserOffCache {
+    entries: Mutex<Vec<(PathBuf, Arc<GrayImage>)>>,
+}
+
+impl LaserOffCache {
+    /// Distinct laser-off frames kept (a 1024² 16-bit frame is 2 MB).
+    pub const CAPACITY: usize = 16;
+
+    /// The decoded frame at `path`, decoded now if it is not held.
+    pub fn get(&self, path: &std::path::Path) -> Result<Arc<GrayImage>, String> {
+        let lock = |m: &Mutex<_>| m.lock().unwrap_or_else(|e: std::sync::PoisonError<_>| e.into_inner());
+        if let Some(hit) = lock(&self.entries).iter().find(|(p, _)| p == path).map(|(_, img)| img.clone()) {
+            return Ok(hit);
+        }
+        // Decoded outside the lock; two threads may both decode a new frame once.
+        let img = Arc::new(load_gray(path).map_err(|e| format!("laser-off frame {e}"))?);
+        let mut entries = lock(&self.entries);
+        if entries.len() == Self::CAPACITY {
+            entries.remove(0);
+        }
+        entries.push((path.to_path_buf(), img.clone()));
+        Ok(img)
+    }
+}
 
 /// Loads a frame record's image (path resolved against `frames_dir`) and subtracts its
 /// laser-off frame (`ambient_path`) if it has one. Errors name the file at fault.
 pub fn load_frame_image(frame: &Frame, frames_dir: Option<&str>) -> Result<GrayImage, String> {
+    load_frame_image_cached(frame, frames_dir, &LaserOffCache::default())
+}
+
+/// [`load_frame_image`] with the laser-off frames taken from (and added to) `cache`.
+pub fn load_frame_image_cached(
+    frame: &Frame,
+    frames_dir: Option<&str>,
+    cache: &LaserOffCache,
+) -> Result<GrayImage, String> {
     let path = frame.resolve_path(frames_dir, &frame.path);
     let mut img = load_gray(&path).map_err(|e| e.to_string())?;
     if let Some(ambient) = &frame.ambient_path {
         let apath = frame.resolve_path(frames_dir, ambient);
-        let off = load_gray(&apath).map_err(|e| format!("laser-off frame {}", e))?;
+        let off = cache.get(&apath)?;
         if off.bit_depth != img.bit_depth {
             return Err(format!(
                 "laser-off frame {}: {}-bit, but the frame is {}-bit",
@@ -20,7 +59,7 @@ pub fn load_frame_image(frame: &Frame, frames_dir: Option<&str>) -> Result<GrayI
                 img.bit_depth
             ));
         }
-        img.subtract_saturating(&off).map_err(|m| format!("laser-off frame {}: {m}", apath.display()))?;
+        img.subtract_saturating(off.as_ref()).map_err(|m| format!("laser-off frame {}: {m}", apath.display()))?;
     }
     Ok(img)
 }

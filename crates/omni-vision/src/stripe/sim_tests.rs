@@ -1,4 +1,5 @@
-//! Accuracy on frames of the virtual sensor (`omni_simulator`) against its ground truth.
+//! Accuracy of the ray sampling ([`Sampling::Rays`]) on frames of the virtual sensor
+//! (`omni_simulator`) against its ground truth (the normal sampling: `tests/ridge_truth.rs`).
 //!
 //! The error of a detected point is measured along its sampling ray: the ray from the mirror
 //! centre through the point is intersected with the truth polylines, and the error is the
@@ -190,7 +191,9 @@ fn report(case: &str, frames: &[(GrayImage, Vec<TruthPoint>)]) -> Vec<(RidgePara
     eprintln!("{case}: {} frames, {truth_points} truth samples, brightest pixel {peak}", frames.len());
     [0.0, ALONG_PX]
         .into_iter()
-        .flat_map(|along| Method::ALL.map(|method| RidgeParams { method, along_stripe_px: along, ..Default::default() }))
+        .flat_map(|along| {
+            Method::ALL.map(|method| RidgeParams { method, along_stripe_px: along, sampling: Sampling::Rays, ..Default::default() })
+        })
         .map(|params| {
             let m = measure_params(frames, params);
             let (rms, bias) = m.rms_bias();

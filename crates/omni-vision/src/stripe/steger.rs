@@ -63,7 +63,7 @@ impl Kernels {
 
     /// Gradient and Hessian `[rx, ry, rxx, rxy, ryy]` of the smoothed image at (x, y) px, or
     /// `None` if the window leaves the image.
-    fn derivatives<P: Pixel>(&self, f: &Frame<'_, P>, x: f64, y: f64) -> Option<[f64; 5]> {
+    pub(super) fn derivatives<P: Pixel>(&self, f: &Frame<'_, P>, x: f64, y: f64) -> Option<[f64; 5]> {
         if !(x >= 0.0 && y >= 0.0) {
             return None;
         }
@@ -95,7 +95,7 @@ impl Kernels {
 
     /// The unit normal of a bright line (eigenvector of the Hessian's most negative eigenvalue)
     /// and that eigenvalue, or `None` where the image is not ridge-shaped.
-    fn normal(h: &[f64; 5]) -> Option<((f64, f64), f64)> {
+    pub(super) fn normal(h: &[f64; 5]) -> Option<((f64, f64), f64)> {
         let [_, _, rxx, rxy, ryy] = *h;
         let half_trace = 0.5 * (rxx + ryy);
         let disc = (0.25 * (rxx - ryy).powi(2) + rxy * rxy).sqrt();

@@ -48,7 +48,7 @@ fn circle() -> MirrorCircle {
 }
 
 fn detector(method: Method) -> RidgeDetector {
-    RidgeDetector::new(W, H, circle(), RidgeParams { method, ..Default::default() })
+    RidgeDetector::new(W, H, circle(), RidgeParams { method, sampling: Sampling::Rays, ..Default::default() })
 }
 
 /// Polar angle (rad, [0, 2π)) and radius (px) of a point about the mirror centre.
@@ -199,7 +199,7 @@ fn saturated_stripe_is_located_at_the_plateau_centre() {
 #[test]
 fn weak_stripe_is_found_and_flagged() {
     let img = render(W, H, 8, 2.0, 7, |x, y| gaussian_line((x - CX).hypot(y - CY) - 70.0, 1.5, 60.0));
-    let params = RidgeParams { method: Method::Gauss, threshold: Some(20.0), ..Default::default() };
+    let params = RidgeParams { method: Method::Gauss, threshold: Some(20.0), sampling: Sampling::Rays, ..Default::default() };
     let det = RidgeDetector::new(W, H, circle(), params);
     let pts = det.detect(&img);
     let (rms, bias) = rms_bias(&pts.iter().map(|p| polar(p).1 - 70.0).collect::<Vec<_>>());

@@ -89,8 +89,7 @@ pub fn run(
         let (w, h) = cam.image_size();
         RidgeDetector::new(w, h, cam.mirror_circle(), config.params)
     });
-    let detectors =
-        Arc::new(Detectors {
+    let detectors = Arc::new(Detectors {
         params: config.params,
         camera: camera_detector,
         from_first_frame: OnceLock::new(),

@@ -131,7 +131,11 @@ fn explore_params() {
 fn explore() {
     for (name, opts) in [("ideal", RenderOptions::ideal()), ("realistic", RenderOptions::default())] {
         for object in [BenchObject::Plane, BenchObject::Cylinder, BenchObject::Sphere] {
-            for (sampling, along) in [(omni_vision::stripe::Sampling::Rays, 0.0), (omni_vision::stripe::Sampling::Normal, 0.0), (omni_vision::stripe::Sampling::Normal, 3.0)] {
+            for (sampling, along) in [
+                (omni_vision::stripe::Sampling::Rays, 0.0),
+                (omni_vision::stripe::Sampling::Normal, 0.0),
+                (omni_vision::stripe::Sampling::Normal, 3.0),
+            ] {
                 let t = bench(object, &opts, RidgeParams { sampling, along_stripe_px: along, ..Default::default() });
                 eprintln!("{}", t.line(&format!("{name} {object:?} {} {along}", sampling.name())));
             }
@@ -160,10 +164,27 @@ fn peek() {
         }
     }
     peaks.sort();
-    eprintln!("bit depth {} peaks: p10 {} p50 {} p90 {}", g.bit_depth, peaks[peaks.len() / 10], peaks[peaks.len() / 2], peaks[peaks.len() * 9 / 10]);
+    eprintln!(
+        "bit depth {} peaks: p10 {} p50 {} p90 {}",
+        g.bit_depth,
+        peaks[peaks.len() / 10],
+        peaks[peaks.len() / 2],
+        peaks[peaks.len() * 9 / 10]
+    );
     let bg: Vec<u16> = g.data.iter().step_by(997).cloned().collect();
-    eprintln!("background median {}", { let mut b = bg.clone(); b.sort(); b[b.len() / 2] });
-    image::save_buffer("/tmp/peek.png", &g.data.iter().map(|v| *v as u8).collect::<Vec<u8>>(), SIZE, SIZE, image::ColorType::L8).unwrap();
+    eprintln!("background median {}", {
+        let mut b = bg.clone();
+        b.sort();
+        b[b.len() / 2]
+    });
+    image::save_buffer(
+        "/tmp/peek.png",
+        &g.data.iter().map(|v| *v as u8).collect::<Vec<u8>>(),
+        SIZE,
+        SIZE,
+        image::ColorType::L8,
+    )
+    .unwrap();
 }
 
 #[test]
@@ -182,8 +203,15 @@ fn outliers() {
             add(&mut t, &[*p], &f.truth, (circle.centre.x, circle.centre.y));
             let e = t.errors.first().cloned().unwrap_or(9.0);
             if e.abs() > 0.05 {
-                let end = lines.iter().flat_map(|l| [l[0].pixel, l[l.len() - 1].pixel]).map(|q| (q[0] - p.u).hypot(q[1] - p.v)).fold(f64::INFINITY, f64::min);
-                eprintln!("alpha {alpha} ({:.1}, {:.1}) err {e:+.3} width {:.2} int {:.0} end-dist {end:.1}", p.u, p.v, p.width, p.intensity);
+                let end = lines
+                    .iter()
+                    .flat_map(|l| [l[0].pixel, l[l.len() - 1].pixel])
+                    .map(|q| (q[0] - p.u).hypot(q[1] - p.v))
+                    .fold(f64::INFINITY, f64::min);
+                eprintln!(
+                    "alpha {alpha} ({:.1}, {:.1}) err {e:+.3} width {:.2} int {:.0} end-dist {end:.1}",
+                    p.u, p.v, p.width, p.intensity
+                );
             }
         }
     }

@@ -185,7 +185,14 @@ impl RidgeDetector {
 
     /// The centre of the stripe through seed pixel (`x`, `y`), measured on a profile along its
     /// normal; `None` if the normal belongs to the other axis, or the profile fails a check.
-    fn measure_seed<P: Pixel>(&self, frame: &Frame<'_, P>, x: u32, y: u32, axis: Axis, threshold: f64) -> Option<Centre> {
+    fn measure_seed<P: Pixel>(
+        &self,
+        frame: &Frame<'_, P>,
+        x: u32,
+        y: u32,
+        axis: Axis,
+        threshold: f64,
+    ) -> Option<Centre> {
         let (x0, y0) = (x as f64, y as f64);
         let derivatives = self.steger.derivatives(frame, x0, y0)?;
         let ((nx, ny), _) = super::steger::Kernels::normal(&derivatives)?;
@@ -279,7 +286,8 @@ impl RidgeDetector {
             if c.asymmetry > MAX_ASYMMETRY && c.point.quality & quality::SATURATED == 0 {
                 continue;
             }
-            let mut widths: Vec<f64> = neighbours.iter().filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX).map(|n| n.2).collect();
+            let mut widths: Vec<f64> =
+                neighbours.iter().filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX).map(|n| n.2).collect();
             widths.sort_by(f64::total_cmp);
             if c.half_width < MIN_WIDTH_RATIO * widths[widths.len() / 2] {
                 continue;
@@ -427,7 +435,6 @@ impl Grid {
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::super::tests::render;
@@ -439,7 +446,9 @@ mod tests {
     fn blurred_ring(r: f64, radius: f64, sigma: f64) -> f64 {
         let z = r * radius / (sigma * sigma);
         let i0e = (1.0 + 1.0 / (8.0 * z) + 9.0 / (128.0 * z * z)) / (std::f64::consts::TAU * z).sqrt();
-        (-(r - radius).powi(2) / (2.0 * sigma * sigma)).exp() * i0e * (std::f64::consts::TAU * radius / sigma.powi(2)).sqrt()
+        (-(r - radius).powi(2) / (2.0 * sigma * sigma)).exp()
+            * i0e
+            * (std::f64::consts::TAU * radius / sigma.powi(2)).sqrt()
     }
 
     /// A curved stripe is not pulled towards its centre of curvature, whatever the lens's blur,
@@ -450,7 +459,8 @@ mod tests {
         let (cx, cy) = (80.3, 79.6);
         for sigma in [0.4, 0.7, 1.0, 1.5] {
             for radius in [15.0, 30.0] {
-                let img = render(w, h, 16, 0.0, 1, |x, y| 40000.0 * blurred_ring((x - cx).hypot(y - cy), radius, sigma));
+                let img =
+                    render(w, h, 16, 0.0, 1, |x, y| 40000.0 * blurred_ring((x - cx).hypot(y - cy), radius, sigma));
                 let circle = MirrorCircle { centre: Vector2::new(cx, cy), inner_radius: 2.0, outer_radius: 75.0 };
                 let det = RidgeDetector::new(w, h, circle, RidgeParams::default());
                 let points = det.detect(&img);
@@ -458,7 +468,10 @@ mod tests {
                 let n = errors.len() as f64;
                 let bias = errors.iter().sum::<f64>() / n;
                 let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
-                eprintln!("blur σ {sigma} px, R {radius} px: {} points, bias {bias:+.4} px, rms {rms:.4} px", errors.len());
+                eprintln!(
+                    "blur σ {sigma} px, R {radius} px: {} points, bias {bias:+.4} px, rms {rms:.4} px",
+                    errors.len()
+                );
                 assert!(n > 0.6 * std::f64::consts::TAU * radius, "σ {sigma} R {radius}: {n} points");
                 assert!(bias.abs() <= 0.01, "σ {sigma} R {radius}: bias {bias:+.4} px");
             }

@@ -17,15 +17,18 @@ impl LaserOffCache {
     /// Distinct laser-off frames kept (a 1024² 16-bit frame is 2 MB).
     pub const CAPACITY: usize = 16;
 
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<(PathBuf, Arc<GrayImage>)>> {
+        self.entries.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
     /// The decoded frame at `path`, decoded now if it is not held.
     pub fn get(&self, path: &std::path::Path) -> Result<Arc<GrayImage>, String> {
-        let lock = |m: &Mutex<_>| m.lock().unwrap_or_else(|e: std::sync::PoisonError<_>| e.into_inner());
-        if let Some(hit) = lock(&self.entries).iter().find(|(p, _)| p == path).map(|(_, img)| img.clone()) {
+        if let Some(hit) = self.lock().iter().find(|(p, _)| p == path).map(|(_, img)| img.clone()) {
             return Ok(hit);
         }
         // Decoded outside the lock; two threads may both decode a new frame once.
         let img = Arc::new(load_gray(path).map_err(|e| format!("laser-off frame {e}"))?);
-        let mut entries = lock(&self.entries);
+        let mut entries = self.lock();
         if entries.len() == Self::CAPACITY {
             entries.remove(0);
         }
@@ -77,4 +80,23 @@ pub fn check_size(img: &GrayImage, detector: &RidgeDetector, what: &str) -> Resu
 pub fn frame_points(img: &GrayImage, detector: &RidgeDetector, what: &str) -> Result<Vec<StripePoint>, String> {
     check_size(img, detector, what)?;
     Ok(detector.detect(img))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_laser_off_frame_is_decoded_once_and_errors_name_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("off.png");
+        image::GrayImage::from_pixel(8, 6, image::Luma([7u8])).save(&path).unwrap();
+        let cache = LaserOffCache::default();
+        let (a, b) = (cache.get(&path).unwrap(), cache.get(&path).unwrap());
+        assert!(Arc::ptr_eq(&a, &b), "decoded twice");
+        assert_eq!((a.width, a.height, a.data[0]), (8, 6, 7));
+        let missing = dir.path().join("missing.png");
+        let e = cache.get(&missing).unwrap_err();
+        assert!(e.contains("laser-off frame") && e.contains("missing.png"), "{e}");
+    }
 }

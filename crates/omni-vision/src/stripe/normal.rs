@@ -331,7 +331,12 @@ mod tests {
 
     fn detector_with_optics_blur(optics_blur_px: f64) -> RidgeDetector {
         let circle = MirrorCircle { centre: Vector2::new(100.0, 100.0), inner_radius: 10.0, outer_radius: 95.0 };
-        RidgeDetector::new(200, 200, circle, RidgeParams { optics_blur_px, sampling: super::super::Sampling::Rays, ..Default::default() })
+        RidgeDetector::new(
+            200,
+            200,
+            circle,
+            RidgeParams { optics_blur_px, sampling: super::super::Sampling::Rays, ..Default::default() },
+        )
     }
 
     /// `f` (row-major, `w` wide) blurred by a 2-D Gaussian of σ `sigma` px (separable, zero

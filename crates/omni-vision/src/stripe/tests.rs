@@ -199,7 +199,8 @@ fn saturated_stripe_is_located_at_the_plateau_centre() {
 #[test]
 fn weak_stripe_is_found_and_flagged() {
     let img = render(W, H, 8, 2.0, 7, |x, y| gaussian_line((x - CX).hypot(y - CY) - 70.0, 1.5, 60.0));
-    let params = RidgeParams { method: Method::Gauss, threshold: Some(20.0), sampling: Sampling::Rays, ..Default::default() };
+    let params =
+        RidgeParams { method: Method::Gauss, threshold: Some(20.0), sampling: Sampling::Rays, ..Default::default() };
     let det = RidgeDetector::new(W, H, circle(), params);
     let pts = det.detect(&img);
     let (rms, bias) = rms_bias(&pts.iter().map(|p| polar(p).1 - 70.0).collect::<Vec<_>>());

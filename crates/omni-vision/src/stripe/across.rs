@@ -36,9 +36,13 @@ const SAME_STRIPE_COS: f64 = 0.866;
 pub const END_PX: f64 = 1.5;
 /// Half the arc (px) of the parabola that gives a point's curvature.
 const SHAPE_HALF_ARC_PX: f64 = 3.0;
-/// A profile whose centre is farther from the middle of its half-maximum crossings than this
-/// fraction of their distance is cut (one flank missing).
-pub const MAX_ASYMMETRY: f64 = 0.12;
+/// A profile whose two flanks (each from the half maximum down to [`ASYMMETRY_LEVEL`] of the
+/// peak) differ by more than this fraction of their sum is cut (one flank falls off a
+/// silhouette or a crease).
+pub const MAX_ASYMMETRY: f64 = 0.08;
+/// The fraction of the peak where lopsidedness is measured: low on the flanks, where a cut
+/// shows first.
+pub const ASYMMETRY_LEVEL: f32 = 0.25;
 /// A profile narrower (half-maximum width) than this fraction of its neighbours' median is cut.
 pub const MIN_WIDTH_RATIO: f64 = 0.7;
 /// The quantile of the frame's profile variances taken as the blur (the narrowest stripes are
@@ -66,7 +70,7 @@ struct Centre {
     variance: Option<f64>,
     /// Half-maximum width (px).
     half_width: f64,
-    /// |centre − middle of the half-maximum crossings| / their distance.
+    /// |left flank − right flank| / their sum (see [`MAX_ASYMMETRY`]).
     asymmetry: f64,
 }
 
@@ -229,7 +233,11 @@ impl RidgeDetector {
         };
         let (ha, hb) = estimators::crossings(&q, &seg, 0.5 * peak)?;
         let half_width = (hb - ha) * SAMPLE_STEP_PX;
-        let asymmetry = (index - 0.5 * (ha + hb)).abs() / (hb - ha).max(1e-9);
+        // A cut flank falls faster than the whole one: compare the flanks' spans between the
+        // half maximum and ASYMMETRY_LEVEL of the peak.
+        let (la, lb) = estimators::crossings(&q, &seg, ASYMMETRY_LEVEL * peak)?;
+        let (left, right) = (ha - la, lb - hb);
+        let asymmetry = (left - right).abs() / (left + right).max(1e-9);
         let s = (index - half as f64) * SAMPLE_STEP_PX;
         if s.abs() > 2.0 {
             return None;
@@ -258,7 +266,7 @@ impl RidgeDetector {
     fn link_and_correct(&self, centres: &[Centre]) -> Vec<StripePoint> {
         let blur_variance = frame_blur_variance(centres);
         let along = self.params.along_stripe_px;
-        let reach = SHAPE_HALF_ARC_PX.max(along).max(super::MIN_STRIPE_ARC_PX) + 1.0;
+        let reach = SHAPE_HALF_ARC_PX.max(2.0 * along).max(super::MIN_STRIPE_ARC_PX) + 1.0;
         let grid = Grid::new(centres, reach);
         let mut out = Vec::with_capacity(centres.len());
         let mut neighbours = Vec::new();
@@ -293,15 +301,16 @@ impl RidgeDetector {
                 continue;
             }
             let mut shift = 0.0;
-            if let Some([_, _, curvature]) = fit_parabola(&neighbours, SHAPE_HALF_ARC_PX) {
+            let curvature = fit_parabola(&neighbours, SHAPE_HALF_ARC_PX.max(2.0 * along)).map(|f| f[2]);
+            if let Some(c) = curvature {
                 // A parabola d = c·t² has its centre of curvature on the +n side for c > 0; the
                 // blur pulls the centre that way by σ²κ/2 = σ²·c.
-                shift -= blur_variance * curvature;
-            }
-            if along > 0.0
-                && let Some([offset, _, _]) = fit_parabola(&neighbours, along)
-            {
-                shift += offset;
+                shift -= blur_variance * c;
+                if along > 0.0
+                    && let Some(offset) = mean_offset(&neighbours, along, c)
+                {
+                    shift += offset;
+                }
             }
             if shift.abs() > MAX_MOVE_PX {
                 continue;
@@ -405,6 +414,22 @@ fn fit_parabola(neighbours: &[(f64, f64, f64)], half_arc: f64) -> Option<[f64; 3
     estimators::solve3(m, r)
 }
 
+/// The stripe's offset at t = 0 from a straight line through the neighbours within ±`half_arc`
+/// once the curvature `c` (from a wider parabola) is taken out: d − c·t²; `None` unless
+/// at least two neighbours lie on each side.
+fn mean_offset(neighbours: &[(f64, f64, f64)], half_arc: f64, c: f64) -> Option<f64> {
+    let (mut s0, mut s1, mut s2, mut r0, mut r1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let (mut before, mut after) = (0, 0);
+    for &(t, d, _) in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
+        let y = d - c * t * t;
+        (s0, s1, s2, r0, r1) = (s0 + 1.0, s1 + t, s2 + t * t, r0 + y, r1 + t * y);
+        before += usize::from(t < -0.5);
+        after += usize::from(t > 0.5);
+    }
+    let det = s0 * s2 - s1 * s1;
+    (before >= 2 && after >= 2 && det > 1e-9).then(|| (r0 * s2 - r1 * s1) / det)
+}
+
 /// Centres bucketed in square cells, for neighbour queries within `reach` px.
 struct Grid {
     cell: f64,
@@ -476,5 +501,98 @@ mod tests {
                 assert!(bias.abs() <= 0.01, "σ {sigma} R {radius}: bias {bias:+.4} px");
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod direction_tests {
+    use super::super::tests::render;
+    use super::super::*;
+    use omni_geom::Vector2;
+
+    const W: u32 = 240;
+    const H: u32 = 232;
+    const CX: f64 = 121.3;
+    const CY: f64 = 114.6;
+
+    fn detector(params: RidgeParams) -> RidgeDetector {
+        let circle = MirrorCircle { centre: Vector2::new(CX, CY), inner_radius: 20.0, outer_radius: 110.0 };
+        RidgeDetector::new(W, H, circle, params)
+    }
+
+    /// Straight stripes at every angle to the rays from the mirror centre, radial ones included,
+    /// are measured along their whole length inside the annulus, about once per px.
+    #[test]
+    fn stripes_in_every_direction_are_measured() {
+        let det = detector(RidgeParams::default());
+        for (i, d) in [0.0, 6.0, 25.0, 60.0].into_iter().enumerate() {
+            for k in 0..12 {
+                let theta = (15.0 * k as f64 + 3.7).to_radians();
+                let (nx, ny) = (theta.cos(), theta.sin());
+                // The line n·p = n·centre + d: distance d from the mirror centre (d = 0: radial).
+                let c = CX * nx + CY * ny + d;
+                let img = render(W, H, 8, 2.0, (i * 12 + k) as u64, |x, y| {
+                    180.0 * (-(x * nx + y * ny - c).powi(2) / (2.0 * 1.2 * 1.2)).exp()
+                });
+                let points = det.detect(&img);
+                let errors: Vec<f64> = points.iter().map(|p| p.u * nx + p.v * ny - c).collect();
+                // The chord inside the annulus (radii 20–110), on both sides if it passes the hole.
+                let half = |r: f64| (r * r - d * d).max(0.0).sqrt();
+                let chord = 2.0 * (half(110.0) - half(20.0)) - 4.0 * super::END_PX;
+                let n = errors.len() as f64;
+                let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n.max(1.0)).sqrt();
+                assert!(n >= 0.68 * chord, "d {d} θ {:.1}°: {n} points on a {chord:.0} px chord", theta.to_degrees());
+                assert!(rms <= 0.03, "d {d} θ {:.1}°: rms {rms:.4} px", theta.to_degrees());
+            }
+        }
+    }
+
+    /// A ring stripe on a lit surface (40 DN) whose silhouette runs `gap` px inside it: the
+    /// points found and their radial errors (px).
+    fn stripe_beside_a_silhouette(gap: f64, lit: f64) -> (usize, Vec<f64>) {
+        const R: f64 = 60.0;
+        let img = render(W, H, 8, 1.0, 9, |x, y| {
+            let r = (x - CX).hypot(y - CY);
+            let stripe = 150.0 * (-(r - R).powi(2) / (2.0 * 1.2 * 1.2)).exp();
+            if r < R - gap { 0.0 } else { lit + stripe }
+        });
+        let pts = detector(RidgeParams::default()).detect(&img);
+        let errors: Vec<f64> = pts.iter().map(|p| (p.u - CX).hypot(p.v - CY) - R).collect();
+        (pts.len(), errors)
+    }
+
+    /// A stripe cut by a silhouette is refused by its own lopsided profile, whatever the
+    /// light beside it (the background step), and a whole one beside it is kept.
+    #[test]
+    fn stripes_cut_by_a_silhouette_are_refused_by_their_profile() {
+        for lit in [0.0, 10.0, 40.0] {
+            let (cut, _) = stripe_beside_a_silhouette(1.2, lit);
+            let (whole, errors) = stripe_beside_a_silhouette(7.0, lit);
+            let n = errors.len() as f64;
+            let bias = errors.iter().sum::<f64>() / n;
+            let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
+            eprintln!("lit {lit} DN: cut {cut} points, whole {whole} points rms {rms:.4} bias {bias:+.4}");
+            assert!(whole > 300, "lit {lit}: {whole} points on the whole stripe");
+            assert!(rms <= 0.05 && bias.abs() <= 0.02, "lit {lit}: rms {rms} bias {bias}");
+            assert!(cut * 50 <= whole, "lit {lit}: cut stripe gave {cut} points (whole: {whole})");
+        }
+    }
+
+    /// The along-stripe parabola averages noise on a tightly curved stripe without moving it.
+    #[test]
+    fn along_stripe_fit_averages_noise_and_keeps_a_curved_stripe() {
+        const R: f64 = 25.0;
+        let img = render(W, H, 8, 12.0, 4, |x, y| 120.0 * (-((x - CX).hypot(y - CY) - R).powi(2) / (2.0 * 0.9 * 0.9)).exp());
+        let measure = |along| {
+            let pts = detector(RidgeParams { along_stripe_px: along, ..Default::default() }).detect(&img);
+            let e: Vec<f64> = pts.iter().map(|p| (p.u - CX).hypot(p.v - CY) - R).collect();
+            let n = e.len() as f64;
+            (e.iter().sum::<f64>() / n, (e.iter().map(|x| x * x).sum::<f64>() / n).sqrt(), e.len())
+        };
+        let (bias0, rms0, n0) = measure(0.0);
+        let (bias3, rms3, n3) = measure(3.0);
+        eprintln!("R {R}: alone rms {rms0:.4} bias {bias0:+.4} ({n0}); along ±3 px rms {rms3:.4} bias {bias3:+.4} ({n3})");
+        assert!(rms3 <= 0.75 * rms0, "along fit: rms {rms3:.4} against {rms0:.4}");
+        assert!(bias3.abs() <= 0.01, "along fit moved a curved stripe by {bias3:+.4} px");
     }
 }

@@ -1,7 +1,14 @@
 //! Sub-pixel laser-stripe centres in omnidirectional frames.
 //!
+//! Two samplings share the estimators, the threshold and the background rule below. The default,
+//! [`Sampling::Normal`] (module `across`), measures each stripe across its own normal, seeded
+//! from every pixel row and column, so that stripes in every direction are measured; it removes
+//! specks, stripe ends and cut profiles by comparing each point with its neighbours on the
+//! stripe, and the blur's pull on curved stripes with the blur measured on the frame. The rest of
+//! this page describes [`Sampling::Rays`], the earlier detector.
+//!
 //! In an omnidirectional image the stripe runs roughly around the mirror centre, so "across the
-//! stripe" is radial: the detector samples each frame along rays from the mirror centre
+//! stripe" is radial: the ray sampling samples each frame along rays from the mirror centre
 //! ([`omni_model::MirrorCircle`] of the camera, or the image centre), restricted to the valid
 //! mirror annulus. There are `ceil(2π · outer_radius)` rays, so that neighbouring rays are at
 //! most 1 px apart at the rim, and every stripe segment crossing a ray gives one point on it.

@@ -110,109 +110,37 @@ fn bench(object: BenchObject, opts: &RenderOptions, params: RidgeParams) -> Tall
     t
 }
 
+/// Ideal optics (Gaussian blur 0.7 px, no speckle): the stripe centre within 0.015 px RMS and
+/// 0.005 px of bias on plane, cylinder and sphere, the plane's stripe covered.
 #[test]
-fn explore_params() {
+fn ideal_optics_accuracy_on_the_bench() {
+    for object in [BenchObject::Plane, BenchObject::Cylinder, BenchObject::Sphere] {
+        let t = bench(object, &RenderOptions::ideal(), RidgeParams::default());
+        eprintln!("{}", t.line(&format!("ideal {object:?}")));
+        let (rms, bias) = t.rms_bias();
+        assert!(t.errors.len() > 40, "{object:?}: {} points", t.errors.len());
+        // The sphere's 40-odd points (its stripes are short at this range) are held to a looser
+        // bound: a point or two near a stripe's end moves its figures by ~0.003 px.
+        let (rms_max, bias_max) = if object == BenchObject::Sphere { (0.018, 0.008) } else { (0.015, 0.005) };
+        assert!(rms <= rms_max && bias.abs() <= bias_max, "{object:?}: rms {rms:.4} bias {bias:+.4} px");
+        assert_eq!(t.false_points, 0, "{object:?}: false points");
+        if object == BenchObject::Plane {
+            assert!(t.coverage(8).unwrap() >= 0.95, "plane coverage {:?}", t.coverage(8));
+        }
+    }
+}
+
+/// The realistic sensor (speckle C = 0.71 at F/4, defocus, a mid-bright room): the plane's
+/// stripe covered, and the along-stripe fit over ±3 px bringing speckle down to ~0.05 px.
+#[test]
+fn realistic_sensor_coverage_and_speckle() {
     let opts = RenderOptions::default();
-    for (label, params) in [
-        ("dbg", RidgeParams::default()),
-        ("default", RidgeParams::default()),
-        ("min_width 0.2", RidgeParams { min_width: 0.2, ..Default::default() }),
-        ("thr 30", RidgeParams { threshold: Some(30.0), ..Default::default() }),
-        ("thr 30 minw 0.2", RidgeParams { threshold: Some(30.0), min_width: 0.2, ..Default::default() }),
-    ] {
-        for sampling in [omni_vision::stripe::Sampling::Rays, omni_vision::stripe::Sampling::Normal] {
-            let t = bench(BenchObject::Plane, &opts, RidgeParams { sampling, ..params });
-            eprintln!("{}", t.line(&format!("{label} {}", sampling.name())));
-        }
-    }
-}
-
-#[test]
-fn explore() {
-    for (name, opts) in [("ideal", RenderOptions::ideal()), ("realistic", RenderOptions::default())] {
-        for object in [BenchObject::Plane, BenchObject::Cylinder, BenchObject::Sphere] {
-            for (sampling, along) in [
-                (omni_vision::stripe::Sampling::Rays, 0.0),
-                (omni_vision::stripe::Sampling::Normal, 0.0),
-                (omni_vision::stripe::Sampling::Normal, 3.0),
-            ] {
-                let t = bench(object, &opts, RidgeParams { sampling, along_stripe_px: along, ..Default::default() });
-                eprintln!("{}", t.line(&format!("{name} {object:?} {} {along}", sampling.name())));
-            }
-        }
-    }
-}
-
-#[test]
-fn peek() {
-    let sensor = Sensor::paper_scaled(SIZE);
-    let scene = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
-    let f = render_laser_frame(&sensor, &scene, 20f64.to_radians(), 0, &[0, 1], &RenderOptions::default());
-    let g = to_gray(&f.image);
-    let lines = truth_polylines(&f.truth);
-    let mut peaks = vec![];
-    for l in &lines {
-        for q in l.iter().step_by(8) {
-            let (x, y) = (q.pixel[0].round() as i64, q.pixel[1].round() as i64);
-            let mut m = 0;
-            for dy in -2..=2 {
-                for dx in -2..=2 {
-                    m = m.max(g.data[((y + dy) * SIZE as i64 + x + dx) as usize]);
-                }
-            }
-            peaks.push(m);
-        }
-    }
-    peaks.sort();
-    eprintln!(
-        "bit depth {} peaks: p10 {} p50 {} p90 {}",
-        g.bit_depth,
-        peaks[peaks.len() / 10],
-        peaks[peaks.len() / 2],
-        peaks[peaks.len() * 9 / 10]
-    );
-    let bg: Vec<u16> = g.data.iter().step_by(997).cloned().collect();
-    eprintln!("background median {}", {
-        let mut b = bg.clone();
-        b.sort();
-        b[b.len() / 2]
-    });
-    image::save_buffer(
-        "/tmp/peek.png",
-        &g.data.iter().map(|v| *v as u8).collect::<Vec<u8>>(),
-        SIZE,
-        SIZE,
-        image::ColorType::L8,
-    )
-    .unwrap();
-}
-
-#[test]
-fn outliers() {
-    let sensor = Sensor::paper_scaled(SIZE);
-    let object = if std::env::var("OBJ").is_ok() { BenchObject::Sphere } else { BenchObject::Cylinder };
-    let scene = Scene::from_file(paper_bench(object)).unwrap();
-    let circle = sensor.camera.mirror_circle();
-    let det = RidgeDetector::new(SIZE, SIZE, circle, RidgeParams::default());
-    for alpha in [15.0f64, 17.5, 20.0, 22.5, 25.0, 27.5] {
-        let f = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &RenderOptions::ideal());
-        let pts = det.detect(&to_gray(&f.image));
-        let lines = truth_polylines(&f.truth);
-        for p in &pts {
-            let mut t = Tally::default();
-            add(&mut t, &[*p], &f.truth, (circle.centre.x, circle.centre.y));
-            let e = t.errors.first().cloned().unwrap_or(9.0);
-            if e.abs() > 0.05 {
-                let end = lines
-                    .iter()
-                    .flat_map(|l| [l[0].pixel, l[l.len() - 1].pixel])
-                    .map(|q| (q[0] - p.u).hypot(q[1] - p.v))
-                    .fold(f64::INFINITY, f64::min);
-                eprintln!(
-                    "alpha {alpha} ({:.1}, {:.1}) err {e:+.3} width {:.2} int {:.0} end-dist {end:.1}",
-                    p.u, p.v, p.width, p.intensity
-                );
-            }
-        }
-    }
+    let alone = bench(BenchObject::Plane, &opts, RidgeParams::default());
+    let along = bench(BenchObject::Plane, &opts, RidgeParams { along_stripe_px: 3.0, ..Default::default() });
+    eprintln!("{}\n{}", alone.line("realistic plane"), along.line("realistic plane, along ±3"));
+    assert!(alone.coverage(8).unwrap() >= 0.9, "coverage {:?}", alone.coverage(8));
+    assert!(alone.rms_bias().0 <= 0.09, "rms {:.4}", alone.rms_bias().0);
+    assert!(along.rms_bias().0 <= 0.055, "along: rms {:.4}", along.rms_bias().0);
+    assert!(along.rms_bias().1.abs() <= 0.01, "along: bias {:+.4}", along.rms_bias().1);
+    assert!(alone.false_points * 1000 <= alone.errors.len(), "{} false points", alone.false_points);
 }

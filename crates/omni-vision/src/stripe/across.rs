@@ -21,7 +21,6 @@
 
 use super::estimators::{self, Segment};
 use super::{Frame, MAX_CENTRE_GRADIENT, Pixel, RidgeDetector, SAMPLE_STEP_PX, StripePoint, quality};
-use std::collections::HashMap;
 
 /// tan 47°: a seed from a row is measured if the stripe's normal is within 47° of the row (the
 /// stripe within 47° of vertical), one from a column if within 47° of the column; the overlap
@@ -36,10 +35,10 @@ const SAME_STRIPE_COS: f64 = 0.866;
 pub const END_PX: f64 = 1.5;
 /// Half the arc (px) of the parabola that gives a point's curvature.
 const SHAPE_HALF_ARC_PX: f64 = 3.0;
-/// A profile whose two flanks (each from the half maximum down to [`ASYMMETRY_LEVEL`] of the
-/// peak) differ by more than this fraction of their sum is cut (one flank falls off a
-/// silhouette or a crease).
-pub const MAX_ASYMMETRY: f64 = 0.08;
+/// A stripe whose profiles' two flanks (each from the half maximum down to [`ASYMMETRY_LEVEL`]
+/// of the peak) differ, on average over the point's neighbours within ±3 px, by more than this
+/// fraction of their sum is cut (one flank falls off a silhouette or a crease).
+pub const MAX_ASYMMETRY: f64 = 0.1;
 /// The fraction of the peak where lopsidedness is measured: low on the flanks, where a cut
 /// shows first.
 pub const ASYMMETRY_LEVEL: f32 = 0.25;
@@ -47,7 +46,7 @@ pub const ASYMMETRY_LEVEL: f32 = 0.25;
 pub const MIN_WIDTH_RATIO: f64 = 0.7;
 /// The quantile of the frame's profile variances taken as the blur (the narrowest stripes are
 /// the ones whose own width adds least).
-const BLUR_QUANTILE: f64 = 0.25;
+const BLUR_QUANTILE: f64 = 0.5;
 /// A fit that moves its point farther than this (px) is not trusted (a kink, another stripe).
 const MAX_MOVE_PX: f64 = 0.5;
 /// FWHM / σ of a Gaussian.
@@ -60,6 +59,17 @@ enum Axis {
     Column,
 }
 
+/// Profile buffers reused from seed to seed.
+#[derive(Debug, Default)]
+struct Buffers {
+    /// Fine samples on the −n side, outwards.
+    left: Vec<f32>,
+    /// The fine profile, −n to +n.
+    raw: Vec<f32>,
+    /// The profile above the background.
+    contrast: Vec<f32>,
+}
+
 /// A measured centre before linking.
 #[derive(Debug, Clone, Copy)]
 struct Centre {
@@ -70,7 +80,7 @@ struct Centre {
     variance: Option<f64>,
     /// Half-maximum width (px).
     half_width: f64,
-    /// |left flank − right flank| / their sum (see [`MAX_ASYMMETRY`]).
+    /// (flank towards −n − flank towards +n) / their sum (see [`MAX_ASYMMETRY`]).
     asymmetry: f64,
 }
 
@@ -78,16 +88,19 @@ impl RidgeDetector {
     /// Stripe centres of a frame measured across the stripes' normals (module docs), sorted by
     /// azimuth around the mirror centre, then radius.
     pub(super) fn detect_across<P: Pixel>(&self, frame: &Frame<'_, P>, threshold: f64) -> Vec<StripePoint> {
-        let mut centres: Vec<Centre> = self
+        let mut buffers = Buffers::default();
+        let centres: Vec<Centre> = self
             .seeds(frame, threshold)
             .into_iter()
-            .filter_map(|(x, y, axis)| self.measure_seed(frame, x, y, axis, threshold))
+            .filter_map(|(x, y, axis)| self.measure_seed(frame, x, y, axis, threshold, &mut buffers))
             .collect();
-        centres = merge_duplicates(centres);
         let mut points = self.link_and_correct(&centres);
-        let azimuth = |p: &StripePoint| (p.v - self.cy).atan2(p.u - self.cx);
-        let radius = |p: &StripePoint| (p.v - self.cy).hypot(p.u - self.cx);
-        points.sort_by(|a, b| azimuth(a).total_cmp(&azimuth(b)).then(radius(a).total_cmp(&radius(b))));
+        let mut keyed: Vec<(f64, f64, StripePoint)> = points
+            .drain(..)
+            .map(|p| ((p.v - self.cy).atan2(p.u - self.cx), (p.v - self.cy).hypot(p.u - self.cx), p))
+            .collect();
+        keyed.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+        points.extend(keyed.into_iter().map(|k| k.2));
         points
     }
 
@@ -196,6 +209,7 @@ impl RidgeDetector {
         y: u32,
         axis: Axis,
         threshold: f64,
+        buffers: &mut Buffers,
     ) -> Option<Centre> {
         let (x0, y0) = (x as f64, y as f64);
         let derivatives = self.steger.derivatives(frame, x0, y0)?;
@@ -207,17 +221,54 @@ impl RidgeDetector {
         if !fits_axis {
             return None;
         }
-        let half = ((0.5 * self.params.max_width + 2.0) / SAMPLE_STEP_PX).ceil() as usize;
-        let mut raw = Vec::with_capacity(2 * half + 1);
-        for i in 0..=2 * half {
-            let s = (i as f64 - half as f64) * SAMPLE_STEP_PX;
-            raw.push(self.sampler.sample(frame, x0 + s * nx, y0 + s * ny)?);
+        // The background: the larger of the minima of a coarse profile (1 px steps, the Gaussian
+        // kernel: bilinear samples are noisier, and their minima lower) on either side, past the
+        // flank of the widest accepted stripe.
+        let reach = (0.5 * self.params.max_width + 2.0).ceil() as i64;
+        let coarse = |k: i64| self.sampler.sample(frame, x0 + k as f64 * nx, y0 + k as f64 * ny);
+        let (mut left, mut right) = (f32::INFINITY, f32::INFINITY);
+        for k in 0..=reach {
+            left = left.min(coarse(-k)?);
+            right = right.min(coarse(k)?);
         }
-        let left = raw[..=half].iter().cloned().fold(f32::INFINITY, f32::min);
-        let right = raw[half..].iter().cloned().fold(f32::INFINITY, f32::min);
         let background = left.max(right);
-        let q: Vec<f32> = raw.iter().map(|v| v - background).collect();
         let t = threshold as f32;
+        // Fine samples with the Gaussian kernel, outwards from the seed until `tail` samples on
+        // each side are at or below the threshold and below the flank levels the checks use
+        // (Blais–Rioux's filter reaches two samples further).
+        let tail = if self.params.method == super::Method::BlaisRioux { 3 } else { 1 };
+        let limit = (reach as f64 / SAMPLE_STEP_PX) as i64;
+        let fine = |i: i64| {
+            let s = i as f64 * SAMPLE_STEP_PX;
+            self.sampler.sample(frame, x0 + s * nx, y0 + s * ny)
+        };
+        let centre = fine(0)?;
+        let stop = t.min(0.8 * ASYMMETRY_LEVEL * (centre - background));
+        let walk = |dir: i64, out: &mut Vec<f32>| -> Option<()> {
+            let mut below = 0;
+            for i in 1..=limit {
+                let v = fine(dir * i)?;
+                out.push(v);
+                if !(v - background > stop) {
+                    below += 1;
+                    if below == tail {
+                        return Some(());
+                    }
+                }
+            }
+            None
+        };
+        let Buffers { left: before, raw, contrast: q } = buffers;
+        before.clear();
+        walk(-1, before)?;
+        let half = before.len();
+        raw.clear();
+        raw.extend(before.iter().rev());
+        raw.push(centre);
+        walk(1, raw)?;
+        q.clear();
+        q.extend(raw.iter().map(|v| v - background));
+        let (raw, q) = (&raw[..], &q[..]);
         let seg = segment_near(&q, half, t)?;
         let (a, b) = estimators::crossings(&q, &seg, t)?;
         let width = (b - a) * SAMPLE_STEP_PX;
@@ -237,7 +288,7 @@ impl RidgeDetector {
         // half maximum and ASYMMETRY_LEVEL of the peak.
         let (la, lb) = estimators::crossings(&q, &seg, ASYMMETRY_LEVEL * peak)?;
         let (left, right) = (ha - la, lb - hb);
-        let asymmetry = (left - right).abs() / (left + right).max(1e-9);
+        let asymmetry = (left - right) / (left + right).max(1e-9);
         let s = (index - half as f64) * SAMPLE_STEP_PX;
         if s.abs() > 2.0 {
             return None;
@@ -269,33 +320,50 @@ impl RidgeDetector {
         let reach = SHAPE_HALF_ARC_PX.max(2.0 * along).max(super::MIN_STRIPE_ARC_PX) + 1.0;
         let grid = Grid::new(centres, reach);
         let mut out = Vec::with_capacity(centres.len());
-        let mut neighbours = Vec::new();
-        for c in centres {
+        let (mut neighbours, mut widths) = (Vec::new(), Vec::new());
+        for (i, c) in centres.iter().enumerate() {
             let (px, py) = (c.point.u, c.point.v);
             let (nx, ny) = c.normal;
             neighbours.clear();
+            let mut duplicate = false;
             grid.visit(px, py, |j| {
                 let o = &centres[j];
                 let (ex, ey) = (o.point.u - px, o.point.v - py);
                 let (t, d) = (-ny * ex + nx * ey, nx * ex + ny * ey);
-                let parallel = (o.normal.0 * nx + o.normal.1 * ny).abs() >= SAME_STRIPE_COS;
-                if parallel && t.abs() <= reach && d.abs() <= 0.5 + 0.25 * t.abs() {
-                    neighbours.push((t, d, o.half_width));
+                let cos = o.normal.0 * nx + o.normal.1 * ny;
+                // Two seeds of one crossing (a run broken by speckle, a stripe at 45° seen from a
+                // row and a column): the brighter (then the first) is kept.
+                let brighter = (o.point.intensity, std::cmp::Reverse(j)) > (c.point.intensity, std::cmp::Reverse(i));
+                if j != i && cos.abs() >= SAME_STRIPE_COS && ex * ex + ey * ey < DUPLICATE_PX * DUPLICATE_PX && brighter
+                {
+                    duplicate = true;
+                }
+                if cos.abs() >= SAME_STRIPE_COS && t.abs() <= reach && d.abs() <= 0.5 + 0.25 * t.abs() {
+                    // The asymmetry as seen along this point's normal.
+                    let asymmetry = if cos > 0.0 { o.asymmetry } else { -o.asymmetry };
+                    neighbours.push((t, d, o.half_width, asymmetry));
                 }
             });
             let spans = |side: f64| neighbours.iter().any(|n| n.0 * side >= super::MIN_STRIPE_ARC_PX);
-            if !(spans(1.0) || spans(-1.0)) {
+            if duplicate || !(spans(1.0) || spans(-1.0)) {
                 continue;
             }
             let reaches = |side: f64| neighbours.iter().any(|n| n.0 * side >= END_PX);
             if !(reaches(1.0) && reaches(-1.0)) {
                 continue;
             }
-            if c.asymmetry > MAX_ASYMMETRY && c.point.quality & quality::SATURATED == 0 {
+            // A cut leaves every profile along it lopsided the same way; speckle and noise
+            // lopsided at random, so the neighbours' mean tells the two apart.
+            let (count, sum) = neighbours
+                .iter()
+                .filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX)
+                .fold((0.0, 0.0), |(c, s), n| (c + 1.0, s + n.3));
+            let lopsided = (sum / count).abs();
+            if lopsided > MAX_ASYMMETRY && c.point.quality & quality::SATURATED == 0 {
                 continue;
             }
-            let mut widths: Vec<f64> =
-                neighbours.iter().filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX).map(|n| n.2).collect();
+            widths.clear();
+            widths.extend(neighbours.iter().filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX).map(|n| n.2));
             widths.sort_by(f64::total_cmp);
             if c.half_width < MIN_WIDTH_RATIO * widths[widths.len() / 2] {
                 continue;
@@ -323,6 +391,10 @@ impl RidgeDetector {
         out
     }
 }
+
+/// A neighbour of a point on its stripe, in the point's frame: arc t and offset d along its
+/// normal (px), half-maximum width (px), asymmetry seen along the point's normal.
+type Neighbour = (f64, f64, f64, f64);
 
 /// Whether the image is flat across the stripe at a found centre (u, v), as on a ridge's
 /// centreline: the gradient along the normal `n` at most [`MAX_CENTRE_GRADIENT`] of the peak. A
@@ -357,30 +429,6 @@ fn segment_near(q: &[f32], mid: usize, t: f32) -> Option<Segment> {
     (start > 0 && end < q.len()).then_some(Segment { start, end, peak })
 }
 
-/// Merges centres nearer than [`DUPLICATE_PX`] with parallel normals (two seeds of one
-/// crossing: a run broken by speckle, a stripe at 45° seen from a row and a column), keeping the
-/// brighter.
-fn merge_duplicates(mut centres: Vec<Centre>) -> Vec<Centre> {
-    centres.sort_by(|a, b| b.point.intensity.total_cmp(&a.point.intensity));
-    let grid = Grid::new(&centres, DUPLICATE_PX);
-    let mut keep = vec![true; centres.len()];
-    for i in 0..centres.len() {
-        if !keep[i] {
-            continue;
-        }
-        let c = centres[i];
-        grid.visit(c.point.u, c.point.v, |j| {
-            let o = &centres[j];
-            let close = (o.point.u - c.point.u).hypot(o.point.v - c.point.v) < DUPLICATE_PX;
-            let parallel = (o.normal.0 * c.normal.0 + o.normal.1 * c.normal.1).abs() >= SAME_STRIPE_COS;
-            if j > i && close && parallel {
-                keep[j] = false;
-            }
-        });
-    }
-    centres.into_iter().zip(keep).filter_map(|(c, k)| k.then_some(c)).collect()
-}
-
 /// The blur variance (px²) of the frame: a low quantile of its profiles' variances, 0 if none.
 fn frame_blur_variance(centres: &[Centre]) -> f64 {
     let mut v: Vec<f64> = centres.iter().filter_map(|c| c.variance).collect();
@@ -393,10 +441,10 @@ fn frame_blur_variance(centres: &[Centre]) -> f64 {
 
 /// Least-squares parabola d = a + b·t + c·t² through the neighbours `(t, d, _)` with
 /// |t| ≤ `half_arc`; `None` unless at least five points with two on each side of t = 0.
-fn fit_parabola(neighbours: &[(f64, f64, f64)], half_arc: f64) -> Option<[f64; 3]> {
+fn fit_parabola(neighbours: &[Neighbour], half_arc: f64) -> Option<[f64; 3]> {
     let (mut m, mut r) = ([[0.0f64; 3]; 3], [0.0f64; 3]);
     let (mut count, mut before, mut after) = (0, 0, 0);
-    for &(t, d, _) in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
+    for &(t, d, _, _) in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
         let basis = [1.0, t, t * t];
         for i in 0..3 {
             r[i] += basis[i] * d;
@@ -417,10 +465,10 @@ fn fit_parabola(neighbours: &[(f64, f64, f64)], half_arc: f64) -> Option<[f64; 3
 /// The stripe's offset at t = 0 from a straight line through the neighbours within ±`half_arc`
 /// once the curvature `c` (from a wider parabola) is taken out: d − c·t²; `None` unless
 /// at least two neighbours lie on each side.
-fn mean_offset(neighbours: &[(f64, f64, f64)], half_arc: f64, c: f64) -> Option<f64> {
+fn mean_offset(neighbours: &[Neighbour], half_arc: f64, c: f64) -> Option<f64> {
     let (mut s0, mut s1, mut s2, mut r0, mut r1) = (0.0, 0.0, 0.0, 0.0, 0.0);
     let (mut before, mut after) = (0, 0);
-    for &(t, d, _) in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
+    for &(t, d, _, _) in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
         let y = d - c * t * t;
         (s0, s1, s2, r0, r1) = (s0 + 1.0, s1 + t, s2 + t * t, r0 + y, r1 + t * y);
         before += usize::from(t < -0.5);
@@ -433,17 +481,20 @@ fn mean_offset(neighbours: &[(f64, f64, f64)], half_arc: f64, c: f64) -> Option<
 /// Centres bucketed in square cells, for neighbour queries within `reach` px.
 struct Grid {
     cell: f64,
-    cells: HashMap<(i32, i32), Vec<usize>>,
+    /// (cell row, cell column, centre index), sorted.
+    entries: Vec<(i32, i32, u32)>,
 }
 
 impl Grid {
     fn new(centres: &[Centre], reach: f64) -> Grid {
         let cell = reach.max(1.0);
-        let mut cells: HashMap<(i32, i32), Vec<usize>> = HashMap::new();
-        for (i, c) in centres.iter().enumerate() {
-            cells.entry(((c.point.u / cell) as i32, (c.point.v / cell) as i32)).or_default().push(i);
-        }
-        Grid { cell, cells }
+        let mut entries: Vec<(i32, i32, u32)> = centres
+            .iter()
+            .enumerate()
+            .map(|(i, c)| ((c.point.v / cell) as i32, (c.point.u / cell) as i32, i as u32))
+            .collect();
+        entries.sort_unstable();
+        Grid { cell, entries }
     }
 
     /// Calls `f` with the index of every centre in the cells within one cell of (x, y), in
@@ -451,10 +502,9 @@ impl Grid {
     fn visit(&self, x: f64, y: f64, mut f: impl FnMut(usize)) {
         let (cx, cy) = ((x / self.cell) as i32, (y / self.cell) as i32);
         for gy in cy - 1..=cy + 1 {
-            for gx in cx - 1..=cx + 1 {
-                if let Some(list) = self.cells.get(&(gx, gy)) {
-                    list.iter().for_each(|&i| f(i));
-                }
+            let start = self.entries.partition_point(|e| (e.0, e.1) < (gy, cx - 1));
+            for e in self.entries[start..].iter().take_while(|e| (e.0, e.1) <= (gy, cx + 1)) {
+                f(e.2 as usize);
             }
         }
     }
@@ -582,7 +632,8 @@ mod direction_tests {
     #[test]
     fn along_stripe_fit_averages_noise_and_keeps_a_curved_stripe() {
         const R: f64 = 25.0;
-        let img = render(W, H, 8, 12.0, 4, |x, y| 120.0 * (-((x - CX).hypot(y - CY) - R).powi(2) / (2.0 * 0.9 * 0.9)).exp());
+        let img =
+            render(W, H, 8, 12.0, 4, |x, y| 120.0 * (-((x - CX).hypot(y - CY) - R).powi(2) / (2.0 * 0.9 * 0.9)).exp());
         let measure = |along| {
             let pts = detector(RidgeParams { along_stripe_px: along, ..Default::default() }).detect(&img);
             let e: Vec<f64> = pts.iter().map(|p| (p.u - CX).hypot(p.v - CY) - R).collect();
@@ -591,7 +642,9 @@ mod direction_tests {
         };
         let (bias0, rms0, n0) = measure(0.0);
         let (bias3, rms3, n3) = measure(3.0);
-        eprintln!("R {R}: alone rms {rms0:.4} bias {bias0:+.4} ({n0}); along ±3 px rms {rms3:.4} bias {bias3:+.4} ({n3})");
+        eprintln!(
+            "R {R}: alone rms {rms0:.4} bias {bias0:+.4} ({n0}); along ±3 px rms {rms3:.4} bias {bias3:+.4} ({n3})"
+        );
         assert!(rms3 <= 0.75 * rms0, "along fit: rms {rms3:.4} against {rms0:.4}");
         assert!(bias3.abs() <= 0.01, "along fit moved a curved stripe by {bias3:+.4} px");
     }

@@ -269,8 +269,8 @@ impl RidgeDetector {
         q.clear();
         q.extend(raw.iter().map(|v| v - background));
         let (raw, q) = (&raw[..], &q[..]);
-        let seg = segment_near(&q, half, t)?;
-        let (a, b) = estimators::crossings(&q, &seg, t)?;
+        let seg = segment_near(q, half, t)?;
+        let (a, b) = estimators::crossings(q, &seg, t)?;
         let width = (b - a) * SAMPLE_STEP_PX;
         if width < self.params.min_width || width > self.params.max_width {
             return None;
@@ -278,15 +278,15 @@ impl RidgeDetector {
         let peak = q[seg.peak];
         let saturated = frame.saturated_near(x0, y0);
         let index = if saturated {
-            estimators::plateau_centre(&q, &seg, t, peak)?
+            estimators::plateau_centre(q, &seg, t, peak)?
         } else {
-            self.centre_index(&raw, &q, &seg, t)?
+            self.centre_index(raw, q, &seg, t)?
         };
-        let (ha, hb) = estimators::crossings(&q, &seg, 0.5 * peak)?;
+        let (ha, hb) = estimators::crossings(q, &seg, 0.5 * peak)?;
         let half_width = (hb - ha) * SAMPLE_STEP_PX;
         // A cut flank falls faster than the whole one: compare the flanks' spans between the
         // half maximum and ASYMMETRY_LEVEL of the peak.
-        let (la, lb) = estimators::crossings(&q, &seg, ASYMMETRY_LEVEL * peak)?;
+        let (la, lb) = estimators::crossings(q, &seg, ASYMMETRY_LEVEL * peak)?;
         let (left, right) = (ha - la, lb - hb);
         let asymmetry = (left - right) / (left + right).max(1e-9);
         let s = (index - half as f64) * SAMPLE_STEP_PX;

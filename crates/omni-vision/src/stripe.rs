@@ -528,6 +528,8 @@ pub struct RidgeDetector {
     words_per_ray: usize,
     sampler: sampling::GaussSampler,
     steger: steger::Kernels,
+    /// Gaussian derivatives that give each seed its stripe normal ([`Sampling::Normal`]).
+    seed_normal: steger::Kernels,
 }
 
 /// Per-call working memory (reuse it across frames on one thread to avoid allocations).
@@ -586,8 +588,9 @@ impl RidgeDetector {
         let dirs = (0..n_rays).map(|i| (TAU * i as f64 / n_rays as f64).sin_cos()).map(|(s, c)| (c, s)).collect();
         let words_per_ray = (r_out as usize + 2).div_ceil(64);
         let steger = steger::Kernels::new(params.hessian_sigma);
+        let seed_normal = steger::Kernels::with_half(3, across::SEED_NORMAL_SIGMA_PX);
         let sampler = sampling::GaussSampler::default();
-        RidgeDetector { params, width, height, cx, cy, r_in, r_out, dirs, words_per_ray, sampler, steger }
+        RidgeDetector { params, width, height, cx, cy, r_in, r_out, dirs, words_per_ray, sampler, steger, seed_normal }
     }
 
     /// A detector sampling from the image centre, over the largest circle inside the image.

@@ -26,6 +26,9 @@ use super::{Frame, MAX_CENTRE_GRADIENT, Pixel, RidgeDetector, SAMPLE_STEP_PX, St
 /// stripe within 47° of vertical), one from a column if within 47° of the column; the overlap
 /// keeps stripes at 45° from falling between the two, and duplicates are merged.
 const AXIS_OVERLAP_TAN: f64 = 1.072;
+/// Scale (px) of the Gaussian derivatives that give a seed its stripe normal (to 3σ; a kernel
+/// cut at 2σ, or σ 0.8 px, let through points 0.1–0.2 px off near the sphere's stripe ends).
+pub const SEED_NORMAL_SIGMA_PX: f64 = 1.0;
 /// Two points nearer than this (px) with parallel normals are one measurement.
 const DUPLICATE_PX: f64 = 0.7;
 /// Neighbours on the same stripe: normals within 30°.
@@ -212,7 +215,7 @@ impl RidgeDetector {
         buffers: &mut Buffers,
     ) -> Option<Centre> {
         let (x0, y0) = (x as f64, y as f64);
-        let derivatives = self.steger.derivatives(frame, x0, y0)?;
+        let derivatives = self.seed_normal.derivatives(frame, x0, y0)?;
         let ((nx, ny), _) = super::steger::Kernels::normal(&derivatives)?;
         let fits_axis = match axis {
             Axis::Row => ny.abs() <= AXIS_OVERLAP_TAN * nx.abs(),
@@ -221,11 +224,10 @@ impl RidgeDetector {
         if !fits_axis {
             return None;
         }
-        // The background: the larger of the minima of a coarse profile (1 px steps, the Gaussian
-        // kernel: bilinear samples are noisier, and their minima lower) on either side, past the
-        // flank of the widest accepted stripe.
+        // The background: the larger of the minima of a coarse profile (bilinear, 1 px steps) on
+        // either side, past the flank of the widest accepted stripe.
         let reach = (0.5 * self.params.max_width + 2.0).ceil() as i64;
-        let coarse = |k: i64| self.sampler.sample(frame, x0 + k as f64 * nx, y0 + k as f64 * ny);
+        let coarse = |k: i64| frame.bilinear(x0 + k as f64 * nx, y0 + k as f64 * ny);
         let (mut left, mut right) = (f32::INFINITY, f32::INFINITY);
         for k in 0..=reach {
             left = left.min(coarse(-k)?);
@@ -277,11 +279,8 @@ impl RidgeDetector {
         }
         let peak = q[seg.peak];
         let saturated = frame.saturated_near(x0, y0);
-        let index = if saturated {
-            estimators::plateau_centre(q, &seg, t, peak)?
-        } else {
-            self.centre_index(raw, q, &seg, t)?
-        };
+        let index =
+            if saturated { estimators::plateau_centre(q, &seg, t, peak)? } else { self.centre_index(raw, q, &seg, t)? };
         let (ha, hb) = estimators::crossings(q, &seg, 0.5 * peak)?;
         let half_width = (hb - ha) * SAMPLE_STEP_PX;
         // A cut flank falls faster than the whole one: compare the flanks' spans between the

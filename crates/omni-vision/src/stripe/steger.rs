@@ -31,7 +31,12 @@ pub struct Kernels {
 impl Kernels {
     /// Gaussian derivatives of scale `sigma` (px).
     pub fn new(sigma: f64) -> Self {
-        let half = (3.0 * sigma).ceil() as i64;
+        Self::with_half((3.0 * sigma).ceil() as i64, sigma)
+    }
+
+    /// Gaussian derivatives of scale `sigma` (px) truncated `half` taps either side of the
+    /// position.
+    pub fn with_half(half: i64, sigma: f64) -> Self {
         let taps = 2 * half as usize + 2;
         let s2 = sigma * sigma;
         let norm = 1.0 / ((std::f64::consts::TAU).sqrt() * sigma);

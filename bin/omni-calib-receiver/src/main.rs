@@ -430,9 +430,7 @@ fn write_overlays(dir: &Path, cal: &Calibration, obs: &[Observation], detected: 
         let picture = overlay::draw_overlay(img, &o.pixels, &reproj);
         let stem = Path::new(&o.name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or(format!("{k}"));
         let path = dir.join(format!("{stem}.png"));
-        let tmp = omni_formats::io::temp_path(&path).with_extension("png");
-        picture.save(&tmp).map_err(|e| format!("{}: {e}", path.display()))?;
-        std::fs::rename(&tmp, &path).map_err(|e| format!("{}: {e}", path.display()))?;
+        omni_vision::image_io::write_rgb_png(&path, picture.width(), picture.height(), picture.as_raw())?;
     }
     Ok(())
 }

@@ -148,3 +148,43 @@ fn bad_input_fails_with_one_line_and_leaves_no_output() {
     let out = run(fx.dir.path(), &["--help"]);
     assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("Examples"));
 }
+
+/// Runs the tool with its output at `/dev/null` and at a FIFO (read by a thread): both must be
+/// written into, not replaced by a regular file. Returns what came through the FIFO.
+fn writes_into_devices(dir: &Path, run_to: impl Fn(&str) -> Output) -> Vec<u8> {
+    use std::os::unix::fs::FileTypeExt;
+    let out = run_to("/dev/null");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null was replaced");
+    let fifo = dir.join("out.fifo");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = fifo.clone();
+    std::thread::spawn(move || tx.send(std::fs::read(reader).unwrap()));
+    let out = run_to(fifo.to_str().unwrap());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo(), "the FIFO was replaced");
+    let bytes = rx.recv_timeout(std::time::Duration::from_secs(20)).expect("nothing was written into the FIFO");
+    let litter: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("tmp"))
+        .collect();
+    assert!(litter.is_empty(), "temporary files left: {litter:?}");
+    bytes
+}
+
+#[test]
+fn dev_null_and_fifo_outputs_stay_what_they_are() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let text = writes_into_devices(d, |o| {
+        run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "-o", o])
+    });
+    let records: Vec<Record> = StreamReader::new(text.as_slice(), "fifo").map(|r| r.unwrap()).collect();
+    assert_eq!(records.len(), 5);
+    let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "--ply", "/dev/null"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::os::unix::fs::FileTypeExt::is_char_device(&std::fs::metadata("/dev/null").unwrap().file_type()));
+}

@@ -76,15 +76,15 @@ struct FitArgs {
     #[arg(long)]
     initial: Option<PathBuf>,
     /// Fewest board points a frame's laser needs to be used.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 20, allow_negative_numbers = true)]
     min_points: usize,
     /// Drop board points farther than this (mm) from the initial model's light plane before
     /// fitting (e.g. checkerboard edges in frames without ambient subtraction); needs an
     /// --initial model that close to the build.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     gate_mm: Option<f64>,
     /// Fewest visible corners to pose a board.
-    #[arg(long, default_value_t = 6)]
+    #[arg(long, default_value_t = 6, allow_negative_numbers = true)]
     min_corners: usize,
     /// Output scanner.json (`-` = stdout), written atomically.
     #[arg(short, long, default_value = "scanner.json")]
@@ -100,10 +100,10 @@ struct TableArgs {
     #[arg(long, default_value = "0:30:1", allow_hyphen_values = true)]
     alpha: String,
     /// Only this laser (default: all).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     laser: Option<usize>,
     /// Facet facing laser 0.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     facet: u32,
     /// JSON output (an array of rows) instead of a text table.
     #[arg(long)]

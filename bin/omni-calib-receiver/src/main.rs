@@ -75,12 +75,12 @@ struct CalibArgs {
     #[arg(long, value_name = "FILE")]
     export_opencv: Option<PathBuf>,
     /// Huber threshold of the robust loss (px).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     huber_px: f64,
     /// Where the fitted model's single viewpoint sits in the world frame (mm). Board images fix
     /// the rays' directions, not the origin: 0,0,0 makes the viewpoint the origin; the mirror's
     /// focus 0,0,2c (0,0,80 for the paper's mirror) keeps SENSOR.md's frame, origin at the camera.
-    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0")]
+    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0", allow_hyphen_values = true)]
     viewpoint_mm: String,
     /// The mirror annulus in the image (px): centre x, centre y, inner and outer rim radius, as
     /// read off an image of a lit scene; or `auto`: found in the board images themselves (the
@@ -89,7 +89,7 @@ struct CalibArgs {
     /// biases them); the principal point starts at its centre; the fitted mei/ocam model is
     /// valid inside it. The annulus used is printed and written into the report. Default: the
     /// whole image.
-    #[arg(long, value_name = "CX,CY,R_IN,R_OUT|auto", conflicts_with = "rim_image")]
+    #[arg(long, value_name = "CX,CY,R_IN,R_OUT|auto", conflicts_with = "rim_image", allow_hyphen_values = true)]
     annulus: Option<String>,
     /// Find the annulus (outer mirror rim and, if visible, the blind centre) in this image of a
     /// lit scene (same camera and size as the board images) instead of giving --annulus.

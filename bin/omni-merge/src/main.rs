@@ -43,23 +43,23 @@ struct Args {
     #[arg(long)]
     poses: Option<PathBuf>,
     /// Longest odometry gap (ms) that may be interpolated across.
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, default_value_t = 100.0, allow_negative_numbers = true)]
     max_pose_gap_ms: f64,
     /// Voxel edge length (mm): each occupied voxel becomes the centroid of its points, scalar
     /// fields averaged (Open3D voxel_down_sample semantics; grid anchored at the world origin).
-    #[arg(long, value_name = "SIZE")]
+    #[arg(long, value_name = "SIZE", allow_negative_numbers = true)]
     voxel: Option<f64>,
     /// Statistical outlier removal: K neighbours, STD_RATIO.
-    #[arg(long, value_name = "K,STD_RATIO")]
+    #[arg(long, value_name = "K,STD_RATIO", allow_hyphen_values = true)]
     statistical: Option<String>,
     /// Radius outlier removal: radius R (mm), MIN_POINTS other points.
-    #[arg(long, value_name = "R,MIN_POINTS")]
+    #[arg(long, value_name = "R,MIN_POINTS", allow_hyphen_values = true)]
     radius: Option<String>,
     /// Keep points inside the box (mm, world frame).
-    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX")]
+    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", allow_hyphen_values = true)]
     crop_box: Option<String>,
     /// Keep points measured at a range (distance from the viewpoint, mm) in [MIN, MAX].
-    #[arg(long, value_name = "MIN,MAX")]
+    #[arg(long, value_name = "MIN,MAX", allow_hyphen_values = true)]
     crop_range: Option<String>,
     /// Print the point counts of each stage to stderr as JSON.
     #[arg(long)]

@@ -221,3 +221,22 @@ fn dev_null_and_fifo_outputs_stay_what_they_are() {
     let ply = writes_into_devices(dir.path(), |o| run(dir.path(), &["a.jsonl", "-o", o, "--ascii"]));
     assert!(ply.starts_with(b"ply\n") && String::from_utf8_lossy(&ply).contains("element vertex 200"));
 }
+
+#[test]
+fn negative_numbers_reach_the_option_check() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rng = SplitMix64::new(2);
+    write_stream(&dir.path().join("a.jsonl"), &[(plane_with_outliers(&mut rng, 50, 0), None)]);
+    for (opt, val, expect) in [
+        ("--voxel", "-1", "voxel"),
+        ("--crop-box", "-1,-1,-1,-2,2,2", "crop"),
+        ("--max-pose-gap-ms", "-3", "max-pose-gap-ms"),
+        ("--statistical", "-4,2", "statistical"),
+    ] {
+        let out = run(dir.path(), &["a.jsonl", "-o", "c.ply", opt, val]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{opt} {val}: {err}");
+        assert!(!err.contains("unexpected argument") && err.contains(expect), "{opt} {val}: {err}");
+        assert!(!dir.path().join("c.ply").exists());
+    }
+}

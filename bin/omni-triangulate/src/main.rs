@@ -49,7 +49,7 @@ struct Args {
     #[arg(long)]
     ascii: bool,
     /// Smallest accepted angle between a ray and the light plane (degrees).
-    #[arg(long, default_value_t = DEFAULT_MIN_INCIDENCE_DEG)]
+    #[arg(long, default_value_t = DEFAULT_MIN_INCIDENCE_DEG, allow_negative_numbers = true)]
     min_incidence_deg: f64,
 }
 

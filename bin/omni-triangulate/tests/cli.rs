@@ -188,3 +188,50 @@ fn dev_null_and_fifo_outputs_stay_what_they_are() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(std::os::unix::fs::FileTypeExt::is_char_device(&std::fs::metadata("/dev/null").unwrap().file_type()));
 }
+
+#[test]
+fn facets_off_the_polygon_and_angles_far_outside_the_facet_are_refused() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let frame = |alpha: &str, facet: &str| {
+        format!(
+            "{{\"type\":\"frame\",\"seq\":4,\"path\":\"a.png\",\"alpha_deg\":{alpha},\"facet\":{facet},\"lasers\":[0],\"stripe\":[[500,500,1,1,0]]}}\n"
+        )
+    };
+    for (name, text, expect) in
+        [("facet.jsonl", frame("15", "12"), "field facet"), ("alpha.jsonl", frame("95", "0"), "field alpha_deg")]
+    {
+        std::fs::write(d.join(name), text).unwrap();
+        let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", name, "-o", "out.jsonl"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains(name) && err.contains("frame 4") && err.contains(expect), "{err}");
+        assert!(!d.join("out.jsonl").exists());
+    }
+}
+
+#[test]
+fn a_bad_facet_offset_is_blamed_on_scanner_json() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let mut v: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("scanner.json")).unwrap()).unwrap();
+    v["transmitter"]["lasers"][1]["facet_offset"] = 40.into();
+    std::fs::write(d.join("bad_scanner.json"), v.to_string()).unwrap();
+    let out = run(d, &["--camera", "camera.json", "--scanner", "bad_scanner.json", "ridges.jsonl"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("omni-triangulate: error: bad_scanner.json:") && err.contains("facet_offset"), "{err}");
+    assert!(!err.contains("ridges.jsonl"), "{err}");
+}
+
+#[test]
+fn negative_numbers_reach_the_option_check() {
+    let fx = fixture();
+    let out = run(
+        fx.dir.path(),
+        &["--camera", "camera.json", "--scanner", "scanner.json", "--min-incidence-deg", "-5", "ridges.jsonl"],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(!err.contains("unexpected argument") && err.contains("incidence"), "{err}");
+}

@@ -31,4 +31,10 @@ pub trait Versioned {
     const FORMAT: &'static str;
     /// The version this build writes (and the only one it reads).
     const VERSION: u32;
+
+    /// Checks values a reader must never accept (sizes beyond the limits, negative lengths), run
+    /// by [`read_doc`]/[`docs::parse_doc`] after parsing; the message names the field.
+    fn check(&self) -> std::result::Result<(), String> {
+        Ok(())
+    }
 }

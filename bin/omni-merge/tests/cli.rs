@@ -240,3 +240,14 @@ fn negative_numbers_reach_the_option_check() {
         assert!(!dir.path().join("c.ply").exists());
     }
 }
+
+#[test]
+fn a_point_beyond_float_range_is_refused_not_written_as_inf() {
+    let dir = tempfile::tempdir().unwrap();
+    write_stream(&dir.path().join("a.jsonl"), &[(vec![[1.0, 2.0, 3.0], [1e40, 0.0, 500.0]], None)]);
+    let out = run(dir.path(), &["a.jsonl", "-o", "c.ply", "--ascii"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("c.ply") && err.contains("point 1: x"), "{err}");
+    assert!(!dir.path().join("c.ply").exists());
+}

@@ -399,3 +399,37 @@ fn manifest_into_dev_null_and_a_fifo() {
     });
     assert!(String::from_utf8_lossy(&text).contains("\"type\":\"status\""));
 }
+
+#[test]
+fn an_interrupted_scan_leaves_no_temporary_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let scene = testdata("scenes/plane.json");
+    let frames = d.join("f");
+    let count = |dir: &Path, temp: bool| {
+        std::fs::read_dir(dir).map_or(0, |r| {
+            r.filter_map(|e| e.ok())
+                .filter(|e| e.file_name().to_string_lossy().contains("omniscan-tmp") == temp)
+                .count()
+        })
+    };
+    let mut child = Command::new(env!("CARGO_BIN_EXE_omni-sim"))
+        .current_dir(d)
+        .args(["scan", "--camera", "sensor/camera.json", "--scanner", "sensor/scanner.json", "--scene", &scene])
+        .args(["--angles", "0:30:0.05", "--frames", "f", "--ideal", "-o", "m.jsonl"])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while count(&frames, false) < 4 {
+        assert!(t0.elapsed().as_secs() < 60, "no frames written");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    assert!(Command::new("kill").arg("-INT").arg(child.id().to_string()).status().unwrap().success());
+    let status = child.wait().unwrap();
+    assert!(!status.success(), "{status:?}");
+    assert_eq!(count(&frames, true), 0, "temporary frames left");
+    assert_eq!(count(d, true), 0);
+    assert!(!d.join("m.jsonl").exists());
+}

@@ -235,3 +235,61 @@ fn negative_numbers_reach_the_option_check() {
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(!err.contains("unexpected argument") && err.contains("incidence"), "{err}");
 }
+
+/// Names of the hidden temporary files in `dir`.
+fn temp_files(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("omniscan-tmp"))
+        .collect()
+}
+
+#[test]
+fn an_interrupted_run_leaves_no_temporary_file() {
+    use std::io::Write as _;
+    let fx = fixture();
+    let d = fx.dir.path();
+    let ridges = std::fs::read_to_string(fx.path("ridges.jsonl")).unwrap();
+    let without_status: String =
+        ridges.lines().filter(|l| !l.contains("\"status\"")).map(|l| format!("{l}\n")).collect();
+    for signal in ["INT", "TERM"] {
+        let mut child = Command::new(BIN)
+            .current_dir(d)
+            .args(["--camera", "camera.json", "--scanner", "scanner.json", "-", "-o", "out.jsonl"])
+            .stdin(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The stream is still coming: the output's temporary file is open.
+        let mut stdin = child.stdin.take().unwrap();
+        stdin.write_all(without_status.as_bytes()).unwrap();
+        stdin.flush().unwrap();
+        let t0 = std::time::Instant::now();
+        while temp_files(d).is_empty() {
+            assert!(t0.elapsed().as_secs() < 20, "no temporary file appeared");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        assert!(Command::new("kill").arg(format!("-{signal}")).arg(child.id().to_string()).status().unwrap().success());
+        let status = child.wait().unwrap();
+        drop(stdin);
+        assert!(!status.success(), "{signal}: {status:?}");
+        assert_eq!(temp_files(d), Vec::<String>::new(), "SIG{signal} left a temporary file");
+        assert!(!fx.path("out.jsonl").exists());
+    }
+}
+
+#[test]
+fn stale_temporary_files_of_dead_runs_are_swept() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let mut dead = Command::new("true").spawn().unwrap();
+    let pid = dead.id();
+    dead.wait().unwrap();
+    let stale = fx.path(&format!(".out.jsonl.omniscan-tmp-{pid}"));
+    std::fs::write(&stale, "left by a killed run").unwrap();
+    let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "-o", "out.jsonl"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(!stale.exists() && fx.path("out.jsonl").exists());
+}

@@ -115,6 +115,10 @@ struct ScanArgs {
     /// Expected frame timestamp minus trigger time (ms): 0 if the camera stamps exposure time.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     latency_ms: f64,
+    /// Missing frames (triggers without a frame) tolerated: more make the scan fail, with
+    /// `complete: false` in the status record.
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+    max_missing: u64,
     /// Manifest output (`-` = stdout). Written as it goes, so a failed scan keeps what it got.
     #[arg(short, long, default_value = "-")]
     output: PathBuf,
@@ -388,11 +392,25 @@ fn scan(a: ScanArgs) -> CliResult {
     if let Some(e) = write_error {
         return Err(CliError::new(e));
     }
-    writer.write(&Record::Status(outcome.status.clone()))?;
+    let mut status = outcome.status.clone();
+    let too_many_missing = status.frames_missing > a.max_missing;
+    let missing_msg = format!(
+        "{} of {} triggered frames missing, more than --max-missing {} (is --frames {} the directory the camera writes to, and can the camera keep up?)",
+        status.frames_missing,
+        status.frames + status.frames_missing,
+        a.max_missing,
+        a.frames.display()
+    );
+    if too_many_missing {
+        status.complete = false;
+        status.errors.push(missing_msg.clone());
+    }
+    writer.write(&Record::Status(status.clone()))?;
     writer.flush()?;
-    let s = &outcome.status;
+    let s = &status;
     match outcome.error {
         Some(e) => Err(CliError::new(format!("{}: scan stopped after {} frames: {e}", a.port.port, s.frames))),
+        None if too_many_missing => Err(CliError::new(format!("{}: {missing_msg}", a.port.port))),
         None => {
             if s.frames_missing > 0 || outcome.stats.frames_unmatched > 0 {
                 omni_cli::warn(

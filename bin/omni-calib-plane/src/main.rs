@@ -174,10 +174,12 @@ fn fit(a: &FitArgs) -> CliResult {
     out.report = Some(report);
     write_doc(&a.output, &out)?;
     if a.output != Path::new("-") {
+        let frames_used = cal.report.frames.iter().map(|f| f.seq).collect::<std::collections::BTreeSet<_>>().len();
         eprintln!(
-            "omni-calib-plane: {} of {} frames used, model residual RMS {:.3} mm, frame-plane RMS {:.3} mm, {} rejected; wrote {}",
-            cal.report.observations_used,
+            "omni-calib-plane: {} of {} frames used ({} light planes, one per frame and laser), model residual RMS {:.3} mm, frame-plane RMS {:.3} mm, {} rejected; wrote {}",
+            frames_used,
             cal.report.frames_total,
+            cal.report.observations_used,
             cal.report.model.residual_rms_mm,
             cal.report.frame_plane_rms_mm,
             cal.report.rejected.len(),

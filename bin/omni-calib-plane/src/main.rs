@@ -86,6 +86,10 @@ struct FitArgs {
     /// Fewest visible corners to pose a board.
     #[arg(long, default_value_t = 6, allow_negative_numbers = true)]
     min_corners: usize,
+    /// Refuse a --stripes stream without its final status record (cut short upstream);
+    /// without it the tool warns and fits what it got.
+    #[arg(long)]
+    strict: bool,
     /// Output scanner.json (`-` = stdout), written atomically.
     #[arg(short, long, default_value = "scanner.json")]
     output: PathBuf,
@@ -154,6 +158,13 @@ fn fit(a: &FitArgs) -> CliResult {
     };
     let mut reader = StreamReader::new(io::open_input(&a.stripes)?, name(&a.stripes));
     let frames = inputs::read_stripe_frames(&mut reader)?;
+    if reader.cut_short() {
+        let msg = reader.cut_short_message();
+        if a.strict {
+            return Err(CliError::new(format!("{msg}; refused with --strict")));
+        }
+        omni_cli::warn("omni-calib-plane", &format!("{msg}; fitting the frames it has"));
+    }
     if a.gate_mm.is_some_and(|g| !(g > 0.0)) {
         return Err(CliError::usage("--gate-mm must be positive"));
     }

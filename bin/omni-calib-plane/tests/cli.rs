@@ -296,3 +296,25 @@ fn a_pose_image_of_the_wrong_size_names_the_sizes() {
     assert!(err.contains("small.png") && err.contains("512 × 512") && err.contains("1024 × 1024"), "{err}");
     assert!(!err.contains("not found"), "{err}");
 }
+
+#[test]
+fn stripes_cut_short_are_warned_about_or_refused_with_strict() {
+    let dir = tempfile::tempdir().unwrap();
+    // The dataset's stripe stream has no status record.
+    let paths = dataset(dir.path(), None);
+    let out = dir.path().join("scanner.json");
+    let mut args = fit_args(&paths, &out);
+    args.push("--strict");
+    let o = run(&args);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("stripes.jsonl") && err.contains("without its status record") && err.contains("--strict"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    let o = run(&fit_args(&paths, &out));
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("warning:") && err.contains("without its status record"), "{err}");
+}

@@ -293,3 +293,30 @@ fn stale_temporary_files_of_dead_runs_are_swept() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(!stale.exists() && fx.path("out.jsonl").exists());
 }
+
+#[test]
+fn a_stream_cut_short_is_warned_about_and_passed_on_incomplete_or_refused_with_strict() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let ridges = std::fs::read_to_string(fx.path("ridges.jsonl")).unwrap();
+    let cut: String = ridges.lines().filter(|l| !l.contains("\"status\"")).map(|l| format!("{l}\n")).collect();
+    std::fs::write(fx.path("cut.jsonl"), cut).unwrap();
+    let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "cut.jsonl"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("warning: cut.jsonl") && err.contains("without its status record"), "{err}");
+    let records: Vec<Record> = StreamReader::new(out.stdout.as_slice(), "out").map(|r| r.unwrap()).collect();
+    let Some(Record::Status(status)) = records.last() else { panic!("no status record passed on") };
+    assert!(!status.complete && status.frames == 3, "{status:?}");
+    assert!(status.errors[0].contains("cut.jsonl"), "{status:?}");
+
+    let out =
+        run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "cut.jsonl", "--strict", "-o", "o.jsonl"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("cut.jsonl") && err.contains("--strict") && err.lines().count() == 1, "{err}");
+    assert!(!fx.path("o.jsonl").exists());
+    // A whole stream passes --strict and gives no warning.
+    let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "--strict"]);
+    assert!(out.status.success() && out.stderr.is_empty(), "{}", String::from_utf8_lossy(&out.stderr));
+}

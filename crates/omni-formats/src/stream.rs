@@ -232,6 +232,21 @@ pub struct Status {
     pub extra: serde_json::Map<String, serde_json::Value>,
 }
 
+impl Status {
+    /// The status a tool passes on for an input that was cut short (no status record):
+    /// `complete: false`, with the reason.
+    pub fn cut_short(frames: u64, message: impl Into<String>) -> Self {
+        Status {
+            frames,
+            frames_missing: 0,
+            frames_failed: 0,
+            complete: false,
+            errors: vec![message.into()],
+            extra: Default::default(),
+        }
+    }
+}
+
 /// A per-frame error record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FrameError {
@@ -264,11 +279,24 @@ pub struct StreamReader<R> {
     name: String,
     line_no: usize,
     buf: String,
+    saw_status: bool,
+    at_end: bool,
 }
 
 impl<R: BufRead> StreamReader<R> {
     pub fn new(reader: R, name: impl Into<String>) -> Self {
-        StreamReader { reader, name: name.into(), line_no: 0, buf: String::new() }
+        StreamReader { reader, name: name.into(), line_no: 0, buf: String::new(), saw_status: false, at_end: false }
+    }
+
+    /// Whether the stream has ended without its final `status` record: it was cut short
+    /// upstream (docs/FORMATS.md). False until the end has been read.
+    pub fn cut_short(&self) -> bool {
+        self.at_end && !self.saw_status
+    }
+
+    /// The one-line explanation of a [`cut_short`](Self::cut_short) stream, naming it.
+    pub fn cut_short_message(&self) -> String {
+        format!("{}: the stream ends without its status record (cut short upstream?)", self.name)
     }
 
     /// The line number of the last record read (1-based).
@@ -287,6 +315,7 @@ impl<R: BufRead> StreamReader<R> {
             self.buf.clear();
             let n = self.reader.read_line(&mut self.buf).map_err(|e| Error::io(&self.name, &e))?;
             if n == 0 {
+                self.at_end = true;
                 return Ok(None);
             }
             self.line_no += 1;
@@ -310,8 +339,12 @@ impl<R: BufRead> StreamReader<R> {
                     None => Error::new(&self.name, loc, e.into_inner().to_string()),
                 }
             })?;
-            if let Record::Frame(f) = &record {
-                f.validate().map_err(|m| Error::new(&self.name, format!("{loc} (frame {})", f.seq), m))?;
+            match &record {
+                Record::Frame(f) => {
+                    f.validate().map_err(|m| Error::new(&self.name, format!("{loc} (frame {})", f.seq), m))?;
+                }
+                Record::Status(_) => self.saw_status = true,
+                _ => {}
             }
             return Ok(Some(record));
         }
@@ -404,5 +437,21 @@ mod tests {
             "{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"alpha_deg\":1,\"facet\":0,\"stripe\":[[1,2,3,4,0]]\n";
         let e = StreamReader::new(text.as_bytes(), "s.jsonl").next().unwrap().unwrap_err().to_string();
         assert!(e.contains("invalid JSON"), "{e}");
+    }
+
+    #[test]
+    fn a_stream_without_status_is_cut_short() {
+        let header = "{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":1,\"producers\":[\"t\"]}\n";
+        let status = "{\"type\":\"status\",\"frames\":0,\"complete\":true}\n";
+        let mut r = StreamReader::new(header.as_bytes(), "cut.jsonl");
+        while r.next_record().unwrap().is_some() {
+            assert!(!r.cut_short(), "not before the end");
+        }
+        assert!(r.cut_short());
+        assert!(r.cut_short_message().starts_with("cut.jsonl: "));
+        let whole = format!("{header}{status}");
+        let mut r = StreamReader::new(whole.as_bytes(), "whole.jsonl");
+        while r.next_record().unwrap().is_some() {}
+        assert!(!r.cut_short());
     }
 }

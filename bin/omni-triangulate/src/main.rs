@@ -165,10 +165,10 @@ impl Run<'_> {
             }
             first = false;
         }
-        if let Some(w) = writer.as_mut() {
-            if first {
-                w.write(&Record::Header(self.header(Header::new("unknown")))).map_err(|e| fail(e.to_string()))?;
-            }
+        if let Some(w) = writer.as_mut()
+            && first
+        {
+            w.write(&Record::Header(self.header(Header::new("unknown")))).map_err(|e| fail(e.to_string()))?;
         }
         if reader.cut_short() {
             let msg = reader.cut_short_message();

@@ -510,10 +510,28 @@ fn check_lasers(sensor: &Sensor, lasers: &[u32]) -> CliResult {
     }
 }
 
+/// The facet must be on the polygon (not taken modulo its count) and every angle within (or
+/// near) one facet's range.
+fn check_facet_and_angles(sensor: &Sensor, facet: u32, angles: &[f64]) -> CliResult {
+    let n = sensor.transmitter.num_facets();
+    if facet >= n {
+        return Err(CliError::usage(format!(
+            "--facet: facet {facet} is not on the polygon ({n} facets, 0 to {})",
+            n - 1
+        )));
+    }
+    if let Some(a) = angles.iter().find(|a| sensor.transmitter.check_frame(a.to_radians(), facet).is_err()) {
+        let span = sensor.transmitter.facet_angle().to_degrees();
+        return Err(CliError::usage(format!("--angles: {a}° is far outside the facet's range [0, {span}°)")));
+    }
+    Ok(())
+}
+
 fn scan(a: ScanArgs) -> CliResult {
     let (sensor, optics) = Sensor::load_with_optics(&a.camera, &a.scanner)?;
     let opts = a.render.options(optics)?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
+    check_facet_and_angles(&sensor, a.facet, &angles)?;
     check_lasers(&sensor, &a.lasers)?;
     let scene = Scene::load(&a.scene)?;
     check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("{}: {e}", a.scene.display())))?;
@@ -560,6 +578,7 @@ fn rig(a: RigArgs) -> CliResult {
     let (sensor, optics) = Sensor::load_with_optics(&a.camera, &a.scanner)?;
     let opts = a.render.options(optics)?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
+    check_facet_and_angles(&sensor, a.facet, &angles)?;
     let board = load_board(&a.board)?;
     let rig = Rig::standard(&board);
     let scene_file = rig.scene();

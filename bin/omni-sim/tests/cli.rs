@@ -433,3 +433,24 @@ fn an_interrupted_scan_leaves_no_temporary_frame() {
     assert_eq!(count(d, true), 0);
     assert!(!d.join("m.jsonl").exists());
 }
+
+#[test]
+fn a_facet_off_the_polygon_and_angles_far_outside_it_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let scene = testdata("scenes/plane.json");
+    for (extra, expect) in
+        [(["--facet", "12", "--angles", "20"], "--facet"), (["--facet", "0", "--angles", "95"], "--angles")]
+    {
+        let mut args =
+            vec!["scan", "--camera", "sensor/camera.json", "--scanner", "sensor/scanner.json", "--scene", &scene];
+        args.extend(["--frames", "f", "-o", "m.jsonl"]);
+        args.extend(extra);
+        let out = sim(&args, d);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains(expect) && (err.contains("12 facets") || err.contains("95")), "{err}");
+        assert!(!d.join("m.jsonl").exists() && !d.join("f").exists());
+    }
+}

@@ -212,7 +212,11 @@ fn find_annulus(paths: &[PathBuf]) -> CliResult {
         _ => format!("{} images", paths.len()),
     };
     let a = detect_annulus(&img, &source)?;
-    println!("{:.3},{:.3},{:.3},{:.3}", a[0], a[1], a[2], a[3]);
+    // Through an io error, not println!: a closed stdout is a clean exit, not a panic.
+    std::io::Write::write_fmt(
+        &mut std::io::stdout(),
+        format_args!("{:.3},{:.3},{:.3},{:.3}\n", a[0], a[1], a[2], a[3]),
+    )?;
     Ok(())
 }
 

@@ -250,3 +250,13 @@ fn a_truncated_jpeg_is_refused_naming_the_file() {
     assert!(err.contains("b.jpg") && err.contains("truncated JPEG"), "{err}");
     assert!(!dir.path().join("camera.json").exists());
 }
+
+#[test]
+fn find_annulus_exits_cleanly_when_stdout_closes() {
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = bin().arg("find-annulus").arg(real_dir()).stdout(writer).output().unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}

@@ -213,10 +213,8 @@ fn find_annulus(paths: &[PathBuf]) -> CliResult {
     };
     let a = detect_annulus(&img, &source)?;
     // Through an io error, not println!: a closed stdout is a clean exit, not a panic.
-    std::io::Write::write_fmt(
-        &mut std::io::stdout(),
-        format_args!("{:.3},{:.3},{:.3},{:.3}\n", a[0], a[1], a[2], a[3]),
-    )?;
+    use std::io::Write as _;
+    writeln!(std::io::stdout(), "{:.3},{:.3},{:.3},{:.3}", a[0], a[1], a[2], a[3])?;
     Ok(())
 }
 

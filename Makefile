@@ -2,14 +2,19 @@
 CARGO ?= cargo
 OUT ?= out/demo
 
-.PHONY: all build test lint fmt bench demo clean
+.PHONY: all build test lint tools fmt bench demo clean
 
 all: build
 
 build:
 	$(CARGO) build --workspace --release
 
-lint:
+# rustfmt and clippy are rustup components a fresh toolchain may lack: say how to get them.
+tools:
+	@$(CARGO) fmt --version >/dev/null 2>&1 || { echo "make: rustfmt is missing; install it with: rustup component add rustfmt clippy" >&2; exit 1; }
+	@$(CARGO) clippy --version >/dev/null 2>&1 || { echo "make: clippy is missing; install it with: rustup component add rustfmt clippy" >&2; exit 1; }
+
+lint: tools
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 

@@ -76,16 +76,20 @@ struct FitArgs {
     #[arg(long)]
     initial: Option<PathBuf>,
     /// Fewest board points a frame's laser needs to be used.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 20, allow_negative_numbers = true)]
     min_points: usize,
     /// Drop board points farther than this (mm) from the initial model's light plane before
     /// fitting (e.g. checkerboard edges in frames without ambient subtraction); needs an
     /// --initial model that close to the build.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     gate_mm: Option<f64>,
     /// Fewest visible corners to pose a board.
-    #[arg(long, default_value_t = 6)]
+    #[arg(long, default_value_t = 6, allow_negative_numbers = true)]
     min_corners: usize,
+    /// Refuse a --stripes stream without its final status record (cut short upstream);
+    /// without it the tool warns and fits what it got.
+    #[arg(long)]
+    strict: bool,
     /// Output scanner.json (`-` = stdout), written atomically.
     #[arg(short, long, default_value = "scanner.json")]
     output: PathBuf,
@@ -100,10 +104,10 @@ struct TableArgs {
     #[arg(long, default_value = "0:30:1", allow_hyphen_values = true)]
     alpha: String,
     /// Only this laser (default: all).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     laser: Option<usize>,
     /// Facet facing laser 0.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     facet: u32,
     /// JSON output (an array of rows) instead of a text table.
     #[arg(long)]
@@ -154,6 +158,13 @@ fn fit(a: &FitArgs) -> CliResult {
     };
     let mut reader = StreamReader::new(io::open_input(&a.stripes)?, name(&a.stripes));
     let frames = inputs::read_stripe_frames(&mut reader)?;
+    if reader.cut_short() {
+        let msg = reader.cut_short_message();
+        if a.strict {
+            return Err(CliError::new(format!("{msg}; refused with --strict")));
+        }
+        omni_cli::warn("omni-calib-plane", &format!("{msg}; fitting the frames it has"));
+    }
     if a.gate_mm.is_some_and(|g| !(g > 0.0)) {
         return Err(CliError::usage("--gate-mm must be positive"));
     }
@@ -174,10 +185,12 @@ fn fit(a: &FitArgs) -> CliResult {
     out.report = Some(report);
     write_doc(&a.output, &out)?;
     if a.output != Path::new("-") {
+        let frames_used = cal.report.frames.iter().map(|f| f.seq).collect::<std::collections::BTreeSet<_>>().len();
         eprintln!(
-            "omni-calib-plane: {} of {} frames used, model residual RMS {:.3} mm, frame-plane RMS {:.3} mm, {} rejected; wrote {}",
-            cal.report.observations_used,
+            "omni-calib-plane: {} of {} frames used ({} light planes, one per frame and laser), model residual RMS {:.3} mm, frame-plane RMS {:.3} mm, {} rejected; wrote {}",
+            frames_used,
             cal.report.frames_total,
+            cal.report.observations_used,
             cal.report.model.residual_rms_mm,
             cal.report.frame_plane_rms_mm,
             cal.report.rejected.len(),

@@ -266,3 +266,55 @@ fn stripe_record(seq: u64, alpha_deg: f64, pixels: &[[f64; 2]]) -> Record {
     );
     Record::Frame(Box::new(f))
 }
+
+#[test]
+fn the_summary_counts_frames_not_planes() {
+    let dir = tempfile::tempdir().unwrap();
+    let paths = dataset(dir.path(), None);
+    let out = dir.path().join("scanner.json");
+    let o = run(&fit_args(&paths, &out));
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    let used: usize = err.split(" of 31 frames used").next().unwrap().rsplit(' ').next().unwrap().parse().unwrap();
+    assert!((1..=31).contains(&used), "{err}");
+    assert!(err.contains("light planes, one per frame and laser"), "{err}");
+}
+
+#[test]
+fn a_pose_image_of_the_wrong_size_names_the_sizes() {
+    let dir = tempfile::tempdir().unwrap();
+    let paths = dataset(dir.path(), None);
+    let out = dir.path().join("scanner.json");
+    let small = dir.path().join("small.png");
+    omni_vision::image_io::write_gray_png(&small, &omni_vision::image_io::GrayImage::new(512, 512, 8)).unwrap();
+    let mut args = fit_args(&paths, &out);
+    args[5] = "--pose-image";
+    args[6] = small.to_str().unwrap();
+    let o = run(&args);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("small.png") && err.contains("512 × 512") && err.contains("1024 × 1024"), "{err}");
+    assert!(!err.contains("not found"), "{err}");
+}
+
+#[test]
+fn stripes_cut_short_are_warned_about_or_refused_with_strict() {
+    let dir = tempfile::tempdir().unwrap();
+    // The dataset's stripe stream has no status record.
+    let paths = dataset(dir.path(), None);
+    let out = dir.path().join("scanner.json");
+    let mut args = fit_args(&paths, &out);
+    args.push("--strict");
+    let o = run(&args);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("stripes.jsonl") && err.contains("without its status record") && err.contains("--strict"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    let o = run(&fit_args(&paths, &out));
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("warning:") && err.contains("without its status record"), "{err}");
+}

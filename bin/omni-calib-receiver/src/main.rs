@@ -75,12 +75,12 @@ struct CalibArgs {
     #[arg(long, value_name = "FILE")]
     export_opencv: Option<PathBuf>,
     /// Huber threshold of the robust loss (px).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     huber_px: f64,
     /// Where the fitted model's single viewpoint sits in the world frame (mm). Board images fix
     /// the rays' directions, not the origin: 0,0,0 makes the viewpoint the origin; the mirror's
     /// focus 0,0,2c (0,0,80 for the paper's mirror) keeps SENSOR.md's frame, origin at the camera.
-    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0")]
+    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0", allow_hyphen_values = true)]
     viewpoint_mm: String,
     /// The mirror annulus in the image (px): centre x, centre y, inner and outer rim radius, as
     /// read off an image of a lit scene; or `auto`: found in the board images themselves (the
@@ -89,7 +89,7 @@ struct CalibArgs {
     /// biases them); the principal point starts at its centre; the fitted mei/ocam model is
     /// valid inside it. The annulus used is printed and written into the report. Default: the
     /// whole image.
-    #[arg(long, value_name = "CX,CY,R_IN,R_OUT|auto", conflicts_with = "rim_image")]
+    #[arg(long, value_name = "CX,CY,R_IN,R_OUT|auto", conflicts_with = "rim_image", allow_hyphen_values = true)]
     annulus: Option<String>,
     /// Find the annulus (outer mirror rim and, if visible, the blind centre) in this image of a
     /// lit scene (same camera and size as the board images) instead of giving --annulus.
@@ -212,7 +212,9 @@ fn find_annulus(paths: &[PathBuf]) -> CliResult {
         _ => format!("{} images", paths.len()),
     };
     let a = detect_annulus(&img, &source)?;
-    println!("{:.3},{:.3},{:.3},{:.3}", a[0], a[1], a[2], a[3]);
+    // Through an io error, not println!: a closed stdout is a clean exit, not a panic.
+    use std::io::Write as _;
+    writeln!(std::io::stdout(), "{:.3},{:.3},{:.3},{:.3}", a[0], a[1], a[2], a[3])?;
     Ok(())
 }
 
@@ -430,9 +432,7 @@ fn write_overlays(dir: &Path, cal: &Calibration, obs: &[Observation], detected: 
         let picture = overlay::draw_overlay(img, &o.pixels, &reproj);
         let stem = Path::new(&o.name).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or(format!("{k}"));
         let path = dir.join(format!("{stem}.png"));
-        let tmp = omni_formats::io::temp_path(&path).with_extension("png");
-        picture.save(&tmp).map_err(|e| format!("{}: {e}", path.display()))?;
-        std::fs::rename(&tmp, &path).map_err(|e| format!("{}: {e}", path.display()))?;
+        omni_vision::image_io::write_rgb_png(&path, picture.width(), picture.height(), picture.as_raw())?;
     }
     Ok(())
 }

@@ -213,3 +213,50 @@ fn rim_detection_failures_are_one_line_errors_without_output() {
     assert_eq!(both.output().unwrap().status.code(), Some(2));
     assert!(!camera.exists());
 }
+
+#[test]
+fn a_huge_board_is_refused_before_anything_is_allocated() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = write_board(dir.path(), 100_000, 6);
+    let out = bin()
+        .arg("--board")
+        .arg(&board)
+        .arg("-o")
+        .arg(dir.path().join("camera.json"))
+        .arg(real_dir())
+        .output()
+        .unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("board100000x6.json") && err.contains("inner_cols") && err.contains("1000"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+}
+
+#[test]
+fn a_truncated_jpeg_is_refused_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = write_board(dir.path(), 7, 11);
+    let images = dir.path().join("boards");
+    std::fs::create_dir(&images).unwrap();
+    let grey: Vec<u8> = (0..96 * 64).map(|i| (i % 200) as u8).collect();
+    let good = images.join("a.jpg");
+    image::save_buffer(&good, &grey, 96, 64, image::ExtendedColorType::L8).unwrap();
+    let bytes = std::fs::read(&good).unwrap();
+    std::fs::write(images.join("b.jpg"), &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let out =
+        bin().arg("--board").arg(&board).arg("-o").arg(dir.path().join("camera.json")).arg(&images).output().unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("b.jpg") && err.contains("truncated JPEG"), "{err}");
+    assert!(!dir.path().join("camera.json").exists());
+}
+
+#[test]
+fn find_annulus_exits_cleanly_when_stdout_closes() {
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = bin().arg("find-annulus").arg(real_dir()).stdout(writer).output().unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}

@@ -38,22 +38,22 @@ enum Command {
         #[arg(long)]
         shape: ShapeKind,
         /// Use only points inside this box (mm).
-        #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX")]
+        #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", allow_hyphen_values = true)]
         crop: Option<String>,
         /// RANSAC inlier threshold (mm); statistics are over the inliers.
-        #[arg(long, default_value_t = 2.0)]
+        #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
         inlier_mm: f64,
         /// RANSAC hypotheses (cylinder and cone use at most 24).
-        #[arg(long, default_value_t = 200)]
+        #[arg(long, default_value_t = 200, allow_negative_numbers = true)]
         iterations: usize,
         /// Random seed (same seed, same result).
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
         seed: u64,
         /// Nominal radius (mm), to report the fitted radius error.
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         radius: Option<f64>,
         /// Nominal sphere centre (mm), to report the centre distance error.
-        #[arg(long, value_name = "X,Y,Z")]
+        #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
         centre: Option<String>,
         /// Print JSON instead of a table.
         #[arg(long)]
@@ -70,10 +70,10 @@ enum Command {
         #[arg(long)]
         scene: PathBuf,
         /// Points farther than this from every surface are counted as stray, not measured (mm).
-        #[arg(long, default_value_t = 20.0)]
+        #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
         max_distance_mm: f64,
         /// Inlier threshold of the radius/centre fits (mm).
-        #[arg(long, default_value_t = 2.0)]
+        #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
         inlier_mm: f64,
         #[arg(long)]
         json: bool,
@@ -115,22 +115,22 @@ Example:
         #[arg(long)]
         scanner: PathBuf,
         /// Wall distances (mm): start:stop:step (stop included) or a list a,b,c.
-        #[arg(long, default_value = "300:2000:100")]
+        #[arg(long, default_value = "300:2000:100", allow_hyphen_values = true)]
         range: String,
         /// Mirror angle of the light plane (degrees within the facet).
-        #[arg(long, default_value_t = 20.0)]
+        #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
         alpha_deg: f64,
         /// Albedo of the wall.
-        #[arg(long, default_value_t = 0.8)]
+        #[arg(long, default_value_t = 0.8, allow_negative_numbers = true)]
         albedo: f64,
         /// Lens F-number.
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         f_number: Option<f64>,
         /// Laser wavelength (nm).
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         wavelength_nm: Option<f64>,
         /// Pixel pitch (µm).
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         pixel_pitch_um: Option<f64>,
         /// Machine-readable output (one JSON document).
         #[arg(long)]
@@ -143,8 +143,9 @@ Example:
         /// Output PNG.
         #[arg(short, long)]
         output: PathBuf,
-        /// Picture width (px); the height follows the cloud's extent.
-        #[arg(long, default_value_t = 800)]
+        /// Picture width (px, 16 to 16384); the height follows the cloud's extent (at most
+        /// 4 × the width and 16384).
+        #[arg(long, default_value_t = 800, value_parser = clap::value_parser!(u32).range(16..=16384), allow_negative_numbers = true)]
         width: u32,
         /// Colour by `height` (z) or `range` (distance from the origin).
         #[arg(long, default_value = "height")]
@@ -280,7 +281,7 @@ fn main() -> std::process::ExitCode {
                 (Some(c), Shape::Sphere { center, .. }) => Some((center - c).norm()),
                 _ => None,
             };
-            print_fit(&fit.shape, pts.len(), &stats, radius_error, centre_error, json);
+            print_fit(&mut std::io::stdout().lock(), &fit.shape, pts.len(), &stats, radius_error, centre_error, json)?;
             Ok(())
         }
         Command::Compare { scene, max_distance_mm, inlier_mm, json, transform, cloud } => {
@@ -289,7 +290,7 @@ fn main() -> std::process::ExitCode {
             let opts = FitOptions { inlier_mm, ..FitOptions::default() };
             let (reports, stray) = compare_with_scene(&scene_file, &pts, max_distance_mm, &opts)
                 .map_err(|m| format!("{}: {m}", scene.display()))?;
-            print_compare(&reports, pts.len(), stray, json);
+            print_compare(&mut std::io::stdout().lock(), &reports, pts.len(), stray, json)?;
             Ok(())
         }
         Command::Align { scanner, reference_poses, rig, output } => {
@@ -372,7 +373,6 @@ fn main() -> std::process::ExitCode {
         Command::Render { cloud, output, width, color } => {
             let pts = load_points(&cloud, None, None)?;
             let img = omni_cloud::render::render(&pts, width, color);
-            let name = output.display().to_string();
             omni_formats::io::write_atomic(&output, |w| {
                 let mut bytes = Vec::new();
                 image::RgbImage::from_raw(img.width, img.height, img.rgb)
@@ -380,8 +380,7 @@ fn main() -> std::process::ExitCode {
                     .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
                     .map_err(std::io::Error::other)?;
                 w.write_all(&bytes)
-            })
-            .map_err(|e| format!("{name}: {e}"))?;
+            })?;
             Ok(())
         }
     })
@@ -403,7 +402,15 @@ fn shape_json(s: &Shape) -> serde_json::Value {
     }
 }
 
-fn print_fit(shape: &Shape, n: usize, e: &ErrorStats, radius_err: Option<f64>, centre_err: Option<f64>, json: bool) {
+fn print_fit(
+    out: &mut dyn Write,
+    shape: &Shape,
+    n: usize,
+    e: &ErrorStats,
+    radius_err: Option<f64>,
+    centre_err: Option<f64>,
+    json: bool,
+) -> std::io::Result<()> {
     if json {
         let mut v = serde_json::json!({"shape": shape_json(shape), "points": n, "inliers": e.count, "errors": e});
         if let Some(r) = radius_err {
@@ -412,46 +419,56 @@ fn print_fit(shape: &Shape, n: usize, e: &ErrorStats, radius_err: Option<f64>, c
         if let Some(c) = centre_err {
             v["centre_error_mm"] = c.into();
         }
-        println!("{v}");
-        return;
+        writeln!(out, "{v}")?;
+        return Ok(());
     }
     let v = shape_json(shape);
-    println!("shape               {}", v["type"].as_str().unwrap_or("?"));
+    writeln!(out, "shape               {}", v["type"].as_str().unwrap_or("?"))?;
     if let Some(obj) = v.as_object() {
         for (k, val) in obj.iter().filter(|(k, _)| k.as_str() != "type") {
-            println!("{k:<20}{val}");
+            writeln!(out, "{k:<20}{val}")?;
         }
     }
-    println!("points              {n} ({} inliers, {:.1} %)", e.count, 100.0 * e.count as f64 / n as f64);
-    print_stats(e);
+    writeln!(out, "points              {n} ({} inliers, {:.1} %)", e.count, 100.0 * e.count as f64 / n as f64)?;
+    print_stats(out, e)?;
     if let Some(r) = radius_err {
-        println!("radius error        {r:+.4} mm");
+        writeln!(out, "radius error        {r:+.4} mm")?;
     }
     if let Some(c) = centre_err {
-        println!("centre error        {c:.4} mm");
+        writeln!(out, "centre error        {c:.4} mm")?;
     }
+    Ok(())
 }
 
-fn print_stats(e: &ErrorStats) {
-    println!("mean signed error   {:+.4} mm", e.mean);
-    println!("standard deviation  {:.4} mm", e.std_dev);
-    println!("rms                 {:.4} mm", e.rms);
-    println!("max |error|         {:.4} mm", e.max_abs);
+fn print_stats(out: &mut dyn Write, e: &ErrorStats) -> std::io::Result<()> {
+    writeln!(out, "mean signed error   {:+.4} mm", e.mean)?;
+    writeln!(out, "standard deviation  {:.4} mm", e.std_dev)?;
+    writeln!(out, "rms                 {:.4} mm", e.rms)?;
+    writeln!(out, "max |error|         {:.4} mm", e.max_abs)?;
+    Ok(())
 }
 
-fn print_compare(reports: &[ObjectReport], n: usize, stray: usize, json: bool) {
+fn print_compare(
+    out: &mut dyn Write,
+    reports: &[ObjectReport],
+    n: usize,
+    stray: usize,
+    json: bool,
+) -> std::io::Result<()> {
     if json {
-        println!("{}", serde_json::json!({"points": n, "stray_points": stray, "objects": reports}));
-        return;
+        writeln!(out, "{}", serde_json::json!({"points": n, "stray_points": stray, "objects": reports}))?;
+        return Ok(());
     }
-    println!(
+    writeln!(
+        out,
         "{:<14}{:<10}{:>8}{:>11}{:>10}{:>10}{:>10}{:>12}{:>12}",
         "object", "kind", "points", "mean mm", "std mm", "rms mm", "max mm", "radius err", "centre err"
-    );
+    )?;
     let opt = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:+.4}"));
     for r in reports {
         let e = &r.errors;
-        println!(
+        writeln!(
+            out,
             "{:<14}{:<10}{:>8}{:>+11.4}{:>10.4}{:>10.4}{:>10.4}{:>12}{:>12}",
             r.name,
             r.kind,
@@ -462,7 +479,8 @@ fn print_compare(reports: &[ObjectReport], n: usize, stray: usize, json: bool) {
             e.max_abs,
             opt(r.radius_error_mm),
             opt(r.centre_error_mm)
-        );
+        )?;
     }
-    println!("{n} points, {stray} farther than the distance limit from every surface");
+    writeln!(out, "{n} points, {stray} farther than the distance limit from every surface")?;
+    Ok(())
 }

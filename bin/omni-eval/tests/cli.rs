@@ -151,3 +151,94 @@ fn fits_a_cone() {
     assert!((apex[2].as_f64().unwrap() - 100.0).abs() < 1.5, "{apex:?}");
     assert!((v["errors"]["std_dev"].as_f64().unwrap() - 0.2).abs() < 0.03);
 }
+
+/// Runs the tool with its output at `/dev/null` and at a FIFO (read by a thread): both must be
+/// written into, not replaced by a regular file. Returns what came through the FIFO.
+fn writes_into_devices(dir: &Path, run_to: impl Fn(&str) -> Output) -> Vec<u8> {
+    use std::os::unix::fs::FileTypeExt;
+    let out = run_to("/dev/null");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null was replaced");
+    let fifo = dir.join("out.fifo");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = fifo.clone();
+    std::thread::spawn(move || tx.send(std::fs::read(reader).unwrap()));
+    let out = run_to(fifo.to_str().unwrap());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo(), "the FIFO was replaced");
+    let bytes = rx.recv_timeout(std::time::Duration::from_secs(20)).expect("nothing was written into the FIFO");
+    let litter: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("tmp"))
+        .collect();
+    assert!(litter.is_empty(), "temporary files left: {litter:?}");
+    bytes
+}
+
+#[test]
+fn render_into_dev_null_and_a_fifo() {
+    let dir = tempfile::tempdir().unwrap();
+    write_fixture(dir.path());
+    let png = writes_into_devices(dir.path(), |o| run(dir.path(), &["render", "c.ply", "-o", o, "--width", "64"]));
+    assert!(png.starts_with(b"\x89PNG"));
+}
+
+/// Runs with stdout a pipe whose reading end is already closed (`| head -1` that has quit).
+fn run_into_closed_pipe(dir: &Path, args: &[&str]) -> Output {
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    Command::new(BIN).current_dir(dir).args(args).stdout(writer).stderr(std::process::Stdio::piped()).output().unwrap()
+}
+
+#[test]
+fn fit_and_compare_exit_cleanly_when_stdout_closes() {
+    let dir = tempfile::tempdir().unwrap();
+    write_fixture(dir.path());
+    for args in [
+        &["fit", "--shape", "sphere", "--crop", "400,-100,-100,600,100,100", "c.ply"][..],
+        &["fit", "--shape", "sphere", "--crop", "400,-100,-100,600,100,100", "--json", "c.ply"],
+        &["compare", "--scene", "scene.json", "c.ply"],
+        &["compare", "--scene", "scene.json", "--json", "c.ply"],
+    ] {
+        let out = run_into_closed_pipe(dir.path(), args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}
+
+#[test]
+fn render_sizes_are_bounded_and_errors_name_the_output_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write_fixture(d);
+    for w in ["0", "2000000000", "-5"] {
+        let out = run(d, &["render", "c.ply", "-o", "p.png", "--width", w]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "--width {w}: {err}");
+        assert!(err.contains("--width") && !err.contains("panicked"), "{err}");
+        assert!(!d.join("p.png").exists());
+    }
+    let out = run(d, &["render", "c.ply", "-o", "nodir/p.png"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert_eq!(err.matches("nodir/p.png").count(), 1, "{err}");
+}
+
+#[test]
+fn a_scene_rectangle_of_negative_width_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write_fixture(d);
+    let text =
+        std::fs::read_to_string(d.join("scene.json")).unwrap().replace("\"width_mm\": 200.0", "\"width_mm\": -200.0");
+    assert!(text.contains("-200"));
+    std::fs::write(d.join("neg.json"), text).unwrap();
+    let out = run(d, &["compare", "--scene", "neg.json", "c.ply"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("neg.json") && err.contains("\"wall\"") && err.contains("width_mm"), "{err}");
+}

@@ -16,3 +16,38 @@ fn readme_hardware_commands_run() {
     assert!(out.status.success(), "README commands failed:\n{log}");
     assert!(work.path().join("calib/scanner.json").exists() && work.path().join("scan/cloud.ply").exists(), "{log}");
 }
+
+#[test]
+fn readme_first_screen_says_where_the_tools_are() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let first_screen: String = readme.lines().take(30).collect::<Vec<_>>().join("\n");
+    for needle in ["target/release", "cargo install --path bin/", "PATH", "rustup component add rustfmt clippy"] {
+        assert!(first_screen.contains(needle), "the README's first 30 lines do not say {needle:?}");
+    }
+}
+
+#[test]
+fn make_test_says_how_to_install_rustfmt_and_clippy() {
+    use std::os::unix::fs::PermissionsExt;
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let dir = tempfile::tempdir().unwrap();
+    for missing in ["fmt", "clippy"] {
+        // A cargo whose `fmt` or `clippy` subcommand is not installed.
+        let fake = dir.path().join(format!("cargo-without-{missing}"));
+        std::fs::write(&fake, format!("#!/bin/sh\n[ \"$1\" = {missing} ] && exit 101\nexit 0\n")).unwrap();
+        std::fs::set_permissions(&fake, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let out = Command::new("make")
+            .current_dir(&root)
+            .arg("-s")
+            .arg("tools")
+            .arg(format!("CARGO={}", fake.display()))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{missing}: {err}");
+        assert!(err.contains("rustup component add rustfmt clippy"), "{missing}: {err}");
+    }
+    let out = Command::new("make").current_dir(&root).args(["-s", "tools"]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

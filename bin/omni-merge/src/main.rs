@@ -43,27 +43,35 @@ struct Args {
     #[arg(long)]
     poses: Option<PathBuf>,
     /// Longest odometry gap (ms) that may be interpolated across.
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, default_value_t = 100.0, allow_negative_numbers = true)]
     max_pose_gap_ms: f64,
     /// Voxel edge length (mm): each occupied voxel becomes the centroid of its points, scalar
     /// fields averaged (Open3D voxel_down_sample semantics; grid anchored at the world origin).
-    #[arg(long, value_name = "SIZE")]
+    #[arg(long, value_name = "SIZE", allow_negative_numbers = true)]
     voxel: Option<f64>,
     /// Statistical outlier removal: K neighbours, STD_RATIO.
-    #[arg(long, value_name = "K,STD_RATIO")]
+    #[arg(long, value_name = "K,STD_RATIO", allow_hyphen_values = true)]
     statistical: Option<String>,
     /// Radius outlier removal: radius R (mm), MIN_POINTS other points.
-    #[arg(long, value_name = "R,MIN_POINTS")]
+    #[arg(long, value_name = "R,MIN_POINTS", allow_hyphen_values = true)]
     radius: Option<String>,
     /// Keep points inside the box (mm, world frame).
-    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX")]
+    #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", allow_hyphen_values = true)]
     crop_box: Option<String>,
     /// Keep points measured at a range (distance from the viewpoint, mm) in [MIN, MAX].
-    #[arg(long, value_name = "MIN,MAX")]
+    #[arg(long, value_name = "MIN,MAX", allow_hyphen_values = true)]
     crop_range: Option<String>,
     /// Print the point counts of each stage to stderr as JSON.
     #[arg(long)]
     stats: bool,
+    /// Keep frames whose `seq` repeats within one stream (refused by default: a stream
+    /// concatenated twice, or a repeated frame, would count its points twice).
+    #[arg(long)]
+    allow_duplicates: bool,
+    /// Refuse a stream without its final status record (cut short upstream); without it the
+    /// tool warns and goes on.
+    #[arg(long)]
+    strict: bool,
 }
 
 /// Parses `n` comma-separated numbers for option `opt`.
@@ -162,7 +170,7 @@ fn main() -> std::process::ExitCode {
                 }
                 add_ply(&mut merger, input, &name)?;
             } else {
-                add_stream(&mut merger, input, &name, trajectory.as_ref())?;
+                add_stream(&mut merger, input, &name, trajectory.as_ref(), &args)?;
             }
         }
         let (cloud, stats) = merger.finish()?;
@@ -193,10 +201,18 @@ fn add_ply(merger: &mut Merger, path: &Path, name: &str) -> Result<(), CliError>
     Ok(())
 }
 
-fn add_stream(merger: &mut Merger, path: &Path, name: &str, traj: Option<&Trajectory>) -> Result<(), CliError> {
+fn add_stream(
+    merger: &mut Merger,
+    path: &Path,
+    name: &str,
+    traj: Option<&Trajectory>,
+    args: &Args,
+) -> Result<(), CliError> {
     let mut reader = StreamReader::new(omni_formats::io::open_input(path)?, name);
     merger.begin_stream_input().map_err(|m| format!("{name}: {m}"))?;
     let mut frames = 0u64;
+    // The line of each frame seq seen, to refuse repeats.
+    let mut seen: std::collections::HashMap<u64, usize> = std::collections::HashMap::new();
     while let Some(record) = reader.next_record()? {
         let frame = match record {
             Record::Frame(frame) => frame,
@@ -207,6 +223,14 @@ fn add_stream(merger: &mut Merger, path: &Path, name: &str, traj: Option<&Trajec
             _ => continue,
         };
         let loc = format!("{name}: line {} (frame {})", reader.line(), frame.seq);
+        if let Some(first) = seen.insert(frame.seq, reader.line())
+            && !args.allow_duplicates
+        {
+            return Err(CliError::new(format!(
+                "{loc}: field seq: frame {} already came at line {first} (a repeated frame or stream? --allow-duplicates keeps both)",
+                frame.seq
+            )));
+        }
         let pose = match traj {
             Some(t) => {
                 let ts = frame.timestamp_us.ok_or_else(|| format!("{loc}: no timestamp_us, needed with --poses"))?;
@@ -219,6 +243,13 @@ fn add_stream(merger: &mut Merger, path: &Path, name: &str, traj: Option<&Trajec
     }
     if frames == 0 {
         return Err(CliError::new(format!("{name}: no frame records")));
+    }
+    if reader.cut_short() {
+        let msg = reader.cut_short_message();
+        if args.strict {
+            return Err(CliError::new(format!("{msg}; refused with --strict")));
+        }
+        omni_cli::warn("omni-merge", &format!("{msg}; its frames are merged, the cloud may be partial"));
     }
     Ok(())
 }

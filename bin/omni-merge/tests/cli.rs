@@ -5,7 +5,7 @@ use omni_cloud::filter::{radius_outlier_mask, statistical_outlier_mask};
 use omni_cloud::rng::SplitMix64;
 use omni_formats::odometry::{PoseSample, write_odometry};
 use omni_formats::ply::{Encoding, PointCloud, ScalarField, read_ply, write_ply};
-use omni_formats::stream::{Frame, Header, Point, Record, StreamWriter, StripePoint};
+use omni_formats::stream::{Frame, Header, Point, Record, Status, StreamWriter, StripePoint};
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -40,6 +40,15 @@ fn write_stream(path: &Path, frames: &[(Vec<[f64; 3]>, Option<u64>)]) {
         );
         w.write(&Record::Frame(Box::new(f))).unwrap();
     }
+    let status = Status {
+        frames: frames.len() as u64,
+        frames_missing: 0,
+        frames_failed: 0,
+        complete: true,
+        errors: vec![],
+        extra: Default::default(),
+    };
+    w.write(&Record::Status(status)).unwrap();
 }
 
 fn plane_with_outliers(rng: &mut SplitMix64, n: usize, outliers: usize) -> Vec<[f64; 3]> {
@@ -185,4 +194,115 @@ fn bad_inputs_fail_cleanly_without_output() {
         assert_eq!(run(d, bad).status.code(), Some(2));
     }
     assert_eq!(run(d, &["s.jsonl"]).status.code(), Some(2));
+}
+
+/// Runs the tool with its output at `/dev/null` and at a FIFO (read by a thread): both must be
+/// written into, not replaced by a regular file. Returns what came through the FIFO.
+fn writes_into_devices(dir: &Path, run_to: impl Fn(&str) -> Output) -> Vec<u8> {
+    use std::os::unix::fs::FileTypeExt;
+    let out = run_to("/dev/null");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null was replaced");
+    let fifo = dir.join("out.fifo");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = fifo.clone();
+    std::thread::spawn(move || tx.send(std::fs::read(reader).unwrap()));
+    let out = run_to(fifo.to_str().unwrap());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo(), "the FIFO was replaced");
+    let bytes = rx.recv_timeout(std::time::Duration::from_secs(20)).expect("nothing was written into the FIFO");
+    let litter: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("tmp"))
+        .collect();
+    assert!(litter.is_empty(), "temporary files left: {litter:?}");
+    bytes
+}
+
+#[test]
+fn dev_null_and_fifo_outputs_stay_what_they_are() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rng = SplitMix64::new(2);
+    write_stream(&dir.path().join("a.jsonl"), &[(plane_with_outliers(&mut rng, 200, 0), None)]);
+    let ply = writes_into_devices(dir.path(), |o| run(dir.path(), &["a.jsonl", "-o", o, "--ascii"]));
+    assert!(ply.starts_with(b"ply\n") && String::from_utf8_lossy(&ply).contains("element vertex 200"));
+}
+
+#[test]
+fn negative_numbers_reach_the_option_check() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rng = SplitMix64::new(2);
+    write_stream(&dir.path().join("a.jsonl"), &[(plane_with_outliers(&mut rng, 50, 0), None)]);
+    for (opt, val, expect) in [
+        ("--voxel", "-1", "voxel"),
+        ("--crop-box", "-1,-1,-1,-2,2,2", "crop"),
+        ("--max-pose-gap-ms", "-3", "max-pose-gap-ms"),
+        ("--statistical", "-4,2", "statistical"),
+    ] {
+        let out = run(dir.path(), &["a.jsonl", "-o", "c.ply", opt, val]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{opt} {val}: {err}");
+        assert!(!err.contains("unexpected argument") && err.contains(expect), "{opt} {val}: {err}");
+        assert!(!dir.path().join("c.ply").exists());
+    }
+}
+
+#[test]
+fn a_point_beyond_float_range_is_refused_not_written_as_inf() {
+    let dir = tempfile::tempdir().unwrap();
+    write_stream(&dir.path().join("a.jsonl"), &[(vec![[1.0, 2.0, 3.0], [1e40, 0.0, 500.0]], None)]);
+    let out = run(dir.path(), &["a.jsonl", "-o", "c.ply", "--ascii"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("c.ply") && err.contains("point 1: x"), "{err}");
+    assert!(!dir.path().join("c.ply").exists());
+}
+
+#[test]
+fn a_repeated_frame_seq_is_refused_unless_allowed() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut rng = SplitMix64::new(4);
+    write_stream(&d.join("a.jsonl"), &[(plane_with_outliers(&mut rng, 30, 0), None)]);
+    let text = std::fs::read_to_string(d.join("a.jsonl")).unwrap();
+    let frame = text.lines().find(|l| l.contains("\"frame\"")).unwrap();
+    let doubled = text.replace(frame, &format!("{frame}\n{frame}"));
+    std::fs::write(d.join("twice.jsonl"), doubled).unwrap();
+    let out = run(d, &["twice.jsonl", "-o", "c.ply"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("twice.jsonl: line 3 (frame 0)") && err.contains("line 2") && err.contains("--allow-duplicates"),
+        "{err}"
+    );
+    assert!(!d.join("c.ply").exists());
+    ok(&run(d, &["twice.jsonl", "-o", "c.ply", "--allow-duplicates"]));
+    assert_eq!(read_ply(&d.join("c.ply")).unwrap().len(), 60);
+    // The same seqs in two different streams are two scans, not a repeat.
+    ok(&run(d, &["a.jsonl", "a.jsonl", "-o", "two.ply"]));
+}
+
+#[test]
+fn a_stream_cut_short_is_warned_about_or_refused_with_strict() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut rng = SplitMix64::new(5);
+    write_stream(&d.join("a.jsonl"), &[(plane_with_outliers(&mut rng, 30, 0), None)]);
+    let out = run(d, &["a.jsonl", "-o", "c.ply", "--strict"]);
+    assert!(out.status.success() && out.stderr.is_empty(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = std::fs::read_to_string(d.join("a.jsonl")).unwrap();
+    let cut: String = text.lines().filter(|l| !l.contains("\"status\"")).map(|l| format!("{l}\n")).collect();
+    std::fs::write(d.join("cut.jsonl"), cut).unwrap();
+    let out = run(d, &["cut.jsonl", "-o", "cut.ply"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("warning: cut.jsonl") && err.contains("without its status record"), "{err}");
+    let out = run(d, &["cut.jsonl", "-o", "strict.ply", "--strict"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("cut.jsonl") && err.contains("--strict"), "{err}");
+    assert!(!d.join("strict.ply").exists());
 }

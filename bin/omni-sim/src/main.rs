@@ -76,7 +76,7 @@ struct SensorArgs {
     #[arg(short, long)]
     output: PathBuf,
     /// Image width and height (px); focal length and principal point scale with it.
-    #[arg(long, default_value_t = 1024)]
+    #[arg(long, default_value_t = 1024, allow_negative_numbers = true)]
     width: u32,
     /// Camera centre off the mirror focus, X,Y,Z (mm).
     #[arg(long, value_parser = parse_vec::<3>, allow_hyphen_values = true, value_name = "X,Y,Z")]
@@ -88,13 +88,13 @@ struct SensorArgs {
     #[arg(long, value_parser = parse_vec::<2>, allow_hyphen_values = true, value_name = "DX,DY")]
     principal_point_offset: Option<[f64; 2]>,
     /// Random per-facet tilt and pitch errors with this σ (degrees), radius errors σ = R·sin(σ).
-    #[arg(long, default_value_t = 0.0, value_name = "SIGMA_DEG")]
+    #[arg(long, default_value_t = 0.0, value_name = "SIGMA_DEG", allow_negative_numbers = true)]
     facet_errors: f64,
     /// Encoder zero offset (degrees).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_name = "DEG")]
     encoder_offset: f64,
     /// Seed of the random facet errors.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     seed: u64,
 }
 
@@ -120,52 +120,52 @@ struct SceneArgs {
 #[derive(clap::Args, Debug)]
 struct RenderArgs {
     /// Output bit depth of the PNG frames.
-    #[arg(long, default_value_t = 8, value_parser = parse_bit_depth)]
+    #[arg(long, default_value_t = 8, value_parser = parse_bit_depth, allow_negative_numbers = true)]
     bit_depth: u8,
     /// Noise seed (same seed, same images).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     seed: u64,
     /// Turn photon and read noise off.
     #[arg(long)]
     no_noise: bool,
     /// Laser power relative to the default (e.g. 3 for a saturated stripe, 0.3 for a weak one).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     laser_gain: f64,
     /// Ambient light relative to the default (a white surface ≈ 51/255 at 1 in laser frames; for
     /// checkerboard and rig pose images the room is lit: ≈ 178/255 at 1).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     ambient_gain: f64,
     /// Polygon turn during the exposure (degrees): motion blur of the stripe.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     motion_blur: f64,
     /// The idealised sensor instead of the realistic one: Gaussian PSF σ 0.7 px, no speckle, a
     /// dim room (white ≈ 51/255 in laser frames).
     #[arg(long)]
     ideal: bool,
     /// Lens F-number (default: camera.json's optics, else the paper preset's F/4).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
     f_number: Option<f64>,
     /// Laser wavelength (nm; default 650).
-    #[arg(long, value_name = "NM")]
+    #[arg(long, value_name = "NM", allow_negative_numbers = true)]
     wavelength_nm: Option<f64>,
     /// Pixel pitch (µm; default 4.65 for a 1024-px image).
-    #[arg(long, value_name = "UM")]
+    #[arg(long, value_name = "UM", allow_negative_numbers = true)]
     pixel_pitch_um: Option<f64>,
     /// Defocus: diameter of the blur circle (px; default 1.5).
-    #[arg(long, value_name = "PX")]
+    #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     defocus_px: Option<f64>,
     /// Override the optical blur: σ of the PSF (px, 0.4–1.5 are typical; with a lens, the
     /// defocus is set to reach it and it cannot be below the diffraction limit).
-    #[arg(long, value_name = "SIGMA_PX")]
+    #[arg(long, value_name = "SIGMA_PX", allow_negative_numbers = true)]
     blur_px: Option<f64>,
     /// Image the laser incoherently: no speckle (the lens's blur stays).
     #[arg(long)]
     no_speckle: bool,
     /// Independent speckle patterns (2: a depolarising matte surface; 1: a polarisation-keeping one).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
     speckle_patterns: Option<u32>,
     /// Worker threads (0: one per core).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     threads: usize,
 }
 
@@ -221,10 +221,10 @@ struct ScanArgs {
     #[arg(long, default_value = "0:30:0.5", allow_hyphen_values = true)]
     angles: String,
     /// Facet facing laser 0.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     facet: u32,
     /// Lasers switched on, e.g. 0,1.
-    #[arg(long, default_value = "0,1", value_delimiter = ',')]
+    #[arg(long, default_value = "0,1", value_delimiter = ',', allow_hyphen_values = true)]
     lasers: Vec<u32>,
     /// Directory for the PNG frames (created if missing).
     #[arg(long)]
@@ -252,7 +252,7 @@ struct BoardsArgs {
     #[arg(long)]
     board: PathBuf,
     /// Number of images.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 20, allow_negative_numbers = true)]
     count: usize,
     /// Output directory (created if missing).
     #[arg(long)]
@@ -296,7 +296,7 @@ struct RigArgs {
     #[arg(long, default_value = "14:28:1", allow_hyphen_values = true)]
     angles: String,
     /// Facet facing laser 0.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     facet: u32,
     /// Also render a laser-off (ambient) frame for every laser frame (`ambient_path` in the
     /// manifest), so that omni-ridge subtracts the checkerboard.
@@ -510,10 +510,28 @@ fn check_lasers(sensor: &Sensor, lasers: &[u32]) -> CliResult {
     }
 }
 
+/// The facet must be on the polygon (not taken modulo its count) and every angle within (or
+/// near) one facet's range.
+fn check_facet_and_angles(sensor: &Sensor, facet: u32, angles: &[f64]) -> CliResult {
+    let n = sensor.transmitter.num_facets();
+    if facet >= n {
+        return Err(CliError::usage(format!(
+            "--facet: facet {facet} is not on the polygon ({n} facets, 0 to {})",
+            n - 1
+        )));
+    }
+    if let Some(a) = angles.iter().find(|a| sensor.transmitter.check_frame(a.to_radians(), facet).is_err()) {
+        let span = sensor.transmitter.facet_angle().to_degrees();
+        return Err(CliError::usage(format!("--angles: {a}° is far outside the facet's range [0, {span}°)")));
+    }
+    Ok(())
+}
+
 fn scan(a: ScanArgs) -> CliResult {
     let (sensor, optics) = Sensor::load_with_optics(&a.camera, &a.scanner)?;
     let opts = a.render.options(optics)?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
+    check_facet_and_angles(&sensor, a.facet, &angles)?;
     check_lasers(&sensor, &a.lasers)?;
     let scene = Scene::load(&a.scene)?;
     check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("{}: {e}", a.scene.display())))?;
@@ -529,8 +547,8 @@ fn boards(a: BoardsArgs) -> CliResult {
     let (file, camera) = CameraFile::load(&a.camera)?;
     let opts = a.render.lit_options(file.optics)?;
     let board = load_board(&a.board)?;
-    if a.count == 0 {
-        return Err(CliError::usage("--count must be at least 1"));
+    if !(1..=10_000).contains(&a.count) {
+        return Err(CliError::usage(format!("--count must be in 1..=10000, got {}", a.count)));
     }
     // The transmitter plays no part in board images; the paper's stands in.
     let sensor = Sensor { camera, transmitter: Sensor::paper().transmitter };
@@ -560,6 +578,7 @@ fn rig(a: RigArgs) -> CliResult {
     let (sensor, optics) = Sensor::load_with_optics(&a.camera, &a.scanner)?;
     let opts = a.render.options(optics)?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
+    check_facet_and_angles(&sensor, a.facet, &angles)?;
     let board = load_board(&a.board)?;
     let rig = Rig::standard(&board);
     let scene_file = rig.scene();

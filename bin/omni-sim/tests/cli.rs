@@ -358,3 +358,99 @@ fn help_teaches() {
         assert!(text.contains(f), "omni-sim rig --help names {f}");
     }
 }
+
+/// Runs the tool with its output at `/dev/null` and at a FIFO (read by a thread): both must be
+/// written into, not replaced by a regular file. Returns what came through the FIFO.
+fn writes_into_devices(dir: &Path, run_to: impl Fn(&str) -> Output) -> Vec<u8> {
+    use std::os::unix::fs::FileTypeExt;
+    let out = run_to("/dev/null");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null was replaced");
+    let fifo = dir.join("out.fifo");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = fifo.clone();
+    std::thread::spawn(move || tx.send(std::fs::read(reader).unwrap()));
+    let out = run_to(fifo.to_str().unwrap());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo(), "the FIFO was replaced");
+    let bytes = rx.recv_timeout(std::time::Duration::from_secs(20)).expect("nothing was written into the FIFO");
+    let litter: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("tmp"))
+        .collect();
+    assert!(litter.is_empty(), "temporary files left: {litter:?}");
+    bytes
+}
+
+#[test]
+fn manifest_into_dev_null_and_a_fifo() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let scene = testdata("scenes/plane.json");
+    let text = writes_into_devices(d, |o| {
+        let args = ["scan", "--camera", "sensor/camera.json", "--scanner", "sensor/scanner.json", "--scene", &scene];
+        let mut args = args.to_vec();
+        args.extend(["--angles", "20", "--frames", "f", "--ideal", "-o", o]);
+        sim(&args, d)
+    });
+    assert!(String::from_utf8_lossy(&text).contains("\"type\":\"status\""));
+}
+
+#[test]
+fn an_interrupted_scan_leaves_no_temporary_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let scene = testdata("scenes/plane.json");
+    let frames = d.join("f");
+    let count = |dir: &Path, temp: bool| {
+        std::fs::read_dir(dir).map_or(0, |r| {
+            r.filter_map(|e| e.ok())
+                .filter(|e| e.file_name().to_string_lossy().contains("omniscan-tmp") == temp)
+                .count()
+        })
+    };
+    let mut child = Command::new(env!("CARGO_BIN_EXE_omni-sim"))
+        .current_dir(d)
+        .args(["scan", "--camera", "sensor/camera.json", "--scanner", "sensor/scanner.json", "--scene", &scene])
+        .args(["--angles", "0:30:0.05", "--frames", "f", "--ideal", "-o", "m.jsonl"])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while count(&frames, false) < 4 {
+        assert!(t0.elapsed().as_secs() < 60, "no frames written");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    assert!(Command::new("kill").arg("-INT").arg(child.id().to_string()).status().unwrap().success());
+    let status = child.wait().unwrap();
+    assert!(!status.success(), "{status:?}");
+    assert_eq!(count(&frames, true), 0, "temporary frames left");
+    assert_eq!(count(d, true), 0);
+    assert!(!d.join("m.jsonl").exists());
+}
+
+#[test]
+fn a_facet_off_the_polygon_and_angles_far_outside_it_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let scene = testdata("scenes/plane.json");
+    for (extra, expect) in
+        [(["--facet", "12", "--angles", "20"], "--facet"), (["--facet", "0", "--angles", "95"], "--angles")]
+    {
+        let mut args =
+            vec!["scan", "--camera", "sensor/camera.json", "--scanner", "sensor/scanner.json", "--scene", &scene];
+        args.extend(["--frames", "f", "-o", "m.jsonl"]);
+        args.extend(extra);
+        let out = sim(&args, d);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains(expect) && (err.contains("12 facets") || err.contains("95")), "{err}");
+        assert!(!d.join("m.jsonl").exists() && !d.join("f").exists());
+    }
+}

@@ -5,7 +5,7 @@ use omni_cli::CliError;
 use omni_cloud::cloud::{append_frame_points, empty_point_cloud};
 use omni_cloud::triangulate::{DEFAULT_MIN_INCIDENCE_DEG, Rejections, Triangulator};
 use omni_formats::ply::{Encoding, PointCloud, write_ply};
-use omni_formats::stream::{Header, Record, StreamReader, StreamWriter};
+use omni_formats::stream::{Header, Record, Status, StreamReader, StreamWriter};
 use omni_formats::{CameraFile, ScannerFile};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -49,8 +49,12 @@ struct Args {
     #[arg(long)]
     ascii: bool,
     /// Smallest accepted angle between a ray and the light plane (degrees).
-    #[arg(long, default_value_t = DEFAULT_MIN_INCIDENCE_DEG)]
+    #[arg(long, default_value_t = DEFAULT_MIN_INCIDENCE_DEG, allow_negative_numbers = true)]
     min_incidence_deg: f64,
+    /// Refuse an input stream without its final status record (cut short upstream); without
+    /// it the tool warns and passes `complete: false` on.
+    #[arg(long)]
+    strict: bool,
 }
 
 fn is_ply(p: &Path) -> bool {
@@ -77,8 +81,14 @@ fn main() -> std::process::ExitCode {
         let mut cloud = ply_out.as_ref().map(|_| empty_point_cloud());
         let input = omni_formats::io::open_input(&args.input)?;
         let name = omni_formats::io::display_name(&args.input, "stdin");
-        let mut run =
-            Run { tri: &tri, args: &args, cloud: cloud.as_mut(), rejections: Rejections::default(), points: 0 };
+        let mut run = Run {
+            tri: &tri,
+            args: &args,
+            cloud: cloud.as_mut(),
+            rejections: Rejections::default(),
+            points: 0,
+            frames: 0,
+        };
         match &stream_out {
             Some(path) => {
                 // The closure's error only aborts the atomic write; the message is kept here.
@@ -112,6 +122,8 @@ struct Run<'a> {
     rejections: Rejections,
     /// Points written so far.
     points: u64,
+    /// Frames read so far.
+    frames: u64,
 }
 
 impl Run<'_> {
@@ -135,22 +147,14 @@ impl Run<'_> {
                     let res = self.tri.triangulate_frame(&frame).map_err(|m| fail(format!("{loc}: {m}")))?;
                     self.rejections.add(&res.rejections);
                     self.points += res.points.len() as u64;
+                    self.frames += 1;
                     frame.points = Some(res.points);
                     if let Some(cloud) = self.cloud.as_deref_mut() {
                         append_frame_points(cloud, &frame, None, &|_| true).map_err(|m| fail(format!("{loc}: {m}")))?;
                     }
                     Record::Frame(frame)
                 }
-                Record::Status(mut status) => {
-                    // Say what this stage refused, next to the upstream counts.
-                    let r = &self.rejections;
-                    status.extra.insert(
-                        "triangulate".into(),
-                        serde_json::json!({"points": self.points, "no_ray": r.no_ray, "grazing": r.grazing,
-                            "unlit": r.unlit, "ambiguous": r.ambiguous}),
-                    );
-                    Record::Status(status)
-                }
+                Record::Status(status) => Record::Status(self.status(status)),
                 other => other,
             };
             if let Some(w) = writer.as_mut() {
@@ -161,13 +165,37 @@ impl Run<'_> {
             }
             first = false;
         }
-        if let Some(w) = writer.as_mut() {
-            if first {
-                w.write(&Record::Header(self.header(Header::new("unknown")))).map_err(|e| fail(e.to_string()))?;
+        if let Some(w) = writer.as_mut()
+            && first
+        {
+            w.write(&Record::Header(self.header(Header::new("unknown")))).map_err(|e| fail(e.to_string()))?;
+        }
+        if reader.cut_short() {
+            let msg = reader.cut_short_message();
+            if self.args.strict {
+                return Err(format!("{msg}; refused with --strict"));
             }
+            omni_cli::warn("omni-triangulate", &format!("{msg}; passing on complete: false"));
+            if let Some(w) = writer.as_mut() {
+                w.write(&Record::Status(self.status(Status::cut_short(self.frames, msg))))
+                    .map_err(|e| fail(e.to_string()))?;
+            }
+        }
+        if let Some(w) = writer.as_mut() {
             w.flush().map_err(|e| fail(e.to_string()))?;
         }
         Ok(())
+    }
+
+    /// The status record passed on, with what this stage refused next to the upstream counts.
+    fn status(&self, mut status: Status) -> Status {
+        let r = &self.rejections;
+        status.extra.insert(
+            "triangulate".into(),
+            serde_json::json!({"points": self.points, "no_ray": r.no_ray, "grazing": r.grazing,
+                "unlit": r.unlit, "ambiguous": r.ambiguous}),
+        );
+        status
     }
 
     fn header(&self, mut h: Header) -> Header {

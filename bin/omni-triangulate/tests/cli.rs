@@ -148,3 +148,175 @@ fn bad_input_fails_with_one_line_and_leaves_no_output() {
     let out = run(fx.dir.path(), &["--help"]);
     assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("Examples"));
 }
+
+/// Runs the tool with its output at `/dev/null` and at a FIFO (read by a thread): both must be
+/// written into, not replaced by a regular file. Returns what came through the FIFO.
+fn writes_into_devices(dir: &Path, run_to: impl Fn(&str) -> Output) -> Vec<u8> {
+    use std::os::unix::fs::FileTypeExt;
+    let out = run_to("/dev/null");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null was replaced");
+    let fifo = dir.join("out.fifo");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = fifo.clone();
+    std::thread::spawn(move || tx.send(std::fs::read(reader).unwrap()));
+    let out = run_to(fifo.to_str().unwrap());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo(), "the FIFO was replaced");
+    let bytes = rx.recv_timeout(std::time::Duration::from_secs(20)).expect("nothing was written into the FIFO");
+    let litter: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("tmp"))
+        .collect();
+    assert!(litter.is_empty(), "temporary files left: {litter:?}");
+    bytes
+}
+
+#[test]
+fn dev_null_and_fifo_outputs_stay_what_they_are() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let text = writes_into_devices(d, |o| {
+        run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "-o", o])
+    });
+    let records: Vec<Record> = StreamReader::new(text.as_slice(), "fifo").map(|r| r.unwrap()).collect();
+    assert_eq!(records.len(), 5);
+    let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "--ply", "/dev/null"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(std::os::unix::fs::FileTypeExt::is_char_device(&std::fs::metadata("/dev/null").unwrap().file_type()));
+}
+
+#[test]
+fn facets_off_the_polygon_and_angles_far_outside_the_facet_are_refused() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let frame = |alpha: &str, facet: &str| {
+        format!(
+            "{{\"type\":\"frame\",\"seq\":4,\"path\":\"a.png\",\"alpha_deg\":{alpha},\"facet\":{facet},\"lasers\":[0],\"stripe\":[[500,500,1,1,0]]}}\n"
+        )
+    };
+    for (name, text, expect) in
+        [("facet.jsonl", frame("15", "12"), "field facet"), ("alpha.jsonl", frame("95", "0"), "field alpha_deg")]
+    {
+        std::fs::write(d.join(name), text).unwrap();
+        let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", name, "-o", "out.jsonl"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains(name) && err.contains("frame 4") && err.contains(expect), "{err}");
+        assert!(!d.join("out.jsonl").exists());
+    }
+}
+
+#[test]
+fn a_bad_facet_offset_is_blamed_on_scanner_json() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let mut v: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("scanner.json")).unwrap()).unwrap();
+    v["transmitter"]["lasers"][1]["facet_offset"] = 40.into();
+    std::fs::write(d.join("bad_scanner.json"), v.to_string()).unwrap();
+    let out = run(d, &["--camera", "camera.json", "--scanner", "bad_scanner.json", "ridges.jsonl"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("omni-triangulate: error: bad_scanner.json:") && err.contains("facet_offset"), "{err}");
+    assert!(!err.contains("ridges.jsonl"), "{err}");
+}
+
+#[test]
+fn negative_numbers_reach_the_option_check() {
+    let fx = fixture();
+    let out = run(
+        fx.dir.path(),
+        &["--camera", "camera.json", "--scanner", "scanner.json", "--min-incidence-deg", "-5", "ridges.jsonl"],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(!err.contains("unexpected argument") && err.contains("incidence"), "{err}");
+}
+
+/// Names of the hidden temporary files in `dir`.
+fn temp_files(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("omniscan-tmp"))
+        .collect()
+}
+
+#[test]
+fn an_interrupted_run_leaves_no_temporary_file() {
+    use std::io::Write as _;
+    let fx = fixture();
+    let d = fx.dir.path();
+    let ridges = std::fs::read_to_string(fx.path("ridges.jsonl")).unwrap();
+    let without_status: String =
+        ridges.lines().filter(|l| !l.contains("\"status\"")).map(|l| format!("{l}\n")).collect();
+    for signal in ["INT", "TERM"] {
+        let mut child = Command::new(BIN)
+            .current_dir(d)
+            .args(["--camera", "camera.json", "--scanner", "scanner.json", "-", "-o", "out.jsonl"])
+            .stdin(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The stream is still coming: the output's temporary file is open.
+        let mut stdin = child.stdin.take().unwrap();
+        stdin.write_all(without_status.as_bytes()).unwrap();
+        stdin.flush().unwrap();
+        let t0 = std::time::Instant::now();
+        while temp_files(d).is_empty() {
+            assert!(t0.elapsed().as_secs() < 20, "no temporary file appeared");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        assert!(Command::new("kill").arg(format!("-{signal}")).arg(child.id().to_string()).status().unwrap().success());
+        let status = child.wait().unwrap();
+        drop(stdin);
+        assert!(!status.success(), "{signal}: {status:?}");
+        assert_eq!(temp_files(d), Vec::<String>::new(), "SIG{signal} left a temporary file");
+        assert!(!fx.path("out.jsonl").exists());
+    }
+}
+
+#[test]
+fn stale_temporary_files_of_dead_runs_are_swept() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let mut dead = Command::new("true").spawn().unwrap();
+    let pid = dead.id();
+    dead.wait().unwrap();
+    let stale = fx.path(&format!(".out.jsonl.omniscan-tmp-{pid}"));
+    std::fs::write(&stale, "left by a killed run").unwrap();
+    let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "-o", "out.jsonl"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(!stale.exists() && fx.path("out.jsonl").exists());
+}
+
+#[test]
+fn a_stream_cut_short_is_warned_about_and_passed_on_incomplete_or_refused_with_strict() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let ridges = std::fs::read_to_string(fx.path("ridges.jsonl")).unwrap();
+    let cut: String = ridges.lines().filter(|l| !l.contains("\"status\"")).map(|l| format!("{l}\n")).collect();
+    std::fs::write(fx.path("cut.jsonl"), cut).unwrap();
+    let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "cut.jsonl"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("warning: cut.jsonl") && err.contains("without its status record"), "{err}");
+    let records: Vec<Record> = StreamReader::new(out.stdout.as_slice(), "out").map(|r| r.unwrap()).collect();
+    let Some(Record::Status(status)) = records.last() else { panic!("no status record passed on") };
+    assert!(!status.complete && status.frames == 3, "{status:?}");
+    assert!(status.errors[0].contains("cut.jsonl"), "{status:?}");
+
+    let out =
+        run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "cut.jsonl", "--strict", "-o", "o.jsonl"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("cut.jsonl") && err.contains("--strict") && err.lines().count() == 1, "{err}");
+    assert!(!fx.path("o.jsonl").exists());
+    // A whole stream passes --strict and gives no warning.
+    let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "--strict"]);
+    assert!(out.status.success() && out.stderr.is_empty(), "{}", String::from_utf8_lossy(&out.stderr));
+}

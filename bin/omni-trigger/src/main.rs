@@ -53,7 +53,7 @@ struct PortArgs {
     #[arg(long)]
     port: String,
     /// Baud rate (ignored by USB CDC devices and pseudo-terminals).
-    #[arg(long, default_value_t = 115_200)]
+    #[arg(long, default_value_t = 115_200, allow_negative_numbers = true)]
     baud: u32,
 }
 
@@ -89,32 +89,36 @@ struct ScanArgs {
     #[arg(long)]
     frames: PathBuf,
     /// Trigger angles within a facet in degrees: start:stop:step (stop excluded) or a list a,b,c.
-    #[arg(long, default_value = "0:30:0.5")]
+    #[arg(long, default_value = "0:30:0.5", allow_hyphen_values = true)]
     angles: String,
     /// Facets that trigger: `all` or a list, e.g. 0,6.
-    #[arg(long, default_value = "all")]
+    #[arg(long, default_value = "all", allow_hyphen_values = true)]
     facets: String,
     /// Lasers on in laser frames, e.g. 0 or 0,1 (default: all).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     lasers: Option<Vec<u32>>,
     /// Interleave laser-off (ambient) revolutions.
     #[arg(long)]
     laser_off: bool,
     /// Laser revolutions to scan.
-    #[arg(long, conflicts_with = "duration")]
+    #[arg(long, conflicts_with = "duration", allow_negative_numbers = true)]
     revolutions: Option<u64>,
     /// Scan for this many seconds instead (then STOP).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     duration: Option<f64>,
     /// Motor speed in rev/min (0 = the fastest the controller's trigger rate allows).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     rpm: f64,
     /// A trigger without a frame after this long is reported missing (ms).
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = 2000, allow_negative_numbers = true)]
     frame_timeout_ms: u64,
     /// Expected frame timestamp minus trigger time (ms): 0 if the camera stamps exposure time.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     latency_ms: f64,
+    /// Missing frames (triggers without a frame) tolerated: more make the scan fail, with
+    /// `complete: false` in the status record.
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+    max_missing: u64,
     /// Manifest output (`-` = stdout). Written as it goes, so a failed scan keeps what it got.
     #[arg(short, long, default_value = "-")]
     output: PathBuf,
@@ -144,14 +148,14 @@ struct EmulateArgs {
     #[arg(long)]
     scene: Option<PathBuf>,
     /// Image width = height of the default (paper) camera, px.
-    #[arg(long, default_value_t = 1024, conflicts_with = "camera")]
+    #[arg(long, default_value_t = 1024, conflicts_with = "camera", allow_negative_numbers = true)]
     width: u32,
     /// `render` through omni-simulator, or `blank` (grey frames, for timing tests).
     #[arg(long, default_value = "render", value_parser = ["render", "blank"])]
     camera_mode: String,
     /// Trigger rate limit (Hz) announced to the host; default: measured render speed / 2.5
     /// (with --buffered-camera: 50 Hz).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     max_rate_hz: Option<f64>,
     /// Give the virtual camera a frame buffer: triggers queue up and every frame is rendered
     /// (stamped with its exposure time), so scans run at full trigger rate however slow the
@@ -159,7 +163,7 @@ struct EmulateArgs {
     #[arg(long)]
     buffered_camera: bool,
     /// Render noise seed.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     seed: u64,
     /// Render with the idealised sensor (Gaussian blur σ 0.7 px, no speckle, a dim room) instead
     /// of the realistic one (the lens in camera.json's `optics`, laser speckle).
@@ -172,28 +176,28 @@ struct EmulateArgs {
     #[arg(long)]
     persist: bool,
     /// Fault: probability of random garbage bytes before a line.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     garbage: f64,
     /// Fault: probability of a wrong checksum on a line.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     bad_crc: f64,
     /// Fault: probability that a trigger event is not sent.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     drop_events: f64,
     /// Fault: probability that a trigger event is sent twice.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     dup_events: f64,
     /// Fault: extra camera time per frame (ms), so it misses triggers.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     slow_camera_ms: u64,
     /// Fault: close the port after this many triggers (an unplugged cable).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     disconnect_after: Option<u64>,
     /// Fault: the motor stalls after this many triggers (the run never ends).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     stall_after: Option<u64>,
     /// Seed of the fault generator.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     fault_seed: u64,
 }
 
@@ -388,11 +392,25 @@ fn scan(a: ScanArgs) -> CliResult {
     if let Some(e) = write_error {
         return Err(CliError::new(e));
     }
-    writer.write(&Record::Status(outcome.status.clone()))?;
+    let mut status = outcome.status.clone();
+    let too_many_missing = status.frames_missing > a.max_missing;
+    let missing_msg = format!(
+        "{} of {} triggered frames missing, more than --max-missing {} (is --frames {} the directory the camera writes to, and can the camera keep up?)",
+        status.frames_missing,
+        status.frames + status.frames_missing,
+        a.max_missing,
+        a.frames.display()
+    );
+    if too_many_missing {
+        status.complete = false;
+        status.errors.push(missing_msg.clone());
+    }
+    writer.write(&Record::Status(status.clone()))?;
     writer.flush()?;
-    let s = &outcome.status;
+    let s = &status;
     match outcome.error {
         Some(e) => Err(CliError::new(format!("{}: scan stopped after {} frames: {e}", a.port.port, s.frames))),
+        None if too_many_missing => Err(CliError::new(format!("{}: {missing_msg}", a.port.port))),
         None => {
             if s.frames_missing > 0 || outcome.stats.frames_unmatched > 0 {
                 omni_cli::warn(
@@ -418,8 +436,8 @@ fn renderer(a: &EmulateArgs) -> CliResult<(Box<dyn FrameRenderer>, u32, u32)> {
     let (sensor, optics) = match (&a.camera, &a.scanner) {
         (Some(c), Some(s)) => omni_simulator::Sensor::load_with_optics(c, s)?,
         _ => {
-            if a.width < 16 {
-                return Err(CliError::usage("--width must be at least 16"));
+            if !(16..=8192).contains(&a.width) {
+                return Err(CliError::usage(format!("--width must be in 16..=8192, got {}", a.width)));
             }
             (omni_simulator::Sensor::paper_scaled(a.width), None)
         }

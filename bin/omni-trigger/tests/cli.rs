@@ -149,7 +149,17 @@ fn clean_scan_of_two_revolutions_gives_exactly_the_expected_manifest() {
 #[test]
 fn rendered_frames_through_the_simulator_pair_with_their_true_angles_and_ambient_frames() {
     let emu = Emulator::start(&["--width", "64"]);
-    let out = emu.scan(&["--angles", "5,20", "--facets", "0,3,6,9", "--revolutions", "1", "--laser-off"]);
+    let out = emu.scan(&[
+        "--angles",
+        "5,20",
+        "--facets",
+        "0,3,6,9",
+        "--revolutions",
+        "1",
+        "--laser-off",
+        "--max-missing",
+        "4",
+    ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let (frames, status) = read_manifest(&emu.manifest_path());
     assert_frames_true(&frames, &emu.truth());
@@ -186,7 +196,9 @@ fn faulty_scan(fault: &[&str]) -> (Vec<Frame>, Status) {
     let mut args = vec!["--camera-mode", "blank", "--max-rate-hz", "40"];
     args.extend_from_slice(fault);
     let emu = Emulator::start(&args);
-    let out = emu.scan(&FAST);
+    let mut scan_args = FAST.to_vec();
+    scan_args.extend(["--max-missing", "24"]);
+    let out = emu.scan(&scan_args);
     assert!(out.status.success(), "{fault:?}: {}", String::from_utf8_lossy(&out.stderr));
     let (frames, status) = read_manifest(&emu.manifest_path());
     eprintln!("{fault:?}: {} paired, {} missing, extra {:?}", status.frames, status.frames_missing, status.extra);
@@ -344,7 +356,7 @@ fn bad_ports_and_arguments_fail_cleanly() {
 fn a_timed_scan_stops_the_controller_and_accounts_for_every_trigger() {
     let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40"]);
     let started = Instant::now();
-    let out = emu.scan(&["--angles", "0,15", "--duration", "0.6"]);
+    let out = emu.scan(&["--angles", "0,15", "--duration", "0.6", "--max-missing", "30"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(started.elapsed() < Duration::from_secs(5));
     let (frames, status) = read_manifest(&emu.manifest_path());
@@ -449,4 +461,26 @@ fn emulate_renders_from_camera_scanner_and_scene_files_and_names_bad_ones() {
     let e = String::from_utf8_lossy(&out.stderr);
     assert!(e.contains("camera.json") && e.contains("fisheye"), "{e}");
     assert!(out.stdout.is_empty(), "no device path for a failed start");
+}
+
+#[test]
+fn missing_frames_beyond_max_missing_fail_the_scan() {
+    // A wrong frames directory: every trigger goes without its frame.
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40"]);
+    let elsewhere = emu.dir.path().join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    let out = Command::new(BIN)
+        .args(["scan", "--port", &emu.port, "--angles", "0,15", "--facets", "0,6", "--frame-timeout-ms", "300"])
+        .arg("--frames")
+        .arg(&elsewhere)
+        .arg("-o")
+        .arg(emu.manifest_path())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("4 of 4 triggered frames missing") && err.contains("--max-missing 0"), "{err}");
+    let (frames, status) = read_manifest(&emu.manifest_path());
+    assert!(frames.is_empty() && !status.complete, "{status:?}");
+    assert!(status.errors.iter().any(|e| e.contains("--max-missing")), "{status:?}");
 }

@@ -4,6 +4,9 @@
 //!   printed once as `omni-x: error: …` (naming the file and record at fault) with exit code 1;
 //!   a closed downstream pipe (`| head`) is a clean exit 0; clap reports usage errors with
 //!   exit code 2 and handles `--help` and `--version`.
+//! * [`main`] also removes the temporary files of atomic writes in progress
+//!   ([`omni_formats::io::TempFile`]) when SIGINT, SIGTERM or SIGHUP ends the tool, then dies of
+//!   that signal as it would have.
 //! * [`progress`] gives a progress bar that is drawn only when stderr is a terminal, so pipes
 //!   and CI logs stay clean.
 //!
@@ -67,6 +70,7 @@ pub type CliResult<T = ()> = Result<T, CliError>;
 
 /// Runs `body` and maps its result to an exit code (see the crate docs).
 pub fn main(tool: &str, body: impl FnOnce() -> CliResult) -> ExitCode {
+    remove_temp_files_on_signal();
     match body() {
         Ok(()) => ExitCode::from(EXIT_OK),
         Err(e) if e.is_broken_pipe() => ExitCode::from(EXIT_OK),
@@ -75,6 +79,26 @@ pub fn main(tool: &str, body: impl FnOnce() -> CliResult) -> ExitCode {
             eprintln!("{tool}: error: {msg}");
             ExitCode::from(e.code)
         }
+    }
+}
+
+/// Watches SIGINT, SIGTERM and SIGHUP from a thread: on the first one, removes the temporary
+/// files of atomic writes in progress and ends the process by that signal's default action (so
+/// the shell sees an interrupted tool). A tool that installs its own handler afterwards (an
+/// orderly stop) replaces this one.
+pub fn remove_temp_files_on_signal() {
+    #[cfg(unix)]
+    {
+        use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+        let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) else { return };
+        let spawned = std::thread::Builder::new().name("signals".into()).spawn(move || {
+            if let Some(sig) = signals.forever().next() {
+                omni_formats::io::remove_temp_files();
+                let _ = signal_hook::low_level::emulate_default_handler(sig);
+                std::process::exit(128 + sig);
+            }
+        });
+        drop(spawned);
     }
 }
 

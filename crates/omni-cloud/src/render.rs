@@ -29,9 +29,12 @@ fn ramp(t: f64) -> [u8; 3] {
     [0, 1, 2].map(|c| (stops[i][c] * (1.0 - f) + stops[i + 1][c] * f) as u8)
 }
 
-/// Renders the points into a picture `width` pixels wide (white background).
+/// Renders the points into a picture `width` pixels wide (clamped to 16 to
+/// [`omni_model::limits::MAX_IMAGE_SIDE_PX`]; white background). The height follows the
+/// cloud's extent, within the same bounds and at most 4 × the width.
 pub fn render(points: &[Point3<f64>], width: u32, color: ColorBy) -> Picture {
-    let width = width.max(16);
+    let max = omni_model::limits::MAX_IMAGE_SIDE_PX;
+    let width = width.clamp(16, max);
     let (az, el) = ((-30.0f64).to_radians(), 25.0f64.to_radians());
     // Camera basis: right, up, and the viewing direction (into the screen).
     let view = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), -el.sin());
@@ -56,7 +59,7 @@ pub fn render(points: &[Point3<f64>], width: u32, color: ColorBy) -> Picture {
     let span = (x1 - x0).max(y1 - y0).max(1e-9);
     let margin = 0.05 * span;
     let scale = width as f64 / (x1 - x0 + 2.0 * margin).max(1e-9);
-    let height = (((y1 - y0 + 2.0 * margin) * scale).ceil() as u32).clamp(16, 4 * width);
+    let height = (((y1 - y0 + 2.0 * margin) * scale).ceil() as u32).clamp(16, (4 * width).min(max));
     let mut rgb = vec![255u8; (width * height * 3) as usize];
     let mut order: Vec<usize> = (0..points.len()).collect();
     order.sort_by(|&a, &b| proj[b].2.total_cmp(&proj[a].2)); // far first

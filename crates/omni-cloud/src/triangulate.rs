@@ -183,6 +183,7 @@ impl<'a> Triangulator<'a> {
             return Err("field alpha_deg: not a finite number".into());
         }
         let alpha = frame.alpha_deg.to_radians();
+        self.transmitter.check_frame(alpha, frame.facet)?;
         frame
             .lasers
             .iter()

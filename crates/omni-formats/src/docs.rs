@@ -142,6 +142,10 @@ pub struct BoardFile {
 impl Versioned for BoardFile {
     const FORMAT: &'static str = "omniscan.board";
     const VERSION: u32 = 1;
+
+    fn check(&self) -> std::result::Result<(), String> {
+        self.validate()
+    }
 }
 
 impl BoardFile {
@@ -158,12 +162,7 @@ impl BoardFile {
 
     /// Checks the board is usable; the message names the field.
     pub fn validate(&self) -> std::result::Result<(), String> {
-        if self.inner_cols < 2 || self.inner_rows < 2 {
-            return Err(format!(
-                "inner_cols and inner_rows must be at least 2, got {} × {}",
-                self.inner_cols, self.inner_rows
-            ));
-        }
+        check_board_corners("", self.inner_cols, self.inner_rows)?;
         if !(self.square_mm.is_finite() && self.square_mm > 0.0) {
             return Err(format!("square_mm must be positive, got {}", self.square_mm));
         }
@@ -174,6 +173,19 @@ impl BoardFile {
     }
 }
 
+/// Checks a board's inner corner counts: at least 2, at most
+/// [`omni_model::limits::MAX_BOARD_CORNERS`] per side. `prefix` is the field path to the board
+/// (`""` for board.json, `"boards[1]."` in a rig).
+pub(crate) fn check_board_corners(prefix: &str, cols: u32, rows: u32) -> std::result::Result<(), String> {
+    let max = omni_model::limits::MAX_BOARD_CORNERS;
+    for (name, v) in [("inner_cols", cols), ("inner_rows", rows)] {
+        if !(2..=max).contains(&v) {
+            return Err(format!("field {prefix}{name}: must be in 2..={max}, got {v}"));
+        }
+    }
+    Ok(())
+}
+
 /// Parses a versioned JSON document from text, checking `format` and `version` first so that a
 /// file of the wrong kind or a newer version gets a clear message rather than a field error.
 pub fn parse_doc<T: DeserializeOwned + Versioned>(text: &[u8], source_name: &str) -> Result<T> {
@@ -181,14 +193,16 @@ pub fn parse_doc<T: DeserializeOwned + Versioned>(text: &[u8], source_name: &str
         Error::new(source_name, format!("line {} column {}", e.line(), e.column()), format!("invalid JSON: {e}"))
     })?;
     check_header(&value, T::FORMAT, T::VERSION, source_name)?;
-    serde_path_to_error::deserialize(value).map_err(|e| {
+    let doc: T = serde_path_to_error::deserialize(value).map_err(|e| {
         let path = e.path().to_string();
         Error::new(
             source_name,
             if path == "." { String::new() } else { format!("field {path}") },
             e.into_inner().to_string(),
         )
-    })
+    })?;
+    doc.check().map_err(|m| Error::new(source_name, "", m))?;
+    Ok(doc)
 }
 
 /// Checks a JSON object's `format` and `version` fields.
@@ -279,5 +293,24 @@ mod tests {
         let f = parse(&v).unwrap();
         let e = f.model.build().unwrap_err();
         assert!(e.contains("rim_radius_mm"), "{e}");
+    }
+
+    #[test]
+    fn board_sizes_are_bounded() {
+        let mut v = serde_json::to_value(BoardFile::new(9, 6, 30.0)).unwrap();
+        v["inner_cols"] = 100_000.into();
+        let e = parse_doc::<BoardFile>(&serde_json::to_vec(&v).unwrap(), "board.json").unwrap_err().to_string();
+        assert_eq!(e, "board.json: field inner_cols: must be in 2..=1000, got 100000");
+    }
+
+    #[test]
+    fn camera_image_size_is_bounded() {
+        let mut v = camera_json();
+        v["model"]["width"] = 2_000_000_000u32.into();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("camera.json");
+        std::fs::write(&path, serde_json::to_vec(&v).unwrap()).unwrap();
+        let e = CameraFile::load(&path).err().unwrap().to_string();
+        assert!(e.contains("camera.json") && e.contains("field model") && e.contains("16384"), "{e}");
     }
 }

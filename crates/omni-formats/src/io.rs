@@ -1,4 +1,5 @@
-//! Input/output helpers: `-` means stdin/stdout, and files are written atomically.
+//! Input/output helpers: `-` means stdin/stdout, and files are written atomically (devices and
+//! FIFOs are written straight into; temporary files are removed on failure and on a signal).
 
 use crate::{Error, Result};
 use std::fs::File;
@@ -28,7 +29,9 @@ pub fn read_all(path: &Path) -> Result<Vec<u8>> {
 
 /// Writes a file atomically: `write` fills a temporary file in the same directory, which is
 /// renamed over `path` only if everything succeeded, so readers never see a half-written file.
-/// For `-` the data goes straight to stdout.
+/// For `-` the data goes straight to stdout. Anything that exists and is not a regular file (a
+/// device such as `/dev/null`, a FIFO, a socket) is written straight into, never replaced; a
+/// symbolic link to a regular file keeps the link and replaces the file it points to.
 pub fn write_atomic<F>(path: &Path, write: F) -> Result<()>
 where
     F: FnOnce(&mut dyn Write) -> std::io::Result<()>,
@@ -39,27 +42,173 @@ where
         return write(&mut w).and_then(|_| w.flush()).map_err(|e| Error::io("stdout", &e));
     }
     let name = path.display().to_string();
-    let tmp = temp_path(path);
-    let result = (|| {
-        let f = File::create(&tmp)?;
-        let mut w = BufWriter::with_capacity(1 << 16, f);
-        write(&mut w)?;
-        let f = w.into_inner().map_err(|e| e.into_error())?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(Error::io(name, &e));
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => return Err(Error::new(name, "", "is a directory")),
+        Ok(m) if !m.is_file() => {
+            // A device or FIFO: open it as it is (no create, no truncate) and write into it.
+            let result = (|| {
+                let f = std::fs::OpenOptions::new().write(true).open(path)?;
+                let mut w = BufWriter::with_capacity(1 << 16, f);
+                write(&mut w)?;
+                w.flush()
+            })();
+            return result.map_err(|e| Error::io(name, &e));
+        }
+        _ => {}
     }
-    Ok(())
+    let target = match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => std::fs::canonicalize(path).map_err(|e| Error::io(&name, &e))?,
+        _ => path.to_path_buf(),
+    };
+    let result = (|| {
+        let mut tmp = TempFile::create(&target)?;
+        let mut w = BufWriter::with_capacity(1 << 16, tmp.file());
+        write(&mut w)?;
+        w.flush()?;
+        drop(w);
+        tmp.commit()
+    })();
+    result.map_err(|e| Error::io(name, &e))
 }
 
-/// The temporary sibling used by [`write_atomic`]: hidden, unique per process.
+/// The marker in every temporary file name: `.NAME.omniscan-tmp-PID`.
+const TEMP_MARKER: &str = ".omniscan-tmp-";
+
+/// The temporary sibling used by [`write_atomic`]: hidden, named after the target and the
+/// process (`.NAME.omniscan-tmp-PID`), so that a later run can recognise a stale one (its
+/// process is gone) and remove it.
 pub fn temp_path(path: &Path) -> PathBuf {
     let file = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    dir.join(format!(".{file}.tmp-{}", std::process::id()))
+    parent_dir(path).join(format!(".{file}{TEMP_MARKER}{}", std::process::id()))
+}
+
+fn parent_dir(path: &Path) -> &Path {
+    path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."))
+}
+
+/// Temporary files in progress in this process, removed by [`remove_temp_files`].
+static TEMP_FILES: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+/// Directories already swept of stale temporary files by this process.
+static SWEPT_DIRS: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+fn temp_files() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    TEMP_FILES.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Removes every temporary file this process has in progress. For a signal handler (SIGINT,
+/// SIGTERM) just before the process ends: the list stays locked afterwards, so a write that
+/// would start a new temporary file waits for the end instead of leaving one behind.
+pub fn remove_temp_files() {
+    let guard = temp_files();
+    for p in guard.iter() {
+        let _ = std::fs::remove_file(p);
+    }
+    std::mem::forget(guard);
+}
+
+/// A temporary file that becomes `target` on [`TempFile::commit`]; removed if dropped before,
+/// and by [`remove_temp_files`] (a signal) while in progress.
+pub struct TempFile {
+    path: PathBuf,
+    target: PathBuf,
+    file: Option<File>,
+}
+
+impl TempFile {
+    /// Creates the temporary sibling of `target` (see [`temp_path`]), after removing stale
+    /// temporary files of dead processes from the directory (once per directory and process).
+    pub fn create(target: &Path) -> std::io::Result<TempFile> {
+        sweep_stale(parent_dir(target));
+        let path = temp_path(target);
+        temp_files().push(path.clone());
+        match File::create(&path) {
+            Ok(f) => Ok(TempFile { path, target: target.to_path_buf(), file: Some(f) }),
+            Err(e) => {
+                forget_temp(&path);
+                Err(e)
+            }
+        }
+    }
+
+    /// The open temporary file.
+    pub fn file(&mut self) -> &mut File {
+        self.file.as_mut().expect("open until commit")
+    }
+
+    /// Syncs the file and renames it over the target.
+    pub fn commit(mut self) -> std::io::Result<()> {
+        let f = self.file.take().expect("open until commit");
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&self.path, &self.target)?;
+        forget_temp(&self.path);
+        self.path = PathBuf::new();
+        Ok(())
+    }
+}
+
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        if !self.path.as_os_str().is_empty() {
+            self.file.take();
+            let _ = std::fs::remove_file(&self.path);
+            forget_temp(&self.path);
+        }
+    }
+}
+
+fn forget_temp(path: &Path) {
+    let mut list = temp_files();
+    if let Some(k) = list.iter().rposition(|p| p == path) {
+        list.swap_remove(k);
+    }
+}
+
+/// Removes `.NAME.omniscan-tmp-PID` files of processes that no longer run from `dir`, once per
+/// directory in this process.
+fn sweep_stale(dir: &Path) {
+    {
+        let mut swept = SWEPT_DIRS.lock().unwrap_or_else(|e| e.into_inner());
+        if swept.iter().any(|d| d == dir) {
+            return;
+        }
+        swept.push(dir.to_path_buf());
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) = stale_temp_pid(&name.to_string_lossy()) else { continue };
+        if pid != std::process::id() && !process_alive(pid) && entry.file_type().is_ok_and(|t| t.is_file()) {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// The process id in a temporary file name `.NAME.omniscan-tmp-PID`, if it is one.
+fn stale_temp_pid(name: &str) -> Option<u32> {
+    if !name.starts_with('.') {
+        return None;
+    }
+    let k = name.rfind(TEMP_MARKER)?;
+    let pid = &name[k + TEMP_MARKER.len()..];
+    if pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+#[cfg(unix)]
+fn process_alive(pid: u32) -> bool {
+    let Ok(pid) = libc::pid_t::try_from(pid) else { return true };
+    // Signal 0 checks existence only; EPERM means it exists under another user.
+    // SAFETY: kill with signal 0 sends nothing.
+    let r = unsafe { libc::kill(pid, 0) };
+    r == 0 || std::io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
+}
+
+#[cfg(not(unix))]
+fn process_alive(_pid: u32) -> bool {
+    true
 }
 
 #[cfg(test)]
@@ -79,5 +228,73 @@ mod tests {
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
         write_atomic(&path, |w| w.write_all(b"ok")).unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), b"ok");
+    }
+
+    #[test]
+    fn dev_null_stays_a_device() {
+        use std::os::unix::fs::FileTypeExt;
+        write_atomic(Path::new("/dev/null"), |w| w.write_all(b"gone")).unwrap();
+        assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device());
+    }
+
+    #[test]
+    fn fifo_is_written_into_not_replaced() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("pipe");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a valid C string path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read(fifo).unwrap())
+        };
+        write_atomic(&fifo, |w| w.write_all(b"through the pipe")).unwrap();
+        assert_eq!(reader.join().unwrap(), b"through the pipe");
+        assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "no temporary file left");
+    }
+
+    #[test]
+    fn symlink_is_kept_and_its_file_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let real = dir.path().join("real.json");
+        let link = dir.path().join("link.json");
+        std::fs::write(&real, b"old").unwrap();
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        write_atomic(&link, |w| w.write_all(b"new")).unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+        assert_eq!(std::fs::read(&real).unwrap(), b"new");
+    }
+
+    #[test]
+    fn directory_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = write_atomic(dir.path(), |w| w.write_all(b"x")).unwrap_err();
+        assert!(e.to_string().contains("is a directory"), "{e}");
+    }
+
+    #[test]
+    fn temp_names_are_recognised_and_stale_ones_swept() {
+        let name = temp_path(Path::new("d/out.ply"));
+        assert_eq!(name, Path::new("d").join(format!(".out.ply.omniscan-tmp-{}", std::process::id())));
+        assert_eq!(stale_temp_pid(".frame_3.png.omniscan-tmp-42"), Some(42));
+        assert_eq!(stale_temp_pid("frame.omniscan-tmp-42"), None);
+        assert_eq!(stale_temp_pid(".frame.omniscan-tmp-4x"), None);
+
+        let dir = tempfile::tempdir().unwrap();
+        // A child that has exited: its pid is dead (and not reused this soon).
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let dead = child.id();
+        child.wait().unwrap();
+        let stale = dir.path().join(format!(".a.ply.omniscan-tmp-{dead}"));
+        let live = dir.path().join(format!(".b.ply.omniscan-tmp-{}", std::process::id()));
+        let other = dir.path().join(".c.ply.tmp-1");
+        for p in [&stale, &live, &other] {
+            std::fs::write(p, b"x").unwrap();
+        }
+        write_atomic(&dir.path().join("a.ply"), |w| w.write_all(b"ok")).unwrap();
+        assert!(!stale.exists(), "a dead process's temporary file is swept");
+        assert!(live.exists() && other.exists(), "live and foreign files are left alone");
     }
 }

@@ -6,7 +6,8 @@
 //! * The per-frame stream (JSON Lines, [`stream`]): a header record, one record per frame that
 //!   grows along the pipe (frame → stripe points → 3D points), and a final status record.
 //! * Point clouds as PLY ([`ply`]): binary little-endian or ASCII, `x y z` float plus scalars.
-//! * [`io`]: `-` for stdin/stdout and atomic writes (temporary file, then rename).
+//! * [`io`]: `-` for stdin/stdout and atomic writes (temporary file, then rename; devices and
+//!   FIFOs written straight into).
 //!
 //! Readers refuse unknown formats and versions, and every error names the file and the
 //! field, record or line at fault ([`Error`]).
@@ -30,4 +31,10 @@ pub trait Versioned {
     const FORMAT: &'static str;
     /// The version this build writes (and the only one it reads).
     const VERSION: u32;
+
+    /// Checks values a reader must never accept (sizes beyond the limits, negative lengths), run
+    /// by [`read_doc`]/[`docs::parse_doc`] after parsing; the message names the field.
+    fn check(&self) -> std::result::Result<(), String> {
+        Ok(())
+    }
 }

@@ -39,8 +39,18 @@ impl PointCloud {
         self.scalars.iter().find(|s| s.name == name).map(|s| s.values.as_slice())
     }
 
-    /// Checks that every scalar field has one value per point and names are PLY-safe.
+    /// Checks that every coordinate is a finite float (what the reader accepts back), every
+    /// scalar field has one value per point and names are PLY-safe.
     pub fn validate(&self) -> std::result::Result<(), String> {
+        for (i, p) in self.positions.iter().enumerate() {
+            if let Some(k) = p.iter().position(|c| !(*c as f32).is_finite()) {
+                return Err(format!(
+                    "point {i}: {} = {} is not a finite number within float range",
+                    ["x", "y", "z"][k],
+                    p[k]
+                ));
+            }
+        }
         for s in &self.scalars {
             if s.values.len() != self.positions.len() {
                 return Err(format!(
@@ -258,5 +268,18 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("`y`"), "{e}");
+    }
+
+    #[test]
+    fn non_finite_points_are_refused_naming_the_point() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.ply");
+        for bad in [f64::INFINITY, f64::NAN, 1e40] {
+            let mut cloud = sample();
+            cloud.positions[1][2] = bad;
+            let e = write_ply(&path, &cloud, Encoding::Ascii).unwrap_err().to_string();
+            assert!(e.contains("c.ply") && e.contains("point 1: z"), "{e}");
+            assert!(!path.exists());
+        }
     }
 }

@@ -46,6 +46,10 @@ pub struct RigBoard {
 impl Versioned for RigFile {
     const FORMAT: &'static str = "omniscan.rig";
     const VERSION: u32 = 1;
+
+    fn check(&self) -> Result<(), String> {
+        self.validate()
+    }
 }
 
 impl RigBoard {
@@ -79,9 +83,7 @@ impl RigFile {
             if self.boards[..i].iter().any(|o| o.name == b.name) {
                 return Err(format!("field boards[{i}].name: duplicate board name \"{}\"", b.name));
             }
-            if b.inner_cols < 2 || b.inner_rows < 2 {
-                return Err(format!("field boards[{i}]: inner_cols and inner_rows must be at least 2"));
-            }
+            crate::docs::check_board_corners(&format!("boards[{i}]."), b.inner_cols, b.inner_rows)?;
             if !(b.square_mm.is_finite() && b.square_mm > 0.0) {
                 return Err(format!("field boards[{i}].square_mm: must be positive, got {}", b.square_mm));
             }

@@ -131,12 +131,29 @@ pub enum TexturePattern {
 impl Versioned for SceneFile {
     const FORMAT: &'static str = "omniscan.scene";
     const VERSION: u32 = 1;
+
+    fn check(&self) -> Result<(), String> {
+        self.validate()
+    }
 }
 
 impl SceneFile {
     /// A scene with the given objects.
     pub fn new(objects: Vec<SceneObject>) -> Self {
         SceneFile { format: Self::FORMAT.into(), version: Self::VERSION, description: None, lighting: None, objects }
+    }
+
+    /// Checks every object's sizes (positive, finite, boards within
+    /// [`omni_model::limits::MAX_BOARD_CORNERS`]) and positions (finite); the message names
+    /// the object (`objects[i] (kind "name")`) and the field.
+    pub fn validate(&self) -> Result<(), String> {
+        for (i, o) in self.objects.iter().enumerate() {
+            o.shape.validate().map_err(|m| match &o.name {
+                Some(n) => format!("objects[{i}] ({} \"{n}\"): {m}", o.shape.kind()),
+                None => format!("objects[{i}] ({}): {m}", o.shape.kind()),
+            })?;
+        }
+        Ok(())
     }
 }
 
@@ -217,6 +234,69 @@ pub enum Shape {
 }
 
 impl Shape {
+    /// Checks sizes and positions (see [`SceneFile::validate`]).
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 { Ok(()) } else { Err(format!("{name} must be a positive number, got {v}")) }
+        };
+        let finite = |name: &str, v: &[f64; 3]| {
+            if v.iter().all(|x| x.is_finite()) { Ok(()) } else { Err(format!("{name} must be finite")) }
+        };
+        match self {
+            Shape::Rectangle { centre_mm, normal, up, width_mm, height_mm } => {
+                finite("centre_mm", centre_mm)?;
+                finite("normal", normal)?;
+                finite("up", up)?;
+                positive("width_mm", *width_mm)?;
+                positive("height_mm", *height_mm)
+            }
+            Shape::Box { centre_mm, size_mm, rotation_deg } => {
+                finite("centre_mm", centre_mm)?;
+                finite("rotation_deg", rotation_deg)?;
+                (0..3).try_for_each(|k| positive(&format!("size_mm[{k}]"), size_mm[k]))
+            }
+            Shape::Room { centre_mm, size_mm } => {
+                finite("centre_mm", centre_mm)?;
+                (0..3).try_for_each(|k| positive(&format!("size_mm[{k}]"), size_mm[k]))
+            }
+            Shape::Sphere { centre_mm, radius_mm } => {
+                finite("centre_mm", centre_mm)?;
+                positive("radius_mm", *radius_mm)
+            }
+            Shape::Cylinder { base_mm: p, axis, radius_mm, height_mm }
+            | Shape::Cone { apex_mm: p, axis, radius_mm, height_mm } => {
+                finite(if matches!(self, Shape::Cone { .. }) { "apex_mm" } else { "base_mm" }, p)?;
+                finite("axis", axis)?;
+                positive("radius_mm", *radius_mm)?;
+                positive("height_mm", *height_mm)
+            }
+            Shape::Pyramid { vertices_mm } => {
+                if vertices_mm.iter().all(|v| v.iter().all(|x| x.is_finite())) {
+                    Ok(())
+                } else {
+                    Err("vertices_mm must be finite".into())
+                }
+            }
+            Shape::Checkerboard { centre_mm, normal, up, square_mm, inner_cols, inner_rows, margin_mm, .. } => {
+                finite("centre_mm", centre_mm)?;
+                finite("normal", normal)?;
+                finite("up", up)?;
+                positive("square_mm", *square_mm)?;
+                let max = omni_model::limits::MAX_BOARD_CORNERS;
+                for (name, v) in [("inner_cols", *inner_cols), ("inner_rows", *inner_rows)] {
+                    if !(1..=max).contains(&v) {
+                        return Err(format!("{name} must be in 1..={max}, got {v}"));
+                    }
+                }
+                if margin_mm.is_finite() && *margin_mm >= 0.0 {
+                    Ok(())
+                } else {
+                    Err(format!("margin_mm must be non-negative, got {margin_mm}"))
+                }
+            }
+        }
+    }
+
     /// The `type` tag of the shape (for messages).
     pub fn kind(&self) -> &'static str {
         match self {
@@ -249,5 +329,38 @@ mod tests {
         let bad = String::from_utf8(text).unwrap().replace("\"sphere\"", "\"torus\"");
         let e = parse_doc::<SceneFile>(bad.as_bytes(), "scene.json").unwrap_err().to_string();
         assert!(e.contains("scene.json") && e.contains("torus"), "{e}");
+    }
+
+    #[test]
+    fn bad_sizes_are_refused_naming_the_object() {
+        let scene = SceneFile::new(vec![
+            SceneObject::new(Shape::Sphere { centre_mm: [500.0, 0.0, 0.0], radius_mm: 50.0 }),
+            SceneObject::new(Shape::Rectangle {
+                centre_mm: [700.0, 0.0, 0.0],
+                normal: [-1.0, 0.0, 0.0],
+                up: [0.0, 0.0, 1.0],
+                width_mm: -200.0,
+                height_mm: 100.0,
+            })
+            .named("wall"),
+        ]);
+        let text = serde_json::to_vec(&scene).unwrap();
+        let e = parse_doc::<SceneFile>(&text, "scene.json").unwrap_err().to_string();
+        assert!(
+            e.contains("scene.json") && e.contains("objects[1] (rectangle \"wall\")") && e.contains("width_mm"),
+            "{e}"
+        );
+        let board = SceneFile::new(vec![SceneObject::new(Shape::Checkerboard {
+            centre_mm: [500.0, 0.0, 0.0],
+            normal: [-1.0, 0.0, 0.0],
+            up: [0.0, 0.0, 1.0],
+            square_mm: 30.0,
+            inner_cols: 100_000,
+            inner_rows: 6,
+            margin_mm: 0.0,
+            dark_albedo: 0.05,
+        })]);
+        let e = board.validate().unwrap_err();
+        assert!(e.contains("inner_cols must be in 1..=1000"), "{e}");
     }
 }

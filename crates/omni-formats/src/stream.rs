@@ -37,7 +37,8 @@ pub struct Header {
     /// Tools that have processed the stream, in order, e.g. `omni-trigger 0.1.0`.
     #[serde(default)]
     pub producers: Vec<String>,
-    /// Directory that relative frame paths are resolved against (default: the current one).
+    /// Directory that relative frame paths are resolved against: relative to the stream file's
+    /// own directory when read with [`StreamReader::open`], else to the current one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames_dir: Option<String>,
     /// Sensor files the stream was made with, if known.
@@ -232,6 +233,21 @@ pub struct Status {
     pub extra: serde_json::Map<String, serde_json::Value>,
 }
 
+impl Status {
+    /// The status a tool passes on for an input that was cut short (no status record):
+    /// `complete: false`, with the reason.
+    pub fn cut_short(frames: u64, message: impl Into<String>) -> Self {
+        Status {
+            frames,
+            frames_missing: 0,
+            frames_failed: 0,
+            complete: false,
+            errors: vec![message.into()],
+            extra: Default::default(),
+        }
+    }
+}
+
 /// A per-frame error record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FrameError {
@@ -264,11 +280,71 @@ pub struct StreamReader<R> {
     name: String,
     line_no: usize,
     buf: String,
+    saw_status: bool,
+    at_end: bool,
+    base_dir: Option<std::path::PathBuf>,
+}
+
+impl StreamReader<Box<dyn BufRead + Send>> {
+    /// Opens a stream file (`-` = stdin). A header's relative `frames_dir` is resolved against
+    /// the file's own directory (see [`StreamReader::with_base_dir`]); from stdin, against the
+    /// current directory.
+    pub fn open(path: &std::path::Path) -> Result<Self> {
+        let name = crate::io::display_name(path, "stdin");
+        if path == std::path::Path::new("-") {
+            let stdin: Box<dyn BufRead + Send> = Box::new(std::io::BufReader::with_capacity(1 << 16, std::io::stdin()));
+            return Ok(StreamReader::new(stdin, name));
+        }
+        let f = std::fs::File::open(path).map_err(|e| Error::io(&name, &e))?;
+        let file: Box<dyn BufRead + Send> = Box::new(std::io::BufReader::with_capacity(1 << 16, f));
+        let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+        Ok(StreamReader::new(file, name).with_base_dir(dir))
+    }
 }
 
 impl<R: BufRead> StreamReader<R> {
     pub fn new(reader: R, name: impl Into<String>) -> Self {
-        StreamReader { reader, name: name.into(), line_no: 0, buf: String::new() }
+        StreamReader {
+            reader,
+            name: name.into(),
+            line_no: 0,
+            buf: String::new(),
+            saw_status: false,
+            at_end: false,
+            base_dir: None,
+        }
+    }
+
+    /// Resolves a header's relative `frames_dir` against `dir`, the directory of the stream's
+    /// file, so a manifest read from elsewhere still finds its frames: the header record comes
+    /// out with `dir/frames_dir`. A manifest written by an older tool, whose `frames_dir` is
+    /// relative to the current directory, keeps it if only that directory exists.
+    pub fn with_base_dir(mut self, dir: &std::path::Path) -> Self {
+        self.base_dir = Some(dir.to_path_buf());
+        self
+    }
+
+    fn resolve_frames_dir(&self, header: &mut Header) {
+        let (Some(base), Some(d)) = (&self.base_dir, &header.frames_dir) else { return };
+        let rel = std::path::Path::new(d);
+        if rel.is_absolute() || base == std::path::Path::new(".") {
+            return;
+        }
+        let joined = base.join(rel);
+        if joined.is_dir() || !rel.is_dir() {
+            header.frames_dir = Some(joined.display().to_string());
+        }
+    }
+
+    /// Whether the stream has ended without its final `status` record: it was cut short
+    /// upstream (docs/FORMATS.md). False until the end has been read.
+    pub fn cut_short(&self) -> bool {
+        self.at_end && !self.saw_status
+    }
+
+    /// The one-line explanation of a [`cut_short`](Self::cut_short) stream, naming it.
+    pub fn cut_short_message(&self) -> String {
+        format!("{}: the stream ends without its status record (cut short upstream?)", self.name)
     }
 
     /// The line number of the last record read (1-based).
@@ -287,6 +363,7 @@ impl<R: BufRead> StreamReader<R> {
             self.buf.clear();
             let n = self.reader.read_line(&mut self.buf).map_err(|e| Error::io(&self.name, &e))?;
             if n == 0 {
+                self.at_end = true;
                 return Ok(None);
             }
             self.line_no += 1;
@@ -302,7 +379,7 @@ impl<R: BufRead> StreamReader<R> {
                     .map_err(|e| Error::new(&self.name, format!("{loc}, {}", e.location), e.message))?;
             }
             let probe = value.clone();
-            let record: Record = serde_path_to_error::deserialize(value).map_err(|e| {
+            let mut record: Record = serde_path_to_error::deserialize(value).map_err(|e| {
                 let path = e.path().to_string();
                 let loc = if path == "." { loc.clone() } else { format!("{loc}, field {path}") };
                 match locate_frame_error(&probe) {
@@ -310,8 +387,15 @@ impl<R: BufRead> StreamReader<R> {
                     None => Error::new(&self.name, loc, e.into_inner().to_string()),
                 }
             })?;
-            if let Record::Frame(f) = &record {
-                f.validate().map_err(|m| Error::new(&self.name, format!("{loc} (frame {})", f.seq), m))?;
+            match &record {
+                Record::Frame(f) => {
+                    f.validate().map_err(|m| Error::new(&self.name, format!("{loc} (frame {})", f.seq), m))?;
+                }
+                Record::Status(_) => self.saw_status = true,
+                _ => {}
+            }
+            if let Record::Header(h) = &mut record {
+                self.resolve_frames_dir(h);
             }
             return Ok(Some(record));
         }
@@ -404,5 +488,50 @@ mod tests {
             "{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"alpha_deg\":1,\"facet\":0,\"stripe\":[[1,2,3,4,0]]\n";
         let e = StreamReader::new(text.as_bytes(), "s.jsonl").next().unwrap().unwrap_err().to_string();
         assert!(e.contains("invalid JSON"), "{e}");
+    }
+
+    #[test]
+    fn a_stream_without_status_is_cut_short() {
+        let header = "{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":1,\"producers\":[\"t\"]}\n";
+        let status = "{\"type\":\"status\",\"frames\":0,\"complete\":true}\n";
+        let mut r = StreamReader::new(header.as_bytes(), "cut.jsonl");
+        while r.next_record().unwrap().is_some() {
+            assert!(!r.cut_short(), "not before the end");
+        }
+        assert!(r.cut_short());
+        assert!(r.cut_short_message().starts_with("cut.jsonl: "));
+        let whole = format!("{header}{status}");
+        let mut r = StreamReader::new(whole.as_bytes(), "whole.jsonl");
+        while r.next_record().unwrap().is_some() {}
+        assert!(!r.cut_short());
+    }
+
+    #[test]
+    fn frames_dir_resolves_against_the_manifest_directory() {
+        let dir = tempfile::tempdir().unwrap();
+        let scan = dir.path().join("scan");
+        std::fs::create_dir_all(scan.join("frames")).unwrap();
+        let manifest = scan.join("m.jsonl");
+        let header = |d: &str| {
+            format!("{{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":1,\"frames_dir\":\"{d}\"}}\n")
+        };
+        let first = |path: &std::path::Path| match StreamReader::open(path).unwrap().next_record().unwrap() {
+            Some(Record::Header(h)) => h.frames_dir.unwrap(),
+            other => panic!("{other:?}"),
+        };
+        std::fs::write(&manifest, header("frames")).unwrap();
+        assert_eq!(first(&manifest), scan.join("frames").display().to_string());
+        // Absolute paths stay; a missing directory is named as tried next to the manifest.
+        let abs = scan.join("frames").display().to_string();
+        std::fs::write(&manifest, header(&abs)).unwrap();
+        assert_eq!(first(&manifest), abs);
+        std::fs::write(&manifest, header("nowhere")).unwrap();
+        assert_eq!(first(&manifest), scan.join("nowhere").display().to_string());
+        // Without a base directory (stdin, StreamReader::new) nothing changes.
+        let text = header("frames");
+        let Some(Record::Header(h)) = StreamReader::new(text.as_bytes(), "stdin").next_record().unwrap() else {
+            panic!()
+        };
+        assert_eq!(h.frames_dir.as_deref(), Some("frames"));
     }
 }

@@ -172,12 +172,10 @@ impl VirtualCamera {
 
 /// Writes a frame atomically with its modification time set to the exposure time.
 fn write_frame(dir: &Path, name: &str, bytes: &[u8], exposure: SystemTime) -> std::io::Result<()> {
-    let tmp = dir.join(format!(".{name}.tmp"));
-    let mut f = std::fs::File::create(&tmp)?;
-    f.write_all(bytes)?;
-    f.set_modified(exposure)?;
-    drop(f);
-    std::fs::rename(&tmp, dir.join(name))
+    let mut tmp = omni_formats::io::TempFile::create(&dir.join(name))?;
+    tmp.file().write_all(bytes)?;
+    tmp.file().set_modified(exposure)?;
+    tmp.commit()
 }
 
 /// Faults to inject; probabilities are per line (per event for drop/duplicate).

@@ -93,9 +93,7 @@ impl HyperbolicParams {
                 return Err(format!("{name} must be finite, got {v}"));
             }
         }
-        if self.width == 0 || self.height == 0 {
-            return Err("width and height must be positive".into());
-        }
+        crate::limits::check_image_size(self.width, self.height)?;
         if !(self.inner_radius_mm >= 0.0 && self.inner_radius_mm < self.rim_radius_mm) {
             return Err("inner_radius_mm must be in [0, rim_radius_mm)".into());
         }

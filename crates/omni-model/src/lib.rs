@@ -15,6 +15,7 @@
 
 mod camera;
 mod hyperbolic;
+pub mod limits;
 pub mod mei;
 pub mod ocam;
 mod optics;

@@ -127,9 +127,7 @@ impl MeiParams {
                 return Err(format!("{name} must be finite, got {v}"));
             }
         }
-        if self.width == 0 || self.height == 0 {
-            return Err("width and height must be positive".into());
-        }
+        crate::limits::check_image_size(self.width, self.height)?;
         if self.inner_radius_px < 0.0 || self.outer_radius_px < 0.0 {
             return Err("inner_radius_px and outer_radius_px must be non-negative".into());
         }

@@ -82,9 +82,7 @@ impl OcamParams {
         if (self.c - self.d * self.e).abs() < 1e-9 {
             return Err("affine matrix [c d; e 1] is singular".into());
         }
-        if self.width == 0 || self.height == 0 {
-            return Err("width and height must be positive".into());
-        }
+        crate::limits::check_image_size(self.width, self.height)?;
         Ok(())
     }
 

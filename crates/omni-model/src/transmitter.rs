@@ -119,8 +119,8 @@ impl TransmitterParams {
         finite3("polygon.axis_point_mm", &p.axis_point_mm)?;
         finite3("polygon.axis_dir", &p.axis_dir)?;
         finite3("polygon.zero_dir", &p.zero_dir)?;
-        if p.facets < 3 {
-            return Err(format!("polygon.facets must be at least 3, got {}", p.facets));
+        if !(3..=crate::limits::MAX_FACETS).contains(&p.facets) {
+            return Err(format!("polygon.facets must be in 3..={}, got {}", crate::limits::MAX_FACETS, p.facets));
         }
         if !(p.circumradius_mm.is_finite() && p.circumradius_mm > 0.0) {
             return Err("polygon.circumradius_mm must be positive".into());
@@ -154,6 +154,12 @@ impl TransmitterParams {
             let w = Vector3::from(l.fan_axis);
             if d.norm() < 1e-9 || w.norm() < 1e-9 || !d.iter().chain(w.iter()).all(|x| x.is_finite()) {
                 return Err(format!("lasers[{j}]: direction and fan_axis must be finite and non-zero"));
+            }
+            if l.facet_offset >= p.facets {
+                return Err(format!(
+                    "lasers[{j}].facet_offset must be less than polygon.facets ({}), got {}",
+                    p.facets, l.facet_offset
+                ));
             }
             if d.normalize().dot(&w.normalize()).abs() > 1e-6 {
                 return Err(format!("lasers[{j}].fan_axis must be perpendicular to lasers[{j}].direction"));
@@ -232,6 +238,25 @@ impl Transmitter {
     /// The scan range of one facet: α ∈ [0, 2θ) (radians).
     pub fn facet_angle(&self) -> f64 {
         2.0 * self.theta
+    }
+
+    /// Checks a stream frame's `facet` and `alpha_deg` (as radians) against the polygon: the
+    /// facet must exist (no wrapping modulo n), and α must lie within the facet's range
+    /// [0, 2θ) give or take half of it (encoder offsets, rounding). The message names the field.
+    pub fn check_frame(&self, alpha: f64, facet: u32) -> Result<(), String> {
+        let n = self.num_facets();
+        if facet >= n {
+            return Err(format!("field facet: facet {facet} is not on the polygon ({n} facets, 0 to {})", n - 1));
+        }
+        let span = self.facet_angle();
+        if !(alpha.is_finite() && alpha >= -0.5 * span && alpha <= 1.5 * span) {
+            return Err(format!(
+                "field alpha_deg: {}° is far outside the facet's range [0, {}°)",
+                alpha.to_degrees(),
+                span.to_degrees()
+            ));
+        }
+        Ok(())
     }
 
     /// Facet `k`'s plane (outward normal) when the polygon has turned by `phi` (radians).
@@ -335,5 +360,29 @@ mod tests {
             );
             assert!(lp.plane.normal.y.abs() < 1e-14);
         }
+    }
+
+    #[test]
+    fn frames_outside_the_polygon_are_refused() {
+        let tx = Transmitter::new(TransmitterParams::paper()).unwrap();
+        assert!(tx.check_frame(15f64.to_radians(), 11).is_ok());
+        assert!(tx.check_frame(-3f64.to_radians(), 0).is_ok(), "small excursions pass");
+        let e = tx.check_frame(15f64.to_radians(), 12).unwrap_err();
+        assert!(e.contains("field facet") && e.contains("12 facets"), "{e}");
+        let e = tx.check_frame(95f64.to_radians(), 0).unwrap_err();
+        assert!(e.contains("field alpha_deg") && e.contains("95"), "{e}");
+        assert!(tx.check_frame(f64::NAN, 0).is_err());
+    }
+
+    #[test]
+    fn facet_count_and_offsets_are_bounded() {
+        let mut p = TransmitterParams::paper();
+        p.polygon.facets = 1_000_000_000;
+        let e = Transmitter::new(p).unwrap_err();
+        assert!(e.contains("polygon.facets") && e.contains("360"), "{e}");
+        let mut p = TransmitterParams::paper();
+        p.lasers[1].facet_offset = 12;
+        let e = Transmitter::new(p).unwrap_err();
+        assert!(e.contains("lasers[1].facet_offset"), "{e}");
     }
 }

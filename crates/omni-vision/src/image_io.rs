@@ -79,14 +79,47 @@ pub fn load_gray(path: &Path) -> Result<GrayImage, Error> {
 
 /// Decodes an in-memory PNG/JPEG file; `name` is used in error messages.
 pub fn decode_gray(bytes: &[u8], name: &str) -> Result<GrayImage, Error> {
+    Ok(from_dynamic(decode_checked(bytes, name)?))
+}
+
+/// Loads a PNG or JPEG file as it is (colour kept), with the checks of [`load_gray`].
+pub fn load_dynamic(path: &Path) -> Result<image::DynamicImage, Error> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path.display().to_string(), &e))?;
+    decode_checked(&bytes, &path.display().to_string())
+}
+
+/// Decodes a PNG/JPEG file, refusing empty files, truncated JPEGs (no end-of-image marker)
+/// and sizes beyond [`omni_model::limits::MAX_IMAGE_SIDE_PX`] before any pixel is allocated.
+fn decode_checked(bytes: &[u8], name: &str) -> Result<image::DynamicImage, Error> {
     if bytes.is_empty() {
         return Err(Error::new(name, "", "empty file, not an image"));
     }
     let format = image::guess_format(bytes)
         .map_err(|_| Error::new(name, "", "not a PNG or JPEG image (unrecognised file signature)"))?;
-    let dynamic = image::load_from_memory_with_format(bytes, format)
-        .map_err(|e| Error::new(name, "", format!("truncated or corrupt image: {e}")))?;
-    Ok(from_dynamic(dynamic))
+    if format == image::ImageFormat::Jpeg && !jpeg_has_end(bytes) {
+        // The JPEG decoder fills a cut-off scan with grey and reports success.
+        return Err(Error::new(name, "", "truncated JPEG: no end-of-image marker (FF D9) at the end of the file"));
+    }
+    let max = omni_model::limits::MAX_IMAGE_SIDE_PX;
+    let reader = || image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
+    let (w, h) =
+        reader().into_dimensions().map_err(|e| Error::new(name, "", format!("truncated or corrupt image: {e}")))?;
+    if w > max || h > max {
+        return Err(Error::new(name, "", format!("image size {w}x{h} exceeds the limit of {max} px per side")));
+    }
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(max);
+    limits.max_image_height = Some(max);
+    let mut decoder = reader();
+    decoder.limits(limits);
+    decoder.decode().map_err(|e| Error::new(name, "", format!("truncated or corrupt image: {e}")))
+}
+
+/// Whether a JPEG file ends with its end-of-image marker (trailing zero padding, as some
+/// cameras write, is allowed).
+fn jpeg_has_end(bytes: &[u8]) -> bool {
+    let end = bytes.iter().rposition(|&b| b != 0).map_or(0, |k| k + 1);
+    bytes[..end].ends_with(&[0xFF, 0xD9])
 }
 
 fn from_dynamic(dynamic: image::DynamicImage) -> GrayImage {
@@ -209,9 +242,53 @@ mod tests {
         std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
         let e = load_gray(&cut).unwrap_err().to_string();
         assert!(e.contains("cut.png") && e.contains("truncated"), "{e}");
+        let jpeg = dir.path().join("g.jpg");
+        let rgb: Vec<u8> = (0..64 * 32).flat_map(|i| [(i % 251) as u8; 3]).collect();
+        image::save_buffer(&jpeg, &rgb, 64, 32, image::ExtendedColorType::Rgb8).unwrap();
+        let bytes = std::fs::read(&jpeg).unwrap();
+        let mut padded = bytes.clone();
+        padded.extend([0u8; 16]);
+        assert!(decode_gray(&padded, "padded.jpg").is_ok(), "zero padding after EOI is fine");
+        for cut_at in [bytes.len() - 2, bytes.len() - 1, bytes.len() * 3 / 4] {
+            let e = decode_gray(&bytes[..cut_at], "cut.jpg").unwrap_err().to_string();
+            assert!(e.starts_with("cut.jpg: ") && e.contains("truncated JPEG"), "{e}");
+        }
+        let header = png_header(100_000, 8);
+        let e = decode_gray(&header, "huge.png").unwrap_err().to_string();
+        assert!(e.starts_with("huge.png: ") && e.contains("100000x8") && e.contains("16384"), "{e}");
         let empty = dir.path().join("empty.png");
         std::fs::write(&empty, "").unwrap();
         assert!(load_gray(&empty).unwrap_err().to_string().contains("empty.png"));
+    }
+
+    /// A grey 8-bit PNG claiming the given size, with almost no pixel data.
+    fn png_header(width: u32, height: u32) -> Vec<u8> {
+        let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+        let mut chunk = |kind: &[u8], data: &[u8]| {
+            let mut body = kind.to_vec();
+            body.extend(data);
+            out.extend((data.len() as u32).to_be_bytes());
+            out.extend(&body);
+            out.extend(crc32(&body).to_be_bytes());
+        };
+        let mut ihdr = width.to_be_bytes().to_vec();
+        ihdr.extend(height.to_be_bytes());
+        ihdr.extend([8, 0, 0, 0, 0]);
+        chunk(b"IHDR", &ihdr);
+        chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]);
+        chunk(b"IEND", &[]);
+        out
+    }
+
+    fn crc32(data: &[u8]) -> u32 {
+        let mut c = 0xFFFF_FFFFu32;
+        for &b in data {
+            c ^= b as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            }
+        }
+        !c
     }
 
     #[test]

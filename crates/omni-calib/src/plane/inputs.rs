@@ -207,6 +207,13 @@ pub fn boards_from_pose_image(
     min_corners: usize,
 ) -> std::result::Result<Vec<(PlacedBoard, BoardPoseReport)>, String> {
     use omni_vision::corners::{DetectorOptions, detect_board};
+    let (w, h) = camera.image_size();
+    if (image.width, image.height) != (w as usize, h as usize) {
+        return Err(format!(
+            "image is {} × {} px but the camera model (--camera) is for {w} × {h} px images (another camera or a resized picture?)",
+            image.width, image.height
+        ));
+    }
     if rig.boards.iter().any(|b| b.placement != rig.boards[0].placement) {
         return Err("a pose image shows one placement; give --board-corners or --board-poses for several".into());
     }

@@ -70,7 +70,7 @@ impl GrayF32 {
 
 /// Loads an image file as grey; the error names the file.
 pub fn load_gray(path: &Path) -> Result<GrayF32, String> {
-    let img = image::open(path).map_err(|e| format!("{}: cannot read image: {e}", path.display()))?;
+    let img = crate::image_io::load_dynamic(path).map_err(|e| e.to_string())?;
     Ok(GrayF32::from_dynamic(&img))
 }
 

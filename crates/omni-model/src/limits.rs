@@ -1,0 +1,34 @@
+//! Upper bounds on every size read from a file or a flag, so that a typo (`inner_cols: 100000`,
+//! `--width 2000000000`) is refused with a message naming the field instead of exhausting
+//! memory. Each is far beyond any real sensor or board.
+
+/// Largest image width or height (px), for camera models, frames and pictures.
+pub const MAX_IMAGE_SIDE_PX: u32 = 16384;
+/// Largest number of polygon facets.
+pub const MAX_FACETS: u32 = 360;
+/// Largest number of inner corners along one side of a checkerboard.
+pub const MAX_BOARD_CORNERS: u32 = 1000;
+
+/// Checks an image size `width` × `height` against [`MAX_IMAGE_SIDE_PX`] (and for zero); the
+/// message names the fields.
+pub fn check_image_size(width: u32, height: u32) -> Result<(), String> {
+    if width == 0 || height == 0 {
+        return Err(format!("width and height must be positive, got {width} × {height}"));
+    }
+    if width > MAX_IMAGE_SIDE_PX || height > MAX_IMAGE_SIDE_PX {
+        return Err(format!("width and height must be at most {MAX_IMAGE_SIDE_PX} px, got {width} × {height}"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn image_sizes_are_bounded() {
+        assert!(check_image_size(1024, 768).is_ok());
+        assert!(check_image_size(0, 768).unwrap_err().contains("positive"));
+        assert!(check_image_size(100_000, 768).unwrap_err().contains("at most 16384"));
+    }
+}

@@ -49,26 +49,26 @@ struct Args {
     #[arg(long, default_value = "normal", value_parser = parse_sampling)]
     sampling: Sampling,
     /// Intensity threshold in the frame's units (0–255 or 0–65535) [default: 4 % of full scale].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     threshold: Option<f64>,
     /// Narrowest accepted stripe (px, threshold crossing to crossing along the ray).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     min_width: f64,
     /// Widest accepted stripe (px); wider segments are glints or ambient light.
-    #[arg(long, default_value_t = 12.0)]
+    #[arg(long, default_value_t = 12.0, allow_negative_numbers = true)]
     max_width: f64,
     /// Scale (px) of the Gaussian derivatives of the hessian method.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     hessian_sigma: f64,
     /// Fit each point along the stripe through the stripe's points within this many px of arc on
     /// either side (0 = off): a parabola across the normal (a line along rays). Averages speckle
     /// and noise at the price of lateral resolution (features shorter than the window blur).
-    #[arg(long, default_value_t = 0.0, value_name = "PX")]
+    #[arg(long, default_value_t = 0.0, value_name = "PX", allow_negative_numbers = true)]
     along_stripe: f64,
     /// With --sampling rays only: the camera's optical blur (Gaussian PSF σ, px; pixel area not
     /// included), whose pull on curved stripes is removed. The normal sampling measures the blur
     /// on each frame instead.
-    #[arg(long, default_value_t = 0.7, value_name = "PX")]
+    #[arg(long, default_value_t = 0.7, value_name = "PX", allow_negative_numbers = true)]
     optics_blur: f64,
     /// Write each frame with its detected centres drawn as DIR/<seq>.png.
     #[arg(long, value_name = "DIR")]
@@ -76,6 +76,10 @@ struct Args {
     /// On a bad frame, write an error record and go on (exit code 1 at the end).
     #[arg(long)]
     keep_going: bool,
+    /// Refuse an input stream without its final status record (cut short upstream); without
+    /// it the tool warns and passes `complete: false` on.
+    #[arg(long)]
+    strict: bool,
     /// Worker threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -122,6 +126,10 @@ fn main() -> ExitCode {
             keep_going: args.keep_going,
             threads,
             producer: format!("omni-ridge {}", env!("CARGO_PKG_VERSION")),
+            base_dir: (args.input != std::path::Path::new("-"))
+                .then(|| args.input.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new(".")))
+                .map(|p| p.to_path_buf()),
+            strict: args.strict,
         };
         run(&args.input, &args.output, config)
     })

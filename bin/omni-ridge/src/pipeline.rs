@@ -25,6 +25,11 @@ pub struct Config {
     pub threads: usize,
     /// Appended to the header's producers.
     pub producer: String,
+    /// A relative `frames_dir` in the stream's header is resolved against this directory (the
+    /// input file's), if given.
+    pub base_dir: Option<PathBuf>,
+    /// A stream without its final status record is an error, not a warning.
+    pub strict: bool,
 }
 
 /// The prefix of the error returned after a `--keep-going` run with failed frames.
@@ -108,7 +113,7 @@ pub fn run(
     spawn_reader(
         reader,
         input_name.to_string(),
-        config.producer.clone(),
+        ReaderSettings { producer: config.producer.clone(), base_dir: config.base_dir.clone(), strict: config.strict },
         token_rx,
         job_tx,
         out_tx.clone(),
@@ -124,19 +129,30 @@ pub fn run(
     write_in_order(out_rx, token_tx, writer, output_name, config.keep_going, &read_error)
 }
 
+/// What the reader thread does with the stream besides reading it.
+struct ReaderSettings {
+    producer: String,
+    base_dir: Option<PathBuf>,
+    strict: bool,
+}
+
 fn spawn_reader(
     reader: Box<dyn BufRead + Send>,
     name: String,
-    producer: String,
+    settings: ReaderSettings,
     tokens: Receiver<()>,
     jobs: SyncSender<Job>,
     direct: SyncSender<Outcome>,
     read_error: Arc<Mutex<Option<(usize, String)>>>,
 ) {
     std::thread::spawn(move || {
+        let ReaderSettings { producer, base_dir, strict } = settings;
         let mut stream = StreamReader::new(reader, name.clone());
+        if let Some(dir) = &base_dir {
+            stream = stream.with_base_dir(dir);
+        }
         let mut frames_dir: Option<String> = None;
-        let mut index = 0;
+        let (mut index, mut frames) = (0, 0u64);
         loop {
             // Wait until the writer has room for one more record in flight.
             if tokens.recv().is_err() {
@@ -149,7 +165,20 @@ fn spawn_reader(
                         Some((0, format!("{name}: empty stream (no header, no frames)")));
                     return;
                 }
-                Ok(None) => return,
+                Ok(None) => {
+                    if stream.cut_short() {
+                        let message = stream.cut_short_message();
+                        if strict {
+                            *read_error.lock().unwrap_or_else(|e| e.into_inner()) =
+                                Some((index, format!("{message}; refused with --strict")));
+                            return;
+                        }
+                        omni_cli::warn("omni-ridge", &format!("{message}; passing on complete: false"));
+                        let status = omni_formats::stream::Status::cut_short(frames, message);
+                        let _ = direct.send((index, Ok(Record::Status(status))));
+                    }
+                    return;
+                }
                 Err(e) => {
                     *read_error.lock().unwrap_or_else(|e| e.into_inner()) = Some((index, e.to_string()));
                     return;
@@ -168,6 +197,7 @@ fn spawn_reader(
                 }
                 other => other,
             };
+            frames += u64::from(matches!(record, Record::Frame(_)));
             if jobs.send(Job { index, record, frames_dir: frames_dir.clone() }).is_err() {
                 return;
             }
@@ -258,8 +288,11 @@ fn write_in_order(
                     Record::Error(FrameError { message, ..fe })
                 }
             };
+            let is_frame = matches!(record, Record::Frame(_) | Record::Error(_));
             out.write(&record)?;
-            progress.inc(1);
+            if is_frame {
+                progress.inc(1);
+            }
             next += 1;
             // The reader may have stopped already; a missing receiver is not an error here.
             let _ = tokens.send(());

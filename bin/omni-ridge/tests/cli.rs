@@ -258,3 +258,51 @@ fn help_teaches_and_bad_usage_exits_2() {
     let out = run(&["--min-width", "5", "--max-width", "3"], "");
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
 }
+
+#[test]
+fn a_stream_cut_short_is_warned_about_and_passed_on_incomplete_or_refused_with_strict() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = scene(dir.path());
+    // Drop the final status record.
+    let cut: String = text.lines().filter(|l| !l.contains("\"status\"")).map(|l| format!("{l}\n")).collect();
+    assert_ne!(cut, text, "the scene has a status record");
+    let out = run(&[], &cut);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("without its status record"), "{}", stderr(&out));
+    let recs = records(&out.stdout);
+    let Some(Record::Status(s)) = recs.last() else { panic!("no status passed on: {:?}", recs.last()) };
+    assert!(!s.complete && s.frames == 3, "{s:?}");
+    let strict = run(&["--strict"], &cut);
+    assert_eq!(strict.status.code(), Some(1), "{}", stderr(&strict));
+    assert!(stderr(&strict).contains("--strict") && stderr(&strict).lines().count() == 1, "{}", stderr(&strict));
+}
+
+#[test]
+fn negative_numbers_reach_the_option_check() {
+    for (flag, name) in [("--min-width", "min-width"), ("--along-stripe", "along-stripe"), ("--threshold", "threshold")]
+    {
+        let out = run(&[flag, "-1"], "");
+        assert_eq!(out.status.code(), Some(2), "{flag}: {}", stderr(&out));
+        assert!(
+            stderr(&out).contains(name) && !stderr(&out).contains("unexpected argument"),
+            "{flag}: {}",
+            stderr(&out)
+        );
+    }
+}
+
+#[test]
+fn a_relative_frames_dir_is_found_beside_the_manifest() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    scene(&frames);
+    // A manifest beside the frames directory naming it relatively, read from another directory.
+    let text = scene(&frames).replace(&frames.display().to_string(), "frames");
+    let manifest = dir.path().join("scan.jsonl");
+    std::fs::write(&manifest, text).unwrap();
+    let elsewhere = tempfile::tempdir().unwrap();
+    let out = Command::new(BIN).arg(&manifest).current_dir(elsewhere.path()).output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(records(&out.stdout).len(), 5);
+}

@@ -318,6 +318,7 @@ impl RidgeDetector {
         let along = self.params.along_stripe_px;
         let reach = SHAPE_HALF_ARC_PX.max(2.0 * along).max(super::MIN_STRIPE_ARC_PX) + 1.0;
         let grid = Grid::new(centres, reach);
+        let reach2 = reach * reach;
         let mut out = Vec::with_capacity(centres.len());
         let (mut neighbours, mut widths) = (Vec::new(), Vec::new());
         for (i, c) in centres.iter().enumerate() {
@@ -328,16 +329,24 @@ impl RidgeDetector {
             grid.visit(px, py, |j| {
                 let o = &centres[j];
                 let (ex, ey) = (o.point.u - px, o.point.v - py);
-                let (t, d) = (-ny * ex + nx * ey, nx * ex + ny * ey);
+                let distance2 = ex * ex + ey * ey;
+                if distance2 > reach2 {
+                    return;
+                }
                 let cos = o.normal.0 * nx + o.normal.1 * ny;
+                if cos.abs() < SAME_STRIPE_COS {
+                    return;
+                }
                 // Two seeds of one crossing (a run broken by speckle, a stripe at 45° seen from a
                 // row and a column): the brighter (then the first) is kept.
-                let brighter = (o.point.intensity, std::cmp::Reverse(j)) > (c.point.intensity, std::cmp::Reverse(i));
-                if j != i && cos.abs() >= SAME_STRIPE_COS && ex * ex + ey * ey < DUPLICATE_PX * DUPLICATE_PX && brighter
+                if distance2 < DUPLICATE_PX * DUPLICATE_PX
+                    && j != i
+                    && (o.point.intensity, std::cmp::Reverse(j)) > (c.point.intensity, std::cmp::Reverse(i))
                 {
                     duplicate = true;
                 }
-                if cos.abs() >= SAME_STRIPE_COS && t.abs() <= reach && d.abs() <= 0.5 + 0.25 * t.abs() {
+                let (t, d) = (-ny * ex + nx * ey, nx * ex + ny * ey);
+                if d.abs() <= 0.5 + 0.25 * t.abs() {
                     // The asymmetry as seen along this point's normal.
                     let asymmetry = if cos > 0.0 { o.asymmetry } else { -o.asymmetry };
                     neighbours.push((t, d, o.half_width, asymmetry));
@@ -363,8 +372,9 @@ impl RidgeDetector {
             }
             widths.clear();
             widths.extend(neighbours.iter().filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX).map(|n| n.2));
-            widths.sort_by(f64::total_cmp);
-            if c.half_width < MIN_WIDTH_RATIO * widths[widths.len() / 2] {
+            let middle = widths.len() / 2;
+            let (_, median, _) = widths.select_nth_unstable_by(middle, f64::total_cmp);
+            if c.half_width < MIN_WIDTH_RATIO * *median {
                 continue;
             }
             let mut shift = 0.0;

@@ -81,7 +81,8 @@ pub(super) fn solve3(m: [[f64; 3]; 3], r: [f64; 3]) -> Option<[f64; 3]> {
             + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
     };
     let d = det(m);
-    if d.abs() < 1e-12 * m[0][0].abs().powi(3).max(1e-300) {
+    let scale = m[0][0].abs();
+    if d.abs() < (1e-12 * scale * scale * scale).max(1e-312) {
         return None;
     }
     let mut out = [0.0; 3];

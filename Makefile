@@ -27,8 +27,10 @@ fmt:
 bench: build
 	scripts/bench.sh
 
-demo: build
-	OUT=$(OUT) scripts/demo.sh
+# The demo profile (Cargo.toml): no LTO, parallel codegen, a fraction of the release build time.
+demo:
+	$(CARGO) build --workspace --profile demo
+	OUT=$(OUT) BIN=$(CURDIR)/target/demo scripts/demo.sh
 
 clean:
 	$(CARGO) clean

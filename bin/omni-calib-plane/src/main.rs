@@ -21,14 +21,10 @@ use std::path::{Path, PathBuf};
         axis, encoder zero, per-facet tilt/pitch/radius errors, each laser's fan plane) to all frames \
         at once and writes scanner.json. `table` prints the light plane of any mirror angle.",
     after_help = "Examples:\n  \
-        omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose.png \\\n      \
-        --stripes stripes.jsonl -o scanner.json\n  \
-        omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose*.png \\\n      \
-        --stripes stripes.jsonl -o scanner.json   # several pose images, averaged\n  \
-        omni-calib-plane fit --camera camera.json --rig rig.json --board-corners corners.json \\\n      \
-        --stripes stripes.jsonl -o scanner.json\n  \
-        omni-calib-plane fit --camera camera.json --rig rig.json --board-poses poses.json \\\n      \
-        --stripes - --initial nominal.json -o scanner.json\n  \
+        omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose.png --stripes stripes.jsonl -o scanner.json\n  \
+        omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose*.png --stripes stripes.jsonl -o scanner.json   # several pose images, averaged\n  \
+        omni-calib-plane fit --camera camera.json --rig rig.json --board-corners corners.json --stripes stripes.jsonl -o scanner.json\n  \
+        omni-calib-plane fit --camera camera.json --rig rig.json --board-poses poses.json --stripes - --initial nominal.json -o scanner.json\n  \
         omni-calib-plane table --scanner scanner.json --alpha 0:30:1\n  \
         omni-calib-plane table --scanner scanner.json --alpha 0:30:0.5 --laser 0 --facet 3 --json"
 )]

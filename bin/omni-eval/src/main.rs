@@ -75,6 +75,7 @@ enum Command {
         /// Inlier threshold of the radius/centre fits (mm).
         #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
         inlier_mm: f64,
+        /// Print the fit as one JSON object instead of a table.
         #[arg(long)]
         json: bool,
         /// Move the cloud by this rigid transform first (transform.json, see `align`).
@@ -110,8 +111,10 @@ omni-calib-receiver and omni-calib-plane write into camera.json and scanner.json
 Example:
   omni-eval budget --camera calib/camera.json --scanner calib/scanner.json --range 300:2000:100")]
     Budget {
+        /// camera.json: the camera model, its optics and its calibration report.
         #[arg(long)]
         camera: PathBuf,
+        /// scanner.json: the light planes and their calibration report.
         #[arg(long)]
         scanner: PathBuf,
         /// Wall distances (mm): start:stop:step (stop included) or a list a,b,c.

@@ -30,11 +30,9 @@ Examples:
   omni-sim sensor --preset paper -o sensor/
   omni-sim sensor --preset paper --camera-offset 0.3,0,0.5 --facet-errors 0.02 --seed 1 -o bad-sensor/
   omni-sim scene --bench plane -o plane.json
-  omni-sim scan --camera sensor/camera.json --scanner sensor/scanner.json --scene plane.json \\
-      --angles 14:29:0.5 --frames frames/ -o scan.jsonl --truth truth.jsonl
+  omni-sim scan --camera sensor/camera.json --scanner sensor/scanner.json --scene plane.json --angles 14:29:0.5 --frames frames/ -o scan.jsonl --truth truth.jsonl
   omni-sim boards --camera sensor/camera.json --board board.json --count 20 --seed 1 --out boards/
-  omni-sim rig --camera sensor/camera.json --scanner sensor/scanner.json --board board.json \\
-      --angles 14:28:1 --laser-off --out rig/";
+  omni-sim rig --camera sensor/camera.json --scanner sensor/scanner.json --board board.json --angles 14:28:1 --laser-off --out rig/";
 
 /// The virtual sensor: writes sensor files, renders laser scans, checkerboard sets and the
 /// transmitter-calibration rig, with ground truth.
@@ -70,6 +68,7 @@ enum Preset {
     after_help = "Example:\n  omni-sim sensor --preset paper --camera-offset 0.5,0,0 --encoder-offset 0.05 -o sensor/"
 )]
 struct SensorArgs {
+    /// The sensor to start from: the paper's geometry (1024² camera, F/4 lens, 12-facet polygon).
     #[arg(long, value_enum, default_value = "paper")]
     preset: Preset,
     /// Output directory (created if missing).
@@ -210,8 +209,10 @@ impl RenderArgs {
 The manifest is the omniscan stream (header, one frame record per frame, status) that omni-ridge reads.\n\
 The ground truth (--truth) holds per frame the true stripe points [x, y, z, u, v, laser].")]
 struct ScanArgs {
+    /// camera.json (from `omni-sim sensor`): the camera model, its image size and optics.
     #[arg(long)]
     camera: PathBuf,
+    /// scanner.json (from `omni-sim sensor`): the polygon mirror and the lasers.
     #[arg(long)]
     scanner: PathBuf,
     /// scene.json (see `omni-sim scene`).
@@ -246,6 +247,7 @@ struct ScanArgs {
 #[command(after_help = "Writes DIR/board_NNN.png and DIR/boards_truth.json (board, poses board→world, true corner\n\
 pixels row-major, null where a corner is not visible).")]
 struct BoardsArgs {
+    /// camera.json (from `omni-sim sensor`): the camera model, its image size and optics.
     #[arg(long)]
     camera: PathBuf,
     /// board.json (inner corners, square size, margin).
@@ -276,17 +278,17 @@ The laser frames keep the room's dim ambient light (white squares ≈ 51/255): g
 so that omni-ridge subtracts the ambient frame instead of finding the squares' edges.
 
 Example (light-plane calibration on the true camera and board poses):
-  omni-sim rig --camera sensor/camera.json --scanner sensor/scanner.json --board board.json \\
-      --angles 14:28:1 --laser-off --out rig/
+  omni-sim rig --camera sensor/camera.json --scanner sensor/scanner.json --board board.json --angles 14:28:1 --laser-off --out rig/
   omni-ridge --camera sensor/camera.json rig/scan.jsonl -o stripes.jsonl
-  omni-calib-plane fit --camera sensor/camera.json --rig rig/rig.json \\
-      --board-poses rig/board_poses.json --stripes stripes.jsonl -o scanner.json";
+  omni-calib-plane fit --camera sensor/camera.json --rig rig/rig.json --board-poses rig/board_poses.json --stripes stripes.jsonl -o scanner.json";
 
 #[derive(clap::Args, Debug)]
 #[command(after_help = RIG_AFTER_HELP)]
 struct RigArgs {
+    /// camera.json (from `omni-sim sensor`): the camera model, its image size and optics.
     #[arg(long)]
     camera: PathBuf,
+    /// scanner.json (from `omni-sim sensor`): the polygon mirror and the lasers.
     #[arg(long)]
     scanner: PathBuf,
     /// board.json of the two (identical) boards.

@@ -13,32 +13,13 @@
 //! mirror annulus. There are `ceil(2π · outer_radius)` rays, so that neighbouring rays are at
 //! most 1 px apart at the rim, and every stripe segment crossing a ray gives one point on it.
 //!
-//! Speed: resampling the whole annulus radially would touch more samples than the image has
-//! pixels. Instead a fast row scan first finds the pixels brighter by more than the threshold
-//! than both their row neighbours or both their column neighbours `max_width / 2 + 1` px away,
-//! marks the rays (and radii) passing within 1 px of them, and only those short stretches of
-//! rays are resampled, [`SAMPLE_STEP_PX`] apart, with a small Gaussian kernel (`sampling`:
-//! bilinear interpolation of a 2-px-wide stripe "pixel-locks" by up to 0.2 px; the Gaussian
-//! kernel does not).
-//!
-//! Where the time goes on a dense frame (the ridge benchmark's room: two stripes all around,
-//! 1522 points, 0.84 ms/MP fastest, 0.89 median; callgrind, 12.8 M instructions per frame):
-//! resampling the marked stretches (coarse profiles, maxima and their backgrounds, fine
-//! profiles, checks) 65 %, the pass across the stripe's normal (`normal`) 11 %, the row scan
-//! 6 %, the marks, the rays' bookkeeping and the isolated-point check the rest. On 8-bit frames
-//! the hot loops have SSE2 forms (row scan, coarse lines, the cross of gradient samples, the
-//! Gaussian kernel) and, where the CPU has AVX2 (detected at run time), AVX2 forms of the row
-//! scan and the kernel; all give the same bits as the generic code (tested), so 8- and 16-bit
-//! frames give the same centres.
-//! Tried and not kept: rays in bands of radii 1.1× wide, each band with its own rays 0.91–1 px
-//! apart instead of nested rays 0.5–1 px apart (16 % fewer points but only 3.6 % fewer
-//! instructions: as many rays are touched, where a stripe crosses from one band into the next
-//! both bands' rays are resampled, and the points there are up to two rays apart); fine
-//! profiles sampled in one batch from the coarse profile's crossings (more samples, slower);
-//! fine samples 1 px apart (the windowed centroid's RMS doubled on the simulator's frames); the
-//! whole resampling path compiled for AVX2 behind one run-time check (0.95 → 1.09 ms/MP);
-//! reading the coarse lines' pixels without bounds checks (0.8 M fewer instructions, no
-//! measurable time); the noise-maximum test as a branch-free pass (no gain).
+//! Speed: a fast row scan first finds the pixels brighter by more than the threshold than both
+//! their row neighbours or both their column neighbours `max_width / 2 + 1` px away; only the
+//! stretches of rays (or, across the normal, the profiles) near them are resampled,
+//! [`SAMPLE_STEP_PX`] apart, with a small Gaussian kernel (`sampling`: bilinear interpolation of
+//! a narrow stripe pixel-locks, the Gaussian kernel does not). On 8-bit frames the hot loops have
+//! SSE2 and AVX2 forms that give the same bits as the generic code (tested). Measurements and
+//! the variants tried: docs/DECISIONS.md.
 //!
 //! Segments: each local maximum of a ray's profile whose contrast above the local background
 //! (the larger of the minima within `max_width / 2 + 2` px on either side) exceeds the

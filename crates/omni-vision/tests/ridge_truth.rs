@@ -144,4 +144,3 @@ fn realistic_sensor_coverage_and_speckle() {
     assert!(along.rms_bias().1.abs() <= 0.01, "along: bias {:+.4}", along.rms_bias().1);
     assert!(alone.false_points * 1000 <= alone.errors.len(), "{} false points", alone.false_points);
 }
-

@@ -144,3 +144,23 @@ fn realistic_sensor_coverage_and_speckle() {
     assert!(along.rms_bias().1.abs() <= 0.01, "along: bias {:+.4}", along.rms_bias().1);
     assert!(alone.false_points * 1000 <= alone.errors.len(), "{} false points", alone.false_points);
 }
+
+/// Without a laser-off frame, the cone + pyramid scene's lit faces taper to tips a few px wide
+/// that stay put from frame to frame: they are not taken for the laser's line.
+#[test]
+fn lit_tapering_faces_are_not_stripes() {
+    let sensor = Sensor::paper_scaled(SIZE);
+    let scene = Scene::from_file(paper_bench(BenchObject::ConePyramid)).unwrap();
+    let circle = sensor.camera.mirror_circle();
+    let det = RidgeDetector::new(SIZE, SIZE, circle, RidgeParams::default());
+    let mut all = Tally::default();
+    for k in 0..8 {
+        let alpha = 14.0 + 2.0 * k as f64;
+        let o = RenderOptions { seed: k, ..RenderOptions::default() };
+        let f = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &o);
+        add(&mut all, &det.detect(&to_gray(&f.image)), &f.truth, (circle.centre.x, circle.centre.y));
+    }
+    eprintln!("{}", all.line("realistic cone + pyramid"));
+    assert!(all.errors.len() > 150, "{} points", all.errors.len());
+    assert!(all.false_points * 1000 <= all.errors.len(), "{} false points of {}", all.false_points, all.errors.len());
+}

@@ -47,6 +47,12 @@ pub const MAX_ASYMMETRY: f64 = 0.1;
 pub const ASYMMETRY_LEVEL: f32 = 0.25;
 /// A profile narrower (half-maximum width) than this fraction of its neighbours' median is cut.
 pub const MIN_WIDTH_RATIO: f64 = 0.7;
+/// A profile whose half-maximum width exceeds this multiple of the frame's narrow ones (its 10 %
+/// quantile) is a lit area, not the laser's line.
+pub const MAX_HALF_WIDTH_RATIO: f64 = 1.7;
+/// A stripe whose half-maximum width changes faster than this (px per px along it, over ±3 px)
+/// is a tapering lit area, not the laser's line.
+pub const MAX_WIDTH_SLOPE: f64 = 0.2;
 /// The quantile of the frame's profile variances taken as the blur (the narrowest stripes are
 /// the ones whose own width adds least).
 const BLUR_QUANTILE: f64 = 0.5;
@@ -315,6 +321,7 @@ impl RidgeDetector {
     /// survive the checks, corrected for the blur's pull and fitted along the stripe (module docs).
     fn link_and_correct(&self, centres: &[Centre]) -> Vec<StripePoint> {
         let blur_variance = frame_blur_variance(centres);
+        let widest = MAX_HALF_WIDTH_RATIO * narrow_half_width(centres);
         let along = self.params.along_stripe_px;
         let reach = SHAPE_HALF_ARC_PX.max(2.0 * along).max(super::MIN_STRIPE_ARC_PX) + 1.0;
         let grid = Grid::new(centres, reach);
@@ -375,6 +382,17 @@ impl RidgeDetector {
             let middle = widths.len() / 2;
             let (_, median, _) = widths.select_nth_unstable_by(middle, f64::total_cmp);
             if c.half_width < MIN_WIDTH_RATIO * *median {
+                continue;
+            }
+            // Lit areas of the ambient image (a face's tapering tip, a sliver between shadows)
+            // are wider than the laser's line, whose width the lens sets, and their width
+            // changes along them.
+            if c.half_width > widest && c.point.quality & quality::SATURATED == 0 {
+                continue;
+            }
+            if let Some(slope) = width_slope(&neighbours, SHAPE_HALF_ARC_PX)
+                && slope.abs() > MAX_WIDTH_SLOPE
+            {
                 continue;
             }
             let mut shift = 0.0;
@@ -438,6 +456,17 @@ fn segment_near(q: &[f32], mid: usize, t: f32) -> Option<Segment> {
     (start > 0 && end < q.len()).then_some(Segment { start, end, peak })
 }
 
+/// A low quantile (10 %) of the frame's unsaturated half-maximum widths (px); infinite if none.
+fn narrow_half_width(centres: &[Centre]) -> f64 {
+    let mut w: Vec<f64> =
+        centres.iter().filter(|c| c.point.quality & quality::SATURATED == 0).map(|c| c.half_width).collect();
+    if w.is_empty() {
+        return f64::INFINITY;
+    }
+    let k = (w.len() - 1) / 10;
+    *w.select_nth_unstable_by(k, f64::total_cmp).1
+}
+
 /// The blur variance (px²) of the frame: a low quantile of its profiles' variances, 0 if none.
 fn frame_blur_variance(centres: &[Centre]) -> f64 {
     let mut v: Vec<f64> = centres.iter().filter_map(|c| c.variance).collect();
@@ -485,6 +514,20 @@ fn mean_offset(neighbours: &[Neighbour], half_arc: f64, c: f64) -> Option<f64> {
     }
     let det = s0 * s2 - s1 * s1;
     (before >= 2 && after >= 2 && det > 1e-9).then(|| (r0 * s2 - r1 * s1) / det)
+}
+
+/// The slope d(half-maximum width)/dt of the neighbours within ±`half_arc` (least squares);
+/// `None` unless two lie on each side.
+fn width_slope(neighbours: &[Neighbour], half_arc: f64) -> Option<f64> {
+    let (mut s0, mut s1, mut s2, mut r0, mut r1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let (mut before, mut after) = (0, 0);
+    for &(t, _, w, _) in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
+        (s0, s1, s2, r0, r1) = (s0 + 1.0, s1 + t, s2 + t * t, r0 + w, r1 + t * w);
+        before += usize::from(t < -0.5);
+        after += usize::from(t > 0.5);
+    }
+    let det = s0 * s2 - s1 * s1;
+    (before >= 2 && after >= 2 && det > 1e-9).then(|| (s0 * r1 - s1 * r0) / det)
 }
 
 /// Centres bucketed in square cells, for neighbour queries within `reach` px.

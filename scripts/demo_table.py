@@ -68,18 +68,18 @@ def main():
     print(f"500 mm (omni-eval budget): speckle {b['speckle_mm']:.3f}, noise {b['noise_mm']:.3f}, "
           f"calibration {fmt(b['calibration_mm'], 0).strip()}, total {b['total_mm']:.3f} mm")
     print()
-    print(f"{'object':<18} {'sensor':<11} {'points':>7} {'mean':>8} {'σ truth':>8} {'σ fit':>8} {'budget':>8} {'radius':>8}   (mm)")
+    print(f"{'object':<21} {'sensor':<11} {'points':>7} {'mean':>8} {'σ truth':>8} {'σ fit':>8} {'budget':>8} {'radius':>8}   (mm)")
     for obj in objects:
         paper = PAPER.get(obj)
         if paper:
-            print(f"{obj:<18} {'paper':<11} {'':>7} {fmt(paper[0], signed=True)} {'':>8} {fmt(paper[1])} {'':>8} {'-':>8}")
+            print(f"{obj:<21} {'paper':<11} {'':>7} {fmt(paper[0], signed=True)} {'':>8} {fmt(paper[1])} {'':>8} {'-':>8}")
         for label, cloud, t in (
             ("calibrated", os.path.join(out, obj, "cloud.ply"), transform),
             ("true files", os.path.join(out, obj, "cloud_true_sensor.ply"), None),
         ):
             for name, n, mean, sd, fit_sd, rad in measure(out, obj, cloud, t):
                 tag = obj if name == obj else f"{obj}/{name}"
-                print(f"{tag:<18} {label:<11} {n:>7} {fmt(mean, signed=True)} {fmt(sd)} {fmt(fit_sd)} "
+                print(f"{tag:<21} {label:<11} {n:>7} {fmt(mean, signed=True)} {fmt(sd)} {fmt(fit_sd)} "
                       f"{fmt(b['total_mm'])} {fmt(rad, signed=True)}")
                 results.setdefault(tag, {})[label] = {
                     "points": n, "mean_mm": mean, "sigma_truth_mm": sd, "sigma_fit_mm": fit_sd, "radius_error_mm": rad,

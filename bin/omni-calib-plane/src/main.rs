@@ -12,6 +12,8 @@ use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
 #[command(
+    // Help is printed as written, unwrapped: examples stay one line for copy and paste.
+    term_width = 0,
     name = "omni-calib-plane",
     version,
     about = "Calibrate the swept light planes (transmitter) of an omnidirectional line-laser scanner",

@@ -12,6 +12,8 @@ use std::path::{Path, PathBuf};
 
 #[derive(Parser, Debug)]
 #[command(
+    // Help is printed as written, unwrapped: examples stay one line for copy and paste.
+    term_width = 0,
     version,
     about = "Calibrate the catadioptric camera (receiver) from checkerboard images: detect the corners, \
 fit a camera model, write camera.json with the fitted model and a report.",

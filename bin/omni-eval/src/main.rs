@@ -15,6 +15,8 @@ use std::path::{Path, PathBuf};
 
 #[derive(Parser, Debug)]
 #[command(
+    // Help is printed as written, unwrapped: examples stay one line for copy and paste.
+    term_width = 0,
     version,
     about = "Measure a point cloud's accuracy: fit a primitive, or compare with a scene's true surfaces.",
     after_help = "Examples:\n  \

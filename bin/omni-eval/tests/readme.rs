@@ -51,3 +51,41 @@ fn make_test_says_how_to_install_rustfmt_and_clippy() {
     let out = Command::new("make").current_dir(&root).args(["-s", "tools"]).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// Every `--help` example is one line, whatever the terminal's width, so that copy and paste
+/// gives the whole command (a wrapped example continues on a line that starts with its next
+/// argument instead of a new command).
+#[test]
+fn help_examples_stay_on_one_line() {
+    let exe = std::env::current_exe().unwrap();
+    let bins = exe.parent().and_then(|d| d.parent()).unwrap().to_path_buf();
+    let tools = [
+        ("omni-calib-plane", vec![]),
+        ("omni-calib-receiver", vec![]),
+        ("omni-eval", vec!["budget"]),
+        ("omni-merge", vec![]),
+        ("omni-ridge", vec![]),
+        ("omni-sim", vec![]),
+        ("omni-sim", vec!["rig"]),
+        ("omni-triangulate", vec![]),
+        ("omni-trigger", vec!["scan"]),
+    ];
+    for (tool, sub) in tools {
+        let out = Command::new(bins.join(tool)).args(&sub).arg("--help").env("COLUMNS", "60").output().unwrap();
+        let help = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(out.status.success() && help.contains("omni-"), "{tool} {sub:?} --help failed");
+        let lines: Vec<&str> = help.lines().collect();
+        let examples = lines.iter().filter(|l| l.trim_start().starts_with("omni-")).count();
+        assert!(examples > 0, "{tool} {sub:?}: no example in --help");
+        for pair in lines.windows(2) {
+            let (line, next) = (pair[0].trim_start(), pair[1]);
+            let continued = next.starts_with("  ")
+                && !next.trim_start().starts_with("omni-")
+                && next.trim_start().chars().next().is_some_and(|c| c.is_ascii_lowercase() || c == '-');
+            assert!(
+                !(line.starts_with("omni-") && continued),
+                "{tool} {sub:?}: the example {line:?} goes on in {next:?}"
+            );
+        }
+    }
+}

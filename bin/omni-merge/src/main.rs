@@ -11,6 +11,8 @@ use std::path::{Path, PathBuf};
 
 #[derive(Parser, Debug)]
 #[command(
+    // Help is printed as written, unwrapped: examples stay one line for copy and paste.
+    term_width = 0,
     version,
     about = "Merge point streams and PLY clouds into one cloud: poses, crop, voxel grid, outlier removal.",
     long_about = "Reads triangulated point streams (JSON Lines from omni-triangulate; `-` = stdin) and PLY \

@@ -30,7 +30,7 @@ Examples:
 
 /// Finds the laser stripe's sub-pixel centres in every frame of a stream.
 #[derive(Parser, Debug)]
-#[command(version, about, after_help = AFTER_HELP)]
+#[command(term_width = 0, version, about, after_help = AFTER_HELP)]
 struct Args {
     /// Input stream (JSON Lines); `-` for stdin.
     #[arg(default_value = "-")]

@@ -37,7 +37,7 @@ Examples:
 /// The virtual sensor: writes sensor files, renders laser scans, checkerboard sets and the
 /// transmitter-calibration rig, with ground truth.
 #[derive(Parser, Debug)]
-#[command(version, about, after_help = AFTER_HELP)]
+#[command(term_width = 0, version, about, after_help = AFTER_HELP)]
 struct Args {
     #[command(subcommand)]
     command: Command,

@@ -14,6 +14,8 @@ const PRODUCER: &str = concat!("omni-triangulate ", env!("CARGO_PKG_VERSION"));
 
 #[derive(Parser, Debug)]
 #[command(
+    // Help is printed as written, unwrapped: examples stay one line for copy and paste.
+    term_width = 0,
     version,
     about = "Triangulate stripe points: each stripe pixel's ray meets its frame's laser light plane.",
     long_about = "Reads the stripe stream written by omni-ridge (JSON Lines), intersects every stripe \

@@ -21,6 +21,8 @@ const TOOL: &str = "omni-trigger";
 
 #[derive(Parser)]
 #[command(
+    // Help is printed as written, unwrapped: examples stay one line for copy and paste.
+    term_width = 0,
     name = "omni-trigger",
     version,
     about = "Talk to the polygon-mirror trigger controller: describe it, capture a scan manifest, or emulate one.",

@@ -530,34 +530,53 @@ fn width_slope(neighbours: &[Neighbour], half_arc: f64) -> Option<f64> {
     (before >= 2 && after >= 2 && det > 1e-9).then(|| (s0 * r1 - s1 * r0) / det)
 }
 
-/// Centres bucketed in square cells, for neighbour queries within `reach` px.
+/// Centres bucketed in square cells (a counting sort into a dense table of cells), for
+/// neighbour queries within `reach` px.
 struct Grid {
     cell: f64,
-    /// (cell row, cell column, centre index), sorted.
-    entries: Vec<(i32, i32, u32)>,
+    columns: usize,
+    rows: usize,
+    /// `order[start[k]..start[k + 1]]`: the centres in cell k (row-major), in index order.
+    start: Vec<u32>,
+    order: Vec<u32>,
 }
 
 impl Grid {
     fn new(centres: &[Centre], reach: f64) -> Grid {
         let cell = reach.max(1.0);
-        let mut entries: Vec<(i32, i32, u32)> = centres
-            .iter()
-            .enumerate()
-            .map(|(i, c)| ((c.point.v / cell) as i32, (c.point.u / cell) as i32, i as u32))
-            .collect();
-        entries.sort_unstable();
-        Grid { cell, entries }
+        let key = |c: &Centre| ((c.point.v / cell).max(0.0) as usize, (c.point.u / cell).max(0.0) as usize);
+        let rows = centres.iter().map(|c| key(c).0 + 1).max().unwrap_or(0);
+        let columns = centres.iter().map(|c| key(c).1 + 1).max().unwrap_or(0);
+        let mut start = vec![0u32; rows * columns + 1];
+        for c in centres {
+            let (r, q) = key(c);
+            start[r * columns + q + 1] += 1;
+        }
+        for k in 1..start.len() {
+            start[k] += start[k - 1];
+        }
+        let mut fill = start.clone();
+        let mut order = vec![0u32; centres.len()];
+        for (i, c) in centres.iter().enumerate() {
+            let (r, q) = key(c);
+            let slot = &mut fill[r * columns + q];
+            order[*slot as usize] = i as u32;
+            *slot += 1;
+        }
+        Grid { cell, columns, rows, start, order }
     }
 
     /// Calls `f` with the index of every centre in the cells within one cell of (x, y), in
     /// index order per cell.
     fn visit(&self, x: f64, y: f64, mut f: impl FnMut(usize)) {
-        let (cx, cy) = ((x / self.cell) as i32, (y / self.cell) as i32);
-        for gy in cy - 1..=cy + 1 {
-            let start = self.entries.partition_point(|e| (e.0, e.1) < (gy, cx - 1));
-            for e in self.entries[start..].iter().take_while(|e| (e.0, e.1) <= (gy, cx + 1)) {
-                f(e.2 as usize);
+        let (cx, cy) = ((x / self.cell).max(0.0) as usize, (y / self.cell).max(0.0) as usize);
+        for r in cy.saturating_sub(1)..(cy + 2).min(self.rows) {
+            let (q0, q1) = (cx.saturating_sub(1), (cx + 2).min(self.columns));
+            if q0 >= q1 {
+                continue;
             }
+            let (a, b) = (self.start[r * self.columns + q0] as usize, self.start[r * self.columns + q1] as usize);
+            self.order[a..b].iter().for_each(|&i| f(i as usize));
         }
     }
 }

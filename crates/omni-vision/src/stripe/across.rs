@@ -71,6 +71,8 @@ enum Axis {
 /// Profile buffers reused from seed to seed.
 #[derive(Debug, Default)]
 struct Buffers {
+    /// Bilinear samples 1 px apart across the stripe, for the background.
+    coarse: Vec<f32>,
     /// Fine samples on the −n side, outwards.
     left: Vec<f32>,
     /// The fine profile, −n to +n.
@@ -233,13 +235,14 @@ impl RidgeDetector {
         // The background: the larger of the minima of a coarse profile (bilinear, 1 px steps) on
         // either side, past the flank of the widest accepted stripe.
         let reach = (0.5 * self.params.max_width + 2.0).ceil() as i64;
-        let coarse = |k: i64| frame.bilinear(x0 + k as f64 * nx, y0 + k as f64 * ny);
-        let (mut left, mut right) = (f32::INFINITY, f32::INFINITY);
-        for k in 0..=reach {
-            left = left.min(coarse(-k)?);
-            right = right.min(coarse(k)?);
+        let n = 2 * reach as usize + 1;
+        let coarse = &mut buffers.coarse;
+        coarse.clear();
+        if !frame.bilinear_line(x0, y0, -reach as f64, (nx, ny), n, coarse) {
+            return None; // the profile leaves the image
         }
-        let background = left.max(right);
+        let min = |v: &[f32]| v.iter().fold(f32::INFINITY, |m, &x| m.min(x));
+        let background = min(&coarse[..=reach as usize]).max(min(&coarse[reach as usize..]));
         let t = threshold as f32;
         // Fine samples with the Gaussian kernel, outwards from the seed until `tail` samples on
         // each side are at or below the threshold and below the flank levels the checks use
@@ -266,7 +269,7 @@ impl RidgeDetector {
             }
             None
         };
-        let Buffers { left: before, raw, contrast: q } = buffers;
+        let Buffers { left: before, raw, contrast: q, .. } = buffers;
         before.clear();
         walk(-1, before)?;
         let half = before.len();

@@ -249,9 +249,15 @@ impl RidgeDetector {
         // (Blais–Rioux's filter reaches two samples further).
         let tail = if self.params.method == super::Method::BlaisRioux { 3 } else { 1 };
         let limit = (reach as f64 / SAMPLE_STEP_PX) as i64;
+        // Sample i at the seed + i·SAMPLE_STEP_PX·n, stepped in 32.32 fixed point; the kernel's
+        // bounds are checked per sample only where the walk's reach leaves the frame.
+        let origin = (super::to_fixed(x0), super::to_fixed(y0));
+        let step = (super::to_fixed(SAMPLE_STEP_PX * nx), super::to_fixed(SAMPLE_STEP_PX * ny));
+        let at = |i: i64| (origin.0 + i * step.0, origin.1 + i * step.1);
+        let reach_inside = self.sampler.kernel_inside(frame, at(-limit)) && self.sampler.kernel_inside(frame, at(limit));
         let fine = |i: i64| {
-            let s = i as f64 * SAMPLE_STEP_PX;
-            self.sampler.sample(frame, x0 + s * nx, y0 + s * ny)
+            let p = at(i);
+            (reach_inside || self.sampler.kernel_inside(frame, p)).then(|| self.sampler.sample_fixed(frame, p))
         };
         let centre = fine(0)?;
         let stop = t.min(0.8 * ASYMMETRY_LEVEL * (centre - background));

@@ -223,6 +223,9 @@ impl RidgeDetector {
         buffers: &mut Buffers,
     ) -> Option<Centre> {
         let (x0, y0) = (x as f64, y as f64);
+        if clearly_other_axis(frame, x as usize, y as usize, axis) {
+            return None;
+        }
         let derivatives = self.seed_normal.derivatives(frame, x0, y0)?;
         let ((nx, ny), _) = super::steger::Kernels::normal(&derivatives)?;
         let fits_axis = match axis {
@@ -254,7 +257,8 @@ impl RidgeDetector {
         let origin = (super::to_fixed(x0), super::to_fixed(y0));
         let step = (super::to_fixed(SAMPLE_STEP_PX * nx), super::to_fixed(SAMPLE_STEP_PX * ny));
         let at = |i: i64| (origin.0 + i * step.0, origin.1 + i * step.1);
-        let reach_inside = self.sampler.kernel_inside(frame, at(-limit)) && self.sampler.kernel_inside(frame, at(limit));
+        let reach_inside =
+            self.sampler.kernel_inside(frame, at(-limit)) && self.sampler.kernel_inside(frame, at(limit));
         let fine = |i: i64| {
             let p = at(i);
             (reach_inside || self.sampler.kernel_inside(frame, p)).then(|| self.sampler.sample_fixed(frame, p))
@@ -431,6 +435,25 @@ impl RidgeDetector {
 /// A neighbour of a point on its stripe, in the point's frame: arc t and offset d along its
 /// normal (px), half-maximum width (px), asymmetry seen along the point's normal.
 type Neighbour = (f64, f64, f64, f64);
+
+/// Whether the seed's stripe clearly runs the other way (its normal more than 60° from the
+/// seed's axis), from the [1 2 1]-smoothed second differences of the 3×3 pixels around it:
+/// those seeds are the other axis's to measure, and this costs less than the Hessian that
+/// would refuse them. Seeds lie at least 1 px inside the frame.
+fn clearly_other_axis<P: Pixel>(frame: &Frame<'_, P>, x: usize, y: usize, axis: Axis) -> bool {
+    let at = |x: usize, y: usize| frame.at(x, y);
+    let (mut dxx, mut dyy) = (0.0f32, 0.0f32);
+    for (k, w) in [(0usize, 1.0f32), (1, 2.0), (2, 1.0)] {
+        let (row, col) = (y + k - 1, x + k - 1);
+        dxx += w * (at(x - 1, row) - 2.0 * at(x, row) + at(x + 1, row));
+        dyy += w * (at(col, y - 1) - 2.0 * at(col, y) + at(col, y + 1));
+    }
+    // tan² 60° = 3: the Hessian's eigen-direction test keeps 47°, so the margin is 13°.
+    match axis {
+        Axis::Row => dyy.abs() > 3.0 * dxx.abs(),
+        Axis::Column => dxx.abs() > 3.0 * dyy.abs(),
+    }
+}
 
 /// Whether the image is flat across the stripe at a found centre (u, v), as on a ridge's
 /// centreline: the gradient along the normal `n` at most [`MAX_CENTRE_GRADIENT`] of the peak. A

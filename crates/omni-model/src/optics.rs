@@ -68,8 +68,8 @@ impl Optics {
         if !(self.defocus_px.is_finite() && (0.0..=8.0).contains(&self.defocus_px)) {
             return Err(format!("defocus_px must be within 0–8 px, got {}", self.defocus_px));
         }
-        if !(1..=8).contains(&self.speckle_patterns) {
-            return Err(format!("speckle_patterns must be within 1–8, got {}", self.speckle_patterns));
+        if !(1..=16).contains(&self.speckle_patterns) {
+            return Err(format!("speckle_patterns must be within 1–16, got {}", self.speckle_patterns));
         }
         Ok(())
     }

@@ -164,3 +164,18 @@ fn lit_tapering_faces_are_not_stripes() {
     assert!(all.errors.len() > 150, "{} points", all.errors.len());
     assert!(all.false_points * 1000 <= all.errors.len(), "{} false points of {}", all.false_points, all.errors.len());
 }
+
+/// Speckle of contrast 0.5 and 0.25 (4 and 16 independent patterns: a rougher, more
+/// depolarising or partially coherent case): the along-stripe fit over ±3 px of arc.
+#[test]
+fn weaker_speckle_with_the_along_stripe_fit() {
+    for (patterns, rms_max, coverage_min) in [(4u32, 0.10, 0.75), (16, 0.05, 0.85)] {
+        let optics = omni_simulator::Optics { speckle_patterns: patterns, ..omni_simulator::Optics::paper() };
+        let opts = RenderOptions::default().with_optics(optics);
+        let along = bench(BenchObject::Plane, &opts, RidgeParams { along_stripe_px: 3.0, ..Default::default() });
+        eprintln!("{}", along.line(&format!("C {:.2}, along ±3", 1.0 / (patterns as f64).sqrt())));
+        let (rms, bias) = along.rms_bias();
+        assert!(rms <= rms_max && bias.abs() <= 0.01, "{patterns} patterns: rms {rms:.4} bias {bias:+.4}");
+        assert!(along.coverage(8).unwrap() >= coverage_min, "{patterns} patterns: coverage {:?}", along.coverage(8));
+    }
+}

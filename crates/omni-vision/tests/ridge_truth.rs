@@ -179,3 +179,58 @@ fn weaker_speckle_with_the_along_stripe_fit() {
         assert!(along.coverage(8).unwrap() >= coverage_min, "{patterns} patterns: coverage {:?}", along.coverage(8));
     }
 }
+
+/// Stripes cut by the plane's edges (its silhouette against the dark room) add no error: the
+/// spread of the whole plane's points is that of its interior (10 mm from the edges), in a dark,
+/// the default and a bright room.
+#[test]
+fn the_plane_edges_add_no_error_under_any_lighting() {
+    use omni_formats::scene::Lighting;
+    let sensor = Sensor::paper_scaled(SIZE);
+    let circle = sensor.camera.mirror_circle();
+    let det = RidgeDetector::new(SIZE, SIZE, circle, RidgeParams::default());
+    for level in [0.1, 1.0, 2.0, 3.0] {
+        let mut file = paper_bench(BenchObject::Plane);
+        file.lighting = Some(Lighting { level, gradient: None, patches: vec![] });
+        let scene = Scene::from_file(file).unwrap();
+        let (mut all, mut interior) = (Tally::default(), Tally::default());
+        for (k, alpha) in [10.0f64, 11.0, 12.0, 13.0, 15.0, 20.0, 25.0, 28.0].into_iter().enumerate() {
+            let o = RenderOptions { seed: k as u64, ..RenderOptions::default() };
+            let f = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &o);
+            let points = det.detect(&to_gray(&f.image));
+            // Interior: the nearest truth sample lies 10 mm or more inside the 400 × 300 mm plane.
+            let inside: Vec<StripePoint> = points
+                .iter()
+                .filter(|p| {
+                    let nearest = f.truth.iter().min_by(|a, b| {
+                        let d = |t: &TruthPoint| (t.pixel[0] - p.u).hypot(t.pixel[1] - p.v);
+                        d(a).total_cmp(&d(b))
+                    });
+                    nearest.is_some_and(|t| t.xyz[1].abs() <= 190.0 && t.xyz[2].abs() <= 140.0)
+                })
+                .copied()
+                .collect();
+            add(&mut all, &points, &f.truth, (circle.centre.x, circle.centre.y));
+            add(&mut interior, &inside, &f.truth, (circle.centre.x, circle.centre.y));
+        }
+        let (whole, inner) = (all.rms_bias().0, interior.rms_bias().0);
+        eprintln!(
+            "lighting {level}: whole {} points rms {whole:.4} px, interior {} points rms {inner:.4} px",
+            all.errors.len(),
+            interior.errors.len()
+        );
+        assert!(whole <= 1.15 * inner, "lighting {level}: whole {whole:.4} px, interior {inner:.4} px");
+        assert_eq!(all.false_points, 0, "lighting {level}: false points");
+    }
+}
+
+/// A saturated stripe is measured at its plateau's centre and kept (held to the ray sampling's
+/// bounds for saturated stripes: the plateau's edges are sampled coarsely).
+#[test]
+fn saturated_stripes_are_kept() {
+    let t = bench(BenchObject::Plane, &RenderOptions::ideal_saturated(), RidgeParams::default());
+    eprintln!("{}", t.line("ideal saturated plane"));
+    let (rms, bias) = t.rms_bias();
+    assert!(t.coverage(8).unwrap() >= 0.9, "coverage {:?}", t.coverage(8));
+    assert!(rms <= 0.1 && bias.abs() <= 0.05, "rms {rms:.4} bias {bias:+.4}");
+}

@@ -387,7 +387,7 @@ impl RidgeDetector {
                 .filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX)
                 .fold((0.0, 0.0), |(c, s), n| (c + 1.0, s + n.3));
             let lopsided = (sum / count).abs();
-            if lopsided > MAX_ASYMMETRY && c.point.quality & quality::SATURATED == 0 {
+            if lopsided > MAX_ASYMMETRY {
                 continue;
             }
             widths.clear();

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
 # `make bench`: every speed figure and side-by-side comparison in one run.
+#  - the stripe detector's accuracy table on the virtual sensor (tests/ridge_truth.rs);
 #  - criterion benches: simulator render, stripe centres, receiver and plane calibration, cloud
 #    operations, protocol parsing/pairing;
 #  - side by side: stripe extraction vs numpy/OpenCV, calibration vs OpenCV omnidir, merge /
@@ -23,6 +24,10 @@ run cargo bench -q -p omni-simulator --bench render "${quick[@]}"
 
 section "omni-ridge: stripe centres vs numpy/OpenCV"
 run scripts/bench_ridge.sh
+
+section "omni-ridge: accuracy and coverage on the virtual sensor (ideal and realistic, 1024 px)"
+# The detector's accuracy table against ground truth: the tests print one line per case.
+run cargo test -q --release -p omni-vision --test ridge_truth -- --nocapture --test-threads 1 2>&1 | grep -E "pts rms|^test result"
 
 section "omni-calib-receiver: 20 x 1 MP images vs OpenCV omnidir"
 run cargo bench -q -p omni-calib --bench receiver "${quick[@]}"

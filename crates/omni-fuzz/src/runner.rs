@@ -72,17 +72,29 @@ pub fn execute(target: &Target, input: &[u8]) -> Outcome {
     }
 }
 
-/// An error message with its numbers replaced by `#`, so "line 3" and "line 4" count as one
-/// kind of error.
+/// The kind of an error message: numbers become `#` and quoted text (`"…"`, `` `…` ``) `…`,
+/// so "line 3: bad \"x\"" and "line 4: bad \"y\"" are one kind; a new kind stands in for new
+/// coverage.
 pub fn error_kind(message: &str) -> String {
-    let mut out = String::with_capacity(message.len().min(160));
-    for c in message.chars().take(160) {
-        if c.is_ascii_digit() {
-            if !out.ends_with('#') {
-                out.push('#');
+    let mut out = String::with_capacity(100);
+    let mut quote = None;
+    for c in message.chars() {
+        match (quote, c) {
+            (Some(q), c) if c == q => quote = None,
+            (Some(_), _) => {}
+            (None, '"' | '`') => {
+                quote = Some(c);
+                out.push('…');
             }
-        } else {
-            out.push(c);
+            (None, c) if c.is_ascii_digit() => {
+                if !out.ends_with('#') {
+                    out.push('#');
+                }
+            }
+            (None, c) => out.push(c),
+        }
+        if out.len() >= 100 {
+            break;
         }
     }
     out
@@ -250,7 +262,7 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert_eq!(execute(&PANICS, b"abc"), Outcome::Error("line 3".into()));
-        assert_eq!(error_kind("line 12, field x[3]: bad"), "line #, field x[#]: bad");
+        assert_eq!(error_kind("line 12, field x[3]: bad \"a1\""), "line #, field x[#]: bad …");
     }
 
     #[test]

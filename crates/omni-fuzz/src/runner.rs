@@ -72,17 +72,22 @@ pub fn execute(target: &Target, input: &[u8]) -> Outcome {
     }
 }
 
-/// The kind of an error message: numbers become `#` and quoted text (`"…"`, `` `…` ``) `…`,
-/// so "line 3: bad \"x\"" and "line 4: bad \"y\"" are one kind; a new kind stands in for new
-/// coverage.
+/// The kind of an error message: numbers become `#` and quoted text (`"…"`, `` `…` ``, and
+/// `'…'` opened after a non-letter, so "Couldn't" stays) `…`, so "line 3: bad \"x\"" and
+/// "line 4: bad \"y\"" are one kind; a new kind stands in for new coverage.
 pub fn error_kind(message: &str) -> String {
     let mut out = String::with_capacity(100);
     let mut quote = None;
+    let mut prev = ' ';
     for c in message.chars() {
         match (quote, c) {
             (Some(q), c) if c == q => quote = None,
             (Some(_), _) => {}
             (None, '"' | '`') => {
+                quote = Some(c);
+                out.push('…');
+            }
+            (None, '\'') if !prev.is_alphanumeric() => {
                 quote = Some(c);
                 out.push('…');
             }
@@ -93,6 +98,7 @@ pub fn error_kind(message: &str) -> String {
             }
             (None, c) => out.push(c),
         }
+        prev = c;
         if out.len() >= 100 {
             break;
         }
@@ -263,6 +269,7 @@ mod tests {
         }
         assert_eq!(execute(&PANICS, b"abc"), Outcome::Error("line 3".into()));
         assert_eq!(error_kind("line 12, field x[3]: bad \"a1\""), "line #, field x[#]: bad …");
+        assert_eq!(error_kind("Couldn't parse 'line 7'."), "Couldn't parse ….");
     }
 
     #[test]

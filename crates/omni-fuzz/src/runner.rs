@@ -72,10 +72,19 @@ pub fn execute(target: &Target, input: &[u8]) -> Outcome {
     }
 }
 
-/// The kind of an error message: numbers become `#` and quoted text (`"…"`, `` `…` ``, and
-/// `'…'` opened after a non-letter, so "Couldn't" stays) `…`, so "line 3: bad \"x\"" and
-/// "line 4: bad \"y\"" are one kind; a new kind stands in for new coverage.
+/// The kind of an error message, standing in for coverage (a new kind joins the corpus): its
+/// first line with the input's echoes taken out — numbers become `#`, quoted text (`"…"`,
+/// `` `…` ``, and `'…'` opened after a non-letter, so "Couldn't" stays) `…`, and words holding
+/// anything but letters, `_` and punctuation are dropped. "line 3: bad \"x\"" and
+/// "line 4: bad \"y\"" are one kind.
 pub fn error_kind(message: &str) -> String {
+    let unquoted = unquote(message.lines().next().unwrap_or(""));
+    let plain = |w: &&str| w.chars().all(|c| c.is_ascii_alphabetic() || "_#…:;,.()[]'".contains(c));
+    unquoted.split_whitespace().filter(plain).collect::<Vec<_>>().join(" ")
+}
+
+/// `message` with numbers as `#` and quoted text as `…`, cut to about 100 bytes.
+fn unquote(message: &str) -> String {
     let mut out = String::with_capacity(100);
     let mut quote = None;
     let mut prev = ' ';
@@ -268,7 +277,8 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert_eq!(execute(&PANICS, b"abc"), Outcome::Error("line 3".into()));
-        assert_eq!(error_kind("line 12, field x[3]: bad \"a1\""), "line #, field x[#]: bad …");
+        assert_eq!(error_kind("line 12, field x[3]: bad \"a1\"\nmore"), "line #, field x[#]: bad …");
+        assert_eq!(error_kind("field inner_r%ws: unknown field"), "field unknown field");
         assert_eq!(error_kind("Couldn't parse 'line 7'."), "Couldn't parse ….");
     }
 

@@ -72,47 +72,36 @@ pub fn execute(target: &Target, input: &[u8]) -> Outcome {
     }
 }
 
-/// The kind of an error message, standing in for coverage (a new kind joins the corpus): its
-/// first line with the input's echoes taken out — numbers become `#`, quoted text (`"…"`,
-/// `` `…` ``, and `'…'` opened after a non-letter, so "Couldn't" stays) `…`, and words holding
-/// anything but letters, `_` and punctuation are dropped. "line 3: bad \"x\"" and
-/// "line 4: bad \"y\"" are one kind.
-pub fn error_kind(message: &str) -> String {
-    let unquoted = unquote(message.lines().next().unwrap_or(""));
-    let plain = |w: &&str| w.chars().all(|c| c.is_ascii_alphabetic() || "_#…:;,.()[]'".contains(c));
-    unquoted.split_whitespace().filter(plain).collect::<Vec<_>>().join(" ")
-}
-
-/// `message` with numbers as `#` and quoted text as `…`, cut to about 100 bytes.
-fn unquote(message: &str) -> String {
-    let mut out = String::with_capacity(100);
-    let mut quote = None;
-    let mut prev = ' ';
-    for c in message.chars() {
-        match (quote, c) {
-            (Some(q), c) if c == q => quote = None,
-            (Some(_), _) => {}
-            (None, '"' | '`') => {
-                quote = Some(c);
-                out.push('…');
-            }
-            (None, '\'') if !prev.is_alphanumeric() => {
-                quote = Some(c);
-                out.push('…');
-            }
-            (None, c) if c.is_ascii_digit() => {
-                if !out.ends_with('#') {
-                    out.push('#');
-                }
-            }
-            (None, c) => out.push(c),
+/// The kind of an error message, standing in for coverage (a new kind joins the corpus): the
+/// words of its first line that do not echo `input` (field names, quoted values, lines: words
+/// found in the input or holding other than letters, `_`, `.`, `-`), with numbers (runs of them) as `#`;
+/// at most 16. "line 3: bad \"x\"" and "line 4: bad \"y\"" are one kind.
+pub fn error_kind(message: &str, input: &[u8]) -> String {
+    let text = String::from_utf8_lossy(input);
+    let line = message.lines().next().unwrap_or("");
+    let words = line.split(|c: char| c.is_whitespace() || "\"'`:,;()[]{}".contains(c)).filter(|w| !w.is_empty());
+    let kept = words.filter_map(|w| {
+        if w.bytes().all(|b| b.is_ascii_digit() || b"+-.eE".contains(&b)) && w.bytes().any(|b| b.is_ascii_digit()) {
+            Some("#")
+        } else if text.contains(w) || !w.chars().all(|c| c.is_ascii_alphabetic() || "_.-".contains(c)) {
+            None
+        } else {
+            Some(w)
         }
-        prev = c;
-        if out.len() >= 100 {
-            break;
+    });
+    let mut out: Vec<&str> = Vec::new();
+    for w in kept {
+        if !(w == "#" && out.last() == Some(&"#")) {
+            out.push(w);
         }
     }
-    out
+    out.truncate(16);
+    out.join(" ")
+}
+
+/// Where a panic happened (its message's last ` at FILE:LINE`), which tells crashes apart.
+fn panic_site(message: &str) -> &str {
+    message.rsplit(" at ").next().unwrap_or(message)
 }
 
 /// A crashing input.
@@ -134,7 +123,7 @@ pub struct Report {
     /// Inputs kept for giving a new kind of error (the corpus' growth).
     pub corpus: usize,
     pub error_kinds: usize,
-    /// One crash per distinct panic message.
+    /// One crash per place that panicked.
     pub crashes: Vec<Crash>,
 }
 
@@ -170,9 +159,9 @@ impl Campaign<'_> {
         self.execs += 1;
         match execute(self.target, input) {
             Outcome::Ok => self.kinds.insert("ok".into()),
-            Outcome::Error(m) => self.kinds.insert(error_kind(&m)),
+            Outcome::Error(m) => self.kinds.insert(error_kind(&m, input)),
             Outcome::Panic(m) => {
-                if self.panics_seen.insert(error_kind(&m)) {
+                if self.panics_seen.insert(panic_site(&m).to_string()) {
                     let saved = self.crashes_dir.as_deref().and_then(|d| save_crash(d, self.target.name, input));
                     self.crashes.push(Crash { message: m, input: input.to_vec(), saved });
                 }
@@ -277,9 +266,12 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert_eq!(execute(&PANICS, b"abc"), Outcome::Error("line 3".into()));
-        assert_eq!(error_kind("line 12, field x[3]: bad \"a1\"\nmore"), "line #, field x[#]: bad …");
-        assert_eq!(error_kind("field inner_r%ws: unknown field"), "field unknown field");
-        assert_eq!(error_kind("Couldn't parse 'line 7'."), "Couldn't parse ….");
+        assert_eq!(
+            error_kind("line 12, field inner_rows: bad \"x1\"\nmore", b"{\"inner_rows\": x1}"),
+            "line # field bad"
+        );
+        assert_eq!(error_kind("line 3: bad", b"q"), error_kind("line 4: bad", b"q"));
+        assert_eq!(panic_site("boom at src/a.rs:3"), "src/a.rs:3");
     }
 
     #[test]

@@ -54,7 +54,7 @@ fn main() -> ExitCode {
         Options { duration: Duration::from_secs_f64(args.seconds), seed: args.seed, crashes_dir: Some(args.crashes) };
     println!(
         "{:<11} {:>7} {:>10} {:>9} {:>6} {:>7} {:>7} {:>8}",
-        "target", "seconds", "execs", "execs/s", "seeds", "corpus", "errors", "crashes"
+        "target", "seconds", "execs", "execs/s", "seeds", "corpus", "kinds", "crashes"
     );
     let mut crashed = false;
     for target in chosen {
@@ -65,7 +65,8 @@ fn main() -> ExitCode {
     if crashed { ExitCode::from(1) } else { ExitCode::SUCCESS }
 }
 
-/// One table row, then one line per crash.
+/// One table row (`kinds`: distinct kinds of clean error, see `runner::error_kind`), then one
+/// line per crash.
 fn print_report(r: &Report) {
     println!(
         "{:<11} {:>7.1} {:>10} {:>9.0} {:>6} {:>7} {:>7} {:>8}",

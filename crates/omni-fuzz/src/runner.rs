@@ -74,8 +74,8 @@ pub fn execute(target: &Target, input: &[u8]) -> Outcome {
 
 /// The kind of an error message, standing in for coverage (a new kind joins the corpus): the
 /// words of its first line that do not echo `input` (field names, quoted values, lines: words
-/// found in the input or holding other than letters, `_`, `.`, `-`), with numbers (runs of them) as `#`;
-/// at most 16. "line 3: bad \"x\"" and "line 4: bad \"y\"" are one kind.
+/// found in the input or holding other than letters, `_`, `.`, `-`), a run of numbers as one
+/// `#`; at most 16 words. "line 3: bad \"x\"" and "line 4: bad \"y\"" are one kind.
 pub fn error_kind(message: &str, input: &[u8]) -> String {
     let text = String::from_utf8_lossy(input);
     let line = message.lines().next().unwrap_or("");

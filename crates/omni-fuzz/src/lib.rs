@@ -6,11 +6,13 @@
 //! accepts only `Ok` or a clean `Err`. [`mutate`] edits seed inputs (bit flips, inserts,
 //! deletes, splices, interesting numbers) from a seeded RNG, and [`runner`] reports panics,
 //! hangs ([`guard`]'s watchdog) and huge allocations ([`guard`]'s allocator limit) as crashes.
-//! A new distinct error message stands in for new coverage: such inputs join the corpus.
+//! Without coverage instrumentation, a new kind of error message (`runner::error_kind`) stands
+//! in for new coverage: such inputs join the corpus.
 //!
 //! * `make fuzz` (or `cargo run --profile fuzz -p omni-fuzz -- --target all --seconds 60`)
 //!   fuzzes each target for a set time; crashing inputs go to `target/fuzz-crashes/`
-//!   (`--crashes DIR`) and the exit status is 1.
+//!   (`--crashes DIR`, named `TARGET-HASH`) and the exit status is 1. The `fuzz` profile keeps
+//!   overflow checks and debug assertions on, as cargo-fuzz does.
 //! * `tests/seeds.rs` replays the seeds ([`corpus`]), a fixed set of mutations of them and every
 //!   file in `crates/omni-fuzz/regressions/` (named `TARGET-…`), so CI keeps found crashes fixed.
 

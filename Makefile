@@ -1,8 +1,9 @@
 # omniscan — see README.md. Every target works on a fresh machine (after .ci/run's installs).
 CARGO ?= cargo
 OUT ?= out/demo
+FUZZ_SECONDS ?= 60
 
-.PHONY: all build test lint tools fmt bench demo clean
+.PHONY: all build test lint tools fmt bench demo fuzz clean
 
 all: build
 
@@ -31,6 +32,11 @@ bench: build
 demo:
 	$(CARGO) build --workspace --profile demo
 	OUT=$(OUT) BIN=$(CURDIR)/target/demo scripts/demo.sh
+
+# Mutation fuzzing of every reader, FUZZ_SECONDS per target (crates/omni-fuzz; crashes are
+# saved to target/fuzz-crashes/). The fuzz profile keeps overflow checks and debug assertions.
+fuzz:
+	$(CARGO) run --profile fuzz -p omni-fuzz -- --target all --seconds $(FUZZ_SECONDS)
 
 clean:
 	$(CARGO) clean

@@ -83,10 +83,17 @@ impl CameraFile {
 
     /// Reads and validates `camera.json`, returning the usable model.
     pub fn load(path: &Path) -> Result<(CameraFile, Box<dyn CameraModel>)> {
-        let file: CameraFile = read_doc(path)?;
-        let model = file.model.build().map_err(|m| Error::new(path.display().to_string(), "field model", m))?;
+        let bytes = crate::io::read_all(path)?;
+        Self::parse(&bytes, &crate::io::display_name(path, "stdin"))
+    }
+
+    /// Parses and validates `camera.json` from its bytes ([`load`](Self::load) without the
+    /// file; the fuzzers use it); errors name `source_name`.
+    pub fn parse(bytes: &[u8], source_name: &str) -> Result<(CameraFile, Box<dyn CameraModel>)> {
+        let file: CameraFile = parse_doc(bytes, source_name)?;
+        let model = file.model.build().map_err(|m| Error::new(source_name, "field model", m))?;
         if let Some(optics) = &file.optics {
-            optics.validate().map_err(|m| Error::new(path.display().to_string(), "field optics", m))?;
+            optics.validate().map_err(|m| Error::new(source_name, "field optics", m))?;
         }
         Ok((file, model))
     }
@@ -115,9 +122,16 @@ impl ScannerFile {
 
     /// Reads and validates `scanner.json`, returning the usable model.
     pub fn load(path: &Path) -> Result<(ScannerFile, Transmitter)> {
-        let file: ScannerFile = read_doc(path)?;
-        let model = Transmitter::new(file.transmitter.clone())
-            .map_err(|m| Error::new(path.display().to_string(), "field transmitter", m))?;
+        let bytes = crate::io::read_all(path)?;
+        Self::parse(&bytes, &crate::io::display_name(path, "stdin"))
+    }
+
+    /// Parses and validates `scanner.json` from its bytes ([`load`](Self::load) without the
+    /// file; the fuzzers use it); errors name `source_name`.
+    pub fn parse(bytes: &[u8], source_name: &str) -> Result<(ScannerFile, Transmitter)> {
+        let file: ScannerFile = parse_doc(bytes, source_name)?;
+        let model =
+            Transmitter::new(file.transmitter.clone()).map_err(|m| Error::new(source_name, "field transmitter", m))?;
         Ok((file, model))
     }
 }

@@ -22,7 +22,7 @@ pub mod scene;
 pub mod stream;
 pub mod transform;
 
-pub use docs::{BoardFile, CameraFile, CameraSpec, ScannerFile, read_doc, write_doc};
+pub use docs::{BoardFile, CameraFile, CameraSpec, ScannerFile, parse_doc, read_doc, write_doc};
 pub use error::{Error, Result};
 
 /// A versioned document type: its `format` name and the versions this build reads.

@@ -34,6 +34,9 @@ impl Default for ControllerSpec {
 
 /// Delay from START to the index pulse at which triggering begins (µs).
 const START_DELAY_US: u64 = 20_000;
+/// Slowest motor speed accepted (rev/min), 0 aside: slower, a run's trigger times overflow the
+/// clock (found by omni-fuzz: `SPEED 9 3e-319`).
+pub const MIN_RPM: f64 = 1e-3;
 /// Ids remembered for retry detection.
 const REMEMBERED_IDS: usize = 64;
 
@@ -50,7 +53,8 @@ struct Run {
 
 impl Run {
     fn total(&self) -> Option<u64> {
-        (self.revolutions > 0).then(|| self.revolutions * self.schedule.per_revolution())
+        // Saturating: `START ID 18446744073709551615` is "until STOP" in all but name.
+        (self.revolutions > 0).then(|| self.revolutions.saturating_mul(self.schedule.per_revolution()))
     }
 
     fn time_of(&self, seq: u64) -> u64 {
@@ -220,8 +224,8 @@ impl Controller {
                 self.disarm();
             }
             Command::Speed(rpm) => {
-                if !(rpm.is_finite() && *rpm >= 0.0) {
-                    return bad("speed must be a non-negative number of rpm".into());
+                if !(rpm.is_finite() && (*rpm == 0.0 || *rpm >= MIN_RPM)) {
+                    return bad(format!("speed must be 0 or at least {MIN_RPM} rpm"));
                 }
                 self.rpm_requested = *rpm;
                 self.disarm();
@@ -412,5 +416,19 @@ mod tests {
         assert!(r[0].starts_with("NAK 4 5"), "{r:?}");
         lines(&mut c, "SPEED 5 80", 0);
         assert_eq!(lines(&mut c, "ARM 6", 0), vec!["ACK 6"]);
+    }
+
+    #[test]
+    fn a_speed_too_slow_for_the_clock_and_endless_revolutions_are_handled() {
+        let mut c = configured();
+        let r = lines(&mut c, "SPEED 3 3.051e-319", 0);
+        assert!(r[0].starts_with("NAK 3 3 speed must be 0 or at least"), "{r:?}");
+        assert_eq!(lines(&mut c, "SPEED 4 0.001", 0), vec!["ACK 4"]);
+        assert_eq!(lines(&mut c, "ARM 5", 0), vec!["ACK 5"]);
+        assert_eq!(lines(&mut c, "START 6 18446744073709551615", 0), vec!["ACK 6"]);
+        // Count 0 fires at the index pulse; count 1000 comes 1000 × 1.67 s later at 0.001 rpm.
+        assert_eq!(c.poll(1_000_000).len(), 1);
+        assert_eq!(lines(&mut c, "STOP 7", 2_000_000), vec!["ACK 7"]);
+        assert!(matches!(c.poll(2_000_000).last(), Some(DeviceMessage::Done { .. })));
     }
 }

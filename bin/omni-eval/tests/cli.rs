@@ -7,6 +7,10 @@ use omni_formats::write_doc;
 use std::path::Path;
 use std::process::{Command, Output};
 
+#[path = "../../../tests/support/devices.rs"]
+mod devices;
+use devices::writes_into_devices;
+
 const BIN: &str = env!("CARGO_BIN_EXE_omni-eval");
 
 fn run(dir: &Path, args: &[&str]) -> Output {
@@ -150,32 +154,6 @@ fn fits_a_cone() {
     let apex = v["shape"]["apex_mm"].as_array().unwrap();
     assert!((apex[2].as_f64().unwrap() - 100.0).abs() < 1.5, "{apex:?}");
     assert!((v["errors"]["std_dev"].as_f64().unwrap() - 0.2).abs() < 0.03);
-}
-
-/// Runs the tool with its output at `/dev/null` and at a FIFO (read by a thread): both must be
-/// written into, not replaced by a regular file. Returns what came through the FIFO.
-fn writes_into_devices(dir: &Path, run_to: impl Fn(&str) -> Output) -> Vec<u8> {
-    use std::os::unix::fs::FileTypeExt;
-    let out = run_to("/dev/null");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null was replaced");
-    let fifo = dir.join("out.fifo");
-    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
-    let (tx, rx) = std::sync::mpsc::channel();
-    let reader = fifo.clone();
-    std::thread::spawn(move || tx.send(std::fs::read(reader).unwrap()));
-    let out = run_to(fifo.to_str().unwrap());
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo(), "the FIFO was replaced");
-    let bytes = rx.recv_timeout(std::time::Duration::from_secs(20)).expect("nothing was written into the FIFO");
-    let litter: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|n| n.contains("tmp"))
-        .collect();
-    assert!(litter.is_empty(), "temporary files left: {litter:?}");
-    bytes
 }
 
 #[test]

@@ -4,6 +4,10 @@ use omni_formats::stream::{Record, StreamReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+#[path = "../../../tests/support/devices.rs"]
+mod devices;
+use devices::writes_into_devices;
+
 fn sim(args: &[&str], dir: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_omni-sim")).args(args).current_dir(dir).output().unwrap()
 }
@@ -357,32 +361,6 @@ fn help_teaches() {
     for f in ["rig.json", "board_poses.json", "board_corners.json", "scene.json", "rig_truth.json", "--laser-off"] {
         assert!(text.contains(f), "omni-sim rig --help names {f}");
     }
-}
-
-/// Runs the tool with its output at `/dev/null` and at a FIFO (read by a thread): both must be
-/// written into, not replaced by a regular file. Returns what came through the FIFO.
-fn writes_into_devices(dir: &Path, run_to: impl Fn(&str) -> Output) -> Vec<u8> {
-    use std::os::unix::fs::FileTypeExt;
-    let out = run_to("/dev/null");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null was replaced");
-    let fifo = dir.join("out.fifo");
-    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
-    let (tx, rx) = std::sync::mpsc::channel();
-    let reader = fifo.clone();
-    std::thread::spawn(move || tx.send(std::fs::read(reader).unwrap()));
-    let out = run_to(fifo.to_str().unwrap());
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo(), "the FIFO was replaced");
-    let bytes = rx.recv_timeout(std::time::Duration::from_secs(20)).expect("nothing was written into the FIFO");
-    let litter: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|n| n.contains("tmp"))
-        .collect();
-    assert!(litter.is_empty(), "temporary files left: {litter:?}");
-    bytes
 }
 
 #[test]

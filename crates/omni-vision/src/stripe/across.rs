@@ -8,16 +8,21 @@
 //! centre is located on a profile sampled along that normal, with the same estimators,
 //! threshold and background rule as on a ray. The points are then linked to their neighbours on
 //! the same stripe (close, with nearly parallel normals), which
-//! * drops isolated specks (no neighbour [`MIN_STRIPE_ARC_PX`](super::MIN_STRIPE_ARC_PX) of arc
-//!   away on either side);
-//! * drops profiles cut by a silhouette or a crease: lopsided ([`MAX_ASYMMETRY`]) or much
-//!   narrower than their neighbours' ([`MIN_WIDTH_RATIO`]);
+//! * drops isolated specks and the last [`END_PX`] of a stripe;
+//! * drops profiles cut by a silhouette or a crease: lopsided on average along the stripe
+//!   ([`MAX_ASYMMETRY`]; one profile's lopsidedness is speckle) or much narrower than their
+//!   neighbours ([`MIN_WIDTH_RATIO`]);
+//! * drops lit areas of the ambient image, wider than the laser's line ([`MAX_HALF_WIDTH_RATIO`])
+//!   or tapering ([`MAX_WIDTH_SLOPE`]);
 //! * gives each point the stripe's local curvature κ, from a parabola through its neighbours,
-//!   and removes the blur's pull towards the centre of curvature, σ²κ/2. σ² is the variance of
-//!   the narrowest profiles of the frame itself (a low quantile of the half-maximum widths), so
-//!   that the pull comes out right for any lens without being told its blur;
+//!   and removes the blur's pull towards the centre of curvature, σ²κ/2, with σ² measured on the
+//!   frame itself (its median profile variance), so that the pull comes out right for any lens
+//!   without being told its blur;
 //! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): a
-//!   parabola, not a line, so that a curved stripe keeps its centre.
+//!   line through the neighbours once a wider parabola's curvature is taken out, so that a curved
+//!   stripe keeps its centre.
+//!
+//! The measurements behind these rules: docs/DECISIONS.md.
 
 use super::estimators::{self, Segment};
 use super::{Frame, MAX_CENTRE_GRADIENT, Pixel, RidgeDetector, SAMPLE_STEP_PX, StripePoint, quality};
@@ -26,8 +31,7 @@ use super::{Frame, MAX_CENTRE_GRADIENT, Pixel, RidgeDetector, SAMPLE_STEP_PX, St
 /// stripe within 47° of vertical), one from a column if within 47° of the column; the overlap
 /// keeps stripes at 45° from falling between the two, and duplicates are merged.
 const AXIS_OVERLAP_TAN: f64 = 1.072;
-/// Scale (px) of the Gaussian derivatives that give a seed its stripe normal (to 3σ; a kernel
-/// cut at 2σ, or σ 0.8 px, let through points 0.1–0.2 px off near the sphere's stripe ends).
+/// Scale (px) of the Gaussian derivatives that give a seed its stripe normal (kernel to 3σ).
 pub const SEED_NORMAL_SIGMA_PX: f64 = 1.0;
 /// Two points nearer than this (px) with parallel normals are one measurement.
 const DUPLICATE_PX: f64 = 0.7;
@@ -53,8 +57,8 @@ pub const MAX_HALF_WIDTH_RATIO: f64 = 1.7;
 /// A stripe whose half-maximum width changes faster than this (px per px along it, over ±3 px)
 /// is a tapering lit area, not the laser's line.
 pub const MAX_WIDTH_SLOPE: f64 = 0.2;
-/// The quantile of the frame's profile variances taken as the blur (the narrowest stripes are
-/// the ones whose own width adds least).
+/// The quantile of the frame's profile variances taken as the blur: the median, robust to noisy
+/// widths and to the few stripes that a grazing sheet widens.
 const BLUR_QUANTILE: f64 = 0.5;
 /// A fit that moves its point farther than this (px) is not trusted (a kink, another stripe).
 const MAX_MOVE_PX: f64 = 0.5;

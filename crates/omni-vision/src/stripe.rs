@@ -198,16 +198,15 @@ pub struct RidgeParams {
     pub max_width: f64,
     /// Scale (px) of the Gaussian derivatives of [`Method::Hessian`].
     pub hessian_sigma: f64,
-    /// Fit along the stripe: each point's radius becomes the value, on its own ray, of a
-    /// straight line fitted to the points of the same stripe within this many px of arc on
-    /// either side (`along` module). 0 = off: every point is measured on its own ray alone.
-    /// Averages the per-ray noise (3 px: about 25 % lower RMS on noisy frames) at the price of
-    /// lateral resolution (a curved stripe moves by ≈ L²/(6R) px).
+    /// Fit along the stripe over this many px of arc on either side (0 = off): across the normal,
+    /// a line through the neighbours' offsets once a wider parabola's curvature is taken out;
+    /// along rays, each point's radius from a line through the same stripe's points (`along`).
+    /// Averages speckle and noise (±3 px: about 35 % lower RMS under speckle) at the price of
+    /// lateral resolution.
     pub along_stripe_px: f64,
-    /// The camera's optical blur (Gaussian PSF σ, px), pixel integration not included. A curved
-    /// stripe's centre is pulled towards its centre of curvature by (σ_optics² + 1/12 + σ_s²)·κ/2
-    /// (optics, pixel area, the detector's sampling kernel); the `normal` post-pass removes that
-    /// pull. Default 0.7 px: the industrial camera that omni-simulator renders by default.
+    /// With [`Sampling::Rays`] only: the camera's optical blur (Gaussian PSF σ, px), pixel
+    /// integration not included, whose pull on curved stripes the `normal` post-pass removes.
+    /// The normal sampling measures the blur on each frame instead.
     pub optics_blur_px: f64,
 }
 

@@ -992,13 +992,21 @@ impl RidgeDetector {
         if self.params.method == Method::Hessian && quality & quality::SATURATED == 0 {
             r = self.steger.refine_along_ray(frame, (self.cx, self.cy), (dx, dy), r)?;
         }
+        quality |= self.contrast_and_width_flags(peak, width, t);
+        Some(StripePoint { u: self.cx + r * dx, v: self.cy + r * dy, intensity: peak as f64, width, quality })
+    }
+
+    /// [`quality::WEAK`] and [`quality::WIDTH_MARGINAL`] for a segment of contrast `peak` and
+    /// `width` (px) at threshold `t`.
+    fn contrast_and_width_flags(&self, peak: f32, width: f64, t: f32) -> u32 {
+        let mut flags = 0;
         if peak < 3.0 * t {
-            quality |= quality::WEAK;
+            flags |= quality::WEAK;
         }
         if width < 1.2 * self.params.min_width || width > 0.8 * self.params.max_width {
-            quality |= quality::WIDTH_MARGINAL;
+            flags |= quality::WIDTH_MARGINAL;
         }
-        Some(StripePoint { u: self.cx + r * dx, v: self.cy + r * dy, intensity: peak as f64, width, quality })
+        flags
     }
 
     /// The segment's threshold crossings (sample indices) in `q`, the contrast profile, or `None`
@@ -1123,7 +1131,12 @@ fn fine_segment(q: &[f32], t: f32) -> Option<Segment> {
             (peak, largest) = (Some(i), v);
         }
     }
-    let peak = peak?;
+    segment_at(q, peak?, t)
+}
+
+/// The run of samples of `q` above `t` around `peak`, or `None` if the peak is not above `t` or
+/// the run reaches either end (or a NaN) of `q`.
+fn segment_at(q: &[f32], peak: usize, t: f32) -> Option<Segment> {
     if !(q[peak] > t) {
         return None;
     }

@@ -51,15 +51,17 @@ pub const MAX_ASYMMETRY: f64 = 0.1;
 pub const ASYMMETRY_LEVEL: f32 = 0.25;
 /// A profile narrower (half-maximum width) than this fraction of its neighbours' median is cut.
 pub const MIN_WIDTH_RATIO: f64 = 0.7;
-/// A profile whose half-maximum width exceeds this multiple of the frame's narrow ones (its 10 %
-/// quantile) is a lit area, not the laser's line.
+/// A profile whose half-maximum width exceeds this multiple of the frame's narrow ones (its
+/// [`NARROW_PERCENTILE`] quantile) is a lit area, not the laser's line.
 pub const MAX_HALF_WIDTH_RATIO: f64 = 1.7;
+/// The quantile (%) of the frame's half-maximum widths that stands for its narrow profiles.
+const NARROW_PERCENTILE: usize = 10;
 /// A stripe whose half-maximum width changes faster than this (px per px along it, over ±3 px)
 /// is a tapering lit area, not the laser's line.
 pub const MAX_WIDTH_SLOPE: f64 = 0.2;
-/// The quantile of the frame's profile variances taken as the blur: the median, robust to noisy
-/// widths and to the few stripes that a grazing sheet widens.
-const BLUR_QUANTILE: f64 = 0.5;
+/// The quantile (%) of the frame's profile variances taken as the blur: the median, robust to
+/// noisy widths and to the few stripes that a grazing sheet widens.
+const BLUR_PERCENTILE: usize = 50;
 /// A fit that moves its point farther than this (px) is not trusted (a kink, another stripe).
 const MAX_MOVE_PX: f64 = 0.5;
 /// FWHM / σ of a Gaussian.
@@ -91,8 +93,6 @@ struct Centre {
     point: StripePoint,
     /// Unit normal of the stripe (px).
     normal: (f64, f64),
-    /// Variance (px²) of the profile from its half-maximum width; `None` if saturated.
-    variance: Option<f64>,
     /// Half-maximum width (px).
     half_width: f64,
     /// (flank towards −n − flank towards +n) / their sum (see [`MAX_ASYMMETRY`]).
@@ -295,11 +295,8 @@ impl RidgeDetector {
         q.extend(raw.iter().map(|v| v - background));
         let (raw, q) = (&raw[..], &q[..]);
         let seg = segment_near(q, half, t)?;
-        let (a, b) = estimators::crossings(q, &seg, t)?;
+        let (a, b) = self.crossings_within_width(q, &seg, t)?;
         let width = (b - a) * SAMPLE_STEP_PX;
-        if width < self.params.min_width || width > self.params.max_width {
-            return None;
-        }
         let peak = q[seg.peak];
         let saturated = frame.saturated_near(x0, y0);
         let index =
@@ -319,26 +316,18 @@ impl RidgeDetector {
         if !flat_across(frame, u, v, (nx, ny), peak) {
             return None;
         }
-        let mut flags = 0;
-        if saturated {
-            flags |= quality::SATURATED;
-        }
-        if peak < 3.0 * t {
-            flags |= quality::WEAK;
-        }
-        if width < 1.2 * self.params.min_width || width > 0.8 * self.params.max_width {
-            flags |= quality::WIDTH_MARGINAL;
-        }
-        let variance = (!saturated).then(|| (half_width / FWHM_PER_SIGMA).powi(2));
+        let flags = if saturated { quality::SATURATED } else { 0 } | self.contrast_and_width_flags(peak, width, t);
         let point = StripePoint { u, v, intensity: peak as f64, width, quality: flags };
-        Some(Centre { point, normal: (nx, ny), variance, half_width, asymmetry })
+        Some(Centre { point, normal: (nx, ny), half_width, asymmetry })
     }
 
     /// Links each centre to its neighbours on the same stripe and returns the points that
     /// survive the checks, corrected for the blur's pull and fitted along the stripe (module docs).
     fn link_and_correct(&self, centres: &[Centre]) -> Vec<StripePoint> {
-        let blur_variance = frame_blur_variance(centres);
-        let widest = MAX_HALF_WIDTH_RATIO * narrow_half_width(centres);
+        // The blur: the median profile's variance, from its half-maximum width.
+        let blur_variance = half_width_quantile(centres, BLUR_PERCENTILE).map_or(0.0, |w| (w / FWHM_PER_SIGMA).powi(2));
+        let widest =
+            half_width_quantile(centres, NARROW_PERCENTILE).map_or(f64::INFINITY, |w| MAX_HALF_WIDTH_RATIO * w);
         let along = self.params.along_stripe_px;
         let reach = SHAPE_HALF_ARC_PX.max(2.0 * along).max(super::MIN_STRIPE_ARC_PX) + 1.0;
         let grid = Grid::new(centres, reach);
@@ -407,7 +396,8 @@ impl RidgeDetector {
             if c.half_width > widest && c.point.quality & quality::SATURATED == 0 {
                 continue;
             }
-            if let Some(slope) = width_slope(&neighbours, SHAPE_HALF_ARC_PX)
+            // d(half-maximum width)/dt along the stripe.
+            if let Some((_, slope)) = fit_line(&neighbours, SHAPE_HALF_ARC_PX, |n| n.2)
                 && slope.abs() > MAX_WIDTH_SLOPE
             {
                 continue;
@@ -419,7 +409,8 @@ impl RidgeDetector {
                 // blur pulls the centre that way by σ²κ/2 = σ²·c.
                 shift -= blur_variance * c;
                 if along > 0.0
-                    && let Some(offset) = mean_offset(&neighbours, along, c)
+                    // The offset at t = 0 once the wider parabola's curvature is taken out.
+                    && let Some((offset, _)) = fit_line(&neighbours, along, |n| n.1 - c * n.0 * n.0)
                 {
                     shift += offset;
                 }
@@ -478,39 +469,19 @@ fn segment_near(q: &[f32], mid: usize, t: f32) -> Option<Segment> {
     let reach = (2.0 / SAMPLE_STEP_PX) as usize;
     let (lo, hi) = (mid.saturating_sub(reach), (mid + reach).min(q.len() - 1));
     let peak = (lo..=hi).max_by(|&a, &b| q[a].total_cmp(&q[b]))?;
-    if !(q[peak] > t) {
-        return None;
-    }
-    let mut start = peak;
-    while start > 0 && q[start - 1] > t {
-        start -= 1;
-    }
-    let mut end = peak + 1;
-    while end < q.len() && q[end] > t {
-        end += 1;
-    }
-    (start > 0 && end < q.len()).then_some(Segment { start, end, peak })
+    super::segment_at(q, peak, t)
 }
 
-/// A low quantile (10 %) of the frame's unsaturated half-maximum widths (px); infinite if none.
-fn narrow_half_width(centres: &[Centre]) -> f64 {
+/// The `percent` quantile of the frame's unsaturated half-maximum widths (px); `None` if there
+/// are none.
+fn half_width_quantile(centres: &[Centre], percent: usize) -> Option<f64> {
     let mut w: Vec<f64> =
         centres.iter().filter(|c| c.point.quality & quality::SATURATED == 0).map(|c| c.half_width).collect();
     if w.is_empty() {
-        return f64::INFINITY;
+        return None;
     }
-    let k = (w.len() - 1) / 10;
-    *w.select_nth_unstable_by(k, f64::total_cmp).1
-}
-
-/// The blur variance (px²) of the frame: a low quantile of its profiles' variances, 0 if none.
-fn frame_blur_variance(centres: &[Centre]) -> f64 {
-    let mut v: Vec<f64> = centres.iter().filter_map(|c| c.variance).collect();
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * BLUR_QUANTILE) as usize]
+    let k = (w.len() - 1) * percent / 100;
+    Some(*w.select_nth_unstable_by(k, f64::total_cmp).1)
 }
 
 /// Least-squares parabola d = a + b·t + c·t² through the neighbours `(t, d, _)` with
@@ -536,34 +507,19 @@ fn fit_parabola(neighbours: &[Neighbour], half_arc: f64) -> Option<[f64; 3]> {
     estimators::solve3(m, r)
 }
 
-/// The stripe's offset at t = 0 from a straight line through the neighbours within ±`half_arc`
-/// once the curvature `c` (from a wider parabola) is taken out: d − c·t²; `None` unless
-/// at least two neighbours lie on each side.
-fn mean_offset(neighbours: &[Neighbour], half_arc: f64, c: f64) -> Option<f64> {
+/// Least-squares line y = a + b·t through `value` of the neighbours within ±`half_arc`:
+/// `(a, b)`, or `None` unless two neighbours lie on each side of t = 0.
+fn fit_line(neighbours: &[Neighbour], half_arc: f64, value: impl Fn(&Neighbour) -> f64) -> Option<(f64, f64)> {
     let (mut s0, mut s1, mut s2, mut r0, mut r1) = (0.0, 0.0, 0.0, 0.0, 0.0);
     let (mut before, mut after) = (0, 0);
-    for &(t, d, _, _) in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
-        let y = d - c * t * t;
+    for n in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
+        let (t, y) = (n.0, value(n));
         (s0, s1, s2, r0, r1) = (s0 + 1.0, s1 + t, s2 + t * t, r0 + y, r1 + t * y);
         before += usize::from(t < -0.5);
         after += usize::from(t > 0.5);
     }
     let det = s0 * s2 - s1 * s1;
-    (before >= 2 && after >= 2 && det > 1e-9).then(|| (r0 * s2 - r1 * s1) / det)
-}
-
-/// The slope d(half-maximum width)/dt of the neighbours within ±`half_arc` (least squares);
-/// `None` unless two lie on each side.
-fn width_slope(neighbours: &[Neighbour], half_arc: f64) -> Option<f64> {
-    let (mut s0, mut s1, mut s2, mut r0, mut r1) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    let (mut before, mut after) = (0, 0);
-    for &(t, _, w, _) in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
-        (s0, s1, s2, r0, r1) = (s0 + 1.0, s1 + t, s2 + t * t, r0 + w, r1 + t * w);
-        before += usize::from(t < -0.5);
-        after += usize::from(t > 0.5);
-    }
-    let det = s0 * s2 - s1 * s1;
-    (before >= 2 && after >= 2 && det > 1e-9).then(|| (s0 * r1 - s1 * r0) / det)
+    (before >= 2 && after >= 2 && det > 1e-9).then(|| ((r0 * s2 - r1 * s1) / det, (s0 * r1 - s1 * r0) / det))
 }
 
 /// Centres bucketed in square cells (a counting sort into a dense table of cells), for

@@ -126,9 +126,6 @@ fn main() -> ExitCode {
             keep_going: args.keep_going,
             threads,
             producer: format!("omni-ridge {}", env!("CARGO_PKG_VERSION")),
-            base_dir: (args.input != std::path::Path::new("-"))
-                .then(|| args.input.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new(".")))
-                .map(|p| p.to_path_buf()),
             strict: args.strict,
         };
         run(&args.input, &args.output, config)
@@ -136,16 +133,15 @@ fn main() -> ExitCode {
 }
 
 fn run(input: &std::path::Path, output: &std::path::Path, config: pipeline::Config) -> CliResult {
-    let reader = pipeline::open_reader(input)?;
-    let input_name = omni_formats::io::display_name(input, "stdin");
+    let stream = omni_formats::stream::StreamReader::open(input)?;
     if output == std::path::Path::new("-") {
         let stdout = std::io::stdout();
-        return pipeline::run(reader, &input_name, stdout.lock(), "stdout", config);
+        return pipeline::run(stream, stdout.lock(), "stdout", config);
     }
     let out_name = output.display().to_string();
     let mut outcome: CliResult = Ok(());
     let written = omni_formats::io::write_atomic(output, |w| {
-        outcome = pipeline::run(reader, &input_name, w, &out_name, config);
+        outcome = pipeline::run(stream, w, &out_name, config);
         match &outcome {
             // Per-frame failures with --keep-going still leave a complete output stream.
             Err(e) if !pipeline::is_keep_going_summary(e) => Err(std::io::Error::other(e.message().to_string())),

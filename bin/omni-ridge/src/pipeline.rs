@@ -25,9 +25,6 @@ pub struct Config {
     pub threads: usize,
     /// Appended to the header's producers.
     pub producer: String,
-    /// A relative `frames_dir` in the stream's header is resolved against this directory (the
-    /// input file's), if given.
-    pub base_dir: Option<PathBuf>,
     /// A stream without its final status record is an error, not a warning.
     pub strict: bool,
 }
@@ -38,15 +35,6 @@ const KEEP_GOING_SUMMARY: &str = "frames failed";
 /// Whether `e` is the end-of-run summary of a `--keep-going` run (the output is complete).
 pub fn is_keep_going_summary(e: &CliError) -> bool {
     e.message().contains(KEEP_GOING_SUMMARY)
-}
-
-/// Opens the input stream (a file, or stdin for `-`) as a sendable reader.
-pub fn open_reader(path: &Path) -> CliResult<Box<dyn BufRead + Send>> {
-    if path == Path::new("-") {
-        return Ok(Box::new(std::io::BufReader::with_capacity(1 << 16, std::io::stdin())));
-    }
-    let f = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    Ok(Box::new(std::io::BufReader::with_capacity(1 << 16, f)))
 }
 
 /// A record on its way through the pipe: its position, and the frames directory in force.
@@ -82,14 +70,12 @@ impl Detectors {
     }
 }
 
-/// Runs the whole stream from `reader` to `writer`.
-pub fn run(
-    reader: Box<dyn BufRead + Send>,
-    input_name: &str,
-    writer: impl Write,
-    output_name: &str,
-    config: Config,
-) -> CliResult {
+/// The input stream, as [`StreamReader::open`] gives it (a relative `frames_dir` resolved
+/// beside the input file).
+pub type Input = StreamReader<Box<dyn BufRead + Send>>;
+
+/// Runs the whole stream from `input` to `writer`.
+pub fn run(input: Input, writer: impl Write, output_name: &str, config: Config) -> CliResult {
     let camera_detector = config.camera.as_ref().map(|cam| {
         let (w, h) = cam.image_size();
         RidgeDetector::new(w, h, cam.mirror_circle(), config.params)
@@ -111,9 +97,8 @@ pub fn run(
     // The reader reports a fatal input error (bad JSON, empty stream) at the position it occurred.
     let read_error: Arc<Mutex<Option<(usize, String)>>> = Arc::default();
     spawn_reader(
-        reader,
-        input_name.to_string(),
-        ReaderSettings { producer: config.producer.clone(), base_dir: config.base_dir.clone(), strict: config.strict },
+        input,
+        ReaderSettings { producer: config.producer.clone(), strict: config.strict },
         token_rx,
         job_tx,
         out_tx.clone(),
@@ -132,13 +117,11 @@ pub fn run(
 /// What the reader thread does with the stream besides reading it.
 struct ReaderSettings {
     producer: String,
-    base_dir: Option<PathBuf>,
     strict: bool,
 }
 
 fn spawn_reader(
-    reader: Box<dyn BufRead + Send>,
-    name: String,
+    mut stream: Input,
     settings: ReaderSettings,
     tokens: Receiver<()>,
     jobs: SyncSender<Job>,
@@ -146,11 +129,8 @@ fn spawn_reader(
     read_error: Arc<Mutex<Option<(usize, String)>>>,
 ) {
     std::thread::spawn(move || {
-        let ReaderSettings { producer, base_dir, strict } = settings;
-        let mut stream = StreamReader::new(reader, name.clone());
-        if let Some(dir) = &base_dir {
-            stream = stream.with_base_dir(dir);
-        }
+        let ReaderSettings { producer, strict } = settings;
+        let name = stream.name().to_string();
         let mut frames_dir: Option<String> = None;
         let (mut index, mut frames) = (0, 0u64);
         loop {

@@ -1158,15 +1158,25 @@ fn segment_at(q: &[f32], peak: usize, t: f32) -> Option<Segment> {
 /// the image counts as 0.
 #[inline]
 fn stands_out<P: Pixel>(f: &Frame<'_, P>, x: usize, y: usize, reach: usize, t: f32) -> bool {
-    let (w, h) = (f.width as usize, f.height as usize);
-    let get = |xx: Option<usize>, yy: Option<usize>| match (xx, yy) {
-        (Some(xx), Some(yy)) if xx < w && yy < h => f.at(xx, yy),
-        _ => 0.0,
-    };
-    let v = f.at(x, y);
-    let row = get(x.checked_sub(reach), Some(y)).max(get(Some(x + reach), Some(y)));
-    let col = get(Some(x), y.checked_sub(reach)).max(get(Some(x), Some(y + reach)));
-    v - row > t || v - col > t
+    row_contrast(f, x, y, reach) > t || column_contrast(f, x, y, reach) > t
+}
+
+/// How much pixel (x, y) is brighter than the brighter of its row neighbours `reach` px away
+/// (beyond the image counts as 0).
+#[inline]
+fn row_contrast<P: Pixel>(f: &Frame<'_, P>, x: usize, y: usize, reach: usize) -> f32 {
+    let right = if x + reach < f.width as usize { f.at(x + reach, y) } else { 0.0 };
+    let left = x.checked_sub(reach).map_or(0.0, |xx| f.at(xx, y));
+    f.at(x, y) - left.max(right)
+}
+
+/// How much pixel (x, y) is brighter than the brighter of its column neighbours `reach` px
+/// away (beyond the image counts as 0).
+#[inline]
+fn column_contrast<P: Pixel>(f: &Frame<'_, P>, x: usize, y: usize, reach: usize) -> f32 {
+    let down = if y + reach < f.height as usize { f.at(x, y + reach) } else { 0.0 };
+    let up = y.checked_sub(reach).map_or(0.0, |yy| f.at(x, yy));
+    f.at(x, y) - up.max(down)
 }
 
 /// Bilinear interpolation of the 2×2 pixels `[top left, top right, bottom left, bottom right]`

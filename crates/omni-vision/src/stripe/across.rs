@@ -25,7 +25,10 @@
 //! The measurements behind these rules: docs/DECISIONS.md.
 
 use super::estimators::{self, Segment};
-use super::{Frame, MAX_CENTRE_GRADIENT, Pixel, RidgeDetector, SAMPLE_STEP_PX, StripePoint, quality};
+use super::{
+    Frame, MAX_CENTRE_GRADIENT, Pixel, RidgeDetector, SAMPLE_STEP_PX, StripePoint, column_contrast, quality,
+    row_contrast, stands_out,
+};
 
 /// tan 47°: a seed from a row is measured if the stripe's normal is within 47° of the row (the
 /// stripe within 47° of vertical), one from a column if within 47° of the column; the overlap
@@ -136,9 +139,6 @@ impl RidgeDetector {
         let y_lo = ((self.cy - self.r_out).floor().max(1.0)) as usize;
         let y_hi = ((self.cy + self.r_out).ceil() as usize).min(h.saturating_sub(2));
         let at = |x: usize, y: usize| frame.at(x, y);
-        let get = |x: i64, y: i64| {
-            if x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h { at(x as usize, y as usize) } else { 0.0 }
-        };
         for y in y_lo..=y_hi {
             hits.clear();
             let interior = y >= k && y + k < h && w > 2 * k + 2;
@@ -152,13 +152,9 @@ impl RidgeDetector {
                 let down = &d[(y + k) * w + a..(y + k) * w + b];
                 P::for_each_contrast_hit(cur, left, right, up, down, tp, |i| hits.push(a + i));
             }
-            for x in (1..a.max(1)).chain(b.max(a.max(1))..w.saturating_sub(1)) {
-                let v = at(x, y);
-                let (xi, yi, ki) = (x as i64, y as i64, k as i64);
-                if v - get(xi - ki, yi).max(get(xi + ki, yi)) > t || v - get(xi, yi - ki).max(get(xi, yi + ki)) > t {
-                    hits.push(x);
-                }
-            }
+            hits.extend(
+                (1..a.max(1)).chain(b.max(a.max(1))..w.saturating_sub(1)).filter(|&x| stands_out(frame, x, y, k, t)),
+            );
             hits.sort_unstable();
             let dy = y as f64 - self.cy;
             // The current row run: (last x, best value, best x).
@@ -172,9 +168,8 @@ impl RidgeDetector {
                 if r2 < r_in2 || r2 > r_out2 {
                     continue;
                 }
-                let (xi, yi, ki) = (x as i64, y as i64, k as i64);
                 let v = at(x, y);
-                if v - get(xi - ki, yi).max(get(xi + ki, yi)) > t {
+                if row_contrast(frame, x, y, k) > t {
                     let s = at(x, y - 1) + 2.0 * v + at(x, y + 1);
                     run = match run {
                         Some((last, best, bx)) if last + 1 == x => {
@@ -188,7 +183,7 @@ impl RidgeDetector {
                         }
                     };
                 }
-                if v - get(xi, yi - ki).max(get(xi, yi + ki)) > t {
+                if column_contrast(frame, x, y, k) > t {
                     let s = at(x - 1, y) + 2.0 * v + at(x + 1, y);
                     if col_last[x] != u32::MAX && col_last[x] + 1 == y as u32 {
                         if s > col_best[x].0 {

@@ -3,7 +3,11 @@ CARGO ?= cargo
 OUT ?= out/demo
 FUZZ_SECONDS ?= 60
 
-.PHONY: all build test lint tools fmt bench demo fuzz clean
+.PHONY: all build test test-rust deps lint tools fmt bench demo fuzz clean
+
+# Parts of the build with their own tests (firmware, Python, ...): each appends to EXTRA_TESTS.
+EXTRA_TESTS :=
+-include mk/*.mk
 
 all: build
 
@@ -19,8 +23,14 @@ lint: tools
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 
-test: lint
+test: deps lint test-rust $(EXTRA_TESTS)
+
+test-rust:
 	$(CARGO) test --workspace
+
+# System packages and Python readers the tests need (scripts/deps.d/); quick when present.
+deps:
+	scripts/deps.sh
 
 fmt:
 	$(CARGO) fmt --all

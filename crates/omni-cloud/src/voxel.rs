@@ -21,7 +21,7 @@
 //! # How it is fast
 //! No hash map and no per-point allocation. On a machine with 4 kB pages (and more so in a VM)
 //! every random access to a table larger than the caches costs a cache miss plus a page walk,
-//! which is what made a per-point hash map run at ~3 M points/s on fine grids. Here every pass
+//! which makes a per-point hash map slow on fine grids. Here every pass
 //! over the points is sequential or touches only a cache-sized table:
 //! * coarse grids (the points' voxel box has ≤ 2²¹ cells): one pass summing each point into its
 //!   voxel through a cell → voxel table, then the cells are walked in key order;
@@ -36,10 +36,7 @@
 //! each owning the global voxels of its key range and writing its own piece of the output; the
 //! pieces are concatenated in key order. A voxel never spans two buckets and its points are
 //! summed in input order, so the bits never depend on the number of threads. Coarse grids (the
-//! cell table) run on one thread. Measured on 2 M room points (benches/cloud.rs), in points per
-//! CPU-second of all threads: 12–13 M at 5 mm, 13.5–16 M at 10 mm, positions only (6 and 8 M
-//! with seven scalar fields); on two cores the wall clock gives up to twice that when the cores
-//! are free (on the busy shared machine: 10–13 M/s at 5 mm, 13–15 M/s at 10 mm).
+//! cell table) run on one thread.
 //!
 //! # Memory
 //! Input is taken in chunks of 2²¹ points; a chunk's voxels are merged in place into sorted

@@ -152,12 +152,7 @@ pub fn random_board_poses(
 /// Close boards fix the focal length / distance direction that small, far boards leave weakly
 /// observed, and above all the mirror's "cone opening" (one elevation offset for all rays): a
 /// board seen under a small angle absorbs it by a small turn of its own pose, a board spanning
-/// a wide angle cannot. Measured with the paper sensor (20 boards rendered, corners detected
-/// inside the annulus, Mei fit, rays over the whole mirror after the best rotation; seeds 2, 3,
-/// 5, 7, 9, 11): predicted ray error for 0.02 px white corner noise 0.0028–0.0035° (0.0050–0.0064°
-/// at the former 0.7–1.25 diagonals); rendered 0.0013–0.0044° median with today's corner
-/// detector (0.0019–0.0086° at 0.7–1.25 diagonals with the same detector), where
-/// [`random_board_poses`] gives 0.032°.
+/// a wide angle cannot (docs/DECISIONS.md has the ray errors against [`random_board_poses`]).
 pub fn calibration_board_poses(
     sensor: &Sensor,
     board: &BoardFile,

@@ -35,10 +35,9 @@
 //!
 //! Ground truth ([`TruthPoint`], [`stripe_truth`], [`truth_polylines`]): the reflected fan of
 //! each laser sampled from its virtual source, first scene hit, kept if lit and seen; exact
-//! pixels by `point_to_pixel`, samples ≤ 0.25 px apart along each curve. Checked by tests: truth
-//! pixels triangulate onto the surface within 1e-6 mm (measured ≤ 5e-11 mm), and the noiseless
-//! rendered stripe's centroid lies within 0.05 px of the truth curve (measured rms 0.007 px on
-//! the plane, 0.01 px on sphere and cylinder).
+//! pixels by `point_to_pixel`, samples ≤ 0.25 px apart along each curve. Tests check that truth
+//! pixels triangulate onto the surface within 1e-6 mm and that the noiseless rendered stripe's
+//! centroid lies within 0.05 px of the truth curve.
 //!
 //! Boards ([`render_board_image`], [`random_board_poses`], [`Rig`]): board frame as OpenCV —
 //! origin at the top-left inner corner, x along columns, y down the rows, z into the board;

@@ -10,11 +10,10 @@
 //!    (column direction × row direction > 0 with y down, i.e. as a board seen directly with
 //!    columns to the right and rows downwards), and placed inside the board's `cols × rows`
 //!    corners, honouring the colour of the first square when the caller knows it.
-//! 4. Sub-pixel refinement by gradient orthogonality (as OpenCV's `cornerSubPix`), better than
-//!    0.1 px on clean corners (a unit test measures 0.01 px on an anti-aliased corner), on the
+//! 4. Sub-pixel refinement by gradient orthogonality (as OpenCV's `cornerSubPix`), on the
 //!    pixel grid (no interpolation, no pixel locking), then its first-order bias on curved edges
-//!    removed (`curvature`: the mirror images the board's lines as arcs, which pulled every
-//!    corner ~0.03 px away from the arcs' concave side).
+//!    removed (`curvature`: the mirror images the board's lines as arcs, which pulls every
+//!    corner away from the arcs' concave side).
 //!
 //! A full board of a symmetric pattern (e.g. 7 × 11 corners: 180° rotation maps it onto itself)
 //! has two equally valid labelings; either is a proper rigid motion of the board, so a pose

@@ -1,69 +1,27 @@
 //! Sub-pixel laser-stripe centres in omnidirectional frames.
 //!
-//! Two samplings share the estimators, the threshold and the background rule below. The default,
-//! [`Sampling::Normal`] (module `across`), measures each stripe across its own normal, seeded
-//! from every pixel row and column, so that stripes in every direction are measured; it removes
-//! specks, stripe ends and cut profiles by comparing each point with its neighbours on the
-//! stripe, and the blur's pull on curved stripes with the blur measured on the frame. The rest of
-//! this page describes [`Sampling::Rays`], the earlier detector.
+//! Two samplings share the estimators, the threshold and the background rule:
 //!
-//! In an omnidirectional image the stripe runs roughly around the mirror centre, so "across the
-//! stripe" is radial: the ray sampling samples each frame along rays from the mirror centre
-//! ([`omni_model::MirrorCircle`] of the camera, or the image centre), restricted to the valid
-//! mirror annulus. There are `ceil(2π · outer_radius)` rays, so that neighbouring rays are at
-//! most 1 px apart at the rim, and every stripe segment crossing a ray gives one point on it.
+//! * [`Sampling::Normal`] (default, module `across`) measures each stripe across its own local
+//!   normal, seeded from every pixel row and column, so a stripe in any direction is measured. A
+//!   point is kept only if it agrees with its neighbours on the stripe (width, symmetry, a sheet
+//!   that goes on): a profile cut by a silhouette or a crease has no reliable centre, whatever the
+//!   ambient level. The blur's pull towards a curved stripe's centre of curvature is removed with
+//!   the blur measured on the frame itself, not a default.
+//! * [`Sampling::Rays`] samples along rays from the mirror centre, `ceil(2π · outer_radius)` of
+//!   them so neighbours are ≤ 1 px apart at the rim; a stripe at angle β to its ray is measured
+//!   with error / sin β, so rays crossing a stripe at β < 30° are skipped.
 //!
-//! Speed: a fast row scan first finds the pixels brighter by more than the threshold than both
-//! their row neighbours or both their column neighbours `max_width / 2 + 1` px away; only the
-//! stretches of rays (or, across the normal, the profiles) near them are resampled,
-//! [`SAMPLE_STEP_PX`] apart, with a small Gaussian kernel (`sampling`: bilinear interpolation of
-//! a narrow stripe pixel-locks, the Gaussian kernel does not). On 8-bit frames the hot loops have
-//! SSE2 and AVX2 forms that give the same bits as the generic code (tested). Measurements and
-//! the variants tried: docs/DECISIONS.md.
-//!
-//! Segments: each local maximum of a ray's profile whose contrast above the local background
-//! (the larger of the minima within `max_width / 2 + 2` px on either side) exceeds the
-//! threshold starts a segment: the samples whose contrast stays above the threshold. So a stripe
-//! on a lit surface is found without a laser-off frame, while the edges of lit areas (steps)
-//! are not. A segment is kept if its width (threshold crossing to crossing, along the ray) lies
-//! within [`RidgeParams::min_width`]..[`RidgeParams::max_width`], the backgrounds on its two
-//! sides agree or the stripe ends well before the step ([`MAX_BACKGROUND_STEP`],
-//! [`STEP_CLEARANCE_PX`]: a stripe cut by an object's silhouette or a crease has no reliable
-//! centre), the image is flat at the centre found ([`MAX_CENTRE_GRADIENT`]), its
-//! edges face the ray ([`MIN_EDGE_ANGLE_DEG`]: a ray grazing a glint is not a stripe) and the
-//! stripe continues on a neighbouring ray ([`MIN_STRIPE_ARC_PX`]: hot pixels and specks are not
-//! stripes).
-//! Several segments on one ray (two lasers, occlusions) are all reported. The centre of a
-//! segment comes from the selected [`Method`]:
-//!
-//! * [`Method::Centroid`] — the paper's baseline (Eq. 16): intensity centroid of the samples
-//!   above the threshold;
-//! * [`Method::Windowed`] — centroid with the background and threshold subtracted from the
-//!   weights;
-//! * [`Method::Gauss`] — log-parabola (Gaussian) fit to the samples above 30 % of the peak;
-//! * [`Method::BlaisRioux`] — Blais–Rioux 4th-order derivative zero crossing;
-//! * [`Method::Hessian`] — Steger's line detector: Newton steps on the Gaussian-smoothed image
-//!   (σ = [`RidgeParams::hessian_sigma`]) from the windowed centroid, in a band of ±1.5 px,
-//!   and the ridge's tangent intersected with the ray.
-//!
-//! Saturated segments (a raw pixel at the saturation level next to the peak) are always
-//! located at the centre of the saturated plateau (midpoint of the edges half way up) and
-//! flagged [`quality::SATURATED`]. Reported per point: `u`, `v` (px), `intensity` = the peak's
-//! contrast above the local background in the sampled profile (frame units), `width` (px) and
-//! the quality flags.
-//!
-//! Oblique crossings: where a stripe crosses its ray obliquely and dims or bends along its
-//! length (a cylinder's or sphere's flanks), the ray's profile mixes different parts of it and
-//! its centre moves (up to 0.07 px, +0.4 mm of fitted radius on the paper bench's cylinder);
-//! those points are measured again across the stripe's normal, and the sampling kernel's pull
-//! σ²/(2R) towards a curved stripe's centre of curvature is removed (module `normal`).
-//!
-//! Known limits: the profiles are sampled along the rays, not along each stripe's gradient: a
-//! stripe at an angle β to the ray is measured with its perpendicular error / sin β along the
-//! ray, and where β < 30° (its edges' gradient more than 60° from the ray) that ray is skipped:
-//! nearly radial stripes are not measured (test
-//! `nearly_radial_stripes_are_measured_down_to_thirty_degrees_and_skipped_below`: every ray and
-//! ≤ 0.03 px rms for β ≥ 40°, about 60 % of the rays for 30–40°, none below).
+//! Both find candidates with a fast row and column scan (pixels brighter than both neighbours
+//! `max_width / 2 + 1` px away by more than the threshold) and resample only near them, with a
+//! small Gaussian kernel [`SAMPLE_STEP_PX`] apart, because bilinear interpolation of a narrow
+//! stripe pixel-locks. Contrast is measured against the local background (the larger of the
+//! minima on either side), so a stripe on a lit surface needs no laser-off frame and the edge of
+//! a lit area is not a stripe. Saturated profiles are located at the middle of their plateau and
+//! flagged [`quality::SATURATED`]. Each point reports `u`, `v` (px), `intensity` (contrast above
+//! the background, frame units), `width` (px) and quality flags. The centre estimator is a
+//! [`Method`]: the paper's centroid (Eq. 16), a windowed centroid, a Gaussian fit, Blais–Rioux or
+//! Steger's Hessian detector. Accuracy figures and the variants tried are in docs/DECISIONS.md.
 //!
 //! ```
 //! use omni_vision::stripe::{Method, RidgeDetector, RidgeParams};
@@ -1069,22 +1027,15 @@ pub const MAX_RAY_STEP: usize = 8;
 /// Largest difference between the backgrounds on the two sides of a stripe, relative to its
 /// contrast, for the stripe to be measured, unless the stripe is clear of the step
 /// ([`STEP_CLEARANCE_PX`]). Where a stripe runs along an object's silhouette or a crease, the
-/// laser sheet is cut across its width and the centre moves towards the part left (up to 1.5 mm
-/// on the paper bench's cylinder, 3 mm from its end); the sides' backgrounds then differ by
-/// 0.26–0.32 of the contrast (lit surface on one side, the darker scene beyond on the other).
-/// Measured on the `make demo` scans without the clearance rule (σ of the points about the true
-/// surface, mm, at 0.5 / 0.3 / 0.25 / 0.2 / 0.1): cylinder 0.104 / 0.093 / 0.079 / 0.039 /
-/// 0.039, cone 0.203 / 0.145 / 0.036 / 0.036 / 0.035, plane 0.063 / 0.061 / 0.056 / 0.055 /
-/// 0.055: 0.2 is the knee, below it σ stays and only points go.
+/// laser sheet is cut across its width and the centre moves towards the part left; the sides'
+/// backgrounds then differ (lit surface on one side, the darker scene beyond on the other). The
+/// value is the knee of the demo scans' σ against it (docs/DECISIONS.md).
 pub const MAX_BACKGROUND_STEP: f32 = 0.2;
 
 /// Samples (px) of flat background that a stripe on a step of the background needs between its
 /// flank and the step to be measured after all (`clear_of_step`): about a stripe's σ and the
-/// step's own blur. Without it, whole stripes right beside a silhouette were dropped too: the
-/// demo's sphere kept 589 of 784 points and nothing below z = −20 mm. Measured on the demo's
-/// scans with 2 / 3 / 4 px: sphere 785 / 737 / 676 points at σ 0.042 / 0.039 / 0.038 mm (0.037
-/// without the rule), cylinder 2316 / 2291 / 2223 at σ 0.040 (0.039 without, 0.104 with neither
-/// limit), cone 1281 / 1252 / 1217 at σ 0.035 (0.034).
+/// step's own blur. Without it, whole stripes right beside a silhouette would be dropped
+/// too.
 pub const STEP_CLEARANCE_PX: usize = 3;
 
 /// Arc length (px) over which a stripe must continue on at least one side of a point.

@@ -8,12 +8,8 @@
 //!
 //!   δ = −½ · A⁻¹ · Σ w·|g|²·d²·K,   A = Σ w·g·gᵀ,
 //!
-//! away from the arcs' concave side. On the rendered calibration boards of the paper sensor
-//! (arcs bending around the image centre, κ ≈ 1/100 … 1/400 px⁻¹, half-windows up to 8 px) this
-//! was a systematic +0.03 px outward shift (+0.011 px at 2.5 px half-windows, +0.036 px at 8 px),
-//! which a camera calibration cannot tell from a 0.005° error of the ray elevations; after the
-//! correction the mean radial error is below 0.001 px (+0.006 px in the outermost 15 % of the
-//! ring).
+//! away from the arcs' concave side. A camera calibration cannot tell that shift from an error of the
+//! ray elevations, so it is removed.
 //!
 //! Each grid line's curvature vector at a corner comes from the corner and its two neighbours on
 //! that line (a parabola through three points; one-sided at the board's border; from the parallel

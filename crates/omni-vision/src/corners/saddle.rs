@@ -240,13 +240,8 @@ pub(crate) struct WindowSample {
 ///
 /// The samples sit on the pixel grid, not at `p` + integer offsets: interpolated samples share
 /// `p`'s sub-pixel phase, and bilinear interpolation smooths the image by an amount that depends
-/// on that phase. Measured on rendered boards (noiseless, thousands of corners): with interpolated
-/// samples every corner's error followed 0.017 px · sin 2π·phase in x and in y (the same for
-/// all edge orientations), with pixel-grid samples that coherent pattern is gone and the error
-/// RMS went from 0.017 to 0.009 px per axis. A phase pattern of ~0.008 px whose sign depends on
-/// the edge orientations remains with either layout (a synthetic corner blurred by 1.1 px shows
-/// it): the gradients of an edge only ~2 px wide are sampled once per pixel. The taper keeps the
-/// sums continuous in `p` as pixels enter and leave the window.
+/// on that phase, which gives every corner an error that follows its phase coherently. The taper
+/// keeps the sums continuous in `p` as pixels enter and leave the window.
 pub(crate) fn window_samples(img: &GrayF32, p: [f64; 2], half_window: f64) -> impl Iterator<Item = WindowSample> + '_ {
     let r = half_window.ceil() as isize + 1;
     let (x0, y0) = (p[0].round() as isize, p[1].round() as isize);

@@ -1,40 +1,22 @@
-//! Re-measuring each centre across the stripe's own normal, and removing the sampling kernel's
-//! pull on curved stripes.
+//! The ray sampling's second look: re-measuring each oblique centre across the stripe's own
+//! normal, and removing the blur's pull on curved stripes.
 //!
-//! The rays cross a stripe squarely only where it runs around the mirror centre; where it runs
-//! obliquely (up to 60° off square, [`super::MIN_EDGE_ANGLE_DEG`]) the ray's profile mixes parts
-//! of the stripe that lie up to a few px apart along it. If the stripe's brightness changes
-//! along it (a curved object lit and seen ever more obliquely towards its edge, the fan's
-//! spreading), the profile is tilted and its centre moves towards the brighter part: for a
-//! Gaussian stripe of σ along the ray and a log-brightness slope g per px along the stripe, the
-//! centroid moves by σ²·g·cos φ along the ray (φ: ray–stripe angle), for the windowed centroid
-//! (exactly, to first order: the subtracted threshold cancels the window's edges) and the
-//! log-parabola alike. On the paper bench's cylinder (virtual sensor, 60 frames) this moved the
-//! centres on the flanks by up to −0.07 px and the fitted radius by +0.43 mm.
+//! Where a stripe crosses its ray obliquely, the ray's profile mixes parts of the stripe up to a
+//! few px apart along it; if the brightness changes along the stripe (a curved object's flanks)
+//! the centre moves towards the brighter part, by σ²·g·cos φ for a Gaussian stripe of σ along
+//! the ray, a log-brightness slope g per px and a ray–stripe angle φ. So every point whose
+//! stripe is oblique to its ray (|dr/ds| ≥ [`MIN_SLOPE`]) is measured again on a profile along
+//! the stripe's normal, with the same estimator, threshold and background rule, and slides along
+//! its ray onto the centre line found. The direction and curvature κ come from a least-squares
+//! parabola r(s) through the stripe's points within ±[`SHAPE_HALF_ARC_PX`] of arc.
 //!
-//! So every point whose stripe crosses its ray obliquely (|dr/ds| ≥ [`MIN_SLOPE`]) is measured
-//! again on a profile sampled along the stripe's normal, which meets the stripe at one place
-//! along it, with the same estimator, threshold and background rule as on the ray; the point
-//! then slides along its own ray onto the centre line found. The local direction comes from a
-//! least-squares parabola r(s) through the points of the same stripe within
-//! ±[`SHAPE_HALF_ARC_PX`] of arc, widened where the rays are sparse ([`MIN_SIDE_POINTS`]; s: arc
-//! length around the mirror centre).
-//!
-//! The same parabola gives the stripe's curvature κ. Every 2-D blur of the image pulls a curved
-//! stripe's centre towards its centre of curvature by σ²κ/2, whatever the stripe's width, and
-//! three blurs add up: the camera's optics ([`super::RidgeParams::optics_blur_px`]), the pixel
-//! area (a box of variance 1/12 px²) and the detector's sampling kernel
-//! ([`super::sampling::SAMPLE_SIGMA_PX`]): σ² = 0.49 + 0.08 + 0.64 px² with the defaults, 0.04 px
-//! at a 15 px radius of curvature (the cylinder's flanks). That known shift is removed. Measured
-//! on a ring of Gaussian profile blurred by σ 0.7 px: pull coefficient (radial error × R) 0.59
-//! (R 15) / 0.61 px² (R 25) against σ²/2 = 0.61; removing the sampling kernel's part alone left
-//! 0.26–0.29 px² (the optics and pixel), which on the simulated paper bench put the flanks of
-//! cylinder and sphere 0.01–0.02 px outwards and the fitted radii 0.15–0.25 mm short.
-//!
-//! Points keep the ray's measurement if they are saturated, have fewer than [`MIN_POINTS`]
-//! neighbours, the new profile fails a check, or the correction would move them by more than
-//! [`MAX_MOVE_PX`]. The Hessian method is left alone (Steger's centre already comes from the
-//! image's local second derivatives, not from the ray's profile).
+//! Every 2-D blur pulls a curved stripe's centre towards its centre of curvature by σ²κ/2,
+//! whatever its width; the optics ([`super::RidgeParams::optics_blur_px`]), the pixel area
+//! (1/12 px²) and the sampling kernel ([`super::sampling::SAMPLE_SIGMA_PX`]) add up, and that
+//! known shift is removed. Points keep the ray's measurement if saturated, with fewer than
+//! [`MIN_POINTS`] neighbours, when the new profile fails a check, or when the move would exceed
+//! [`MAX_MOVE_PX`]. Steger's Hessian method is left alone: its centre comes from the image's own
+//! second derivatives, not from the ray's profile.
 
 use super::sampling::SAMPLE_SIGMA_PX;
 use super::{
@@ -48,10 +30,8 @@ pub const SHAPE_HALF_ARC_PX: f64 = 3.0;
 pub const MIN_POINTS: usize = 5;
 /// Points of the same stripe wanted on each side: where the rays are sparse (0.5–1 px apart
 /// depending on the radius, see `RidgeDetector::ray_step`) the window widens, up to twice
-/// [`SHAPE_HALF_ARC_PX`], until it holds this many. Measured on the demo's cylinder (true sensor
-/// files, 40 frames): with a camera file carrying the rim circle its rays were 0.8 px apart
-/// instead of 0.55 and the points' RMS about the surface was 0.057 mm instead of 0.045 (the
-/// fixed ±3 px window held ~3 points a side); with this rule 0.043 and 0.042 mm.
+/// [`SHAPE_HALF_ARC_PX`], until it holds this many. A fixed window holds too few points where the
+/// rays are sparse, and the shape's noise then reaches the points.
 pub const MIN_SIDE_POINTS: usize = 4;
 /// |dr/ds| below which the ray is taken as the normal (the stripe within 3° of square).
 pub const MIN_SLOPE: f64 = 0.05;

@@ -432,3 +432,25 @@ fn a_facet_off_the_polygon_and_angles_far_outside_it_are_refused() {
         assert!(!d.join("m.jsonl").exists() && !d.join("f").exists());
     }
 }
+
+/// Sizes given on the command line are bounded before anything is allocated or written.
+#[test]
+fn board_counts_and_sensor_widths_out_of_range_are_usage_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let board = testdata("boards/board_9x6.json");
+    for count in ["0", "10001", "4000000000"] {
+        let out = sim(&["boards", "--camera", "sensor/camera.json", "--board", &board, "--count", count, "--out", "b"], d);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "--count {count}: {err}");
+        assert!(err.contains("--count") && err.lines().count() == 1, "{err}");
+        assert!(!d.join("b").exists(), "no output directory after a usage error");
+    }
+    for width in ["8", "8193"] {
+        let out = sim(&["sensor", "--preset", "paper", "--width", width, "-o", "w"], d);
+        assert_eq!(out.status.code(), Some(2), "--width {width}");
+        assert!(String::from_utf8_lossy(&out.stderr).contains("--width"));
+        assert!(!d.join("w").exists());
+    }
+}

@@ -441,7 +441,8 @@ fn board_counts_and_sensor_widths_out_of_range_are_usage_errors() {
     small_sensor(d);
     let board = testdata("boards/board_9x6.json");
     for count in ["0", "10001", "4000000000"] {
-        let out = sim(&["boards", "--camera", "sensor/camera.json", "--board", &board, "--count", count, "--out", "b"], d);
+        let out =
+            sim(&["boards", "--camera", "sensor/camera.json", "--board", &board, "--count", count, "--out", "b"], d);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "--count {count}: {err}");
         assert!(err.contains("--count") && err.lines().count() == 1, "{err}");

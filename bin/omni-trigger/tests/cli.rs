@@ -488,8 +488,9 @@ fn missing_frames_beyond_max_missing_fail_the_scan() {
 /// The virtual camera's size is bounded before the emulator opens its pseudo-terminal.
 #[test]
 fn an_emulated_camera_width_out_of_range_is_a_usage_error() {
+    let dir = tempfile::tempdir().unwrap();
     for width in ["8", "8193", "2000000000"] {
-        let out = Command::new(BIN).args(["emulate", "--width", width]).output().unwrap();
+        let out = Command::new(BIN).args(["emulate", "--width", width, "--frames"]).arg(dir.path()).output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "--width {width}: {err}");
         assert!(err.contains("--width must be in 16..=8192") && err.lines().count() == 1, "{err}");

@@ -18,6 +18,8 @@ its length (--sampling rays: along rays from the mirror centre instead, which mi
 record's `stripe` field; other records and fields pass through untouched. Points closer than 1.5 px
 to a stripe's end, lopsided profiles (a stripe cut by a silhouette or a crease) and isolated specks
 are dropped; the blur's pull on curved stripes is removed with the blur measured on the frame.
+Without laser-off frames, textured or patterned light (window bars, posters, checks) gives false
+stripes; --static-ambient estimates the laser-off frame from the scan itself (a sensor at rest).
 
 Methods: centroid (the paper's threshold + intensity centroid, Eq. 16), windowed (centroid with the
 threshold subtracted, the default), gauss (log-parabola fit), blais-rioux, hessian (Steger).
@@ -26,7 +28,8 @@ Saturated stripes are always located at the centre of the saturated plateau.
 Examples:
   omni-sim scan --scene room.json | omni-ridge --camera camera.json | omni-triangulate ...
   omni-ridge scan.jsonl -o ridges.jsonl --camera camera.json --method gauss --threshold 40
-  omni-ridge scan.jsonl -o ridges.jsonl --overlay check/ --keep-going";
+  omni-ridge scan.jsonl -o ridges.jsonl --overlay check/ --keep-going
+  omni-ridge scan.jsonl -o ridges.jsonl --camera camera.json --static-ambient";
 
 /// Finds the laser stripe's sub-pixel centres in every frame of a stream.
 #[derive(Parser, Debug)]
@@ -80,6 +83,12 @@ struct Args {
     /// it the tool warns and passes `complete: false` on.
     #[arg(long)]
     strict: bool,
+    /// Estimate the ambient light from the scan itself and subtract it from every frame without a
+    /// laser-off frame: the per-pixel median of up to 31 frames at different mirror angles. For a
+    /// sensor that stands still during the scan, under patterned or textured light; needs INPUT
+    /// as a file (it is read twice).
+    #[arg(long)]
+    static_ambient: bool,
     /// Worker threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -119,6 +128,14 @@ fn main() -> ExitCode {
         } else {
             args.threads
         };
+        let static_ambient = if args.static_ambient {
+            if args.input == std::path::Path::new("-") {
+                return Err(CliError::usage("--static-ambient reads the stream twice: give it as a file, not stdin"));
+            }
+            Some(pipeline::estimate_static_ambient(&args.input)?)
+        } else {
+            None
+        };
         let config = pipeline::Config {
             params,
             camera,
@@ -127,6 +144,7 @@ fn main() -> ExitCode {
             threads,
             producer: format!("omni-ridge {}", env!("CARGO_PKG_VERSION")),
             strict: args.strict,
+            static_ambient,
         };
         run(&args.input, &args.output, config)
     })

@@ -27,6 +27,8 @@ pub struct Config {
     pub producer: String,
     /// A stream without its final status record is an error, not a warning.
     pub strict: bool,
+    /// Subtracted from every laser frame that has no laser-off frame of its own.
+    pub static_ambient: Option<GrayImage>,
 }
 
 /// The prefix of the error returned after a `--keep-going` run with failed frames.
@@ -55,6 +57,7 @@ struct Detectors {
     from_first_frame: OnceLock<RidgeDetector>,
     /// Laser-off frames, decoded once for all the frames that share them.
     laser_off: stripe::LaserOffCache,
+    static_ambient: Option<GrayImage>,
 }
 
 impl Detectors {
@@ -85,6 +88,7 @@ pub fn run(input: Input, writer: impl Write, output_name: &str, config: Config) 
         camera: camera_detector,
         from_first_frame: OnceLock::new(),
         laser_off: stripe::LaserOffCache::default(),
+        static_ambient: config.static_ambient,
     });
     let threads = config.threads.max(1);
     let window = 2 * threads + 2;
@@ -221,9 +225,12 @@ fn process_frame(
         frame.stripe = Some(Vec::new());
         return Ok(());
     }
-    let img = stripe::load_frame_image_cached(frame, frames_dir, &detectors.laser_off)?;
-    let (detector, what) = detectors.for_image(&img)?;
+    let mut img = stripe::load_frame_image_cached(frame, frames_dir, &detectors.laser_off)?;
     let path = frame.resolve_path(frames_dir, &frame.path);
+    if let (Some(ambient), None) = (&detectors.static_ambient, &frame.ambient_path) {
+        img.subtract_saturating(ambient).map_err(|m| format!("{}: static ambient's {m}", path.display()))?;
+    }
+    let (detector, what) = detectors.for_image(&img)?;
     let points = stripe::frame_points(&img, detector, what).map_err(|m| format!("{}: {m}", path.display()))?;
     if let Some(dir) = overlay {
         let rgb = stripe::draw_overlay(&img, &points);
@@ -287,4 +294,30 @@ fn write_in_order(
         return Err(CliError::new(format!("{} {KEEP_GOING_SUMMARY} (see the error records)", failures.len())));
     }
     Ok(())
+}
+
+/// The static-ambient estimate of the stream in `input` (a file: it is read twice), from the
+/// frames [`stripe::static_ambient_frames`] picks.
+pub fn estimate_static_ambient(input: &Path) -> CliResult<GrayImage> {
+    let mut stream = StreamReader::open(input)?;
+    let (mut frames, mut dirs) = (Vec::new(), Vec::new());
+    let mut frames_dir: Option<String> = None;
+    while let Some(record) = stream.next_record()? {
+        match record {
+            Record::Header(h) => frames_dir = h.frames_dir,
+            Record::Frame(f) => {
+                frames.push(*f);
+                dirs.push(frames_dir.clone());
+            }
+            _ => {}
+        }
+    }
+    let name = input.display();
+    let picked = stripe::static_ambient_frames(&frames).map_err(|m| CliError::new(format!("{name}: {m}")))?;
+    let mut images = Vec::with_capacity(picked.len());
+    for i in picked {
+        let path = frames[i].resolve_path(dirs[i].as_deref(), &frames[i].path);
+        images.push(omni_vision::image_io::load_gray(&path).map_err(|e| CliError::new(e.to_string()))?);
+    }
+    stripe::static_ambient(&images).map_err(|m| CliError::new(format!("{name}: static ambient: {m}")))
 }

@@ -306,3 +306,52 @@ fn a_relative_frames_dir_is_found_beside_the_manifest() {
     assert!(out.status.success(), "{}", stderr(&out));
     assert_eq!(records(&out.stdout).len(), 5);
 }
+
+/// A static pattern (two bright bars that look like stripes) under a ring that moves from
+/// frame to frame: `--static-ambient` takes the scan's per-pixel median as its laser-off frame.
+#[test]
+fn static_ambient_removes_a_pattern_that_stays_put() {
+    let dir = tempfile::tempdir().unwrap();
+    let bars = |x: f64, _y: f64| if (18.0..21.0).contains(&x) || (104.0..107.0).contains(&x) { 90.0 } else { 0.0 };
+    let radii: Vec<f64> = (0..7).map(|k| 26.0 + 4.0 * k as f64).collect();
+    let mut recs = vec![header(dir.path())];
+    for (k, r) in radii.iter().enumerate() {
+        write_gray_png(&dir.path().join(format!("p{k}.png")), &ring(*r, 150.0, bars)).unwrap();
+        recs.push(frame(k as u64, &format!("p{k}.png")));
+    }
+    recs.push(status(radii.len() as u64));
+    let input = dir.path().join("scan.jsonl");
+    std::fs::write(&input, stream_text(&recs)).unwrap();
+    let off_ring = |out: &Output| -> (usize, f64) {
+        assert!(out.status.success(), "{}", stderr(out));
+        let frames = records(&out.stdout).into_iter().filter_map(|r| match r {
+            Record::Frame(f) => Some(f),
+            _ => None,
+        });
+        let (mut off, mut worst) = (0, 0.0f64);
+        for (f, r) in frames.zip(&radii) {
+            for p in f.stripe.as_ref().unwrap() {
+                let e = ((p.u - CENTRE).hypot(p.v - CENTRE) - r).abs();
+                if e > 2.0 { off += 1 } else { worst = worst.max(e) }
+            }
+        }
+        (off, worst)
+    };
+    let (off, _) = off_ring(&run(&[input.to_str().unwrap()], ""));
+    assert!(off > 50, "the bars should be taken for stripes without the estimate: {off} points off the rings");
+    let (off, worst) = off_ring(&run(&["--static-ambient", input.to_str().unwrap()], ""));
+    assert!(off == 0 && worst < 0.06, "{off} points off the rings, worst {worst:.3} px on them");
+    // Read twice, so not from stdin; and one mirror angle is not a sweep.
+    let out = run(&["--static-ambient", "-"], &stream_text(&recs));
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("not stdin"), "{}", stderr(&out));
+    let few = dir.path().join("few.jsonl");
+    std::fs::write(&few, stream_text(&recs[..3])).unwrap();
+    let out = run(&["--static-ambient", few.to_str().unwrap()], "");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr(&out).contains("few.jsonl") && stderr(&out).contains("mirror angles, the stream has 2"),
+        "{}",
+        stderr(&out)
+    );
+}

@@ -234,3 +234,82 @@ fn saturated_stripes_are_kept() {
     assert!(t.coverage(8).unwrap() >= 0.9, "coverage {:?}", t.coverage(8));
     assert!(rms <= 0.1 && bias.abs() <= 0.05, "rms {rms:.4} bias {bias:+.4}");
 }
+
+/// Patterned ambient light without a laser-off frame: a checkered plane (20 mm cells, albedo
+/// ×(1 ± 0.8)) in a bright room with a pool of light on it. The checks' edges and the pool's rim
+/// stand out like stripes; the scan's own per-pixel median (`static_ambient`, as
+/// `omni-ridge --static-ambient` uses it) removes them as well as a true laser-off frame does.
+#[test]
+fn patterned_ambient_light_is_removed_by_the_static_ambient_estimate() {
+    use omni_formats::scene::{LightPatch, Lighting, Texture, TexturePattern};
+    use omni_vision::stripe::{static_ambient, static_ambient_frames};
+    let sensor = Sensor::paper_scaled(SIZE);
+    let mut file = paper_bench(BenchObject::Plane);
+    file.lighting = Some(Lighting {
+        level: 2.0,
+        gradient: None,
+        patches: vec![LightPatch { centre_mm: [500.0, 80.0, 40.0], radius_mm: 120.0, gain: 2.0 }],
+    });
+    file.objects[0].texture =
+        Some(Texture { pattern: TexturePattern::Checker, period_mm: 40.0, contrast: 0.8, direction: [0.0, 0.0, 1.0] });
+    let scene = Scene::from_file(file).unwrap();
+    let circle = sensor.camera.mirror_circle();
+    let det = RidgeDetector::new(SIZE, SIZE, circle, RidgeParams::default());
+    let alphas: Vec<f64> = (0..10).map(|k| 6.0 + 2.5 * k as f64).collect();
+    let frames: Vec<_> = alphas
+        .iter()
+        .enumerate()
+        .map(|(k, a)| {
+            let o = RenderOptions { seed: 40 + k as u64, ..RenderOptions::default() };
+            render_laser_frame(&sensor, &scene, a.to_radians(), 0, &[0, 1], &o)
+        })
+        .collect();
+    let records: Vec<_> =
+        alphas.iter().enumerate().map(|(k, a)| omni_formats::stream::Frame::new(k as u64, "f.png", *a, 0)).collect();
+    let picked = static_ambient_frames(&records).unwrap();
+    assert_eq!(picked.len(), frames.len());
+    let images: Vec<GrayImage> = frames.iter().map(|f| to_gray(&f.image)).collect();
+    let ambient = static_ambient(&images).unwrap();
+    let (mut raw, mut cleaned, mut laser_off) = (Tally::default(), Tally::default(), Tally::default());
+    let centre = (circle.centre.x, circle.centre.y);
+    for (k, (f, img)) in frames.iter().zip(&images).enumerate() {
+        add(&mut raw, &det.detect(img), &f.truth, centre);
+        let mut estimated = img.clone();
+        estimated.subtract_saturating(&ambient).unwrap();
+        add(&mut cleaned, &det.detect(&estimated), &f.truth, centre);
+        // A true laser-off frame of its own (another exposure: its own noise) as the yardstick.
+        let o = RenderOptions { seed: 90 + k as u64, ..RenderOptions::default() };
+        let off = to_gray(&render_laser_frame(&sensor, &scene, alphas[k].to_radians(), 0, &[], &o).image);
+        let mut subtracted = img.clone();
+        subtracted.subtract_saturating(&off).unwrap();
+        add(&mut laser_off, &det.detect(&subtracted), &f.truth, centre);
+    }
+    eprintln!(
+        "{}\n{}\n{}",
+        raw.line("patterned, as captured"),
+        cleaned.line("patterned, static ambient"),
+        laser_off.line("patterned, laser-off")
+    );
+    let total = |t: &Tally| t.band_total.iter().sum::<usize>();
+    let covered = |t: &Tally| t.band_covered.iter().sum::<usize>() as f64 / total(t).max(1) as f64;
+    assert!(raw.false_points > raw.errors.len(), "the pattern should fool the detector: {}", raw.line("raw"));
+    // The estimate does as well as a laser-off frame: what the texture itself costs (dim stripes
+    // on the dark cells) is the same for both.
+    assert!(cleaned.false_points * 100 <= cleaned.errors.len(), "{}", cleaned.line("static ambient"));
+    assert!(covered(&cleaned) >= covered(&laser_off) - 0.03, "coverage {:.3}", covered(&cleaned));
+    let ((rms, bias), (off_rms, _)) = (cleaned.rms_bias(), laser_off.rms_bias());
+    assert!(rms <= off_rms + 0.015 && bias.abs() <= 0.02, "rms {rms:.4} (laser-off {off_rms:.4}) bias {bias:+.4}");
+}
+
+/// A scan whose stripe stays in one place (one mirror angle) cannot give its own ambient light.
+#[test]
+fn a_static_ambient_estimate_needs_several_mirror_angles() {
+    use omni_vision::stripe::static_ambient_frames;
+    let same: Vec<_> = (0..20).map(|k| omni_formats::stream::Frame::new(k, "f.png", 12.0, 0)).collect();
+    let e = static_ambient_frames(&same).unwrap_err();
+    assert!(e.contains("5 or more mirror angles") && e.contains("has 1"), "{e}");
+    let many: Vec<_> = (0..100).map(|k| omni_formats::stream::Frame::new(k, "f.png", k as f64 * 0.3, 0)).collect();
+    let picked = static_ambient_frames(&many).unwrap();
+    assert_eq!(picked.len(), 31);
+    assert!(picked.windows(2).all(|w| w[1] > w[0]) && picked[0] == 0 && *picked.last().unwrap() >= 96);
+}

@@ -67,6 +67,61 @@ pub fn load_frame_image_cached(
     Ok(img)
 }
 
+/// Frames a static-ambient estimate uses at most, evenly spaced over the scan.
+pub const STATIC_AMBIENT_MAX_FRAMES: usize = 31;
+/// Fewest laser frames, at as many distinct mirror angles, a static-ambient estimate needs.
+pub const STATIC_AMBIENT_MIN_FRAMES: usize = 5;
+
+/// The scene without the laser, estimated from the laser frames of a sensor that does not move
+/// during the scan: the per-pixel median of frames taken at different mirror angles. A sweeping
+/// stripe lights each pixel in a few frames only, so the median is that pixel's ambient level;
+/// lighting and texture that stay put cancel when it is subtracted, the stripe does not.
+pub fn static_ambient(frames: &[GrayImage]) -> Result<GrayImage, String> {
+    let first = frames.first().ok_or("no frames to estimate the ambient light from")?;
+    if let Some((i, f)) = frames
+        .iter()
+        .enumerate()
+        .find(|(_, f)| (f.width, f.height, f.bit_depth) != (first.width, first.height, first.bit_depth))
+    {
+        return Err(format!(
+            "frame {i} is {}x{} px, {}-bit, but the first is {}x{} px, {}-bit",
+            f.width, f.height, f.bit_depth, first.width, first.height, first.bit_depth
+        ));
+    }
+    let mut out = GrayImage::new(first.width, first.height, first.bit_depth);
+    let mut values = vec![0u16; frames.len()];
+    for (k, pixel) in out.data.iter_mut().enumerate() {
+        for (v, f) in values.iter_mut().zip(frames) {
+            *v = f.data[k];
+        }
+        let mid = values.len() / 2;
+        *pixel = *values.select_nth_unstable(mid).1;
+    }
+    Ok(out)
+}
+
+/// The laser frames (indices into `frames`) a static-ambient estimate of a scan uses: frames
+/// with a laser on and no laser-off frame of their own, at most [`STATIC_AMBIENT_MAX_FRAMES`]
+/// evenly spaced ones.
+/// Refused when fewer than [`STATIC_AMBIENT_MIN_FRAMES`] distinct mirror angles remain: with
+/// the stripe in the same place in most frames, the median would be the stripe.
+pub fn static_ambient_frames(frames: &[Frame]) -> Result<Vec<usize>, String> {
+    let laser: Vec<usize> =
+        (0..frames.len()).filter(|&i| !frames[i].lasers.is_empty() && frames[i].ambient_path.is_none()).collect();
+    let mut angles: Vec<(u32, i64)> =
+        laser.iter().map(|&i| (frames[i].facet, (frames[i].alpha_deg * 100.0).round() as i64)).collect();
+    angles.sort_unstable();
+    angles.dedup();
+    if angles.len() < STATIC_AMBIENT_MIN_FRAMES {
+        return Err(format!(
+            "a static-ambient estimate needs laser frames at {STATIC_AMBIENT_MIN_FRAMES} or more mirror angles, the stream has {}",
+            angles.len()
+        ));
+    }
+    let n = laser.len().min(STATIC_AMBIENT_MAX_FRAMES);
+    Ok((0..n).map(|i| laser[i * laser.len() / n]).collect())
+}
+
 /// Checks that an image has the size the detector (camera) expects.
 pub fn check_size(img: &GrayImage, detector: &RidgeDetector, what: &str) -> Result<(), String> {
     let (w, h) = detector.image_size();
@@ -85,6 +140,20 @@ pub fn frame_points(img: &GrayImage, detector: &RidgeDetector, what: &str) -> Re
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_static_ambient_is_the_per_pixel_median_of_frames_of_one_size() {
+        let frames: Vec<GrayImage> = [3u16, 200, 5, 4, 6]
+            .iter()
+            .map(|&v| GrayImage { width: 2, height: 1, bit_depth: 8, data: vec![v, 7] })
+            .collect();
+        assert_eq!(static_ambient(&frames).unwrap().data, vec![5, 7]);
+        let mut mixed = frames.clone();
+        mixed[3] = GrayImage::new(3, 1, 8);
+        let e = static_ambient(&mixed).unwrap_err();
+        assert!(e.contains("frame 3 is 3x1 px") && e.contains("first is 2x1"), "{e}");
+        assert!(static_ambient(&[]).is_err());
+    }
 
     #[test]
     fn a_laser_off_frame_is_decoded_once_and_errors_name_it() {

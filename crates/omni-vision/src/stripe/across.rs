@@ -686,6 +686,37 @@ mod direction_tests {
         }
     }
 
+    /// The lateral resolution the along-stripe fit costs: a step of 0.3 px across a straight
+    /// stripe (16-bit, noiseless) rises 10–90 % over 1.6 L, as through a moving average over the
+    /// fit's window 2L; alone it rises over the blur's reach only.
+    #[test]
+    fn along_stripe_fit_spreads_a_step_over_its_window() {
+        const STEP_X: f64 = 121.0;
+        let centre_line = |x: f64| if x < STEP_X { 60.0 } else { 60.3 };
+        let img = render(W, H, 16, 0.0, 1, |x, y| 40000.0 * (-(y - centre_line(x)).powi(2) / (2.0 * 0.9 * 0.9)).exp());
+        let rise = |along: f64| {
+            let mut pts: Vec<(f64, f64)> = detector(RidgeParams { along_stripe_px: along, ..Default::default() })
+                .detect(&img)
+                .iter()
+                .filter(|p| (p.v - 60.15).abs() < 1.0 && (p.u - STEP_X).abs() < 20.0)
+                .map(|p| (p.u, (p.v - 60.0) / 0.3))
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let first = |level: f64| pts.iter().find(|p| p.1 >= level).map(|p| p.0).unwrap();
+            let last = |level: f64| pts.iter().rev().find(|p| p.1 <= level).map(|p| p.0).unwrap();
+            (first(0.9) - last(0.1)).max(0.0)
+        };
+        let alone = rise(0.0);
+        eprintln!("10-90 % rise of a 0.3 px step: alone {alone:.2} px");
+        assert!(alone <= 2.5, "alone: {alone:.2} px");
+        for l in [3.0, 6.0] {
+            let r = rise(l);
+            eprintln!("  along ±{l} px: {r:.2} px");
+            // A moving average over 2L rises 10–90 % in 1.6 L.
+            assert!(r >= 1.4 * l && r <= 1.6 * l + 1.0, "along ±{l}: rise {r:.2} px");
+        }
+    }
+
     /// The along-stripe parabola averages noise on a tightly curved stripe without moving it.
     #[test]
     fn along_stripe_fit_averages_noise_and_keeps_a_curved_stripe() {

@@ -313,3 +313,19 @@ fn a_static_ambient_estimate_needs_several_mirror_angles() {
     assert_eq!(picked.len(), 31);
     assert!(picked.windows(2).all(|w| w[1] > w[0]) && picked[0] == 0 && *picked.last().unwrap() >= 96);
 }
+
+/// Under the realistic sensor's speckle, the along-stripe fit (±3 px) on the curved objects
+/// lowers the scatter and leaves the bias where the single points put it: it adds none.
+#[test]
+fn the_along_stripe_fit_adds_no_bias_on_curved_stripes_under_speckle() {
+    for object in [BenchObject::Cylinder, BenchObject::Sphere] {
+        let opts = RenderOptions::default();
+        let alone = bench(object, &opts, RidgeParams::default());
+        let along = bench(object, &opts, RidgeParams { along_stripe_px: 3.0, ..Default::default() });
+        eprintln!("{}\n{}", alone.line(&format!("realistic {object:?}")), along.line("  along ±3"));
+        let ((rms0, bias0), (rms3, bias3)) = (alone.rms_bias(), along.rms_bias());
+        assert!((bias3 - bias0).abs() <= 0.005, "{object:?}: bias {bias0:+.4} → {bias3:+.4} px");
+        assert!(rms3 <= 0.8 * rms0, "{object:?}: rms {rms0:.4} → {rms3:.4} px");
+        assert!(bias0.abs() <= 0.035, "{object:?}: bias {bias0:+.4} px");
+    }
+}

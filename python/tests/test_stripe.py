@@ -28,12 +28,13 @@ def test_detected_centres_are_near_the_true_stripe(sim):
         image = cv2.imread(by_seq[rec["seq"]]["image_path"], cv2.IMREAD_UNCHANGED)
         found = omniscan.detect_stripe(image, cam)[:, :2]
         true_px = np.array(rec["points"])[:, 3:5]
-        assert len(found) > 0.5 * len(true_px) > 0
+        assert len(found) > 20 and len(true_px) > 0
         # Distance from each found centre to the densely sampled true stripe.
         d = np.linalg.norm(found[:, None, :] - true_px[None, :, :], axis=2).min(axis=1)
         distances.append(d)
     d = np.concatenate(distances)
-    assert np.median(d) < 0.5, f"median {np.median(d):.3f} px from the true stripe"
+    # Measured: median 0.04 px, 95 % within 0.07 px (384 px idealised frames).
+    assert np.median(d) < 0.1 and np.quantile(d, 0.95) < 0.3, (np.median(d), np.quantile(d, 0.95))
 
 
 def test_sixteen_bit_images_and_ambient_subtraction():

@@ -93,7 +93,11 @@ impl Camera {
 
     /// Pixels (u, v) of world points: `points` has shape (..., 3) (mm, world frame); returns
     /// shape (..., 2), NaN where a point is not visible through the mirror.
-    fn point_to_pixel<'py>(&self, py: Python<'py>, points: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    fn point_to_pixel<'py>(
+        &self,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let pts = Vectors::<3>::extract(points, "points")?;
         let pixels = py.detach(|| {
             let mut out = Vec::with_capacity(pts.len() * 2);

@@ -31,9 +31,9 @@ impl Scanner {
                 self.model.num_lasers()
             )));
         }
-        self.model
-            .light_plane(alpha, facet, laser)
-            .ok_or_else(|| crate::value_error(format!("laser {laser}: no light plane at alpha {alpha_deg}° facet {facet}")))
+        self.model.light_plane(alpha, facet, laser).ok_or_else(|| {
+            crate::value_error(format!("laser {laser}: no light plane at alpha {alpha_deg}° facet {facet}"))
+        })
     }
 }
 
@@ -81,7 +81,13 @@ impl Scanner {
     /// `virtual_source` (the laser apex mirrored in the facet), `facet_point` and `out_dir` (the
     /// central ray's hit on the facet and its reflected direction), `on_facet`.
     #[pyo3(signature = (alpha_deg, facet = 0, laser = 0))]
-    fn light_plane<'py>(&self, py: Python<'py>, alpha_deg: f64, facet: u32, laser: usize) -> PyResult<Bound<'py, PyDict>> {
+    fn light_plane<'py>(
+        &self,
+        py: Python<'py>,
+        alpha_deg: f64,
+        facet: u32,
+        laser: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let lp = self.plane_at(alpha_deg, facet, laser)?;
         let d = PyDict::new(py);
         let vec3 = |v: &[f64]| v.to_vec().into_pyarray(py);

@@ -8,6 +8,9 @@ use omni_model::CameraModel;
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
+/// A float64 numpy array of any shape.
+type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
+
 /// A receiver model loaded from camera.json (kinds hyperbolic, mei, ocam): maps pixels to world
 /// rays and world points to pixels, exactly as the omniscan tools do.
 #[pyclass(frozen, module = "omniscan")]
@@ -65,11 +68,7 @@ impl Camera {
     /// directions), each of shape (..., 3): ray origins in mm (the single viewpoint) and unit
     /// directions, world frame. Rows are NaN where a pixel does not see the scene through the
     /// mirror (outside the annulus or the image).
-    fn pixel_to_ray<'py>(
-        &self,
-        py: Python<'py>,
-        pixels: &Bound<'py, PyAny>,
-    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>)> {
+    fn pixel_to_ray<'py>(&self, py: Python<'py>, pixels: &Bound<'py, PyAny>) -> PyResult<(Array<'py>, Array<'py>)> {
         let px = Vectors::<2>::extract(pixels, "pixels")?;
         let (origins, dirs) = py.detach(|| {
             let (mut origins, mut dirs) = (Vec::with_capacity(px.len() * 3), Vec::with_capacity(px.len() * 3));

@@ -129,3 +129,15 @@ def test_a_changed_scene_reruns_only_its_scan(batch):
     # The new scan measures the moved plane as well as the old one measured the first.
     row = summary(out)["plane"]
     assert row["points"] > 200 and abs(row["mean"]) < 1.0 and row["std"] < 1.5, row
+
+
+def test_a_config_of_another_version_is_refused(tmp_path):
+    with open(os.path.join(HERE, "config.yaml")) as f:
+        config = yaml.safe_load(f)
+    config["version"] = 2
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(config))
+    cmd = [os.path.join(os.path.dirname(sys.executable), "snakemake"), "-s", SNAKEFILE, "--configfile",
+           str(tmp_path / "config.yaml"), "--directory", str(tmp_path), "--cores", "1", "--dry-run"]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    assert done.returncode != 0
+    assert "expected format omniscan.workflow version 1" in done.stdout + done.stderr

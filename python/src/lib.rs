@@ -1,6 +1,6 @@
 //! `omniscan._native`: the Python bindings (PyO3). Every function here converts numpy arrays to
 //! the workspace crates' types, calls the crate, and converts back; the geometry, the detector
-//! and the readers are the crates' own (python/README.md, docs/DECISIONS.md).
+//! and the readers are the crates' own (README.md "Python", docs/DECISIONS.md).
 //!
 //! Units as everywhere in omniscan: millimetres, world frame (receiver frame, +z up towards the
 //! mirror); degrees in the Python API, radians in the crates; pixels x right, y down, (0, 0) at

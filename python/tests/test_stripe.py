@@ -1,0 +1,67 @@
+"""omniscan.detect_stripe on numpy images (decoded by OpenCV): the same centres as omni-ridge,
+and near the simulator's true stripe pixels."""
+import cv2
+import numpy as np
+import pytest
+
+import omniscan
+
+
+def frames(sim):
+    return omniscan.read_stream(sim["dir"] / "stripes.jsonl")["frames"]
+
+
+def test_detect_stripe_equals_omni_ridge(sim):
+    cam = omniscan.Camera.load(sim["camera"])
+    for fr in frames(sim):
+        image = cv2.imread(fr["image_path"], cv2.IMREAD_UNCHANGED)
+        assert image.dtype == np.uint8 and image.shape == cam.image_size[::-1]
+        ours = omniscan.detect_stripe(image, cam)
+        np.testing.assert_array_equal(ours, fr["stripe"])
+
+
+def test_detected_centres_are_near_the_true_stripe(sim):
+    cam = omniscan.Camera.load(sim["camera"])
+    by_seq = {fr["seq"]: fr for fr in frames(sim)}
+    distances = []
+    for rec in sim["truth"]:
+        image = cv2.imread(by_seq[rec["seq"]]["image_path"], cv2.IMREAD_UNCHANGED)
+        found = omniscan.detect_stripe(image, cam)[:, :2]
+        true_px = np.array(rec["points"])[:, 3:5]
+        assert len(found) > 20 and len(true_px) > 0
+        # Distance from each found centre to the densely sampled true stripe.
+        d = np.linalg.norm(found[:, None, :] - true_px[None, :, :], axis=2).min(axis=1)
+        distances.append(d)
+    d = np.concatenate(distances)
+    # Measured: median 0.04 px, 95 % within 0.07 px (384 px idealised frames).
+    assert np.median(d) < 0.1 and np.quantile(d, 0.95) < 0.3, (np.median(d), np.quantile(d, 0.95))
+
+
+def test_sixteen_bit_images_and_ambient_subtraction():
+    # A synthetic vertical Gaussian stripe at x = 40.3 px on a 96x96 frame, plus a flat ambient.
+    x = np.arange(96.0)
+    profile = 30000.0 * np.exp(-0.5 * ((x - 40.3) / 1.2) ** 2)
+    stripe = np.tile(profile, (96, 1))
+    ambient = np.full((96, 96), 5000, dtype=np.uint16)
+    image = (stripe + ambient).astype(np.uint16)
+    found = omniscan.detect_stripe(image, ambient=ambient, method="gauss")
+    assert len(found) > 20
+    rows = found[np.abs(found[:, 1] - 48.0) < 30.0]
+    np.testing.assert_allclose(rows[:, 0], 40.3, atol=0.05)
+    # The same stripe at 8 bits is found at the same place.
+    found8 = omniscan.detect_stripe((stripe / 257.0).astype(np.uint8), method="gauss")
+    np.testing.assert_allclose(np.median(found8[:, 0]), 40.3, atol=0.05)
+
+
+def test_bad_images_and_settings_are_refused(sim):
+    cam = omniscan.Camera.load(sim["camera"])
+    with pytest.raises(TypeError, match="uint8 or uint16"):
+        omniscan.detect_stripe(np.zeros((8, 8), dtype=np.float32))
+    with pytest.raises(TypeError, match="3-D"):
+        omniscan.detect_stripe(np.zeros((8, 8, 3), dtype=np.uint8))
+    with pytest.raises(ValueError, match="camera's image"):
+        omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), cam)
+    with pytest.raises(ValueError, match="unknown method"):
+        omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), method="magic")
+    with pytest.raises(ValueError, match="ambient"):
+        omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), ambient=np.zeros((20, 31), dtype=np.uint8))

@@ -2,6 +2,7 @@
  * trigger timing in scan.c. Wiring and timing: firmware/README.md. */
 #include <avr/interrupt.h>
 #include <avr/io.h>
+#include <avr/sleep.h>
 #include <avr/wdt.h>
 #include "proto.h"
 #include "scan.h"
@@ -15,6 +16,7 @@ int main(void)
     wdt_enable(WDTO_250MS); /* a hung main loop resets the chip: outputs float, lasers off */
     scan_init();
     uart_init();
+    set_sleep_mode(SLEEP_MODE_IDLE);
     sei();
     uint64_t last_status = 0;
     for (;;) {
@@ -38,5 +40,15 @@ int main(void)
         } else {
             last_status = now;
         }
+        /* Idle sleep until the next interrupt (byte, encoder, timer): the timers, the UART and the
+         * pin changes keep running; checked with interrupts off so no wake-up is missed. */
+        cli();
+        if (uart_rx_empty() && scan_idle()) {
+            sleep_enable();
+            sei();
+            sleep_cpu();
+            sleep_disable();
+        }
+        sei();
     }
 }

@@ -48,6 +48,8 @@ enum run_state scan_state(void);
 uint8_t scan_pop_event(struct trigger_event *ev);
 /* Set once when a run ended (revolutions done, stopped, host gone); cleared by reading. */
 uint8_t scan_take_done(uint32_t *fired);
+/* 1 if there is no event and no end of run to report (call with interrupts off). */
+uint8_t scan_idle(void);
 uint32_t scan_fired(void);
 uint32_t scan_overruns(void);
 /* Index pulses that found the count off zero (missed or extra encoder edges). */

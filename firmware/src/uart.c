@@ -65,3 +65,5 @@ void uart_puts(const char *s)
     while (*s)
         uart_putc((uint8_t)*s++);
 }
+
+uint8_t uart_rx_empty(void) { return rx_tail == rx_head; }

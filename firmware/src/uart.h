@@ -8,4 +8,6 @@ int16_t uart_getc(void);
 /* Queues a byte; waits while the transmit buffer is full. */
 void uart_putc(uint8_t c);
 void uart_puts(const char *s);
+/* 1 if no received byte waits (call with interrupts off). */
+uint8_t uart_rx_empty(void);
 #endif

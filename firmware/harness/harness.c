@@ -102,12 +102,19 @@ static int encoder_running;
 
 static const uint8_t gray[4] = {0, 2, 3, 1}; /* (A<<1)|B for count mod 4: A leads B */
 
+/* Drives A, B and Z for the current count; only pins that change are driven (each change is
+ * a pin-change interrupt). */
 static void set_encoder_pins(void)
 {
+    static int level[3] = {-1, -1, -1};
     uint8_t s = gray[((enc_pos % 4) + 4) % 4];
-    avr_raise_irq(pin_a, (s >> 1) & 1);
-    avr_raise_irq(pin_b, s & 1);
-    avr_raise_irq(pin_z, ((enc_pos % opt.cpr) + opt.cpr) % opt.cpr == 0);
+    int now[3] = {(s >> 1) & 1, s & 1, ((enc_pos % opt.cpr) + opt.cpr) % opt.cpr == 0};
+    avr_irq_t *pins[3] = {pin_a, pin_b, pin_z};
+    for (int i = 0; i < 3; i++)
+        if (now[i] != level[i]) {
+            level[i] = now[i];
+            avr_raise_irq(pins[i], (uint32_t)now[i]);
+        }
 }
 
 static avr_cycle_count_t next_edge_time(void)
@@ -257,7 +264,6 @@ static void laser_pin(avr_irq_t *irq, uint32_t value, void *param)
 
 /* ---- the serial line ---- */
 static avr_irq_t *uart_in;
-static int uart_xoff;
 static uint8_t to_fw[QUEUE_MAX];
 static size_t to_fw_len;
 static char fw_line[LINE_MAX], host_line[LINE_MAX];
@@ -299,22 +305,6 @@ static void uart_out(avr_irq_t *irq, uint32_t value, void *param)
         connected = 0; /* seen as a hang-up on the next poll */
 }
 
-static void uart_xon(avr_irq_t *irq, uint32_t value, void *param)
-{
-    (void)irq;
-    (void)value;
-    (void)param;
-    uart_xoff = 0;
-}
-
-static void uart_xoff_cb(avr_irq_t *irq, uint32_t value, void *param)
-{
-    (void)irq;
-    (void)value;
-    (void)param;
-    uart_xoff = 1;
-}
-
 static void from_host(const uint8_t *b, size_t n)
 {
     for (size_t i = 0; i < n; i++) {
@@ -332,13 +322,17 @@ static void from_host(const uint8_t *b, size_t n)
     }
 }
 
+/* One byte per UART frame time (10 bits at 115200 baud), as the wire delivers them; a byte that
+ * arrives while the receiver is off or full is lost, as on the wire (the host retries). */
 static void feed_uart(void)
 {
-    size_t i = 0;
-    while (i < to_fw_len && !uart_xoff)
-        avr_raise_irq(uart_in, to_fw[i++]);
-    memmove(to_fw, to_fw + i, to_fw_len - i);
-    to_fw_len -= i;
+    static avr_cycle_count_t next_byte;
+    if (to_fw_len == 0 || avr->cycle < next_byte)
+        return;
+    avr_raise_irq(uart_in, to_fw[0]);
+    memmove(to_fw, to_fw + 1, to_fw_len - 1);
+    to_fw_len--;
+    next_byte = avr->cycle + F_CPU * 10 / 115200;
 }
 
 static void set_connected(int now_connected)
@@ -502,8 +496,6 @@ int main(int argc, char **argv)
     avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
     uart_in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), uart_out, NULL);
-    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), uart_xon, NULL);
-    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF), uart_xoff_cb, NULL);
 
     pin_a = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 2);
     pin_b = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('D'), 3);
@@ -539,9 +531,6 @@ int main(int argc, char **argv)
         if (linger_until && avr->cycle >= linger_until)
             break;
         pace();
-        if (getenv("FW_DEBUG") && avr->cycle % (F_CPU / 4) < F_CPU / 10000)
-            fprintf(stderr, "dbg cycle=%llu pc=0x%x to_fw=%zu xoff=%d conn=%d\n", (unsigned long long)avr->cycle,
-                    avr->pc, to_fw_len, uart_xoff, connected);
     }
     if (edges_f)
         fclose(edges_f);

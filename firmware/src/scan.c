@@ -229,15 +229,16 @@ static void book_revolution(void)
     las_next_rev = lasers_of(rev + 1U);
 }
 
-/* Books the trigger just fired (interrupts off on entry and exit). */
+/* Books the trigger just fired. Runs with interrupts on (the encoder preempts it); the few
+ * accesses shared with the encoder and timer interrupts are made with interrupts off. */
 static void book_trigger(void)
 {
+    /* The encoder cannot fire again before `target` is set below: these are stable. */
     uint16_t tcnt = fire_tcnt, at = fire_count;
     uint32_t hi;
     uint16_t lo;
+    cli();
     latch_ticks(&hi, &lo);
-    if (lo < tcnt)
-        hi--; /* Timer1 overflowed between the edge and now */
     /* The pulse ends PULSE_TICKS after the edge (at once if that already passed). */
     if ((uint16_t)(lo - tcnt) >= PULSE_TICKS) {
         PORTB &= (uint8_t)~TRIGGER;
@@ -247,6 +248,9 @@ static void book_trigger(void)
         TIFR1 = (1 << OCF1A);
         TIMSK1 |= (1 << OCIE1A);
     }
+    sei();
+    if (lo < tcnt)
+        hi--; /* Timer1 overflowed between the edge and now */
     if (state != RUN_RUNNING)
         return;
     uint16_t scheduled = position_of(i_facet, i_count);
@@ -273,38 +277,44 @@ static void book_trigger(void)
         i_facet++;
     }
     if (i_facet < sched.n_facets) {
-        las_next = lasers_of(rev);
-        target = position_of(i_facet, i_count);
+        uint8_t las = lasers_of(rev);
+        uint16_t t = position_of(i_facet, i_count);
+        cli();
+        las_next = las;
+        target = t;
+        sei();
     } else if (revs_wanted != 0 && rev + 1U >= revs_wanted) {
+        cli();
         end_run(0); /* the last pulse still ends on time */
+        sei();
     } /* else: the next revolution's count 0 sets the target */
 }
 
-/* Trigger raised (bookkeeping) or DTR changed. Runs with interrupts on; never nests itself. */
+/* Trigger raised (bookkeeping) or DTR changed. Runs with interrupts on; never nests itself: a
+ * nested call finds `booking` set and leaves the work to the loop below. */
 ISR(PCINT0_vect, ISR_NOBLOCK)
 {
     cli();
     if ((PINB & HOST_DTR) && (state == RUN_RUNNING || state == RUN_WAITING_INDEX))
         end_run(1); /* the host closed the port: no run without a host, lasers off at once */
-    if (booking) {
-        sei();
+    if (booking)
         return;
-    }
     booking = 1;
-    while (rev_pending || fire_pending) {
+    for (;;) {
+        cli();
         if (rev_pending) {
             rev_pending--;
             sei();
             book_revolution();
-        } else {
+        } else if (fire_pending) {
             fire_pending--;
-            book_trigger();
             sei();
+            book_trigger();
+        } else {
+            booking = 0;
+            return; /* reti enables interrupts */
         }
-        cli();
     }
-    booking = 0;
-    sei();
 }
 
 uint8_t host_present(void) { return !(PINB & HOST_DTR); }

@@ -69,10 +69,14 @@ static int connected, ever_connected;
 static volatile sig_atomic_t quit;
 static struct timespec wall0_mono, wall0_real;
 
-static uint64_t rng_state;
-static uint64_t rng_next(void) /* SplitMix64 */
+/* SplitMix64 streams: encoder jitter, faults on the firmware's lines, faults on the host's lines
+ * (separate, so that the faults do not depend on how many encoder edges came between lines). */
+enum { RNG_JITTER, RNG_TO_HOST, RNG_TO_FW };
+static uint64_t rng_state[3];
+static int rng_stream;
+static uint64_t rng_next(void)
 {
-    uint64_t z = (rng_state += 0x9E3779B97F4A7C15ULL);
+    uint64_t z = (rng_state[rng_stream] += 0x9E3779B97F4A7C15ULL);
     z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
     z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
     return z ^ (z >> 31);
@@ -120,6 +124,7 @@ static void set_encoder_pins(void)
 static avr_cycle_count_t next_edge_time(void)
 {
     double nominal = anchor_cycle + (double)(enc_pos + 1 - anchor_pos) * count_cycles;
+    rng_stream = RNG_JITTER;
     double j = (2.0 * rng_unit() - 1.0) * opt.jitter * count_cycles;
     avr_cycle_count_t t = (avr_cycle_count_t)llround(nominal + j);
     return t > avr->cycle ? t : avr->cycle + 1;
@@ -299,6 +304,7 @@ static void uart_out(avr_irq_t *irq, uint32_t value, void *param)
     if (value != '\n' && fw_line_len < LINE_MAX)
         return;
     char buf[2 * LINE_MAX];
+    rng_stream = RNG_TO_HOST;
     size_t n = with_faults(fw_line, fw_line_len, buf);
     fw_line_len = 0;
     if (connected && write(master_fd, buf, n) < 0 && errno != EAGAIN)
@@ -313,6 +319,7 @@ static void from_host(const uint8_t *b, size_t n)
         if (b[i] != '\n' && host_line_len < LINE_MAX)
             continue;
         char buf[2 * LINE_MAX];
+        rng_stream = RNG_TO_FW;
         size_t k = with_faults(host_line, host_line_len, buf);
         host_line_len = 0;
         if (to_fw_len + k <= QUEUE_MAX) {
@@ -473,11 +480,15 @@ int main(int argc, char **argv)
     parse_args(argc, argv);
     port_out = dup(1);
     dup2(2, 1); /* simavr's own messages go to stderr */
-    rng_state = opt.seed;
+    for (int i = 0; i < 3; i++)
+        rng_state[i] = opt.seed * 3 + (uint64_t)i;
     if (mkdir(opt.frames, 0755) != 0 && errno != EEXIST)
         die("cannot create %s", opt.frames);
     truth_f = open_append(opt.truth);
     edges_f = open_append(opt.edges);
+    if (edges_f && ftell(edges_f) == 0)
+        fprintf(edges_f, "{\"format\":\"omniscan.fw_edges\",\"version\":1,\"f_cpu_hz\":%llu,\"cpr\":%u,\"facets\":%u}\n",
+                (unsigned long long)F_CPU, opt.cpr, opt.facets);
     elf_firmware_t fw;
     memset(&fw, 0, sizeof fw);
     if (access(opt.firmware, R_OK) != 0 || elf_read_firmware(opt.firmware, &fw) != 0)

@@ -72,8 +72,12 @@ impl Harness {
 
     /// The harness's pin records of one kind (`trigger`, `laser`, `host`).
     fn edges(&self, kind: &str) -> Vec<Value> {
-        let text = std::fs::read_to_string(self.dir.path().join("edges.jsonl")).unwrap_or_default();
+        let text = std::fs::read_to_string(self.dir.path().join("edges.jsonl")).unwrap();
+        let header: Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
+        assert_eq!((&header["format"], &header["version"]), (&Value::from("omniscan.fw_edges"), &Value::from(1)));
+        assert_eq!(header["cpr"], CPR);
         text.lines()
+            .skip(1)
             .map(|l| serde_json::from_str::<Value>(l).unwrap_or_else(|e| panic!("{l}: {e}")))
             .filter(|v| v["kind"] == kind)
             .collect()
@@ -248,7 +252,7 @@ fn scans_at_two_polygon_speeds_fire_every_trigger_at_its_scheduled_count() {
 #[test]
 #[ignore = "needs the firmware and fw-harness: make fw-test"]
 fn corrupted_lines_in_both_directions_are_dropped_retried_and_placed() {
-    let h = Harness::start(&["--bad-crc", "0.15", "--garbage", "0.15", "--fault-seed", "3"]);
+    let h = Harness::start(&["--bad-crc", "0.1", "--garbage", "0.1", "--fault-seed", "3"]);
     let out = h.scan(&["--angles", "0,15", "--revolutions", "1", "--rpm", "100", "--max-missing", "24"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let (frames, status) = read_manifest(&h.manifest_path());
@@ -405,7 +409,8 @@ fn commands_are_refused_retried_and_stopped_as_the_protocol_says() {
     let sts = lines.iter().find(|s| s.starts_with("STS ")).expect("STS before the ACK");
     assert!(sts.contains("state=armed") && sts.contains("rpm=125.000000"), "{sts}");
     assert_eq!(Line::field(sts, "crc"), 1, "{sts}");
-    assert!(!lines.iter().any(|s| s.contains(" 17")), "the corrupted command was answered: {lines:?}");
+    let answered_17 = |s: &String| (s.starts_with("ACK ") || s.starts_with("NAK ")) && s.split(' ').nth(1) == Some("17");
+    assert!(!lines.iter().any(answered_17), "the corrupted command was answered: {lines:?}");
     // HELLO repeats its report on a retry.
     for _ in 0..2 {
         let (ack, lines) = l.ask("HELLO 19");
@@ -415,14 +420,23 @@ fn commands_are_refused_retried_and_stopped_as_the_protocol_says() {
 
     // STOP mid-revolution: counts 0, 1500, 18000, 19500 at 125 rpm (20, 220, 20, 220 ms apart),
     // until STOP; STOP comes after the second trigger, in the 220 ms gap.
-    assert_eq!(l.ask("START 20 0").0, "ACK 20");
-    assert_eq!(code(&l.ask("FACETS 21 ALL").0), "4", "configuration while running");
-    assert_eq!(code(&l.ask("START 22 0").0), "4", "already running");
     let mut trg = vec![];
+    let mut keep_trg = |lines: Vec<String>| trg.extend(lines.into_iter().filter(|s| s.starts_with("TRG ")));
+    let (ack, before) = l.ask("START 20 0");
+    assert_eq!(ack, "ACK 20");
+    keep_trg(before);
+    let (nak, before) = l.ask("FACETS 21 ALL");
+    assert_eq!(code(&nak), "4", "configuration while running");
+    keep_trg(before);
+    let (nak, before) = l.ask("START 22 0");
+    assert_eq!(code(&nak), "4", "already running");
+    keep_trg(before);
     while trg.len() < 2 {
         trg.push(l.until("TRG ", Duration::from_secs(10)).0);
     }
-    assert_eq!(l.ask("STOP 23").0, "ACK 23");
+    let (ack, before) = l.ask("STOP 23");
+    assert_eq!(ack, "ACK 23");
+    trg.extend(before.into_iter().filter(|s| s.starts_with("TRG ")));
     let (done, before) = l.until("DONE ", Duration::from_secs(5));
     trg.extend(before.into_iter().filter(|s| s.starts_with("TRG ")));
     let fired = Line::field(&done, "fired");

@@ -468,6 +468,14 @@ static void pace(void)
     clock_gettime(CLOCK_MONOTONIC, &now);
     double wall = (double)(now.tv_sec - wall0_mono.tv_sec) + (double)(now.tv_nsec - wall0_mono.tv_nsec) * 1e-9;
     double sim = (double)avr->cycle / (double)F_CPU;
+    /* Frames carry the simulated time on the wall clock: a simulation that falls behind real
+     * time (a loaded machine) makes them look early to the host, which then cannot pair them. */
+    static double last_warning;
+    if (wall - sim > 0.005 && wall - last_warning > 1.0) {
+        last_warning = wall;
+        fprintf(stderr, "fw-harness: warning: the simulation is %.0f ms behind real time (machine too busy)\n",
+                (wall - sim) * 1e3);
+    }
     if (sim > wall + 0.001) {
         double d = sim - wall;
         struct timespec ts = {(time_t)d, (long)((d - floor(d)) * 1e9)};

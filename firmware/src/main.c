@@ -8,7 +8,6 @@
 #include "scan.h"
 #include "uart.h"
 
-#define STATUS_PERIOD_TICKS (1000000ULL * TICKS_PER_US)
 
 int main(void)
 {
@@ -18,8 +17,8 @@ int main(void)
     uart_init();
     set_sleep_mode(SLEEP_MODE_IDLE);
     sei();
-    uint64_t last_status = 0;
     for (;;) {
+        /* Kept short: the loop runs after every interrupt, i.e. on every encoder count. */
         wdt_reset();
         int16_t c;
         while ((c = uart_getc()) >= 0)
@@ -30,15 +29,10 @@ int main(void)
         uint32_t fired;
         if (scan_take_done(&fired))
             proto_send_done(fired);
-        enum run_state st = scan_state();
-        uint64_t now = clock_ticks();
-        if (st == RUN_RUNNING || st == RUN_WAITING_INDEX) {
-            if (now - last_status >= STATUS_PERIOD_TICKS) {
-                last_status = now;
+        if (scan_status_due()) {
+            enum run_state st = scan_state();
+            if (st == RUN_RUNNING || st == RUN_WAITING_INDEX)
                 proto_send_status();
-            }
-        } else {
-            last_status = now;
         }
         /* Idle sleep until the next interrupt (byte, encoder, timer): the timers, the UART and the
          * pin changes keep running; checked with interrupts off so no wake-up is missed. */

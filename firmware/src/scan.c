@@ -89,7 +89,25 @@ void scan_init(void)
     z_prev = PIND & ENC_Z;
 }
 
-ISR(TIMER1_OVF_vect) { ticks_hi++; }
+static volatile uint8_t status_due;
+
+/* Every 32.768 ms; 30 of them (0.98 s) make the status period while running. */
+ISR(TIMER1_OVF_vect)
+{
+    static uint8_t overflows;
+    ticks_hi++;
+    if (++overflows == 30) {
+        overflows = 0;
+        status_due = 1;
+    }
+}
+
+uint8_t scan_status_due(void)
+{
+    uint8_t due = status_due;
+    status_due = 0;
+    return due;
+}
 
 /* The clock with interrupts already off: an overflow not yet counted shows as a pending flag. */
 static void latch_ticks(uint32_t *hi, uint16_t *lo)

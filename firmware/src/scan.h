@@ -48,6 +48,8 @@ enum run_state scan_state(void);
 uint8_t scan_pop_event(struct trigger_event *ev);
 /* Set once when a run ended (revolutions done, stopped, host gone); cleared by reading. */
 uint8_t scan_take_done(uint32_t *fired);
+/* 1 once every 0.98 s (Timer1 overflows), then cleared. */
+uint8_t scan_status_due(void);
 /* 1 if there is no event and no end of run to report (call with interrupts off). */
 uint8_t scan_idle(void);
 uint32_t scan_fired(void);

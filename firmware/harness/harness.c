@@ -536,10 +536,13 @@ int main(int argc, char **argv)
     clock_gettime(CLOCK_MONOTONIC, &wall0_mono);
     clock_gettime(CLOCK_REALTIME, &wall0_real);
     avr_cycle_count_t linger_until = 0;
+    unsigned long long runs = 0, sleeping = 0;
     while (!quit) {
         avr_cycle_count_t slice_end = avr->cycle + F_CPU / 10000; /* 100 µs of simulated time */
         while (avr->cycle < slice_end) {
             int st = avr_run(avr);
+            runs++;
+            sleeping += st == cpu_Sleeping;
             if (st == cpu_Done || st == cpu_Crashed)
                 die("%s", st == cpu_Crashed ? "the firmware crashed (watchdog or bad opcode)" : "the firmware stopped");
         }
@@ -551,6 +554,9 @@ int main(int argc, char **argv)
             break;
         pace();
     }
+    if (getenv("FW_DEBUG"))
+        fprintf(stderr, "fw-harness: %llu cycles, %llu steps, %llu asleep\n", (unsigned long long)avr->cycle, runs,
+                sleeping);
     if (edges_f)
         fclose(edges_f);
     if (truth_f)

@@ -148,7 +148,13 @@ fn assert_frames_true(frames: &[Frame], truth: &[TruthRecord]) {
     for f in frames {
         let t = by_path.get(f.path.as_str()).unwrap_or_else(|| panic!("{} not written by the camera", f.path));
         assert_eq!(t.trigger_seq, f.seq, "{}: paired with trigger {} but shows edge {}", f.path, f.seq, t.trigger_seq);
-        assert!((t.alpha_deg - f.alpha_deg).abs() < 1e-9, "{}: manifest {}° true {}°", f.path, f.alpha_deg, t.alpha_deg);
+        assert!(
+            (t.alpha_deg - f.alpha_deg).abs() < 1e-9,
+            "{}: manifest {}° true {}°",
+            f.path,
+            f.alpha_deg,
+            t.alpha_deg
+        );
         assert_eq!((t.facet, &t.lasers), (f.facet, &f.lasers), "{}", f.path);
         assert!(used.insert(f.path.clone()), "{} paired twice", f.path);
     }
@@ -278,8 +284,11 @@ fn corrupted_lines_in_both_directions_are_dropped_retried_and_placed() {
 #[ignore = "needs the firmware and fw-harness: make fw-test"]
 fn the_host_closing_the_port_mid_scan_switches_the_lasers_off() {
     let mut h = Harness::start(&[]);
-    let mut scan =
-        h.scan_command(&["--angles", "0,15", "--revolutions", "20", "--rpm", "30"]).stderr(Stdio::null()).spawn().unwrap();
+    let mut scan = h
+        .scan_command(&["--angles", "0,15", "--revolutions", "20", "--rpm", "30"])
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
     let t0 = Instant::now();
     while std::fs::read_to_string(h.manifest_path()).map(|t| t.matches("\"frame\"").count()).unwrap_or(0) < 3 {
         assert!(t0.elapsed() < Duration::from_secs(20), "scan produced no frames; harness: {}", h.log());
@@ -436,7 +445,8 @@ fn commands_are_refused_retried_and_stopped_as_the_protocol_says() {
     let sts = lines.iter().find(|s| s.starts_with("STS ")).expect("STS before the ACK");
     assert!(sts.contains("state=armed") && sts.contains("rpm=125.000000"), "{sts}");
     assert_eq!(Line::field(sts, "crc"), crc_before + 1, "{sts}");
-    let answered_17 = |s: &String| (s.starts_with("ACK ") || s.starts_with("NAK ")) && s.split(' ').nth(1) == Some("17");
+    let answered_17 =
+        |s: &String| (s.starts_with("ACK ") || s.starts_with("NAK ")) && s.split(' ').nth(1) == Some("17");
     assert!(!lines.iter().any(answered_17), "the corrupted command was answered: {lines:?}");
     // HELLO repeats its report on a retry.
     for _ in 0..2 {

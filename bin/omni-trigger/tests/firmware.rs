@@ -359,8 +359,7 @@ impl Line {
     fn ask(&mut self, body: &str) -> (String, Vec<String>) {
         let id = body.split(' ').nth(1).unwrap();
         self.send_raw(encode_line(body).as_bytes());
-        let (ack, before) = self.until_reply(id);
-        (ack, before)
+        self.until_reply(id)
     }
 
     fn until_reply(&mut self, id: &str) -> (String, Vec<String>) {

@@ -10,7 +10,7 @@ use omni_formats::ply::PointCloud;
 use omni_formats::stream::{Header, Record, Status, StreamReader, StreamWriter};
 use omni_formats::{CameraFile, ScannerFile};
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 const PRODUCER: &str = concat!("omni-triangulate ", env!("CARGO_PKG_VERSION"));
 

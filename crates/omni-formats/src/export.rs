@@ -29,13 +29,15 @@ impl CloudFormat {
     }
 
     /// The format of an output file: `explicit` if given (a `--format` option), else the
-    /// extension; `-` (stdout) without `explicit` is PLY. An unknown or missing extension is an
-    /// error naming the file.
+    /// extension; a stream without a name of its own (`-` for stdout, an existing device or
+    /// FIFO such as `/dev/null`) is PLY. An unknown or missing extension is an error naming the
+    /// file.
     pub fn for_output(path: &Path, explicit: Option<CloudFormat>) -> std::result::Result<CloudFormat, String> {
         if let Some(f) = explicit {
             return Ok(f);
         }
-        if path == Path::new("-") {
+        let is_stream = path == Path::new("-") || std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir());
+        if is_stream {
             return Ok(CloudFormat::Ply);
         }
         let ext = path.extension().map(|e| e.to_string_lossy().into_owned());
@@ -140,6 +142,7 @@ mod tests {
         assert_eq!(f("a.PCD", None), Ok(CloudFormat::Pcd));
         assert_eq!(f("dir/a.las", None), Ok(CloudFormat::Las));
         assert_eq!(f("-", None), Ok(CloudFormat::Ply));
+        assert_eq!(f("/dev/null", None), Ok(CloudFormat::Ply));
         assert_eq!(f("a.txt", Some(CloudFormat::Pcd)), Ok(CloudFormat::Pcd));
         let e = f("a.xyz", None).unwrap_err();
         assert!(e.starts_with("a.xyz: unknown point-cloud extension `.xyz`"), "{e}");

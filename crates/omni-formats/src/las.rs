@@ -128,7 +128,7 @@ mod tests {
             let header = reader.header().clone();
             assert_eq!((header.version().major, header.version().minor), (1, 4));
             assert_eq!(header.number_of_points(), 3);
-            let points: Vec<las::Point> = reader.points().collect::<Result<_, _>>().unwrap();
+            let points: Vec<las::Point> = reader.read_all().unwrap().points().collect::<Result<_, _>>().unwrap();
             for (p, want) in points.iter().zip(&cloud().positions) {
                 let got = [p.x, p.y, p.z].map(|c| c / units.per_mm());
                 for k in 0..3 {

@@ -409,6 +409,9 @@ pub fn read_header(r: &mut dyn BufRead, name: &str) -> Result<(Vec<u8>, Option<V
     Ok((raw, Some(VertexLayout { format, count: *count, properties, mm_per_unit })))
 }
 
+/// The per-vertex visitor of [`visit_vertices`]: xyz (mm) and the scalars.
+pub type VertexFn<'a, E> = dyn FnMut(&[f64; 3], &[f32]) -> std::result::Result<(), E> + 'a;
+
 /// Why [`visit_vertices`] stopped: the file was bad, or the visitor returned an error.
 #[derive(Debug)]
 pub enum VisitError<E> {
@@ -423,7 +426,7 @@ pub fn visit_vertices<E>(
     r: &mut dyn BufRead,
     name: &str,
     layout: &VertexLayout,
-    on_point: &mut dyn FnMut(&[f64; 3], &[f32]) -> std::result::Result<(), E>,
+    on_point: &mut VertexFn<E>,
 ) -> std::result::Result<(), VisitError<E>> {
     let props = &layout.properties;
     let axis = |a: &str| props.iter().position(|(n, _)| n == a).unwrap_or(0);

@@ -4,7 +4,7 @@
 #  - criterion benches: simulator render, stripe centres, receiver and plane calibration, cloud
 #    operations, protocol parsing/pairing;
 #  - side by side: stripe extraction vs numpy/OpenCV, calibration vs OpenCV omnidir, merge /
-#    outlier removal / PLY vs Open3D (Python packages are installed with pip if missing);
+#    outlier removal / PLY read and write vs Open3D; Open3D reading our PCD, colours and normals (Python packages are installed with pip if missing);
 #  - end to end: frames per second of omni-ridge | omni-triangulate from PNG files, and of the
 #    stripe kernel on frames already in memory, against a 200 fps camera.
 set -uo pipefail
@@ -39,6 +39,9 @@ run cargo bench -q -p omni-calib --bench plane "${quick[@]}"
 section "omni-triangulate / omni-merge: vs Open3D"
 run cargo bench -q -p omni-cloud --bench cloud "${quick[@]}"
 run python3 scripts/bench_cloud.py
+
+section "Cloud formats: omniscan's PCD, PLY colours and normals read by Open3D"
+run make -s bench-cloud-open3d
 
 section "omni-trigger: protocol parsing and pairing"
 run cargo bench -q -p omni-hw --bench protocol "${quick[@]}"

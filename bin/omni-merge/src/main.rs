@@ -2,10 +2,11 @@
 
 use clap::Parser;
 use omni_cli::CliError;
+use omni_cloud::export::CloudOutputArgs;
 use omni_cloud::filter::CropBox;
 use omni_cloud::merge::{MergeOptions, Merger};
 use omni_cloud::motion::Trajectory;
-use omni_formats::ply::{Encoding, write_ply};
+use omni_formats::rosbag::BagMessage;
 use omni_formats::stream::{Record, StreamReader};
 use std::path::{Path, PathBuf};
 
@@ -14,11 +15,14 @@ use std::path::{Path, PathBuf};
     // Help is printed as written, unwrapped: examples stay one line for copy and paste.
     term_width = 0,
     version,
-    about = "Merge point streams and PLY clouds into one cloud: poses, crop, voxel grid, outlier removal.",
+    about = "Merge point streams and PLY clouds into one cloud (PLY, PCD, LAS, ROS 2 bag): poses, crop, voxel grid, outlier removal.",
     long_about = "Reads triangulated point streams (JSON Lines from omni-triangulate; `-` = stdin) and PLY \
 clouds (by the .ply extension), optionally moves each frame by the sensor pose interpolated from an \
 odometry file at the frame's timestamp_us (slerp + lerp), then crops, voxel-downsamples and removes \
-outliers, in that order, and writes one PLY cloud.\n\n\
+outliers, in that order, and writes one cloud: PLY, PCD or LAS by the output's extension (or \
+--format), optionally with normals facing the sensor, and/or a ROS 2 bag (--rosbag) with the merged \
+cloud as one sensor_msgs/msg/PointCloud2 message in frame `map`, stamped with the latest frame \
+timestamp. Scalar fields keep their PLY types (uchar colours stay uchar).\n\n\
 Outlier removal matches Open3D: --statistical K,STD_RATIO is remove_statistical_outlier(nb_neighbors=K, \
 std_ratio): mean distance to the K nearest points counting the point itself, kept if below \
 mean + STD_RATIO·std over the cloud. --radius R,MIN_POINTS is remove_radius_outlier(nb_points=MIN_POINTS, \
@@ -27,7 +31,9 @@ radius=R): kept if more than MIN_POINTS points (the point itself included) lie s
 omni-merge points.jsonl -o cloud.ply\n  \
 omni-merge --voxel 1.0 --statistical 20,2.0 a.jsonl b.jsonl old.ply -o room.ply\n  \
 omni-merge --poses odometry.jsonl --crop-range 100,3000 walk.jsonl -o walk.ply\n  \
-omni-triangulate ... | omni-merge --radius 5,4 - -o cloud.ply --ascii\n\n\
+omni-triangulate ... | omni-merge --radius 5,4 - -o cloud.ply --ascii\n  \
+omni-merge points.jsonl -o cloud.las --units m\n  \
+omni-merge --voxel 2 points.jsonl -o cloud.pcd --normals --rosbag merged_bag\n\n\
 Voxels are anchored at the world origin and the output is ordered by voxel index (deterministic).\n\
 Exit codes: 0 ok, 1 bad input or I/O error (nothing half-written), 2 usage error."
 )]
@@ -35,12 +41,12 @@ struct Args {
     /// Inputs: point streams (`-` = stdin) or PLY files (*.ply).
     #[arg(required = true)]
     inputs: Vec<PathBuf>,
-    /// Output PLY (`-` = stdout).
+    /// Output cloud: .ply, .pcd or .las (`-` = stdout, PLY unless --format). Needed unless
+    /// --rosbag is given.
     #[arg(short, long)]
-    output: PathBuf,
-    /// Write ASCII PLY instead of binary little-endian.
-    #[arg(long)]
-    ascii: bool,
+    output: Option<PathBuf>,
+    #[command(flatten)]
+    cloud: CloudOutputArgs,
     /// Odometry (JSON Lines poses with timestamps) to place each frame in the world.
     #[arg(long)]
     poses: Option<PathBuf>,
@@ -147,6 +153,14 @@ fn main() -> std::process::ExitCode {
     omni_cli::main("omni-merge", || {
         let args = Args::parse();
         let opts = options(&args)?;
+        args.cloud.check().map_err(CliError::usage)?;
+        match &args.output {
+            Some(o) => {
+                args.cloud.format_for(o).map_err(CliError::usage)?;
+            }
+            None if args.cloud.rosbag.is_none() => return Err(CliError::usage("give -o FILE, --rosbag DIR or both")),
+            None => {}
+        }
         if args.inputs.iter().filter(|p| p.as_os_str() == "-").count() > 1 {
             return Err(CliError::usage("stdin (`-`) can be given only once"));
         }
@@ -162,6 +176,7 @@ fn main() -> std::process::ExitCode {
             None => None,
         };
         let mut merger = Merger::new(opts).map_err(CliError::usage)?;
+        let mut latest_us: Option<u64> = None;
         for input in &args.inputs {
             let name = omni_formats::io::display_name(input, "stdin");
             if is_ply(input) {
@@ -172,15 +187,17 @@ fn main() -> std::process::ExitCode {
                 }
                 add_ply(&mut merger, input, &name)?;
             } else {
-                add_stream(&mut merger, input, &name, trajectory.as_ref(), &args)?;
+                let latest = add_stream(&mut merger, input, &name, trajectory.as_ref(), &args)?;
+                latest_us = latest_us.max(latest);
             }
         }
-        let (cloud, stats) = merger.finish()?;
+        let (mut cloud, stats) = merger.finish()?;
         if cloud.is_empty() {
             omni_cli::warn("omni-merge", "no points left after cropping and filtering; writing an empty cloud");
         }
-        let enc = if args.ascii { Encoding::Ascii } else { Encoding::BinaryLittleEndian };
-        write_ply(&args.output, &cloud, enc)?;
+        args.cloud.finish_cloud(&mut cloud)?;
+        let message = BagMessage { stamp_ns: latest_us.unwrap_or(0) * 1000, points: 0..cloud.len() };
+        args.cloud.write(&cloud, args.output.as_deref(), &[message], "map")?;
         if args.stats {
             eprintln!("{}", serde_json::to_string(&stats).unwrap_or_default());
         }
@@ -190,13 +207,13 @@ fn main() -> std::process::ExitCode {
 
 fn add_ply(merger: &mut Merger, path: &Path, name: &str) -> Result<(), CliError> {
     let merger = std::cell::RefCell::new(merger);
-    omni_cloud::ply_stream::for_each_vertex(
+    omni_cloud::ply_stream::for_each_vertex_typed(
         path,
-        &mut |names, n| {
+        &mut |names, types, n| {
             if n == 0 {
                 return Err(format!("{name}: the PLY has no vertices"));
             }
-            merger.borrow_mut().begin_input(names).map_err(|m| format!("{name}: {m}"))
+            merger.borrow_mut().begin_typed_input(names, types).map_err(|m| format!("{name}: {m}"))
         },
         &mut |p, s| merger.borrow_mut().add(p, s).map_err(|m| format!("{name}: {m}")),
     )?;
@@ -209,10 +226,11 @@ fn add_stream(
     name: &str,
     traj: Option<&Trajectory>,
     args: &Args,
-) -> Result<(), CliError> {
+) -> Result<Option<u64>, CliError> {
     let mut reader = StreamReader::new(omni_formats::io::open_input(path)?, name);
     merger.begin_stream_input().map_err(|m| format!("{name}: {m}"))?;
     let mut frames = 0u64;
+    let mut latest_us: Option<u64> = None;
     // The line of each frame seq seen, to refuse repeats.
     let mut seen: std::collections::HashMap<u64, usize> = std::collections::HashMap::new();
     while let Some(record) = reader.next_record()? {
@@ -241,6 +259,7 @@ fn add_stream(
             None => None,
         };
         merger.add_frame(&frame, pose.as_ref()).map_err(|m| format!("{loc}: {m}"))?;
+        latest_us = latest_us.max(frame.timestamp_us);
         frames += 1;
     }
     if frames == 0 {
@@ -253,5 +272,5 @@ fn add_stream(
         }
         omni_cli::warn("omni-merge", &format!("{msg}; its frames are merged, the cloud may be partial"));
     }
-    Ok(())
+    Ok(latest_us)
 }

@@ -75,7 +75,7 @@ fn merges_streams_and_ply_and_matches_the_library_filters() {
         positions: b.clone(),
         scalars: omni_cloud::cloud::POINT_SCALARS
             .iter()
-            .map(|n| ScalarField { name: n.to_string(), values: vec![1.0; b.len()] })
+            .map(|n| ScalarField::new(n.to_string(), vec![1.0; b.len()]))
             .collect(),
     };
     write_ply(&dir.path().join("b.ply"), &ply, Encoding::BinaryLittleEndian).unwrap();

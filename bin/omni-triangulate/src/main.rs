@@ -3,12 +3,14 @@
 use clap::Parser;
 use omni_cli::CliError;
 use omni_cloud::cloud::{append_frame_points, empty_point_cloud};
+use omni_cloud::export::{BagGrouping, CloudOutputArgs, FrameSpan, bag_messages};
 use omni_cloud::triangulate::{DEFAULT_MIN_INCIDENCE_DEG, Rejections, Triangulator};
-use omni_formats::ply::{Encoding, PointCloud, write_ply};
+use omni_formats::export::CloudFormat;
+use omni_formats::ply::PointCloud;
 use omni_formats::stream::{Header, Record, Status, StreamReader, StreamWriter};
 use omni_formats::{CameraFile, ScannerFile};
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 const PRODUCER: &str = concat!("omni-triangulate ", env!("CARGO_PKG_VERSION"));
 
@@ -23,11 +25,14 @@ pixel's ray (from camera.json) with the light plane of each laser that was on in
 scanner.json), and keeps the intersection that is in front of the viewpoint and lit by that laser. \
 Rays meeting the plane at less than --min-incidence-deg are refused: the range error grows as \
 1/sin(angle). Writes the stream with a `points` array added to each frame \
-([x, y, z, laser, range, stripe_index], mm, world = receiver frame), or a PLY point cloud.",
+([x, y, z, laser, range, stripe_index], mm, world = receiver frame), and/or a point cloud (PLY, PCD or \
+LAS by the extension, or --format), and/or a ROS 2 bag (--rosbag) with one \
+sensor_msgs/msg/PointCloud2 per frame or per revolution, stamped with the frames' timestamp_us.",
     after_help = "Examples:\n  \
 omni-ridge scan.jsonl | omni-triangulate --camera camera.json --scanner scanner.json > points.jsonl\n  \
 omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl -o cloud.ply\n  \
-omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl -o points.jsonl --ply cloud.ply\n\n\
+omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl -o points.jsonl --cloud cloud.pcd\n  \
+omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl --rosbag scan_bag --bag-per revolution\n\n\
 PLY scalar fields: intensity, scalar_frame, scalar_laser, scalar_alpha_deg, scalar_range (mm), scalar_u, scalar_v (px).\n\
 Exit codes: 0 ok, 1 bad input or I/O error (nothing half-written), 2 usage error."
 )]
@@ -41,15 +46,22 @@ struct Args {
     /// Stripe stream (JSON Lines); `-` = stdin.
     #[arg(default_value = "-")]
     input: PathBuf,
-    /// Output: a stream (`-` = stdout, default) or, if the name ends in `.ply`, a PLY cloud.
+    /// Output: a stream (`-` = stdout, default) or, if the name ends in .ply, .pcd or .las, a
+    /// point cloud.
     #[arg(short, long)]
     output: Option<PathBuf>,
-    /// Also (or only, without -o) write the points as a PLY cloud.
-    #[arg(long)]
-    ply: Option<PathBuf>,
-    /// Write PLY as ASCII instead of binary little-endian.
-    #[arg(long)]
-    ascii: bool,
+    /// Also (or only, without -o) write the points as a cloud: PLY, PCD or LAS by the
+    /// extension or --format.
+    #[arg(long, visible_alias = "ply", value_name = "FILE")]
+    cloud: Option<PathBuf>,
+    #[command(flatten)]
+    cloud_out: CloudOutputArgs,
+    /// Bag messages: one PointCloud2 per frame or per revolution.
+    #[arg(long, value_enum, default_value_t = BagGrouping::Frame)]
+    bag_per: BagGrouping,
+    /// Stamp frames that have no timestamp_us (simulated scans) seq × MS milliseconds.
+    #[arg(long, value_name = "MS")]
+    stamp_period_ms: Option<f64>,
     /// Smallest accepted angle between a ray and the light plane (degrees).
     #[arg(long, default_value_t = DEFAULT_MIN_INCIDENCE_DEG, allow_negative_numbers = true)]
     min_incidence_deg: f64,
@@ -59,28 +71,35 @@ struct Args {
     strict: bool,
 }
 
-fn is_ply(p: &Path) -> bool {
-    p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
-}
-
 fn main() -> std::process::ExitCode {
     omni_cli::main("omni-triangulate", || {
         let args = Args::parse();
         let (_, camera) = CameraFile::load(&args.camera)?;
         let (_, transmitter) = ScannerFile::load(&args.scanner)?;
         let tri = Triangulator::new(camera.as_ref(), &transmitter, args.min_incidence_deg).map_err(CliError::usage)?;
-        let (stream_out, mut ply_out) = match (&args.output, &args.ply) {
-            (Some(o), p) if is_ply(o) => {
+        args.cloud_out.check().map_err(CliError::usage)?;
+        if let Some(p) = args.stamp_period_ms
+            && !(p > 0.0 && p.is_finite())
+        {
+            return Err(CliError::usage("--stamp-period-ms must be a positive number"));
+        }
+        let bag = args.cloud_out.rosbag.is_some();
+        let (stream_out, mut cloud_out) = match (&args.output, &args.cloud) {
+            (Some(o), p) if CloudFormat::has_cloud_extension(o) => {
                 if p.is_some() {
-                    return Err(CliError::usage("-o names a PLY file; give --ply only with a stream output"));
+                    return Err(CliError::usage("-o names a cloud file; give --cloud only with a stream output"));
                 }
                 (None, Some(o.clone()))
             }
             (Some(o), p) => (Some(o.clone()), p.clone()),
             (None, Some(p)) => (None, Some(p.clone())),
+            (None, None) if bag => (None, None),
             (None, None) => (Some(PathBuf::from("-")), None),
         };
-        let mut cloud = ply_out.as_ref().map(|_| empty_point_cloud());
+        if let Some(path) = &cloud_out {
+            args.cloud_out.format_for(path).map_err(CliError::usage)?;
+        }
+        let mut cloud = (cloud_out.is_some() || bag).then(empty_point_cloud);
         let input = omni_formats::io::open_input(&args.input)?;
         let name = omni_formats::io::display_name(&args.input, "stdin");
         let mut run = Run {
@@ -90,6 +109,7 @@ fn main() -> std::process::ExitCode {
             rejections: Rejections::default(),
             points: 0,
             frames: 0,
+            spans: Vec::new(),
         };
         match &stream_out {
             Some(path) => {
@@ -109,9 +129,12 @@ fn main() -> std::process::ExitCode {
             }
             None => run.process(input, &name, None).map_err(CliError::new)?,
         }
-        if let (Some(path), Some(cloud)) = (ply_out.take(), cloud) {
-            let enc = if args.ascii { Encoding::Ascii } else { Encoding::BinaryLittleEndian };
-            write_ply(&path, &cloud, enc)?;
+        let spans = std::mem::take(&mut run.spans);
+        if let Some(mut cloud) = cloud {
+            let period_us = args.stamp_period_ms.map(|ms| ms * 1000.0);
+            let messages = if bag { bag_messages(&spans, args.bag_per, period_us)? } else { Vec::new() };
+            args.cloud_out.finish_cloud(&mut cloud)?;
+            args.cloud_out.write(&cloud, cloud_out.take().as_deref(), &messages, "omniscan")?;
         }
         Ok(())
     })
@@ -126,6 +149,8 @@ struct Run<'a> {
     points: u64,
     /// Frames read so far.
     frames: u64,
+    /// Each frame's points in the cloud (for the bag's messages).
+    spans: Vec<FrameSpan>,
 }
 
 impl Run<'_> {
@@ -152,7 +177,14 @@ impl Run<'_> {
                     self.frames += 1;
                     frame.points = Some(res.points);
                     if let Some(cloud) = self.cloud.as_deref_mut() {
+                        let start = cloud.len();
                         append_frame_points(cloud, &frame, None, &|_| true).map_err(|m| fail(format!("{loc}: {m}")))?;
+                        self.spans.push(FrameSpan {
+                            seq: frame.seq,
+                            revolution: frame.revolution,
+                            timestamp_us: frame.timestamp_us,
+                            points: start..cloud.len(),
+                        });
                     }
                     Record::Frame(frame)
                 }

@@ -40,7 +40,7 @@ pub fn room_cloud(n: usize, seed: u64) -> PointCloud {
         .collect();
     let scalars = POINT_SCALARS
         .iter()
-        .map(|name| ScalarField { name: name.to_string(), values: (0..n).map(|i| (i % 251) as f32).collect() })
+        .map(|name| ScalarField::new(name.to_string(), (0..n).map(|i| (i % 251) as f32).collect()))
         .collect();
     PointCloud { positions, scalars }
 }

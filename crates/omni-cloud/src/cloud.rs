@@ -14,7 +14,7 @@ pub const POINT_SCALARS: [&str; 7] =
 pub fn empty_point_cloud() -> PointCloud {
     PointCloud {
         positions: Vec::new(),
-        scalars: POINT_SCALARS.iter().map(|n| ScalarField { name: n.to_string(), values: Vec::new() }).collect(),
+        scalars: POINT_SCALARS.iter().map(|n| ScalarField::new(n.to_string(), Vec::new())).collect(),
     }
 }
 

@@ -97,7 +97,7 @@ pub fn gather(cloud: &PointCloud, idx: &[usize]) -> PointCloud {
         scalars: cloud
             .scalars
             .iter()
-            .map(|s| ScalarField { name: s.name.clone(), values: idx.iter().map(|&i| s.values[i]).collect() })
+            .map(|s| ScalarField { name: s.name.clone(), values: idx.iter().map(|&i| s.values[i]).collect(), ty: s.ty })
             .collect(),
     }
 }
@@ -201,7 +201,7 @@ mod tests {
     fn retain_matches_select() {
         let pts = noisy_plane(100, 5, 9);
         let cloud = PointCloud {
-            scalars: vec![ScalarField { name: "i".into(), values: (0..pts.len()).map(|i| i as f32).collect() }],
+            scalars: vec![ScalarField::new("i", (0..pts.len()).map(|i| i as f32).collect())],
             positions: pts,
         };
         let mask: Vec<bool> = (0..cloud.len()).map(|i| i % 3 != 0).collect();

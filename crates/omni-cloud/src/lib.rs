@@ -10,6 +10,8 @@
 //!   functions, re-exported); [`kdtree`] is the neighbour search behind them.
 //! * [`merge`]: many inputs → one cloud (pose, crop, voxel, outliers) with bounded memory;
 //!   [`ply_stream`] visits PLY vertices without loading the file.
+//! * [`normals`]: surface normals from a local plane fit, oriented towards the sensor.
+//! * [`export`]: the command-line options and message grouping for cloud files and ROS 2 bags.
 //! * [`motion`]: poses interpolated from odometry (slerp + lerp) for a moving sensor.
 //! * [`eval`]: signed distances to a scene's true surfaces, per object.
 //! * [`fit`]: RANSAC + least-squares plane, sphere, cylinder and cone fits and error statistics.
@@ -26,11 +28,13 @@
 pub mod align;
 pub mod cloud;
 pub mod eval;
+pub mod export;
 pub mod filter;
 pub mod fit;
 pub mod kdtree;
 pub mod merge;
 pub mod motion;
+pub mod normals;
 pub mod ply_stream;
 pub mod render;
 pub use omni_geom::rng;

@@ -10,7 +10,7 @@
 use crate::cloud::POINT_SCALARS;
 use crate::filter::{CropBox, VoxelGrid, radius_outlier_mask, retain, statistical_outlier_mask};
 use nalgebra::{Isometry3, Point3};
-use omni_formats::ply::{PointCloud, ScalarField};
+use omni_formats::ply::{PointCloud, ScalarField, ScalarType};
 use omni_formats::stream::Frame;
 
 /// What to do to the merged points.
@@ -49,6 +49,8 @@ enum Sink {
 pub struct Merger {
     opts: MergeOptions,
     names: Vec<String>,
+    /// The output fields' types (the first input's; written back so uchar colours stay uchar).
+    types: Vec<ScalarType>,
     sink: Option<Sink>,
     stats: MergeStats,
     /// Maps the current input's scalar order onto the output's.
@@ -72,6 +74,7 @@ impl Merger {
         Ok(Merger {
             opts,
             names: Vec::new(),
+            types: Vec::new(),
             sink: None,
             stats: MergeStats::default(),
             map: Vec::new(),
@@ -83,13 +86,23 @@ impl Merger {
     /// Declares the scalar fields of the next input (in its order). The first input fixes the
     /// output's fields; later inputs must carry all of them (extra fields are dropped).
     pub fn begin_input(&mut self, scalar_names: &[String]) -> Result<(), String> {
+        self.begin_typed_input(scalar_names, &vec![ScalarType::F32; scalar_names.len()])
+    }
+
+    /// [`Merger::begin_input`] with the fields' types (one per name): the first input's types
+    /// are the output's.
+    pub fn begin_typed_input(&mut self, scalar_names: &[String], types: &[ScalarType]) -> Result<(), String> {
+        if types.len() != scalar_names.len() {
+            return Err(format!("internal: {} types for {} scalar fields", types.len(), scalar_names.len()));
+        }
         if self.sink.is_none() {
             self.names = scalar_names.to_vec();
+            self.types = types.to_vec();
             self.sink = Some(match self.opts.voxel {
                 Some(size) => Sink::Voxels(VoxelGrid::new(size, [0.0; 3], self.names.clone())?),
                 None => Sink::Points(PointCloud {
                     positions: Vec::new(),
-                    scalars: self.names.iter().map(|n| ScalarField { name: n.clone(), values: Vec::new() }).collect(),
+                    scalars: self.names.iter().map(|n| ScalarField::new(n.clone(), Vec::new())).collect(),
                 }),
             });
         }
@@ -188,6 +201,9 @@ impl Merger {
             Some(Sink::Points(c)) => c,
             Some(Sink::Voxels(g)) => g.finish()?,
         };
+        for (f, ty) in cloud.scalars.iter_mut().zip(&self.types) {
+            f.ty = *ty;
+        }
         self.stats.after_voxel = cloud.len() as u64;
         if let Some((k, ratio)) = self.opts.statistical {
             let mask = statistical_outlier_mask(&cloud.positions, k, ratio)?;

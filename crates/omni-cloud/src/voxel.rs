@@ -470,7 +470,8 @@ impl VoxelSink for PointCloud {
     }
 
     fn empty_piece(&self) -> Self {
-        let scalars = self.scalars.iter().map(|f| ScalarField { name: f.name.clone(), values: Vec::new() }).collect();
+        let scalars =
+            self.scalars.iter().map(|f| ScalarField { name: f.name.clone(), values: Vec::new(), ty: f.ty }).collect();
         PointCloud { positions: Vec::new(), scalars }
     }
 
@@ -963,7 +964,11 @@ fn fold_run(
 /// 2²¹ points (module docs, Memory); identical to feeding a [`VoxelGrid`].
 pub fn voxel_downsample(cloud: &PointCloud, size: f64, origin: [f64; 3]) -> Result<PointCloud, String> {
     let grid = VoxelGrid::new(size, origin, cloud.scalars.iter().map(|s| s.name.clone()).collect())?;
-    grid.add_cloud_and_finish(cloud)
+    let mut out = grid.add_cloud_and_finish(cloud)?;
+    for (o, s) in out.scalars.iter_mut().zip(&cloud.scalars) {
+        o.ty = s.ty;
+    }
+    Ok(out)
 }
 
 /// A streaming voxel-grid accumulator (module docs for semantics and order): points go in one
@@ -1121,7 +1126,7 @@ impl VoxelGrid {
             scalars: self
                 .scalar_names
                 .iter()
-                .map(|name| ScalarField { name: name.clone(), values: Vec::with_capacity(cap) })
+                .map(|name| ScalarField::new(name.clone(), Vec::with_capacity(cap)))
                 .collect(),
         };
         let first = self.points_before_chunk;
@@ -1150,10 +1155,7 @@ mod tests {
             .collect();
         let a = (0..n).map(|_| (rng.uniform() * 1000.0) as f32).collect();
         let b = (0..n).map(|i| (i % 7) as f32 - 3.0).collect();
-        PointCloud {
-            positions,
-            scalars: vec![ScalarField { name: "a".into(), values: a }, ScalarField { name: "b".into(), values: b }],
-        }
+        PointCloud { positions, scalars: vec![ScalarField::new("a", a), ScalarField::new("b", b)] }
     }
 
     /// The definition written the obvious way: ⌊(p − o)/size⌋ by division, points grouped in
@@ -1169,9 +1171,11 @@ mod tests {
         let scalars = cloud
             .scalars
             .iter()
-            .map(|f| ScalarField {
-                name: f.name.clone(),
-                values: groups.values().map(|g| mean(g, &|i| f.values[i] as f64) as f32).collect(),
+            .map(|f| {
+                ScalarField::new(
+                    f.name.clone(),
+                    groups.values().map(|g| mean(g, &|i| f.values[i] as f64) as f32).collect(),
+                )
             })
             .collect();
         (groups.keys().copied().collect(), PointCloud { positions, scalars })
@@ -1218,7 +1222,7 @@ mod tests {
                 [1.7, 0.1, 0.3],
                 [1.0, 0.0, -0.0], // exactly on a voxel corner: belongs to voxel (1, 0, 0)
             ],
-            scalars: vec![ScalarField { name: "intensity".into(), values: vec![10.0, 20.0, 30.0, 40.0, 50.0, 60.0] }],
+            scalars: vec![ScalarField::new("intensity", vec![10.0, 20.0, 30.0, 40.0, 50.0, 60.0])],
         };
         let out = voxel_downsample(&cloud, 1.0, [0.0; 3]).unwrap();
         let expect = [[-0.5, 0.5, 0.5], [0.3, 0.4, 0.5], [4.2 / 3.0, 0.2, 0.8 / 3.0]];
@@ -1318,7 +1322,7 @@ mod tests {
         let far = 0.999 * MAX_VOXEL_INDEX as f64;
         let cloud = PointCloud {
             positions: vec![[far, far, far], [-far, far, -far], [far, -far, far], [-far, -far, -far], [far, far, far]],
-            scalars: vec![ScalarField { name: "s".into(), values: vec![1.0, 2.0, 3.0, 4.0, 5.0] }],
+            scalars: vec![ScalarField::new("s", vec![1.0, 2.0, 3.0, 4.0, 5.0])],
         };
         let out = voxel_downsample(&cloud, 1.0, [0.0; 3]).unwrap();
         let (cells, expect) = brute_force(&cloud, 1.0, [0.0; 3]);

@@ -5,7 +5,9 @@
 //!   simulator's scene (see [`scene`]).
 //! * The per-frame stream (JSON Lines, [`stream`]): a header record, one record per frame that
 //!   grows along the pipe (frame → stripe points → 3D points), and a final status record.
-//! * Point clouds as PLY ([`ply`]): binary little-endian or ASCII, `x y z` float plus scalars.
+//! * Point clouds as PLY ([`ply`]): binary little-endian or ASCII, `x y z` float or double plus
+//!   typed scalars; for other programs also PCD ([`pcd`]) and LAS 1.4 ([`las`]), chosen by
+//!   [`export::CloudFormat`], and ROS 2 bags of `PointCloud2` messages ([`rosbag`]).
 //! * [`io`]: `-` for stdin/stdout and atomic writes (temporary file, then rename; devices and
 //!   FIFOs written straight into).
 //!
@@ -14,10 +16,14 @@
 
 mod docs;
 mod error;
+pub mod export;
 pub mod io;
+pub mod las;
 pub mod odometry;
+pub mod pcd;
 pub mod ply;
 pub mod rig;
+pub mod rosbag;
 pub mod scene;
 pub mod stream;
 pub mod transform;

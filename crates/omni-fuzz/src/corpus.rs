@@ -101,8 +101,8 @@ fn ply_seeds() -> Vec<Seed> {
     let cloud = PointCloud {
         positions: vec![[0.0, 1.5, -2.25], [1000.0, -3.0, 0.125], [7.0, 8.0, 9.0]],
         scalars: vec![
-            ScalarField { name: "intensity".into(), values: vec![10.0, 200.0, 3.5] },
-            ScalarField { name: "scalar_frame".into(), values: vec![0.0, 1.0, 2.0] },
+            ScalarField::new("intensity", vec![10.0, 200.0, 3.5]),
+            ScalarField::new("scalar_frame", vec![0.0, 1.0, 2.0]),
         ],
     };
     [("ascii", Encoding::Ascii), ("binary", Encoding::BinaryLittleEndian)]

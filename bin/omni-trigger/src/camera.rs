@@ -55,7 +55,7 @@ impl CameraArgs {
         FrameFormat::parse(&self.frame_format).map_err(|e| CliError::usage(format!("--frame-format: {e}")))
     }
 
-    /// The manifest header's `camera` object, if a camera is driven.
+    /// The manifest header's `genicam` object, if a camera is driven.
     pub fn header(&self) -> Option<serde_json::Value> {
         let spec = self.camera.as_ref()?;
         Some(serde_json::json!({

@@ -346,9 +346,9 @@ fn scan(a: ScanArgs) -> CliResult {
     // is touched.
     let mut source: Box<dyn FrameSource> = match a.camera.open(&a.frames)? {
         Some(camera) => camera,
-        None => Box::new(
-            DirFrameSource::new(&a.frames).map_err(|e| CliError::new(format!("{}: {e}", a.frames.display())))?,
-        ),
+        None => {
+            Box::new(DirFrameSource::new(&a.frames).map_err(|e| CliError::new(format!("{}: {e}", a.frames.display())))?)
+        }
     };
     let mut client = open_client(&a.port)?;
     let info = hello(&mut client, &a.port.port)?;
@@ -363,7 +363,7 @@ fn scan(a: ScanArgs) -> CliResult {
     );
     header.extra.insert("angles".into(), a.angles.clone().into());
     if let Some(c) = a.camera.header() {
-        header.extra.insert("camera".into(), c);
+        header.extra.insert("genicam".into(), c);
     }
     writer.write(&Record::Header(header))?;
 
@@ -414,7 +414,10 @@ fn scan(a: ScanArgs) -> CliResult {
     let too_many_missing = status.frames_missing > a.max_missing;
     let hint = match a.camera.camera {
         Some(_) => "can the camera keep up with the trigger rate? Its counters are in the status record".to_string(),
-        None => format!("is --frames {} the directory the camera writes to, and can the camera keep up?", a.frames.display()),
+        None => format!(
+            "is --frames {} the directory the camera writes to, and can the camera keep up?",
+            a.frames.display()
+        ),
     };
     let missing_msg = format!(
         "{} of {} triggered frames missing, more than --max-missing {} ({hint})",

@@ -101,8 +101,15 @@ pub fn encode(frame: &RawFrame, format: FrameFormat) -> std::io::Result<Vec<u8>>
             } else {
                 (frame.data[..n].to_vec(), image::ExtendedColorType::L8)
             };
-            image::write_buffer_with_format(&mut buf, &bytes, frame.width, frame.height, color, image::ImageFormat::Png)
-                .map_err(std::io::Error::other)?;
+            image::write_buffer_with_format(
+                &mut buf,
+                &bytes,
+                frame.width,
+                frame.height,
+                color,
+                image::ImageFormat::Png,
+            )
+            .map_err(std::io::Error::other)?;
             Ok(buf.into_inner())
         }
     }
@@ -303,9 +310,9 @@ mod tests {
         let mtime = meta.modified().unwrap().duration_since(SystemTime::UNIX_EPOCH).unwrap().as_micros() as i64;
         assert_eq!(mtime, t0 + 5000);
         assert!(w.written().unwrap().is_empty());
-        let hidden = std::fs::read_dir(dir.path()).unwrap().filter(|e| {
-            e.as_ref().unwrap().file_name().to_string_lossy().starts_with('.')
-        });
+        let hidden = std::fs::read_dir(dir.path())
+            .unwrap()
+            .filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().starts_with('.'));
         assert_eq!(hidden.count(), 0, "no temporary file left");
     }
 }

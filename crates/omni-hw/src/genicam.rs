@@ -282,7 +282,9 @@ fn configure(camera: &Camera, label: &str, s: &CameraSettings) -> Result<(), Str
         camera.set_gain(db).map_err(|e| err("cannot set the gain", e))?;
     }
     set_trigger(camera, label, &s.trigger)?;
-    camera.set_acquisition_mode(aravis::AcquisitionMode::Continuous).map_err(|e| err("cannot set continuous acquisition", e))
+    camera
+        .set_acquisition_mode(aravis::AcquisitionMode::Continuous)
+        .map_err(|e| err("cannot set continuous acquisition", e))
 }
 
 fn set_roi(camera: &Camera, label: &str, roi: Roi) -> Result<(), String> {
@@ -319,18 +321,18 @@ fn set_trigger(camera: &Camera, label: &str, trigger: &Trigger) -> Result<(), St
             if offered.is_empty() { "none: no trigger mode".to_string() } else { offered.join(", ") }
         ));
     }
-    // FrameStart on the source, rising edge, TriggerMode On.
-    camera
-        .set_trigger(trigger.source())
-        .map_err(|e| camera_error(label, &format!("the camera refuses trigger mode on {}", trigger.source()), e))?;
     // Cameras that poll for triggers at their frame rate (Aravis's fake camera) answer sooner
-    // at the highest rate; a camera without the feature simply keeps its own.
+    // at the highest rate; a camera without the feature simply keeps its own. First, because
+    // Aravis's frame rate setter turns the trigger mode off.
     if camera.is_frame_rate_available().unwrap_or(false)
         && let Ok((_, max)) = camera.frame_rate_bounds()
     {
         let _ = camera.set_frame_rate(max);
     }
-    Ok(())
+    // FrameStart on the source, rising edge, TriggerMode On.
+    camera
+        .set_trigger(trigger.source())
+        .map_err(|e| camera_error(label, &format!("the camera refuses trigger mode on {}", trigger.source()), e))
 }
 
 impl AravisFrameSource {

@@ -735,7 +735,8 @@ mod tests {
             assert!(p.on_trigger(ev.clone(), ev.t_us as i64 + OFFSET).is_empty());
         }
         let at = |seq: u64, late_us: i64| event(&s, seq).t_us as i64 + OFFSET + late_us;
-        let named = |seq: u64, time_us: i64| CapturedFrame { trigger_seq: Some(seq), ..frame(&format!("c{seq}.pgm"), time_us) };
+        let named =
+            |seq: u64, time_us: i64| CapturedFrame { trigger_seq: Some(seq), ..frame(&format!("c{seq}.pgm"), time_us) };
         let mut extra = named(0, at(0, 1000));
         extra.extra.insert("camera_frame".into(), 7.into());
         // Named trigger 1, but exposed at trigger 2's time: beyond trigger 1's window, so not
@@ -751,8 +752,10 @@ mod tests {
         assert_eq!(got.iter().map(|g| (g.0, g.1.as_str())).collect::<Vec<_>>(), vec![(0, "c0.pgm"), (3, "c3.pgm")]);
         let first = out.iter().find_map(|e| if let PairEvent::Paired(f) = e { Some(f) } else { None }).unwrap();
         assert_eq!(first.extra.get("camera_frame"), Some(&7.into()), "the source's fields reach the record");
-        let unmatched: Vec<&String> =
-            out.iter().filter_map(|e| if let PairEvent::FrameUnmatched { reason, .. } = e { Some(reason) } else { None }).collect();
+        let unmatched: Vec<&String> = out
+            .iter()
+            .filter_map(|e| if let PairEvent::FrameUnmatched { reason, .. } = e { Some(reason) } else { None })
+            .collect();
         assert_eq!(unmatched.len(), 2, "{out:?}");
         assert!(unmatched[0].contains("answered trigger (seq 1)"), "{}", unmatched[0]);
         assert!(unmatched[1].contains("seq 0, which is not waiting"), "{}", unmatched[1]);

@@ -97,4 +97,3 @@ pub fn read_manifest(path: &Path) -> (Vec<Frame>, Status) {
 pub fn extra(status: &Status, key: &str) -> u64 {
     status.extra.get(key).and_then(|v| v.as_u64()).unwrap_or_else(|| panic!("status lacks {key}"))
 }
-

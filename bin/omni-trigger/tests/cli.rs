@@ -8,6 +8,7 @@ use common::*;
 use omni_formats::stream::{Frame, Status};
 use omni_hw::emulator::TruthRecord;
 use std::collections::HashMap;
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 

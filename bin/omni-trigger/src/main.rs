@@ -1,12 +1,13 @@
 //! `omni-trigger`: talk to the polygon-mirror trigger controller, capture a scan, or emulate one.
 
+mod camera;
 mod render;
 
 use clap::{Args, Parser, Subcommand};
 use omni_cli::{CliError, CliResult};
 use omni_formats::stream::{Header, Record, StreamWriter};
 use omni_hw::emulator::{BlankRenderer, EmulatorOptions, Faults, FrameRenderer, ServeEnd, VirtualCamera, serve};
-use omni_hw::pairing::{DirFrameSource, PairEvent, PairOptions};
+use omni_hw::pairing::{DirFrameSource, FrameSource, PairEvent, PairOptions};
 use omni_hw::scan::{ScanConfig, StopWhen, configure, expected_triggers, failed_status, run_scan};
 use omni_hw::schedule::AngleSpec;
 use omni_hw::{Client, ClientOptions, DeviceInfo};
@@ -47,6 +48,7 @@ enum Cmd {
     Info(InfoArgs),
     Scan(ScanArgs),
     Emulate(EmulateArgs),
+    Cameras(camera::CamerasArgs),
 }
 
 #[derive(Args)]
@@ -83,13 +85,17 @@ struct InfoArgs {
     ambient_path names the laser-off frame taken one revolution earlier at the same encoder count.\n\n\
     Examples:\n  \
     omni-trigger scan --port /dev/ttyACM0 --frames frames/ --angles 0:30:0.5 --revolutions 2 -o scan.jsonl\n  \
-    omni-trigger scan --port /dev/ttyACM0 --frames frames/ --angles 2.5,15,27.5 --facets 0 --duration 10")]
+    omni-trigger scan --port /dev/ttyACM0 --frames frames/ --angles 2.5,15,27.5 --facets 0 --duration 10\n  \
+    omni-trigger scan --port /dev/ttyACM0 --camera aravis:Basler-21234567 --trigger Line0 --pixel-format Mono8 --exposure-us 500 --frames frames/ -o scan.jsonl")]
 struct ScanArgs {
     #[command(flatten)]
     port: PortArgs,
-    /// Directory the camera software writes frames into (files already there are ignored).
+    /// Directory the camera software writes frames into (files already there are ignored);
+    /// with --camera, the directory omni-trigger writes the camera's frames into.
     #[arg(long)]
     frames: PathBuf,
+    #[command(flatten)]
+    camera: camera::CameraArgs,
     /// Trigger angles within a facet in degrees: start:stop:step (stop excluded) or a list a,b,c.
     #[arg(long, default_value = "0:30:0.5", allow_hyphen_values = true)]
     angles: String,
@@ -209,6 +215,7 @@ fn main() -> ExitCode {
         Cmd::Info(a) => info(a),
         Cmd::Scan(a) => scan(a),
         Cmd::Emulate(a) => emulate(a),
+        Cmd::Cameras(a) => camera::cameras(a),
     })
 }
 
@@ -335,8 +342,14 @@ fn open_output(path: &Path) -> CliResult<Box<dyn Write>> {
 
 fn scan(a: ScanArgs) -> CliResult {
     let cfg = scan_config(&a)?;
-    let mut source =
-        DirFrameSource::new(&a.frames).map_err(|e| CliError::new(format!("{}: {e}", a.frames.display())))?;
+    // The camera is opened and set up first: any refusal is reported before the controller
+    // is touched.
+    let mut source: Box<dyn FrameSource> = match a.camera.open(&a.frames)? {
+        Some(camera) => camera,
+        None => {
+            Box::new(DirFrameSource::new(&a.frames).map_err(|e| CliError::new(format!("{}: {e}", a.frames.display())))?)
+        }
+    };
     let mut client = open_client(&a.port)?;
     let info = hello(&mut client, &a.port.port)?;
     let out_name = omni_formats::io::display_name(&a.output, "stdout");
@@ -349,6 +362,9 @@ fn scan(a: ScanArgs) -> CliResult {
             "counts_per_rev": info.counts_per_rev, "facets": info.facets, "lasers": info.lasers}),
     );
     header.extra.insert("angles".into(), a.angles.clone().into());
+    if let Some(c) = a.camera.header() {
+        header.extra.insert("genicam".into(), c);
+    }
     writer.write(&Record::Header(header))?;
 
     let (schedule, rpm) = match configure(&mut client, &info, &cfg) {
@@ -389,19 +405,25 @@ fn scan(a: ScanArgs) -> CliResult {
             }
         }
     };
-    let outcome = run_scan(&mut client, &mut source, schedule, rpm, &cfg, &mut sink);
+    let outcome = run_scan(&mut client, source.as_mut(), schedule, rpm, &cfg, &mut sink);
     bar.finish_and_clear();
     if let Some(e) = write_error {
         return Err(CliError::new(e));
     }
     let mut status = outcome.status.clone();
     let too_many_missing = status.frames_missing > a.max_missing;
+    let hint = match a.camera.camera {
+        Some(_) => "can the camera keep up with the trigger rate? Its counters are in the status record".to_string(),
+        None => format!(
+            "is --frames {} the directory the camera writes to, and can the camera keep up?",
+            a.frames.display()
+        ),
+    };
     let missing_msg = format!(
-        "{} of {} triggered frames missing, more than --max-missing {} (is --frames {} the directory the camera writes to, and can the camera keep up?)",
+        "{} of {} triggered frames missing, more than --max-missing {} ({hint})",
         status.frames_missing,
         status.frames + status.frames_missing,
         a.max_missing,
-        a.frames.display()
     );
     if too_many_missing {
         status.complete = false;

@@ -2,92 +2,15 @@
 //! real pseudo-terminal (the production path through `serialport`), clean and with each fault.
 //! Ground truth: the emulator's `--truth` file says which trigger and true angle each frame shows.
 
-use omni_formats::stream::{Frame, Record, Status, StreamReader};
-use omni_hw::emulator::{TruthRecord, read_truth};
+mod common;
+
+use common::*;
+use omni_formats::stream::{Frame, Status};
+use omni_hw::emulator::TruthRecord;
 use std::collections::HashMap;
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::path::Path;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-const BIN: &str = env!("CARGO_BIN_EXE_omni-trigger");
-
-/// An emulator child process; killed when dropped.
-struct Emulator {
-    child: Child,
-    port: String,
-    dir: tempfile::TempDir,
-}
-
-impl Emulator {
-    fn start(args: &[&str]) -> Emulator {
-        let dir = tempfile::tempdir().unwrap();
-        let mut child = Command::new(BIN)
-            .arg("emulate")
-            .arg("--frames")
-            .arg(dir.path().join("frames"))
-            .arg("--truth")
-            .arg(dir.path().join("truth.jsonl"))
-            .args(args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-        let port = line.trim().to_string();
-        assert!(port.starts_with("/dev/"), "emulator printed {line:?}");
-        Emulator { child, port, dir }
-    }
-
-    fn frames(&self) -> PathBuf {
-        self.dir.path().join("frames")
-    }
-
-    fn truth(&self) -> Vec<TruthRecord> {
-        let p = self.dir.path().join("truth.jsonl");
-        if p.exists() { read_truth(&p).unwrap() } else { vec![] }
-    }
-
-    fn manifest_path(&self) -> PathBuf {
-        self.dir.path().join("scan.jsonl")
-    }
-
-    fn scan(&self, args: &[&str]) -> Output {
-        Command::new(BIN)
-            .args(["scan", "--port", &self.port, "--frames"])
-            .arg(self.frames())
-            .arg("-o")
-            .arg(self.manifest_path())
-            .args(args)
-            .output()
-            .unwrap()
-    }
-}
-
-impl Drop for Emulator {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// Reads a manifest, checking it is valid JSON Lines: header first, status last, frames between.
-fn read_manifest(path: &Path) -> (Vec<Frame>, Status) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let records: Vec<Record> =
-        StreamReader::new(text.as_bytes(), "manifest").map(|r| r.unwrap_or_else(|e| panic!("{e}\n{text}"))).collect();
-    assert!(matches!(records.first(), Some(Record::Header(_))), "{text}");
-    let Some(Record::Status(status)) = records.last().cloned() else { panic!("no final status record:\n{text}") };
-    let frames: Vec<Frame> = records[1..records.len() - 1]
-        .iter()
-        .map(|r| match r {
-            Record::Frame(f) => (**f).clone(),
-            other => panic!("unexpected record {other:?}"),
-        })
-        .collect();
-    (frames, status)
-}
 
 /// Every paired frame shows exactly the trigger and angle the manifest says (truth from the
 /// emulator), and no frame file is used twice.
@@ -111,10 +34,6 @@ fn assert_frames_true(frames: &[Frame], truth: &[TruthRecord]) {
         assert_eq!((t.facet, &t.lasers), (f.facet, &f.lasers), "{}", f.path);
         assert!(used.insert(f.path.clone()), "{} paired twice", f.path);
     }
-}
-
-fn extra(status: &Status, key: &str) -> u64 {
-    status.extra.get(key).and_then(|v| v.as_u64()).unwrap_or_else(|| panic!("status lacks {key}"))
 }
 
 /// 24 triggers per revolution (angles 0° and 15° on all 12 facets), evenly spaced.

@@ -62,7 +62,7 @@ fn parse_lines(c: &mut Criterion) {
                 let ev = event(&s, q);
                 let t = ev.t_us as i64;
                 p.on_trigger(ev, t + 100);
-                p.on_frame(CapturedFrame { path: PathBuf::new(), name: format!("f{q}.png"), time_us: t }, t + 200);
+                p.on_frame(CapturedFrame::new(PathBuf::new(), format!("f{q}.png"), t), t + 200);
                 paired += p.tick(t + 300).len();
             }
             paired

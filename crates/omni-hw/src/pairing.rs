@@ -32,15 +32,47 @@ pub struct CapturedFrame {
     pub name: String,
     /// Host-clock timestamp (µs since the Unix epoch) of the exposure or of the file.
     pub time_us: i64,
+    /// The trigger (sequence number) this frame answers, when the source knows it (a camera the
+    /// host fired by software for that trigger). The frame then pairs with that trigger or with
+    /// none: its timestamp must still fall in the trigger's window.
+    pub trigger_seq: Option<u64>,
+    /// Fields copied into the frame's manifest record (e.g. the camera's frame id).
+    pub extra: serde_json::Map<String, serde_json::Value>,
 }
 
-/// Where frames come from. A GenICam/Aravis camera would implement this too; pairing only sees
-/// [`CapturedFrame`]s.
+impl CapturedFrame {
+    /// A frame file with its timestamp and nothing else known.
+    pub fn new(path: PathBuf, name: String, time_us: i64) -> Self {
+        CapturedFrame { path, name, time_us, trigger_seq: None, extra: serde_json::Map::new() }
+    }
+}
+
+/// Where frames come from: a directory the camera software writes into ([`DirFrameSource`]) or
+/// a camera the host drives itself (`genicam::AravisFrameSource`, feature `aravis`); pairing
+/// only sees [`CapturedFrame`]s.
 pub trait FrameSource {
     /// Frames that became complete since the previous call, oldest first.
     fn poll(&mut self) -> std::io::Result<Vec<CapturedFrame>>;
     /// A short description for messages, e.g. the directory.
     fn describe(&self) -> String;
+    /// The controller fired trigger `ev` (its event arrived at host time `received_us`): a
+    /// source that triggers the camera by software does so now. An error stops the scan.
+    fn on_trigger(&mut self, _ev: &TriggerEvent, _received_us: i64) -> std::io::Result<()> {
+        Ok(())
+    }
+    /// Frames the source received broken or not at all since the previous call (e.g. a camera
+    /// frame with lost packets), one line each, for the status record.
+    fn take_losses(&mut self) -> Vec<String> {
+        Vec::new()
+    }
+    /// The scan ended: frames still in progress (e.g. being written), waiting briefly for them.
+    fn finish(&mut self) -> std::io::Result<Vec<CapturedFrame>> {
+        Ok(Vec::new())
+    }
+    /// Counters for the status record (e.g. camera packets lost), added to its fields.
+    fn stats(&self) -> serde_json::Map<String, serde_json::Value> {
+        serde_json::Map::new()
+    }
 }
 
 /// Image files appearing in a directory, written by the camera's software.
@@ -115,7 +147,7 @@ impl FrameSource for DirFrameSource {
                 .unwrap_or_else(crate::client::host_time_us);
             self.sizes.remove(&name);
             self.stale.remove(&name);
-            out.push(CapturedFrame { path: entry.path(), name: name.to_string_lossy().into_owned(), time_us });
+            out.push(CapturedFrame::new(entry.path(), name.to_string_lossy().into_owned(), time_us));
             self.reported.insert(name);
         }
         out.sort_by(|a, b| (a.time_us, &a.name).cmp(&(b.time_us, &b.name)));
@@ -163,6 +195,9 @@ pub enum PairEvent {
     FrameUnmatched { path: String, reason: String },
     /// An event contradicting the schedule (dropped, never paired).
     BadEvent(String),
+    /// A frame the source received broken (e.g. packets lost on the network) or not at all; it
+    /// is never paired, and its trigger ends up missing.
+    FrameBroken(String),
 }
 
 /// Counters of the pairing.
@@ -399,22 +434,36 @@ impl Pairer {
         Some(PairEvent::FrameMissing { seq, facet: ev.facet, alpha_deg: self.schedule.alpha_deg(ev.encoder), reason })
     }
 
+    /// The pending trigger a frame could be, with its timestamp error (µs): the one the source
+    /// named, or else the nearest in time.
+    fn candidate(&self, frame: &CapturedFrame) -> Result<(u64, f64), String> {
+        let error = |e: &TriggerEvent| (frame.time_us - self.frame_time(e)) as f64;
+        match frame.trigger_seq {
+            Some(seq) => self.pending.get(&seq).map(|e| (seq, error(e))).ok_or_else(|| {
+                format!("the camera answered trigger seq {seq}, which is not waiting for a frame (already paired or expired)")
+            }),
+            None => self
+                .pending
+                .values()
+                .map(|e| (e.seq, error(e)))
+                .min_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+                .ok_or_else(|| "no pending trigger (its event was lost or it came too late)".into()),
+        }
+    }
+
     fn match_frame(&mut self, frame: CapturedFrame) -> Vec<PairEvent> {
         let mut out = Vec::new();
-        let best = self
-            .pending
-            .values()
-            .map(|e| (e.seq, (frame.time_us - self.frame_time(e)) as f64))
-            .min_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
-        let Some((seq, error_us)) = best.filter(|(seq, err)| err.abs() <= self.tolerance_us(*seq)) else {
+        let best = self.candidate(&frame);
+        let Some((seq, error_us)) = best.clone().ok().filter(|(seq, err)| err.abs() <= self.tolerance_us(*seq)) else {
             self.stats.frames_unmatched += 1;
             let reason = match best {
-                Some((seq, err)) => format!(
-                    "its timestamp is {:.1} ms from the nearest pending trigger (seq {seq}), beyond the ±{:.1} ms window",
+                Ok((seq, err)) => format!(
+                    "its timestamp is {:.1} ms from the {} trigger (seq {seq}), beyond the ±{:.1} ms window",
                     err / 1000.0,
+                    if frame.trigger_seq.is_some() { "answered" } else { "nearest pending" },
                     self.tolerance_us(seq) / 1000.0
                 ),
-                None => "no pending trigger (its event was lost or it came too late)".into(),
+                Err(reason) => reason,
             };
             out.push(PairEvent::FrameUnmatched { path: frame.name, reason });
             return out;
@@ -430,7 +479,9 @@ impl Pairer {
             if self.inferred.contains(&seq) {
                 self.stats.paired_inferred += 1;
             }
-            out.push(PairEvent::Paired(Box::new(self.record(&ev, frame.name))));
+            let mut record = self.record(&ev, frame.name);
+            record.extra.extend(frame.extra);
+            out.push(PairEvent::Paired(Box::new(record)));
         }
         out
     }
@@ -490,7 +541,7 @@ mod tests {
     }
 
     fn frame(name: &str, time_us: i64) -> CapturedFrame {
-        CapturedFrame { path: PathBuf::from(name), name: name.into(), time_us }
+        CapturedFrame::new(PathBuf::from(name), name.into(), time_us)
     }
 
     /// Feeds events (received 300 µs after firing) and frames (stamped `latency` after firing,
@@ -673,5 +724,41 @@ mod tests {
             assert_eq!(f.lasers, vec![0, 1]);
             assert_eq!(f.ambient_path.as_deref(), Some(format!("f{}.png", f.seq - 6).as_str()));
         }
+    }
+
+    #[test]
+    fn a_frame_naming_its_trigger_pairs_with_it_or_with_none() {
+        let s = schedule(false);
+        let mut p = Pairer::new(s.clone(), RPM, PairOptions::default());
+        for seq in 0..4 {
+            let ev = event(&s, seq);
+            assert!(p.on_trigger(ev.clone(), ev.t_us as i64 + OFFSET).is_empty());
+        }
+        let at = |seq: u64, late_us: i64| event(&s, seq).t_us as i64 + OFFSET + late_us;
+        let named =
+            |seq: u64, time_us: i64| CapturedFrame { trigger_seq: Some(seq), ..frame(&format!("c{seq}.pgm"), time_us) };
+        let mut extra = named(0, at(0, 1000));
+        extra.extra.insert("camera_frame".into(), 7.into());
+        // Named trigger 1, but exposed at trigger 2's time: beyond trigger 1's window, so not
+        // paired, although trigger 2 would fit in time.
+        let frames = [extra, named(1, at(2, 0)), named(0, at(0, 2000)), named(3, at(3, 500))];
+        let mut out = Vec::new();
+        for f in frames {
+            p.on_frame(f, at(3, 6000));
+        }
+        out.extend(p.tick(at(3, 6000)));
+        out.extend(p.drain());
+        let got = paired(&out);
+        assert_eq!(got.iter().map(|g| (g.0, g.1.as_str())).collect::<Vec<_>>(), vec![(0, "c0.pgm"), (3, "c3.pgm")]);
+        let first = out.iter().find_map(|e| if let PairEvent::Paired(f) = e { Some(f) } else { None }).unwrap();
+        assert_eq!(first.extra.get("camera_frame"), Some(&7.into()), "the source's fields reach the record");
+        let unmatched: Vec<&String> = out
+            .iter()
+            .filter_map(|e| if let PairEvent::FrameUnmatched { reason, .. } = e { Some(reason) } else { None })
+            .collect();
+        assert_eq!(unmatched.len(), 2, "{out:?}");
+        assert!(unmatched[0].contains("answered trigger (seq 1)"), "{}", unmatched[0]);
+        assert!(unmatched[1].contains("seq 0, which is not waiting"), "{}", unmatched[1]);
+        assert_eq!((p.stats.paired, p.stats.frames_missing), (2, 2));
     }
 }

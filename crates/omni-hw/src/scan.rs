@@ -145,6 +145,7 @@ pub fn describe(event: &PairEvent) -> Option<String> {
         )),
         PairEvent::FrameUnmatched { path, reason } => Some(format!("frame {path}: not paired: {reason}")),
         PairEvent::BadEvent(m) => Some(format!("dropped event: {m}")),
+        PairEvent::FrameBroken(m) => Some(m.clone()),
     }
 }
 
@@ -183,6 +184,7 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
     fn handle(&mut self, message: DeviceMessage, at_us: i64) -> Result<(), String> {
         match message {
             DeviceMessage::Trigger(ev) => {
+                self.source.on_trigger(&ev, at_us).map_err(|e| format!("{}: {e}", self.source.describe()))?;
                 let out = self.pairer.on_trigger(ev, at_us);
                 self.emit(out)
             }
@@ -207,8 +209,23 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
         for f in frames {
             self.pairer.on_frame(f, now);
         }
+        let broken: Vec<PairEvent> = self.source.take_losses().into_iter().map(PairEvent::FrameBroken).collect();
+        self.emit(broken)?;
         let out = self.pairer.tick(now);
         self.emit(out)
+    }
+
+    /// Frames the source still had in progress when the run ended; an error is recorded.
+    fn finish_frames(&mut self) {
+        let now = host_time_us();
+        match self.source.finish() {
+            Ok(frames) => frames.into_iter().for_each(|f| self.pairer.on_frame(f, now)),
+            Err(e) => {
+                let m = format!("{}: {e}", self.source.describe());
+                self.errors_total += 1;
+                self.errors.push(m);
+            }
+        }
     }
 
     /// Silence: ask the controller what it is doing; an idle controller means the run ended
@@ -317,6 +334,7 @@ pub fn run_scan<P: Read + Write, S: FrameSource + ?Sized>(
     }
     // Account for everything still waiting, without waiting any longer.
     let _ = run.poll_frames();
+    run.finish_frames();
     let out = run.pairer.drain();
     let sink_result = run.emit(out);
     if result.is_ok() && sink_result.is_ok() {
@@ -355,6 +373,7 @@ fn finish<P: Read + Write, S: FrameSource + ?Sized>(run: Run<'_, P, S>, error: O
         put("controller_overruns", c.overruns);
         put("controller_crc_errors", c.crc_errors);
     }
+    extra.extend(run.source.stats());
     let status = Status {
         frames: stats.paired,
         frames_missing: stats.missing_total(),

@@ -1,4 +1,5 @@
-//! Image I/O helpers: frames on disk (PNG 8/16-bit, JPEG) to a grey buffer, and PNG output.
+//! Image I/O helpers: frames on disk (PNG 8/16-bit, JPEG, binary PGM 8/16-bit) to a grey buffer,
+//! and PNG output.
 //!
 //! Every error is an [`omni_formats::Error`] naming the file, so a tool can print it as is:
 //! `frames/000012.png: truncated or corrupt image: …`.
@@ -69,7 +70,8 @@ impl GrayImage {
     }
 }
 
-/// Loads a PNG (8- or 16-bit, grey or colour) or JPEG file as a grey image. Colour images are
+/// Loads a PNG (8- or 16-bit, grey or colour), JPEG or binary PGM (`P5`, 8- or 16-bit, the
+/// uncompressed format `omni-trigger` can capture into) file as a grey image. Colour images are
 /// converted to luma. Missing, truncated, corrupt and non-image files give an error naming the
 /// file.
 pub fn load_gray(path: &Path) -> Result<GrayImage, Error> {
@@ -77,7 +79,7 @@ pub fn load_gray(path: &Path) -> Result<GrayImage, Error> {
     decode_gray(&bytes, &path.display().to_string())
 }
 
-/// Decodes an in-memory PNG/JPEG file; `name` is used in error messages.
+/// Decodes an in-memory PNG/JPEG/PGM file; `name` is used in error messages.
 pub fn decode_gray(bytes: &[u8], name: &str) -> Result<GrayImage, Error> {
     Ok(from_dynamic(decode_checked(bytes, name)?))
 }
@@ -95,7 +97,7 @@ fn decode_checked(bytes: &[u8], name: &str) -> Result<image::DynamicImage, Error
         return Err(Error::new(name, "", "empty file, not an image"));
     }
     let format = image::guess_format(bytes)
-        .map_err(|_| Error::new(name, "", "not a PNG or JPEG image (unrecognised file signature)"))?;
+        .map_err(|_| Error::new(name, "", "not a PNG, JPEG or PGM image (unrecognised file signature)"))?;
     if format == image::ImageFormat::Jpeg && !jpeg_has_end(bytes) {
         // The JPEG decoder fills a cut-off scan with grey and reports success.
         return Err(Error::new(name, "", "truncated JPEG: no end-of-image marker (FF D9) at the end of the file"));
@@ -208,6 +210,27 @@ mod tests {
             write_gray_png(&p, &img).unwrap();
             assert_eq!(load_gray(&p).unwrap(), img);
         }
+    }
+
+    /// PGM written byte by byte from netpbm's `pgm(5)`: `P5`, width, height and maxval as text,
+    /// one whitespace byte, then the samples (big-endian pairs when maxval > 255).
+    #[test]
+    fn binary_pgm_8_and_16_bit_load_exactly() {
+        let mut p8 = b"P5\n3 2\n255\n".to_vec();
+        p8.extend([0u8, 7, 255, 1, 2, 3]);
+        let g = decode_gray(&p8, "f.pgm").unwrap();
+        assert_eq!((g.width, g.height, g.bit_depth), (3, 2, 8));
+        assert_eq!(g.data, vec![0, 7, 255, 1, 2, 3]);
+        let samples = [0u16, 258, 65535, 40000];
+        let mut p16 = b"P5 2 2 65535\n".to_vec();
+        p16.extend(samples.iter().flat_map(|v| v.to_be_bytes()));
+        let g = decode_gray(&p16, "f16.pgm").unwrap();
+        assert_eq!((g.width, g.height, g.bit_depth), (2, 2, 16));
+        assert_eq!(g.data, samples.to_vec());
+        let e = decode_gray(&p16[..p16.len() - 3], "cut.pgm").unwrap_err().to_string();
+        assert!(e.starts_with("cut.pgm: ") && e.contains("truncated"), "{e}");
+        let e = decode_gray(b"P5\n100000 8\n255\n", "huge.pgm").unwrap_err().to_string();
+        assert!(e.contains("100000x8"), "{e}");
     }
 
     #[test]

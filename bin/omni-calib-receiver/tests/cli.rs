@@ -260,3 +260,97 @@ fn find_annulus_exits_cleanly_when_stdout_closes() {
     assert_eq!(out.status.code(), Some(0), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+fn write_mei_camera(dir: &Path) -> PathBuf {
+    let path = dir.join("mei.json");
+    let text = r#"{"format": "omniscan.camera", "version": 1, "model": {"kind": "mei", "xi": 0.93,
+        "fx_px": 310.5, "fy_px": 311.25, "cx_px": 377.1, "cy_px": 239.7, "k1": -0.21, "k2": 0.034,
+        "p1": 0.0012, "p2": -0.0007, "width": 752, "height": 480, "inner_radius_px": 40,
+        "outer_radius_px": 235, "viewpoint_mm": [0, 0, 80]}}"#;
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn run_with_stdin(args: &[&std::ffi::OsStr], stdin: &str) -> Output {
+    use std::io::Write as _;
+    let mut child = bin()
+        .args(args)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(stdin.as_bytes()).unwrap();
+    child.wait_with_output().unwrap()
+}
+
+/// `query`: a pixel's ray, sent back as a point 1 m along it, comes back to the pixel (text and
+/// JSON); unseen pixels say `none`; a bad line names its number and leaves no output file.
+#[test]
+fn query_answers_pixels_and_points_both_ways() {
+    let dir = tempfile::tempdir().unwrap();
+    let cam = write_mei_camera(dir.path());
+    let q = |extra: &[&str], stdin: &str| {
+        let mut args: Vec<&std::ffi::OsStr> = vec!["query".as_ref(), "--camera".as_ref(), cam.as_os_str()];
+        args.extend(extra.iter().map(|a| std::ffi::OsStr::new(*a)));
+        run_with_stdin(&args, stdin)
+    };
+    let out = q(&[], "# a comment\n577.1 239.7\n377.1 239.7\n");
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8(out.stdout).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 2, "{text}");
+    assert_eq!(lines[1], "377.1 239.7 none", "the blind centre");
+    let v: Vec<f64> = lines[0].split(' ').map(|t| t.parse().unwrap()).collect();
+    assert_eq!(v[2..5], [0.0, 0.0, 80.0], "rays start at the viewpoint");
+    let point: Vec<f64> = (0..3).map(|k| v[2 + k] + 1000.0 * v[5 + k]).collect();
+    let out = q(&["--json"], &format!("{{\"point_mm\": [{}, {}, {}]}}\n", point[0], point[1], point[2]));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let answer: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let (u, w) = (answer["px"][0].as_f64().unwrap(), answer["px"][1].as_f64().unwrap());
+    assert!((u - 577.1).abs() < 1e-6 && (w - 239.7).abs() < 1e-6, "{answer}");
+
+    let file = dir.path().join("answers.txt");
+    let out = q(&["-o", file.to_str().unwrap()], "577.1 239.7\n1 2 3 4\n");
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert!(err.contains("stdin: line 2: expected 2 numbers (pixel u v) or 3"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(!file.exists(), "no half-written answers");
+}
+
+/// `export` writes Kalibr (with `rostopic`, `cam_overlaps` and the frame), OpenCV and refuses a
+/// model of the wrong kind; `import-kalibr`/`import-opencv` read them back to the same camera.
+#[test]
+fn export_and_import_kalibr_and_opencv_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let cam = write_mei_camera(dir.path());
+    let original: serde_json::Value = serde_json::from_slice(&std::fs::read(&cam).unwrap()).unwrap();
+    for (to, import) in [("kalibr", "import-kalibr"), ("opencv", "import-opencv")] {
+        let file = dir.path().join(format!("{to}.yaml"));
+        let out = bin().arg("export").arg(&cam).arg("--to").arg(to).arg("-o").arg(&file).output().unwrap();
+        assert!(out.status.success(), "{}", stderr(&out));
+        let text = std::fs::read_to_string(&file).unwrap();
+        assert!(text.contains("(x, y, -z) of the omniscan world"), "{text}");
+        if to == "kalibr" {
+            assert!(text.contains("rostopic: /omni/image_raw") && text.contains("cam_overlaps: []"), "{text}");
+        }
+        let back = dir.path().join(format!("from_{to}.json"));
+        let out = bin().arg(import).arg(&file).arg("-o").arg(&back).output().unwrap();
+        assert!(out.status.success(), "{}", stderr(&out));
+        let read: serde_json::Value = serde_json::from_slice(&std::fs::read(&back).unwrap()).unwrap();
+        for key in ["xi", "fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2", "width", "height"] {
+            assert_eq!(read["model"][key], original["model"][key], "{to}: {key}");
+        }
+    }
+    let out = bin().arg("export").arg(&cam).arg("--to").arg("ocam").arg("-o").arg("-").output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("--to ocam needs a camera of kind ocam, this one is mei"), "{}", stderr(&out));
+    let bad = dir.path().join("bad.yaml");
+    std::fs::write(&bad, "cam0:\n  camera_model: pinhole\n").unwrap();
+    let back = dir.path().join("x.json");
+    let out = bin().arg("import-kalibr").arg(&bad).arg("-o").arg(&back).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("bad.yaml: cam0.camera_model: \"pinhole\""), "{}", stderr(&out));
+    assert!(!back.exists());
+}

@@ -18,8 +18,11 @@
 //! model is the Mei model with ξ fixed by the given mirror and no distortion; only the focal
 //! lengths and the principal point are fitted.
 
+pub mod convert;
 pub mod corners_file;
 pub mod export;
+pub mod query;
+mod yaml;
 
 use crate::pose::{UNPROJECTABLE_PX, board_to_world, params_to_pose, pose_from_rays, pose_to_params, refine_pose};
 use nalgebra::{DMatrix, Isometry3, Point3, Vector2, Vector3};
@@ -183,7 +186,7 @@ impl Calibration {
             .zip(self.params.iter().zip(&self.std_devs))
             .map(|(n, (v, s))| (n.clone(), json!({"value": v, "std": s})))
             .collect();
-        json!({
+        let mut report = json!({
             "rms_px": self.rms_px,
             "images_used": self.images.iter().filter(|i| i.used).count(),
             "images_rejected": self.images.iter().filter(|i| !i.used).count(),
@@ -196,7 +199,16 @@ impl Calibration {
                 "used": i.used,
                 "reason": i.reason,
             })).collect::<Vec<_>>(),
-        })
+        });
+        if let CameraSpec::Ocam(p) = &self.spec {
+            let [lo, hi] = p.valid_rho_range();
+            report["inverse_poly"] = json!({
+                "degree": p.inv_poly.len().saturating_sub(1),
+                "max_error_px": p.inverse_poly_error_px(),
+                "rho_range_px": [lo, hi],
+            });
+        }
+        report
     }
 }
 
@@ -770,7 +782,7 @@ fn describe(
                 outer_radius_px,
                 viewpoint_mm: [0.0; 3],
             };
-            p.fit_inverse_poly(12);
+            p.fit_inverse_poly(omni_model::ocam::INVERSE_TOLERANCE_PX, omni_model::ocam::INVERSE_MAX_DEGREE);
             let mut values = v[..6].to_vec();
             let mut stds = std_full[..6].to_vec();
             for k in 2..=opts.ocam_degree {

@@ -223,7 +223,8 @@ def ocam_ray_angles(m, camera, pixels):
     for (u, v), d in zip(pixels, ours):
         ref = cam2world(m, v, u)  # OCamCalib: (row, column)
         ref = np.array([ref[1], ref[0], ref[2]])  # its (x, y, z) is our (y, x, z)
-        angles.append(math.degrees(math.acos(min(1.0, float(np.dot(ref, d))))))
+        d = np.asarray(d)
+        angles.append(math.degrees(math.atan2(np.linalg.norm(np.cross(ref, d)), float(np.dot(ref, d)))))
     return np.array(angles)
 
 

@@ -87,6 +87,10 @@ struct CalibArgs {
     /// The image topic written into --export-kalibr's camchain.yaml (`rostopic`).
     #[arg(long, value_name = "TOPIC", default_value = export::DEFAULT_ROSTOPIC)]
     rostopic: String,
+    /// Also report a held-out test RMS: K-fold validation (each K-th image posed under the model
+    /// fitted to the others; K more fits). 0 = none.
+    #[arg(long, value_name = "K", default_value_t = 0)]
+    folds: usize,
     /// Huber threshold of the robust loss (px).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     huber_px: f64,
@@ -615,6 +619,21 @@ fn calibrate(args: &CalibArgs) -> CliResult {
         }
     }
     print_summary(&cal);
+    let warnings = receiver::validate::warnings(&cal, &opts);
+    for w in &warnings {
+        omni_cli::warn("omni-calib-receiver", w);
+    }
+    let held_out = match args.folds {
+        0 => None,
+        k => {
+            let h = receiver::validate::k_fold(corners.width, corners.height, &obs, &opts, k)?;
+            eprintln!(
+                "held-out RMS per corner ({k}-fold, {} corners): test {:.3} px, training {:.3} px",
+                h.test_corners, h.test_rms_px, h.train_rms_px
+            );
+            Some(h)
+        }
+    };
     if let Some(dir) = &args.overlay {
         write_overlays(dir, &cal, &obs, &detected)?;
     }
@@ -628,6 +647,13 @@ fn calibrate(args: &CalibArgs) -> CliResult {
     if let Some(a) = annulus {
         report["annulus_px"] = serde_json::json!(a);
     }
+    report["warnings"] = serde_json::json!(warnings);
+    if let Some(h) = held_out {
+        report["held_out"] = serde_json::json!({
+            "folds": h.folds, "test_rms_per_corner_px": h.test_rms_px,
+            "train_rms_per_corner_px": h.train_rms_px, "test_corners": h.test_corners,
+        });
+    }
     file.report = Some(report);
     write_doc(&args.output, &file)?;
     Ok(())
@@ -636,13 +662,25 @@ fn calibrate(args: &CalibArgs) -> CliResult {
 fn print_summary(cal: &Calibration) {
     for img in &cal.images {
         match (img.used, img.rms_px, img.reason.as_ref()) {
-            (true, Some(r), _) => eprintln!("  {}: {} corners, RMS {r:.3} px", img.name, img.corners),
+            (true, Some(r), _) => {
+                eprintln!(
+                    "  {}: {} corners, RMS {:.3} px per corner",
+                    img.name,
+                    img.corners,
+                    r * std::f64::consts::SQRT_2
+                )
+            }
             (_, _, Some(why)) => eprintln!("  {}: rejected: {why}", img.name),
             _ => eprintln!("  {}: rejected", img.name),
         }
     }
     let used = cal.images.iter().filter(|i| i.used).count();
-    eprintln!("RMS reprojection error {:.3} px over {used} of {} images", cal.rms_px, cal.images.len());
+    eprintln!(
+        "RMS reprojection error {:.3} px per corner (Euclidean, as OpenCV and Kalibr print; {:.3} px per coordinate) over {used} of {} images",
+        cal.rms_per_corner_px(),
+        cal.rms_px,
+        cal.images.len()
+    );
     for ((n, v), s) in cal.param_names.iter().zip(&cal.params).zip(&cal.std_devs) {
         eprintln!("  {n} = {v:.6e} ± {s:.2e}");
     }

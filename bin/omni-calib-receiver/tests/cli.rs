@@ -354,3 +354,74 @@ fn export_and_import_kalibr_and_opencv_round_trip() {
     assert!(stderr(&out).contains("bad.yaml: cam0.camera_model: \"pinhole\""), "{}", stderr(&out));
     assert!(!back.exists());
 }
+
+/// `convert` fits the target model to the source's rays and reports the difference; beyond the
+/// tolerance it refuses and writes nothing.
+#[test]
+fn convert_reports_the_difference_and_refuses_beyond_the_tolerance() {
+    let dir = tempfile::tempdir().unwrap();
+    // The sensor's exact mirror camera (docs/FORMATS.md's example).
+    let cam = dir.path().join("hyperbolic.json");
+    let text = r#"{"format": "omniscan.camera", "version": 1, "model": {"kind": "hyperbolic", "a_mm": 35.33,
+        "b_mm": 18.756, "fx_px": 1950.0, "fy_px": 1950.0, "cx_px": 511.5, "cy_px": 511.5, "width": 1024,
+        "height": 1024, "rim_radius_mm": 25.0, "inner_radius_mm": 4.0, "camera_offset_mm": [0, 0, 0],
+        "camera_tilt_deg": [0, 0]}}"#;
+    std::fs::write(&cam, text).unwrap();
+    let out_path = dir.path().join("ocam.json");
+    let out = bin().arg("convert").arg(&cam).arg("--to").arg("ocam").arg("-o").arg(&out_path).output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("converted to Ocam over"), "{}", stderr(&out));
+    let c: serde_json::Value = serde_json::from_slice(&std::fs::read(&out_path).unwrap()).unwrap();
+    assert_eq!(c["model"]["kind"], "ocam");
+    let viewpoint_z = c["model"]["viewpoint_mm"][2].as_f64().unwrap();
+    assert!((viewpoint_z - 2.0 * 35.33f64.hypot(18.756)).abs() < 1e-9, "rays start at the focus 2c: {viewpoint_z}");
+    let ray = c["report"]["max_ray_difference_deg"].as_f64().unwrap();
+    let pixel = c["report"]["max_pixel_difference_px"].as_f64().unwrap();
+    assert!(ray <= 0.01 && pixel <= 0.05, "{ray}° {pixel} px");
+    // A tolerance below what the polynomial reaches: refused, no file.
+    let strict = dir.path().join("strict.json");
+    let out = bin()
+        .arg("convert")
+        .arg(&cam)
+        .arg("--to")
+        .arg("ocam")
+        .arg("--max-ray-deg")
+        .arg("1e-9")
+        .arg("-o")
+        .arg(&strict)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("differs from the source by up to") && stderr(&out).contains("not written"));
+    assert!(!strict.exists());
+}
+
+/// `--folds 3` on the real set prints and records the held-out RMS beside the training RMS, per
+/// corner.
+#[test]
+fn held_out_rms_on_the_real_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = write_board(dir.path(), 7, 11);
+    let camera = dir.path().join("camera.json");
+    let out = bin()
+        .arg("--board")
+        .arg(&board)
+        .arg("--folds")
+        .arg("3")
+        .arg("-o")
+        .arg(&camera)
+        .arg(real_dir())
+        .output()
+        .unwrap();
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("px per corner (Euclidean, as OpenCV and Kalibr print;"), "{err}");
+    assert!(err.contains("held-out RMS per corner (3-fold"), "{err}");
+    let cam: serde_json::Value = serde_json::from_slice(&std::fs::read(&camera).unwrap()).unwrap();
+    let r = &cam["report"];
+    let (test, train) =
+        (r["held_out"]["test_rms_per_corner_px"].as_f64().unwrap(), r["rms_per_corner_px"].as_f64().unwrap());
+    assert!((r["rms_px"].as_f64().unwrap() * 2f64.sqrt() - train).abs() < 1e-12);
+    assert!(test >= 0.9 * train && test < 1.0, "test {test} px, training {train} px");
+    assert_eq!(r["warnings"], serde_json::json!([]));
+}

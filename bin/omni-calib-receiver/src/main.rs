@@ -34,7 +34,7 @@ omni-calib-receiver export camera.json --to opencv -o omnidir.yaml\n  \
 omni-calib-receiver convert camera.json --to ocam -o ocam.json     (fits OCamCalib's model to the rays)\n  \
 omni-calib-receiver import-kalibr camchain.yaml -o camera.json\n  \
 omni-calib-receiver import-opencv omnidir.yaml -o camera.json\n  \
-echo \"600 240\" | omni-calib-receiver query --camera camera.json     (pixel → ray; \"x y z\" → pixel)\n\n\
+omni-calib-receiver query --camera camera.json < questions.txt     (lines \"u v\" → rays, \"x y z\" → pixels)\n\n\
 Models: mei (unified sphere model + radial-tangential distortion, as Kalibr omni-radtan and OpenCV \
 omnidir), ocam (Scaramuzza polynomial, as OCamCalib), hyperbolic (the exact mirror of --mirror with \
 focal length and principal point fitted). Images may be files or directories (png, jpg, tif). \

@@ -8,6 +8,7 @@ use omni_formats::{BoardFile, CameraFile, CameraSpec, read_doc, write_doc};
 use omni_vision::corners::{DetectorOptions, GrayF32, detect_board, load_gray, overlay};
 use omni_vision::rim;
 use rayon::prelude::*;
+use std::io::{BufRead as _, Write as _};
 use std::path::{Path, PathBuf};
 
 #[derive(Parser, Debug)]
@@ -28,12 +29,19 @@ omni-calib-receiver --board board.json --annulus 511.5,511.5,102.5,493 boards/\n
 omni-calib-receiver --board board.json --annulus auto boards/\n  \
 omni-calib-receiver --board board.json --rim-image lit_room.png boards/\n  \
 omni-calib-receiver find-annulus pose.png        (prints CX,CY,R_IN,R_OUT for --annulus)\n  \
-omni-calib-receiver import-ocam calib_results.txt -o camera.json\n\n\
+omni-calib-receiver import-ocam calib_results.txt -o camera.json\n  \
+omni-calib-receiver export camera.json --to opencv -o omnidir.yaml\n  \
+omni-calib-receiver convert camera.json --to ocam -o ocam.json     (fits OCamCalib's model to the rays)\n  \
+omni-calib-receiver import-kalibr camchain.yaml -o camera.json\n  \
+omni-calib-receiver import-opencv omnidir.yaml -o camera.json\n  \
+omni-calib-receiver query --camera camera.json < questions.txt     (lines \"u v\" → rays, \"x y z\" → pixels)\n\n\
 Models: mei (unified sphere model + radial-tangential distortion, as Kalibr omni-radtan and OpenCV \
 omnidir), ocam (Scaramuzza polynomial, as OCamCalib), hyperbolic (the exact mirror of --mirror with \
 focal length and principal point fitted). Images may be files or directories (png, jpg, tif). \
 Images whose board is not found, has too few corners, or fits much worse than the others are \
 reported and left out. camera.json is written only if the calibration succeeded.\n\
+Exported Kalibr and OpenCV files describe the unit sphere (x, y, −z) of the omniscan world about \
+the viewpoint (written into the files as a comment; see docs/FORMATS.md).\n\
 Exit codes: 0 ok, 1 bad input or failed calibration, 2 usage error."
 )]
 struct Args {
@@ -76,6 +84,13 @@ struct CalibArgs {
     /// Also export OpenCV omnidir K, D, xi as OpenCV YAML (needs --model mei).
     #[arg(long, value_name = "FILE")]
     export_opencv: Option<PathBuf>,
+    /// The image topic written into --export-kalibr's camchain.yaml (`rostopic`).
+    #[arg(long, value_name = "TOPIC", default_value = export::DEFAULT_ROSTOPIC)]
+    rostopic: String,
+    /// Also report a held-out test RMS: K-fold validation (each K-th image posed under the model
+    /// fitted to the others; K more fits). 0 = none.
+    #[arg(long, value_name = "K", default_value_t = 0)]
+    folds: usize,
     /// Huber threshold of the robust loss (px).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     huber_px: f64,
@@ -112,9 +127,91 @@ enum Command {
         #[arg(required = true)]
         images: Vec<PathBuf>,
     },
-    /// Convert an OCamCalib calib_results.txt into camera.json (kind ocam).
+    /// Convert an OCamCalib calib_results.txt into camera.json (kind ocam). The centre's pixel
+    /// origin is read from its header: OCamCalib v3 ("starting from 0 (C convention)") as
+    /// written, older files (Matlab, 1-based) minus one.
     ImportOcam {
-        /// OCamCalib's calib_results.txt.
+        /// OCamCalib's calib_results.txt (`-` = stdin).
+        input: PathBuf,
+        /// Output camera.json (`-` = stdout).
+        #[arg(short, long, default_value = "camera.json")]
+        output: PathBuf,
+    },
+    /// Ask a calibration: pixels give world rays, 3-D points give pixels. One question per line:
+    /// `u v` (pixel) or `x y z` (point, mm, world frame), or JSON `[u, v]`, `[x, y, z]`,
+    /// `{"px": [u, v]}`, `{"point_mm": [x, y, z]}`. A text answer repeats the question, then
+    /// `ox oy oz dx dy dz` (ray origin in mm, unit direction) or `u v`, or `none` where the
+    /// mirror does not see it; --json answers with one object per line.
+    /// Example: echo "600 240" | omni-calib-receiver query --camera camera.json
+    Query {
+        /// The calibration (camera.json).
+        #[arg(long)]
+        camera: PathBuf,
+        /// Questions (`-` = stdin).
+        #[arg(short, long, default_value = "-")]
+        input: PathBuf,
+        /// Answers (`-` = stdout).
+        #[arg(short, long, default_value = "-")]
+        output: PathBuf,
+        /// Answer in JSON (one object per line) instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write an existing camera.json in another tool's format without re-fitting: ocam
+    /// (OCamCalib calib_results.txt, from kind ocam), kalibr (camchain.yaml) or opencv
+    /// (cv::omnidir YAML), both from kind mei.
+    Export {
+        /// The calibration (camera.json).
+        camera: PathBuf,
+        /// Target format: ocam, kalibr or opencv.
+        #[arg(long, value_parser = ["ocam", "kalibr", "opencv"])]
+        to: String,
+        /// For kalibr: the image topic (`rostopic`).
+        #[arg(long, value_name = "TOPIC", default_value = export::DEFAULT_ROSTOPIC)]
+        rostopic: String,
+        /// Output file (`-` = stdout).
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Convert a calibration into another model without a re-fit to boards: the target model is
+    /// fitted to the source's rays over its mirror annulus. Prints the largest ray (deg) and
+    /// pixel (px) difference and refuses (exit 1, no output) beyond the tolerances.
+    Convert {
+        /// The calibration (camera.json).
+        camera: PathBuf,
+        /// Target model: mei, ocam or hyperbolic.
+        #[arg(long)]
+        to: ModelKind,
+        /// For --to hyperbolic: camera.json of kind hyperbolic giving the mirror (a, b, rim);
+        /// default: the source's mirror if it is hyperbolic, else the paper's.
+        #[arg(long)]
+        mirror: Option<PathBuf>,
+        /// Largest ray difference accepted (deg).
+        #[arg(long, default_value_t = 0.05)]
+        max_ray_deg: f64,
+        /// Largest pixel difference accepted (px).
+        #[arg(long, default_value_t = 0.2)]
+        max_pixel_px: f64,
+        /// Output camera.json (`-` = stdout).
+        #[arg(short, long, default_value = "camera.json")]
+        output: PathBuf,
+    },
+    /// Convert one camera of a Kalibr camchain.yaml (omni + radtan) into camera.json (kind mei).
+    /// Kalibr's sphere (x, y, z) is (x, y, −z) of the omniscan world; the numbers are the same.
+    ImportKalibr {
+        /// Kalibr's camchain.yaml (`-` = stdin).
+        input: PathBuf,
+        /// Which camera of the chain.
+        #[arg(long, default_value = "cam0")]
+        cam: String,
+        /// Output camera.json (`-` = stdout).
+        #[arg(short, long, default_value = "camera.json")]
+        output: PathBuf,
+    },
+    /// Convert an OpenCV cv::omnidir YAML file (K, D, xi, image_width, image_height) into
+    /// camera.json (kind mei). OpenCV's sphere (x, y, z) is (x, y, −z) of the omniscan world.
+    ImportOpencv {
+        /// The OpenCV FileStorage YAML file (`-` = stdin).
         input: PathBuf,
         /// Output camera.json (`-` = stdout).
         #[arg(short, long, default_value = "camera.json")]
@@ -127,6 +224,17 @@ fn main() -> std::process::ExitCode {
         let args = Args::parse();
         match args.command {
             Some(Command::ImportOcam { input, output }) => import_ocam(&input, &output),
+            Some(Command::Query { camera, input, output, json }) => query(&camera, &input, &output, json),
+            Some(Command::Export { camera, to, rostopic, output }) => export_camera(&camera, &to, &rostopic, &output),
+            Some(Command::Convert { camera, to, mirror, max_ray_deg, max_pixel_px, output }) => {
+                convert(&camera, to, mirror.as_deref(), [max_ray_deg, max_pixel_px], &output)
+            }
+            Some(Command::ImportKalibr { input, cam, output }) => {
+                import_mei(&input, &output, "kalibr", |t| export::parse_kalibr_camchain(t, &cam))
+            }
+            Some(Command::ImportOpencv { input, output }) => {
+                import_mei(&input, &output, "opencv-omnidir", export::parse_opencv_omnidir)
+            }
             Some(Command::FindAnnulus { images }) => find_annulus(&expand_images(&images)?),
             None => calibrate(&args.calib),
         }
@@ -215,7 +323,6 @@ fn find_annulus(paths: &[PathBuf]) -> CliResult {
     };
     let a = detect_annulus(&img, &source)?;
     // Through an io error, not println!: a closed stdout is a clean exit, not a panic.
-    use std::io::Write as _;
     writeln!(std::io::stdout(), "{:.3},{:.3},{:.3},{:.3}", a[0], a[1], a[2], a[3])?;
     Ok(())
 }
@@ -237,11 +344,136 @@ fn set_viewpoint(spec: &mut CameraSpec, viewpoint: [f64; 3]) {
     }
 }
 
+/// The text of an input file (`-` = stdin) and its name for messages.
+fn read_text(input: &Path) -> CliResult<(String, String)> {
+    let name = omni_formats::io::display_name(input, "stdin");
+    let bytes = omni_formats::io::read_all(input)?;
+    let text = String::from_utf8(bytes).map_err(|_| format!("{name}: not UTF-8 text"))?;
+    Ok((text, name))
+}
+
 fn import_ocam(input: &Path, output: &Path) -> CliResult {
-    let text = std::fs::read_to_string(input).map_err(|e| format!("{}: {e}", input.display()))?;
-    let params = export::parse_ocam_calib_results(&text).map_err(|e| format!("{}: {e}", input.display()))?;
+    let (text, name) = read_text(input)?;
+    let (params, origin) = export::parse_ocam_calib_results(&text).map_err(|e| format!("{name}: {e}"))?;
     let mut file = CameraFile::new(CameraSpec::Ocam(params));
-    file.report = Some(serde_json::json!({"imported_from": input.display().to_string()}));
+    file.report = Some(serde_json::json!({"imported_from": name, "centre": origin.describe()}));
+    write_doc(output, &file)?;
+    Ok(())
+}
+
+/// Answers the questions of `input` line by line (so a pipe gets each answer as it asks).
+fn query(camera: &Path, input: &Path, output: &Path, as_json: bool) -> CliResult {
+    let (_, cam) = CameraFile::load(camera)?;
+    let name = omni_formats::io::display_name(input, "stdin");
+    let reader = omni_formats::io::open_input(input)?;
+    let mut failure: Option<String> = None;
+    omni_formats::io::write_atomic(output, |w| {
+        for (n, line) in reader.lines().enumerate() {
+            let line = line?;
+            match receiver::query::parse_query(&line) {
+                Ok(None) => {}
+                Ok(Some(q)) => {
+                    writeln!(w, "{}", receiver::query::answer(cam.as_ref(), q, as_json))?;
+                    if output == Path::new("-") {
+                        w.flush()?;
+                    }
+                }
+                Err(e) => {
+                    failure = Some(format!("{name}: line {}: {e}", n + 1));
+                    // Abandons a file output (its temporary is removed); stdout keeps the answers so far.
+                    return Err(std::io::Error::other("bad input"));
+                }
+            }
+        }
+        Ok(())
+    })
+    .map_err(|e| failure.take().map_or_else(|| CliError::from(e), CliError::new))
+}
+
+fn read_mirror(path: &Path) -> CliResult<omni_model::HyperbolicParams> {
+    match read_doc::<CameraFile>(path)?.model {
+        CameraSpec::Hyperbolic(h) => Ok(h),
+        _ => Err(CliError::new(format!("{}: --mirror needs a camera of kind hyperbolic", path.display()))),
+    }
+}
+
+fn convert(camera: &Path, to: ModelKind, mirror: Option<&Path>, limits: [f64; 2], output: &Path) -> CliResult {
+    let source: CameraFile = read_doc(camera)?;
+    let mirror = match (mirror, &source.model) {
+        (Some(p), _) => read_mirror(p)?,
+        (None, CameraSpec::Hyperbolic(h)) => h.clone(),
+        (None, _) => omni_model::HyperbolicParams::paper(),
+    };
+    let c = receiver::convert::convert(&source.model, to, &mirror).map_err(|e| format!("{}: {e}", camera.display()))?;
+    eprintln!(
+        "converted to {to:?} over {} pixels of the annulus: rays within {:.4}°, pixels within {:.4} px",
+        c.samples, c.max_ray_deg, c.max_pixel_px
+    );
+    if !(c.max_ray_deg <= limits[0] && c.max_pixel_px <= limits[1]) {
+        return Err(CliError::new(format!(
+            "{}: the {to:?} model differs from the source by up to {:.4}° / {:.4} px (limits --max-ray-deg {} / --max-pixel-px {}); not written",
+            camera.display(),
+            c.max_ray_deg,
+            c.max_pixel_px,
+            limits[0],
+            limits[1]
+        )));
+    }
+    let mut file = CameraFile::new(c.spec);
+    file.report = Some(serde_json::json!({
+        "converted_from": camera.display().to_string(),
+        "max_ray_difference_deg": c.max_ray_deg,
+        "max_pixel_difference_px": c.max_pixel_px,
+        "pixels_compared": c.samples,
+    }));
+    write_doc(output, &file)?;
+    Ok(())
+}
+
+fn export_camera(camera: &Path, to: &str, rostopic: &str, output: &Path) -> CliResult {
+    let file: CameraFile = read_doc(camera)?;
+    let text = match (to, &file.model) {
+        ("ocam", CameraSpec::Ocam(p)) => {
+            let (text, fit) = export::ocam_calib_results(p);
+            report_inverse_fit(&fit);
+            text
+        }
+        ("kalibr", CameraSpec::Mei(p)) => export::kalibr_camchain(p, rostopic),
+        ("opencv", CameraSpec::Mei(p)) => export::opencv_omnidir_yaml(p),
+        (to, model) => {
+            let kind = match model {
+                CameraSpec::Mei(_) => "mei",
+                CameraSpec::Ocam(_) => "ocam",
+                CameraSpec::Hyperbolic(_) => "hyperbolic",
+            };
+            let needs = if to == "ocam" { "ocam" } else { "mei" };
+            return Err(CliError::new(format!(
+                "{}: --to {to} needs a camera of kind {needs}, this one is {kind}",
+                camera.display()
+            )));
+        }
+    };
+    write_text(output, &text)
+}
+
+fn report_inverse_fit(fit: &omni_model::ocam::InverseFit) {
+    eprintln!(
+        "OCamCalib inverse polynomial: degree {}, within {:.4} px of the direct one over radii {:.1}–{:.1} px",
+        fit.degree, fit.max_error_px, fit.rho_range_px[0], fit.rho_range_px[1]
+    );
+}
+
+/// Imports a Mei-model file (Kalibr, OpenCV) with `parse`; `kind` names the source format.
+fn import_mei(
+    input: &Path,
+    output: &Path,
+    kind: &str,
+    parse: impl Fn(&str) -> Result<omni_model::MeiParams, String>,
+) -> CliResult {
+    let (text, name) = read_text(input)?;
+    let params = parse(&text).map_err(|e| format!("{name}: {e}"))?;
+    let mut file = CameraFile::new(CameraSpec::Mei(params));
+    file.report = Some(serde_json::json!({"imported_from": name, "source_format": kind, "frame": export::FRAME_NOTE}));
     write_doc(output, &file)?;
     Ok(())
 }
@@ -351,10 +583,7 @@ fn calibrate(args: &CalibArgs) -> CliResult {
     let board: BoardFile = read_doc(board_path)?;
     board.validate().map_err(|e| format!("{}: {e}", board_path.display()))?;
     let mirror = match &args.mirror {
-        Some(p) => match read_doc::<CameraFile>(p)?.model {
-            CameraSpec::Hyperbolic(h) => h,
-            _ => return Err(CliError::new(format!("{}: --mirror needs a camera of kind hyperbolic", p.display()))),
-        },
+        Some(p) => read_mirror(p)?,
         None => omni_model::HyperbolicParams::paper(),
     };
     let paths = if args.corners.is_some() { Vec::new() } else { expand_images(&args.images)? };
@@ -390,6 +619,21 @@ fn calibrate(args: &CalibArgs) -> CliResult {
         }
     }
     print_summary(&cal);
+    let warnings = receiver::validate::warnings(&cal, &opts);
+    for w in &warnings {
+        omni_cli::warn("omni-calib-receiver", w);
+    }
+    let held_out = match args.folds {
+        0 => None,
+        k => {
+            let h = receiver::validate::k_fold(corners.width, corners.height, &obs, &opts, k)?;
+            eprintln!(
+                "held-out RMS per corner ({k}-fold, {} corners): test {:.3} px, training {:.3} px",
+                h.test_corners, h.test_rms_px, h.train_rms_px
+            );
+            Some(h)
+        }
+    };
     if let Some(dir) = &args.overlay {
         write_overlays(dir, &cal, &obs, &detected)?;
     }
@@ -403,6 +647,13 @@ fn calibrate(args: &CalibArgs) -> CliResult {
     if let Some(a) = annulus {
         report["annulus_px"] = serde_json::json!(a);
     }
+    report["warnings"] = serde_json::json!(warnings);
+    if let Some(h) = held_out {
+        report["held_out"] = serde_json::json!({
+            "folds": h.folds, "test_rms_per_corner_px": h.test_rms_px,
+            "train_rms_per_corner_px": h.train_rms_px, "test_corners": h.test_corners,
+        });
+    }
     file.report = Some(report);
     write_doc(&args.output, &file)?;
     Ok(())
@@ -411,13 +662,25 @@ fn calibrate(args: &CalibArgs) -> CliResult {
 fn print_summary(cal: &Calibration) {
     for img in &cal.images {
         match (img.used, img.rms_px, img.reason.as_ref()) {
-            (true, Some(r), _) => eprintln!("  {}: {} corners, RMS {r:.3} px", img.name, img.corners),
+            (true, Some(r), _) => {
+                eprintln!(
+                    "  {}: {} corners, RMS {:.3} px per corner",
+                    img.name,
+                    img.corners,
+                    r * std::f64::consts::SQRT_2
+                )
+            }
             (_, _, Some(why)) => eprintln!("  {}: rejected: {why}", img.name),
             _ => eprintln!("  {}: rejected", img.name),
         }
     }
     let used = cal.images.iter().filter(|i| i.used).count();
-    eprintln!("RMS reprojection error {:.3} px over {used} of {} images", cal.rms_px, cal.images.len());
+    eprintln!(
+        "RMS reprojection error {:.3} px per corner (Euclidean, as OpenCV and Kalibr print; {:.3} px per coordinate) over {used} of {} images",
+        cal.rms_per_corner_px(),
+        cal.rms_px,
+        cal.images.len()
+    );
     for ((n, v), s) in cal.param_names.iter().zip(&cal.params).zip(&cal.std_devs) {
         eprintln!("  {n} = {v:.6e} ± {s:.2e}");
     }
@@ -448,12 +711,14 @@ fn write_exports(args: &CalibArgs, cal: &Calibration) -> CliResult {
     match &cal.spec {
         CameraSpec::Ocam(p) => {
             if let Some(path) = &args.export_ocam {
-                write_text(path, &export::ocam_calib_results(p))?;
+                let (text, fit) = export::ocam_calib_results(p);
+                report_inverse_fit(&fit);
+                write_text(path, &text)?;
             }
         }
         CameraSpec::Mei(p) => {
             if let Some(path) = &args.export_kalibr {
-                write_text(path, &export::kalibr_camchain(p))?;
+                write_text(path, &export::kalibr_camchain(p, &args.rostopic))?;
             }
             if let Some(path) = &args.export_opencv {
                 write_text(path, &export::opencv_omnidir_yaml(p))?;

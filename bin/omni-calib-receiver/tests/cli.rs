@@ -260,3 +260,168 @@ fn find_annulus_exits_cleanly_when_stdout_closes() {
     assert_eq!(out.status.code(), Some(0), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+fn write_mei_camera(dir: &Path) -> PathBuf {
+    let path = dir.join("mei.json");
+    let text = r#"{"format": "omniscan.camera", "version": 1, "model": {"kind": "mei", "xi": 0.93,
+        "fx_px": 310.5, "fy_px": 311.25, "cx_px": 377.1, "cy_px": 239.7, "k1": -0.21, "k2": 0.034,
+        "p1": 0.0012, "p2": -0.0007, "width": 752, "height": 480, "inner_radius_px": 40,
+        "outer_radius_px": 235, "viewpoint_mm": [0, 0, 80]}}"#;
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn run_with_stdin(args: &[&std::ffi::OsStr], stdin: &str) -> Output {
+    use std::io::Write as _;
+    let mut child = bin()
+        .args(args)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(stdin.as_bytes()).unwrap();
+    child.wait_with_output().unwrap()
+}
+
+/// `query`: a pixel's ray, sent back as a point 1 m along it, comes back to the pixel (text and
+/// JSON); unseen pixels say `none`; a bad line names its number and leaves no output file.
+#[test]
+fn query_answers_pixels_and_points_both_ways() {
+    let dir = tempfile::tempdir().unwrap();
+    let cam = write_mei_camera(dir.path());
+    let q = |extra: &[&str], stdin: &str| {
+        let mut args: Vec<&std::ffi::OsStr> = vec!["query".as_ref(), "--camera".as_ref(), cam.as_os_str()];
+        args.extend(extra.iter().map(|a| std::ffi::OsStr::new(*a)));
+        run_with_stdin(&args, stdin)
+    };
+    let out = q(&[], "# a comment\n577.1 239.7\n377.1 239.7\n");
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8(out.stdout).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 2, "{text}");
+    assert_eq!(lines[1], "377.1 239.7 none", "the blind centre");
+    let v: Vec<f64> = lines[0].split(' ').map(|t| t.parse().unwrap()).collect();
+    assert_eq!(v[2..5], [0.0, 0.0, 80.0], "rays start at the viewpoint");
+    let point: Vec<f64> = (0..3).map(|k| v[2 + k] + 1000.0 * v[5 + k]).collect();
+    let out = q(&["--json"], &format!("{{\"point_mm\": [{}, {}, {}]}}\n", point[0], point[1], point[2]));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let answer: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let (u, w) = (answer["px"][0].as_f64().unwrap(), answer["px"][1].as_f64().unwrap());
+    assert!((u - 577.1).abs() < 1e-6 && (w - 239.7).abs() < 1e-6, "{answer}");
+
+    let file = dir.path().join("answers.txt");
+    let out = q(&["-o", file.to_str().unwrap()], "577.1 239.7\n1 2 3 4\n");
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert!(err.contains("stdin: line 2: expected 2 numbers (pixel u v) or 3"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(!file.exists(), "no half-written answers");
+}
+
+/// `export` writes Kalibr (with `rostopic`, `cam_overlaps` and the frame), OpenCV and refuses a
+/// model of the wrong kind; `import-kalibr`/`import-opencv` read them back to the same camera.
+#[test]
+fn export_and_import_kalibr_and_opencv_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let cam = write_mei_camera(dir.path());
+    let original: serde_json::Value = serde_json::from_slice(&std::fs::read(&cam).unwrap()).unwrap();
+    for (to, import) in [("kalibr", "import-kalibr"), ("opencv", "import-opencv")] {
+        let file = dir.path().join(format!("{to}.yaml"));
+        let out = bin().arg("export").arg(&cam).arg("--to").arg(to).arg("-o").arg(&file).output().unwrap();
+        assert!(out.status.success(), "{}", stderr(&out));
+        let text = std::fs::read_to_string(&file).unwrap();
+        assert!(text.contains("(x, y, -z) of the omniscan world"), "{text}");
+        if to == "kalibr" {
+            assert!(text.contains("rostopic: /omni/image_raw") && text.contains("cam_overlaps: []"), "{text}");
+        }
+        let back = dir.path().join(format!("from_{to}.json"));
+        let out = bin().arg(import).arg(&file).arg("-o").arg(&back).output().unwrap();
+        assert!(out.status.success(), "{}", stderr(&out));
+        let read: serde_json::Value = serde_json::from_slice(&std::fs::read(&back).unwrap()).unwrap();
+        for key in ["xi", "fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2", "width", "height"] {
+            assert_eq!(read["model"][key], original["model"][key], "{to}: {key}");
+        }
+    }
+    let out = bin().arg("export").arg(&cam).arg("--to").arg("ocam").arg("-o").arg("-").output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("--to ocam needs a camera of kind ocam, this one is mei"), "{}", stderr(&out));
+    let bad = dir.path().join("bad.yaml");
+    std::fs::write(&bad, "cam0:\n  camera_model: pinhole\n").unwrap();
+    let back = dir.path().join("x.json");
+    let out = bin().arg("import-kalibr").arg(&bad).arg("-o").arg(&back).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("bad.yaml: cam0.camera_model: \"pinhole\""), "{}", stderr(&out));
+    assert!(!back.exists());
+}
+
+/// `convert` fits the target model to the source's rays and reports the difference; beyond the
+/// tolerance it refuses and writes nothing.
+#[test]
+fn convert_reports_the_difference_and_refuses_beyond_the_tolerance() {
+    let dir = tempfile::tempdir().unwrap();
+    // The sensor's exact mirror camera (docs/FORMATS.md's example).
+    let cam = dir.path().join("hyperbolic.json");
+    let text = r#"{"format": "omniscan.camera", "version": 1, "model": {"kind": "hyperbolic", "a_mm": 35.33,
+        "b_mm": 18.756, "fx_px": 1950.0, "fy_px": 1950.0, "cx_px": 511.5, "cy_px": 511.5, "width": 1024,
+        "height": 1024, "rim_radius_mm": 25.0, "inner_radius_mm": 4.0, "camera_offset_mm": [0, 0, 0],
+        "camera_tilt_deg": [0, 0]}}"#;
+    std::fs::write(&cam, text).unwrap();
+    let out_path = dir.path().join("ocam.json");
+    let out = bin().arg("convert").arg(&cam).arg("--to").arg("ocam").arg("-o").arg(&out_path).output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("converted to Ocam over"), "{}", stderr(&out));
+    let c: serde_json::Value = serde_json::from_slice(&std::fs::read(&out_path).unwrap()).unwrap();
+    assert_eq!(c["model"]["kind"], "ocam");
+    let viewpoint_z = c["model"]["viewpoint_mm"][2].as_f64().unwrap();
+    assert!((viewpoint_z - 2.0 * 35.33f64.hypot(18.756)).abs() < 1e-9, "rays start at the focus 2c: {viewpoint_z}");
+    let ray = c["report"]["max_ray_difference_deg"].as_f64().unwrap();
+    let pixel = c["report"]["max_pixel_difference_px"].as_f64().unwrap();
+    assert!(ray <= 0.01 && pixel <= 0.05, "{ray}° {pixel} px");
+    // A tolerance below what the polynomial reaches: refused, no file.
+    let strict = dir.path().join("strict.json");
+    let out = bin()
+        .arg("convert")
+        .arg(&cam)
+        .arg("--to")
+        .arg("ocam")
+        .arg("--max-ray-deg")
+        .arg("1e-9")
+        .arg("-o")
+        .arg(&strict)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("differs from the source by up to") && stderr(&out).contains("not written"));
+    assert!(!strict.exists());
+}
+
+/// `--folds 3` on the real set prints and records the held-out RMS beside the training RMS, per
+/// corner.
+#[test]
+fn held_out_rms_on_the_real_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = write_board(dir.path(), 7, 11);
+    let camera = dir.path().join("camera.json");
+    let out = bin()
+        .arg("--board")
+        .arg(&board)
+        .arg("--folds")
+        .arg("3")
+        .arg("-o")
+        .arg(&camera)
+        .arg(real_dir())
+        .output()
+        .unwrap();
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("px per corner (Euclidean, as OpenCV and Kalibr print;"), "{err}");
+    assert!(err.contains("held-out RMS per corner (3-fold"), "{err}");
+    let cam: serde_json::Value = serde_json::from_slice(&std::fs::read(&camera).unwrap()).unwrap();
+    let r = &cam["report"];
+    let (test, train) =
+        (r["held_out"]["test_rms_per_corner_px"].as_f64().unwrap(), r["rms_per_corner_px"].as_f64().unwrap());
+    assert!((r["rms_px"].as_f64().unwrap() * 2f64.sqrt() - train).abs() < 1e-12);
+    assert!(test >= 0.9 * train && test < 1.0, "test {test} px, training {train} px");
+    assert_eq!(r["warnings"], serde_json::json!([]));
+}

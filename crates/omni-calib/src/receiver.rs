@@ -18,8 +18,12 @@
 //! model is the Mei model with ξ fixed by the given mirror and no distortion; only the focal
 //! lengths and the principal point are fitted.
 
+pub mod convert;
 pub mod corners_file;
 pub mod export;
+pub mod query;
+pub mod validate;
+mod yaml;
 
 use crate::pose::{UNPROJECTABLE_PX, board_to_world, params_to_pose, pose_from_rays, pose_to_params, refine_pose};
 use nalgebra::{DMatrix, Isometry3, Point3, Vector2, Vector3};
@@ -135,7 +139,8 @@ impl Default for Options {
 pub struct ImageReport {
     pub name: String,
     pub corners: usize,
-    /// RMS reprojection error of the image under the final model (px), if a pose was found.
+    /// RMS reprojection error of the image under the final model (px, per coordinate: x and y
+    /// residuals pooled; × √2 per corner), if a pose was found.
     pub rms_px: Option<f64>,
     /// Whether the image took part in the final fit.
     pub used: bool,
@@ -150,7 +155,8 @@ pub struct ImageReport {
 pub struct Calibration {
     /// The fitted camera (ready for `camera.json`).
     pub spec: CameraSpec,
-    /// RMS reprojection error over all corners of the used images (px).
+    /// RMS reprojection error over all corners of the used images (px, per coordinate: x and y
+    /// residuals pooled; see [`Calibration::rms_per_corner_px`]).
     pub rms_px: f64,
     pub images: Vec<ImageReport>,
     /// Names, values and standard deviations of the fitted intrinsics.
@@ -162,6 +168,12 @@ pub struct Calibration {
 }
 
 impl Calibration {
+    /// RMS reprojection error per corner (Euclidean, px): √2 × [`Calibration::rms_px`], the value
+    /// OpenCV and Kalibr print.
+    pub fn rms_per_corner_px(&self) -> f64 {
+        self.rms_px * std::f64::consts::SQRT_2
+    }
+
     /// Where the fitted model puts the corners of image `k` (the same `obs` as given to
     /// [`calibrate`]); `None` for corners that do not project or images without a pose.
     pub fn reprojected(&self, k: usize, obs: &Observation) -> Vec<Option<[f64; 2]>> {
@@ -183,8 +195,10 @@ impl Calibration {
             .zip(self.params.iter().zip(&self.std_devs))
             .map(|(n, (v, s))| (n.clone(), json!({"value": v, "std": s})))
             .collect();
-        json!({
+        let mut report = json!({
             "rms_px": self.rms_px,
+            "rms_per_corner_px": self.rms_per_corner_px(),
+            "rms_convention": "rms_px: per coordinate (x and y residuals pooled); rms_per_corner_px: per corner, Euclidean (as OpenCV and Kalibr)",
             "images_used": self.images.iter().filter(|i| i.used).count(),
             "images_rejected": self.images.iter().filter(|i| !i.used).count(),
             "mirrored_labels": self.mirrored_labels,
@@ -196,7 +210,16 @@ impl Calibration {
                 "used": i.used,
                 "reason": i.reason,
             })).collect::<Vec<_>>(),
-        })
+        });
+        if let CameraSpec::Ocam(p) = &self.spec {
+            let [lo, hi] = p.valid_rho_range();
+            report["inverse_poly"] = json!({
+                "degree": p.inv_poly.len().saturating_sub(1),
+                "max_error_px": p.inverse_poly_error_px(),
+                "rho_range_px": [lo, hi],
+            });
+        }
+        report
     }
 }
 
@@ -770,7 +793,7 @@ fn describe(
                 outer_radius_px,
                 viewpoint_mm: [0.0; 3],
             };
-            p.fit_inverse_poly(12);
+            p.fit_inverse_poly(omni_model::ocam::INVERSE_TOLERANCE_PX, omni_model::ocam::INVERSE_MAX_DEGREE);
             let mut values = v[..6].to_vec();
             let mut stds = std_full[..6].to_vec();
             for k in 2..=opts.ocam_degree {

@@ -12,7 +12,8 @@
 //! (u′, v′, f(ρ)), ρ = √(u′² + v′²): with a0 < 0 the image centre looks straight down (−z),
 //! as for [`crate::HyperbolicCamera`]. Projection solves f(ρ)/ρ = z/√(x² + y²) for ρ exactly
 //! (bracketed Newton), so it is the true inverse; the inverse polynomial ρ(θ) that OCamCalib
-//! stores is only used for import/export ([`OcamParams::fit_inverse_poly`]).
+//! stores is only used for import/export ([`OcamParams::fit_inverse_poly`]), fitted over the
+//! valid radii only ([`OcamParams::valid_rho_range`]).
 
 use crate::camera::{CentralCamera, CentralParams};
 use omni_geom::{Point3, Vector2, Vector3};
@@ -95,33 +96,92 @@ impl OcamParams {
         }
     }
 
-    /// Fits OCamCalib's inverse polynomial ρ(θ) of the given degree over the used radii
-    /// (least squares on 400 samples); returns the worst residual (px).
-    pub fn fit_inverse_poly(&mut self, degree: usize) -> f64 {
-        let rho_max = self.max_rho();
-        let rho_min = self.inner_radius_px.max(1.0);
-        let samples: Vec<(f64, f64)> = (0..400)
+    /// Radii ρ (px, about the centre) over which the model is used: the mirror annulus, else
+    /// out to the image edge nearest the centre (a mirror camera's rim lies inside the image;
+    /// beyond it the fitted polynomial is unconstrained).
+    pub fn valid_rho_range(&self) -> [f64; 2] {
+        let inner = self.inner_radius_px.max(0.0);
+        if self.outer_radius_px > 0.0 {
+            return [inner, self.outer_radius_px];
+        }
+        // Pixel edges are at −0.5 and size − 0.5 (as `CameraModel::in_image`).
+        let (w, h) = (self.width as f64 - 0.5, self.height as f64 - 0.5);
+        let edge = (self.cx_px + 0.5).min(w - self.cx_px).min(self.cy_px + 0.5).min(h - self.cy_px);
+        [inner, edge.max(inner + 1.0)]
+    }
+
+    /// Fits OCamCalib's inverse polynomial ρ(θ) over [`OcamParams::valid_rho_range`], raising
+    /// the degree from 4 until the worst radial error is at most `tolerance_px` (or
+    /// `max_degree` is reached); keeps the best fit and says how good it is.
+    pub fn fit_inverse_poly(&mut self, tolerance_px: f64, max_degree: usize) -> InverseFit {
+        let rho_range_px = self.valid_rho_range();
+        let [lo, hi] = rho_range_px;
+        // θ = elevation of the direction above the sensor plane, as OCamCalib's world2cam.
+        let samples: Vec<(f64, f64)> = (0..=INVERSE_SAMPLES)
             .map(|k| {
-                let rho = rho_min + (rho_max - rho_min) * k as f64 / 399.0;
-                let theta = poly_eval(&self.poly, rho).atan2(rho);
-                (theta, rho)
+                let rho = lo + (hi - lo) * k as f64 / INVERSE_SAMPLES as f64;
+                (poly_eval(&self.poly, rho).atan2(rho), rho)
             })
             .collect();
-        let n = degree + 1;
-        let mut a = nalgebra::DMatrix::zeros(samples.len(), n);
-        let mut b = nalgebra::DVector::zeros(samples.len());
-        for (r, (theta, rho)) in samples.iter().enumerate() {
-            for k in 0..n {
-                a[(r, k)] = theta.powi(k as i32);
+        let mut best = InverseFit { degree: 0, max_error_px: f64::INFINITY, rho_range_px };
+        for degree in 4..=max_degree.max(4) {
+            let Some(coeffs) = least_squares_poly(&samples, degree) else { continue };
+            let worst = samples.iter().map(|(t, r)| (poly_eval(&coeffs, *t) - r).abs()).fold(0.0, f64::max);
+            if worst < best.max_error_px {
+                best = InverseFit { degree, max_error_px: worst, rho_range_px };
+                self.inv_poly = coeffs;
             }
-            b[r] = *rho;
+            if worst <= tolerance_px {
+                break;
+            }
         }
-        let Ok(x) = a.clone().svd(true, true).solve(&b, 1e-15) else {
-            return f64::INFINITY;
-        };
-        self.inv_poly = x.iter().cloned().collect();
-        samples.iter().map(|(t, r)| (poly_eval(&self.inv_poly, *t) - r).abs()).fold(0.0, f64::max)
+        best
     }
+
+    /// The worst radial error (px) of the stored inverse polynomial against the forward model
+    /// over [`OcamParams::valid_rho_range`]; infinite if there is none.
+    pub fn inverse_poly_error_px(&self) -> f64 {
+        if self.inv_poly.is_empty() {
+            return f64::INFINITY;
+        }
+        let [lo, hi] = self.valid_rho_range();
+        (0..=INVERSE_SAMPLES)
+            .map(|k| {
+                let rho = lo + (hi - lo) * k as f64 / INVERSE_SAMPLES as f64;
+                (poly_eval(&self.inv_poly, poly_eval(&self.poly, rho).atan2(rho)) - rho).abs()
+            })
+            .fold(0.0, f64::max)
+    }
+}
+
+/// Radii sampled (plus one) when fitting and checking the inverse polynomial.
+const INVERSE_SAMPLES: usize = 2000;
+
+/// The worst error OCamCalib's inverse polynomial may have over the valid radii (px).
+pub const INVERSE_TOLERANCE_PX: f64 = 0.01;
+
+/// Highest degree tried for the inverse polynomial.
+pub const INVERSE_MAX_DEGREE: usize = 24;
+
+/// How well the inverse polynomial ρ(θ) matches the forward model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InverseFit {
+    pub degree: usize,
+    /// Worst |ρ_inv(θ(ρ)) − ρ| over the sampled radii (px).
+    pub max_error_px: f64,
+    /// The radii fitted (px, about the centre).
+    pub rho_range_px: [f64; 2],
+}
+
+/// Least-squares coefficients c_0 … c_degree of ρ ≈ Σ c_k·θ^k (columns scaled for conditioning).
+fn least_squares_poly(samples: &[(f64, f64)], degree: usize) -> Option<Vec<f64>> {
+    let n = degree + 1;
+    let scale = samples.iter().map(|s| s.0.abs()).fold(0.0, f64::max).max(1e-12);
+    let a = nalgebra::DMatrix::from_fn(samples.len(), n, |r, k| (samples[r].0 / scale).powi(k as i32));
+    let b = nalgebra::DVector::from_iterator(samples.len(), samples.iter().map(|s| s.1));
+    let x = a.svd(true, true).solve(&b, 1e-14).ok()?;
+    let coeffs: Vec<f64> = x.iter().enumerate().map(|(k, c)| c / scale.powi(k as i32)).collect();
+    coeffs.iter().all(|c| c.is_finite()).then_some(coeffs)
 }
 
 /// Evaluates Σ c_k·x^k.
@@ -276,7 +336,10 @@ mod tests {
     fn inverse_polynomial_fits_to_a_hundredth_of_a_pixel() {
         let mut p = sample();
         p.outer_radius_px = 240.0;
-        let worst = p.fit_inverse_poly(12);
-        assert!(worst < 0.01, "{worst}");
+        let fit = p.fit_inverse_poly(INVERSE_TOLERANCE_PX, INVERSE_MAX_DEGREE);
+        assert!(fit.max_error_px <= 0.01, "{fit:?}");
+        assert_eq!(fit.rho_range_px, [20.0, 240.0]);
+        // Checked independently of the fit: round trips through world2cam's form.
+        assert!(p.inverse_poly_error_px() <= 0.01);
     }
 }

@@ -2,10 +2,11 @@
 # fw-harness (simavr) runs the ELF with its UART on a pseudo-terminal, and the unchanged
 # omni-trigger talks to it (bin/omni-trigger/tests/firmware.rs, ignored by a plain `cargo test`).
 # One test at a time: the harness keeps real time.
-#   fw-test       protocol, refusals, retries, STOP, info, host disconnect -> lasers off (make test)
-#   fw-test-scan  full scans paired with frames at 60/30 rpm and with corrupted lines: the frames'
-#                 times need the simulation at real speed, which a busy machine does not give the
-#                 harness (it warns "behind real time"); not yet in make test
+#   fw-test       every firmware test (make test): protocol, refusals, retries, STOP, info, host
+#                 disconnect -> lasers off, and full scans paired with frames at 60/30 rpm and
+#                 with corrupted lines
+#   fw-test-scan  the scans alone: the frames' times need the simulation at real speed, which a
+#                 busy machine does not give the harness (it warns "behind real time")
 .PHONY: fw fw-test fw-test-scan
 EXTRA_TESTS += fw-test
 FW_OUT := $(CURDIR)/firmware/build

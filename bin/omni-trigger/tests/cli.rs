@@ -6,35 +6,10 @@ mod common;
 
 use common::*;
 use omni_formats::stream::{Frame, Status};
-use omni_hw::emulator::TruthRecord;
 use std::collections::HashMap;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// Every paired frame shows exactly the trigger and angle the manifest says (truth from the
-/// emulator), and no frame file is used twice.
-fn assert_frames_true(frames: &[Frame], truth: &[TruthRecord]) {
-    let by_path: HashMap<&str, &TruthRecord> = truth.iter().map(|t| (t.path.as_str(), t)).collect();
-    let mut used = std::collections::HashSet::new();
-    for f in frames {
-        let t = by_path.get(f.path.as_str()).unwrap_or_else(|| panic!("{} not written by the camera", f.path));
-        assert_eq!(
-            t.trigger_seq, f.seq,
-            "{}: paired with trigger {} but shows trigger {}",
-            f.path, f.seq, t.trigger_seq
-        );
-        assert!(
-            (t.alpha_deg - f.alpha_deg).abs() < 1e-9,
-            "{}: manifest {}° true {}°",
-            f.path,
-            f.alpha_deg,
-            t.alpha_deg
-        );
-        assert_eq!((t.facet, &t.lasers), (f.facet, &f.lasers), "{}", f.path);
-        assert!(used.insert(f.path.clone()), "{} paired twice", f.path);
-    }
-}
 
 /// 24 triggers per revolution (angles 0° and 15° on all 12 facets), evenly spaced.
 const FAST: [&str; 4] = ["--angles", "0,15", "--revolutions", "1"];

@@ -8,13 +8,14 @@
 //! firmware and the harness and runs them with FW_HARNESS and FW_ELF set, one at a time (the
 //! harness must keep real time). They fail, never skip, when those are missing.
 
-use omni_formats::stream::{Frame, Record, Status, StreamReader};
+mod common;
+
+use common::{assert_frames_true, extra, read_manifest};
 use omni_hw::emulator::{TruthRecord, read_truth};
 use omni_hw::framing::{LineReader, encode_line};
 use serde_json::Value;
-use std::collections::HashMap;
 use std::io::{BufRead, BufReader, Read, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
@@ -122,46 +123,6 @@ impl Drop for Harness {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
-}
-
-fn read_manifest(path: &Path) -> (Vec<Frame>, Status) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let records: Vec<Record> =
-        StreamReader::new(text.as_bytes(), "manifest").map(|r| r.unwrap_or_else(|e| panic!("{e}\n{text}"))).collect();
-    assert!(matches!(records.first(), Some(Record::Header(_))), "{text}");
-    let Some(Record::Status(status)) = records.last().cloned() else { panic!("no final status record:\n{text}") };
-    let frames = records[1..records.len() - 1]
-        .iter()
-        .map(|r| match r {
-            Record::Frame(f) => (**f).clone(),
-            other => panic!("unexpected record {other:?}"),
-        })
-        .collect();
-    (frames, status)
-}
-
-/// Every paired frame shows the trigger and angle the manifest says: the truth is the harness's
-/// encoder position at the trigger edge and the laser pins, not anything the firmware said.
-fn assert_frames_true(frames: &[Frame], truth: &[TruthRecord]) {
-    let by_path: HashMap<&str, &TruthRecord> = truth.iter().map(|t| (t.path.as_str(), t)).collect();
-    let mut used = std::collections::HashSet::new();
-    for f in frames {
-        let t = by_path.get(f.path.as_str()).unwrap_or_else(|| panic!("{} not written by the camera", f.path));
-        assert_eq!(t.trigger_seq, f.seq, "{}: paired with trigger {} but shows edge {}", f.path, f.seq, t.trigger_seq);
-        assert!(
-            (t.alpha_deg - f.alpha_deg).abs() < 1e-9,
-            "{}: manifest {}° true {}°",
-            f.path,
-            f.alpha_deg,
-            t.alpha_deg
-        );
-        assert_eq!((t.facet, &t.lasers), (f.facet, &f.lasers), "{}", f.path);
-        assert!(used.insert(f.path.clone()), "{} paired twice", f.path);
-    }
-}
-
-fn extra(status: &Status, key: &str) -> u64 {
-    status.extra.get(key).and_then(|v| v.as_u64()).unwrap_or_else(|| panic!("status lacks {key}"))
 }
 
 /// Scheduled count (within the revolution) of trigger `seq` for angles `counts` on all facets.

@@ -3,6 +3,7 @@
 
 use omni_formats::stream::{Frame, Record, Status, StreamReader};
 use omni_hw::emulator::{TruthRecord, read_truth};
+use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -96,4 +97,28 @@ pub fn read_manifest(path: &Path) -> (Vec<Frame>, Status) {
 
 pub fn extra(status: &Status, key: &str) -> u64 {
     status.extra.get(key).and_then(|v| v.as_u64()).unwrap_or_else(|| panic!("status lacks {key}"))
+}
+
+/// Every paired frame shows exactly the trigger and angle the manifest says (truth from the
+/// emulator or the firmware harness: the camera's own record of each trigger), and no frame file is used twice.
+pub fn assert_frames_true(frames: &[Frame], truth: &[TruthRecord]) {
+    let by_path: HashMap<&str, &TruthRecord> = truth.iter().map(|t| (t.path.as_str(), t)).collect();
+    let mut used = std::collections::HashSet::new();
+    for f in frames {
+        let t = by_path.get(f.path.as_str()).unwrap_or_else(|| panic!("{} not written by the camera", f.path));
+        assert_eq!(
+            t.trigger_seq, f.seq,
+            "{}: paired with trigger {} but shows trigger {}",
+            f.path, f.seq, t.trigger_seq
+        );
+        assert!(
+            (t.alpha_deg - f.alpha_deg).abs() < 1e-9,
+            "{}: manifest {}° true {}°",
+            f.path,
+            f.alpha_deg,
+            t.alpha_deg
+        );
+        assert_eq!((t.facet, &t.lasers), (f.facet, &f.lasers), "{}", f.path);
+        assert!(used.insert(f.path.clone()), "{} paired twice", f.path);
+    }
 }

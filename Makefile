@@ -7,6 +7,7 @@ FUZZ_SECONDS ?= 60
 
 # Parts of the build with their own tests (firmware, Python, ...): each appends to EXTRA_TESTS.
 EXTRA_TESTS :=
+.DEFAULT_GOAL := all
 -include mk/*.mk
 
 all: build

@@ -30,6 +30,71 @@ impl BlockIdUnwrapper {
         self.last = Some((raw, index));
         Some((index, step - 1))
     }
+
+    /// The index of `raw` if it is the latest id or one before it (a buffer handed back late).
+    pub fn index_of(&self, raw: u64) -> Option<u64> {
+        let (last_raw, last_index) = self.last?;
+        if raw == last_raw {
+            return Some(last_index);
+        }
+        forward_distance(raw, last_raw).and_then(|d| last_index.checked_sub(d))
+    }
+}
+
+/// Counts every broken camera frame once. A frame whose block id the stream skipped is lost
+/// until an incomplete buffer for it turns up: Aravis hands incomplete buffers back when their
+/// timeout expires, often after later frames. An incomplete buffer with no id (0: none of its
+/// leader packets arrived) stands for one skipped frame, before or after the gap is seen.
+#[derive(Debug, Clone, Default)]
+pub struct LossCount {
+    /// Indices skipped and not yet accounted for by an incomplete buffer.
+    gaps: std::collections::BTreeSet<u64>,
+    /// Incomplete buffers without an id that no gap has taken up yet.
+    unnamed: u64,
+    pub lost: u64,
+    pub incomplete: u64,
+}
+
+impl LossCount {
+    /// Frames `indices` were skipped by the block ids.
+    pub fn skipped(&mut self, indices: std::ops::Range<u64>) {
+        for index in indices {
+            if self.unnamed > 0 {
+                self.unnamed -= 1;
+            } else {
+                self.gaps.insert(index);
+                self.lost += 1;
+            }
+        }
+    }
+
+    /// An incomplete buffer of the newest frame, `index`.
+    pub fn incomplete_named(&mut self, index: u64) {
+        self.incomplete += 1;
+        if self.gaps.remove(&index) {
+            self.lost -= 1;
+        }
+    }
+
+    /// An incomplete buffer of an older frame (`None`: older than any index kept). It counts
+    /// only if that frame was skipped: otherwise the frame arrived whole and this is a second,
+    /// partial copy of it.
+    pub fn incomplete_late(&mut self, index: Option<u64>) {
+        if index.is_some_and(|i| self.gaps.remove(&i)) {
+            self.lost -= 1;
+            self.incomplete += 1;
+        }
+    }
+
+    /// An incomplete buffer that carries no block id.
+    pub fn incomplete_unnamed(&mut self) {
+        self.incomplete += 1;
+        if self.gaps.pop_first().is_some() {
+            self.lost -= 1;
+        } else {
+            self.unnamed += 1;
+        }
+    }
 }
 
 /// How far `raw` is after `last` (≥ 1), or `None` if it is not after it. 16-bit ids move
@@ -104,6 +169,34 @@ mod tests {
         assert_eq!(u.push(2), None, "a repeated id is not a new frame");
         assert_eq!(u.push(65535), None, "an id from before the wrap is stale");
         assert_eq!(u.push(3), Some((4, 0)));
+    }
+
+    /// Incomplete buffers handed back after later frames, with or without their id, turn a
+    /// frame counted lost into one counted incomplete: each broken frame is counted once.
+    #[test]
+    fn a_late_incomplete_buffer_is_not_counted_twice() {
+        let mut ids = BlockIdUnwrapper::default();
+        let mut count = LossCount::default();
+        for raw in [65400, 65401] {
+            ids.push(raw);
+        }
+        let (index, skipped) = ids.push(65404).unwrap();
+        count.skipped(index - skipped..index);
+        assert_eq!((count.lost, count.incomplete), (2, 0));
+        count.incomplete_late(ids.index_of(65402));
+        assert_eq!((count.lost, count.incomplete), (1, 1));
+        // A partial copy of a frame that arrived whole is no broken frame.
+        count.incomplete_late(ids.index_of(65401));
+        assert_eq!((count.lost, count.incomplete), (1, 1));
+        count.incomplete_unnamed();
+        assert_eq!((count.lost, count.incomplete), (0, 2));
+        // An unnamed one before its gap is seen.
+        count.incomplete_unnamed();
+        let (index, skipped) = ids.push(65406).unwrap();
+        count.skipped(index - skipped..index);
+        assert_eq!((count.lost, count.incomplete), (0, 3));
+        assert_eq!(ids.index_of(65406), Some(6));
+        assert_eq!(ids.index_of(65410), None);
     }
 
     #[test]

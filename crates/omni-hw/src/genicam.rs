@@ -11,7 +11,7 @@
 //! the timestamp. With a hardware line the pairing goes by timestamp alone.
 
 use crate::client::host_time_us;
-use crate::frame_id::{BlockIdUnwrapper, TriggerLedger};
+use crate::frame_id::{BlockIdUnwrapper, LossCount, TriggerLedger};
 use crate::frame_writer::{FrameFormat, FrameWriter, RawFrame};
 use crate::message::TriggerEvent;
 use crate::pairing::{CapturedFrame, FrameSource};
@@ -200,8 +200,7 @@ pub struct AravisFrameSource {
     clock_offset_ns: Option<i128>,
     losses: Vec<String>,
     received: u64,
-    incomplete: u64,
-    lost: u64,
+    broken: LossCount,
     software_triggers: u64,
 }
 
@@ -238,8 +237,7 @@ pub fn open(device_id: &str, settings: &CameraSettings, frames_dir: &Path) -> Re
         clock_offset_ns: None,
         losses: Vec::new(),
         received: 0,
-        incomplete: 0,
-        lost: 0,
+        broken: LossCount::default(),
         software_triggers: 0,
     })
 }
@@ -341,10 +339,12 @@ impl AravisFrameSource {
     fn take(&mut self, buffer: aravis::Buffer) -> std::io::Result<()> {
         let raw_id = buffer.frame_id();
         let status = buffer.status();
-        let index = match self.ids.push(raw_id) {
+        // Id 0 is reserved: an incomplete buffer carries it when none of its leader arrived.
+        let unnamed = raw_id == 0 && status != BufferStatus::Success;
+        let index = match if unnamed { None } else { self.ids.push(raw_id) } {
             Some((index, skipped)) => {
                 if skipped > 0 {
-                    self.lost += skipped;
+                    self.broken.skipped(index - skipped..index);
                     self.losses.push(format!(
                         "{}: {skipped} camera frame(s) before block id {raw_id} never arrived",
                         self.label
@@ -361,7 +361,11 @@ impl AravisFrameSource {
                 Ok(())
             }
             (other, _) => {
-                self.incomplete += 1;
+                match index {
+                    Some(index) => self.broken.incomplete_named(index),
+                    None if unnamed => self.broken.incomplete_unnamed(),
+                    None => self.broken.incomplete_late(self.ids.index_of(raw_id)),
+                }
                 self.losses.push(format!("{}: camera frame block id {raw_id} incomplete ({other:?})", self.label));
                 Ok(())
             }
@@ -383,7 +387,7 @@ impl AravisFrameSource {
         };
         let image = RawFrame { width, height, bit_depth: self.bit_depth, data };
         if let Err(e) = image.check() {
-            self.incomplete += 1;
+            self.broken.incomplete_named(index);
             self.losses.push(format!("{}: camera frame block id {raw_id}: {e}", self.label));
             return Ok(());
         }
@@ -456,8 +460,8 @@ impl FrameSource for AravisFrameSource {
             m.insert(k.into(), v.into());
         };
         put("camera_frames_received", self.received);
-        put("camera_frames_incomplete", self.incomplete);
-        put("camera_frames_lost", self.lost);
+        put("camera_frames_incomplete", self.broken.incomplete);
+        put("camera_frames_lost", self.broken.lost);
         put("camera_software_triggers", self.software_triggers);
         let (_, failures, underruns) = self.stream.statistics();
         put("camera_stream_failures", failures);

@@ -5,8 +5,10 @@ FUZZ_SECONDS ?= 60
 
 .PHONY: all build test test-rust deps lint tools fmt bench demo fuzz clean
 
-# Parts of the build with their own tests (firmware, Python, ...): each appends to EXTRA_TESTS.
+# Parts of the build with their own tests (firmware, Python, ...): each appends to EXTRA_TESTS;
+# FEATURE_TESTS run last, because they build crates with cargo features the others do not use.
 EXTRA_TESTS :=
+FEATURE_TESTS :=
 .DEFAULT_GOAL := all
 -include mk/*.mk
 
@@ -24,7 +26,7 @@ lint: tools
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 
-test: deps lint test-rust $(EXTRA_TESTS)
+test: deps lint test-rust $(EXTRA_TESTS) $(FEATURE_TESTS)
 
 test-rust:
 	$(CARGO) test --workspace

@@ -9,4 +9,6 @@ test-arv:
 	$(CARGO) clippy -p omni-hw -p omni-trigger --features omni-trigger/aravis --all-targets -- -D warnings
 	$(CARGO) test -p omni-trigger --features aravis --test aravis
 
-EXTRA_TESTS += test-arv
+# Last in `make test` (FEATURE_TESTS): building with the feature rebuilds omni-hw and what uses
+# it, which the other parts would otherwise build again without it.
+FEATURE_TESTS += test-arv

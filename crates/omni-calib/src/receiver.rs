@@ -737,23 +737,7 @@ fn describe(
     }
     match model.kind {
         ModelKind::Mei => {
-            let mut p = MeiParams {
-                xi: 0.0,
-                fx_px: 0.0,
-                fy_px: 0.0,
-                cx_px: 0.0,
-                cy_px: 0.0,
-                k1: 0.0,
-                k2: 0.0,
-                p1: 0.0,
-                p2: 0.0,
-                width,
-                height,
-                inner_radius_px,
-                outer_radius_px,
-                viewpoint_mm: [0.0; 3],
-            };
-            p.set_vector(f);
+            let p = MeiParams { inner_radius_px, outer_radius_px, ..MeiParams::from_vector(f, width, height) };
             (model.names.clone(), f.clone(), std_full, CameraSpec::Mei(p))
         }
         ModelKind::Hyperbolic => {

@@ -93,6 +93,29 @@ impl MeiParams {
         [self.xi, self.fx_px, self.fy_px, self.cx_px, self.cy_px, self.k1, self.k2, self.p1, self.p2]
     }
 
+    /// A camera of `width` × `height` px with the intrinsics `v` in [`MeiParams::to_vector`]
+    /// order, no annulus and its viewpoint at the origin.
+    pub fn from_vector(v: &[f64], width: u32, height: u32) -> MeiParams {
+        let mut p = MeiParams {
+            xi: 0.0,
+            fx_px: 0.0,
+            fy_px: 0.0,
+            cx_px: 0.0,
+            cy_px: 0.0,
+            k1: 0.0,
+            k2: 0.0,
+            p1: 0.0,
+            p2: 0.0,
+            width,
+            height,
+            inner_radius_px: 0.0,
+            outer_radius_px: 0.0,
+            viewpoint_mm: [0.0; 3],
+        };
+        p.set_vector(v);
+        p
+    }
+
     /// Sets the intrinsics from [`MeiParams::to_vector`] order.
     pub fn set_vector(&mut self, v: &[f64]) {
         [self.xi, self.fx_px, self.fy_px, self.cx_px, self.cy_px, self.k1, self.k2, self.p1, self.p2] =

@@ -192,23 +192,7 @@ fn mei_from(v: [f64; 9], width: f64, height: f64) -> Result<MeiParams, String> {
     if !(width.fract() == 0.0 && height.fract() == 0.0 && width >= 1.0 && height >= 1.0) {
         return Err(format!("image size: expected whole positive numbers, got {width} × {height}"));
     }
-    let mut p = MeiParams {
-        xi: 0.0,
-        fx_px: 0.0,
-        fy_px: 0.0,
-        cx_px: 0.0,
-        cy_px: 0.0,
-        k1: 0.0,
-        k2: 0.0,
-        p1: 0.0,
-        p2: 0.0,
-        width: width as u32,
-        height: height as u32,
-        inner_radius_px: 0.0,
-        outer_radius_px: 0.0,
-        viewpoint_mm: [0.0; 3],
-    };
-    p.set_vector(&v);
+    let p = MeiParams::from_vector(&v, width as u32, height as u32);
     p.validate()?;
     omni_model::limits::check_image_size(p.width, p.height)?;
     Ok(p)

@@ -75,6 +75,10 @@ struct CalibArgs {
     /// default: the paper's mirror.
     #[arg(long)]
     mirror: Option<PathBuf>,
+    /// For --model hyperbolic: also fit the camera's offset from the mirror's focus and its tilt
+    /// (a non-central model; for a camera off the focus, which the model check warns about).
+    #[arg(long)]
+    non_central: bool,
     /// Also export OCamCalib calib_results.txt (needs --model ocam).
     #[arg(long, value_name = "FILE")]
     export_ocam: Option<PathBuf>,
@@ -606,7 +610,14 @@ fn calibrate(args: &CalibArgs) -> CliResult {
     }
     let corners = &detected.corners;
     let obs = corners.observations(board.square_mm);
-    let opts = Options { model: args.model, huber_px: args.huber_px, mirror, annulus, ..Default::default() };
+    let opts = Options {
+        model: args.model,
+        huber_px: args.huber_px,
+        mirror,
+        annulus,
+        non_central: args.non_central,
+        ..Default::default()
+    };
     let mut cal = receiver::calibrate(corners.width, corners.height, &obs, &opts).map_err(|e| {
         let reasons: Vec<String> =
             corners.images.iter().filter_map(|i| i.reason.as_ref().map(|r| format!("{}: {r}", i.name))).collect();

@@ -285,7 +285,7 @@ fn resolve_annulus(args: &CalibArgs, boards: &[PathBuf]) -> CliResult<Option<([f
     Ok(Some((a, Some((img.width, img.height, source)))))
 }
 
-/// One image as it is, several as their per-pixel range ([`rim::range_image`]).
+/// One image as it is, several as their per-pixel range or the best single one ([`rim::rim_image`]).
 fn rim_input(paths: &[PathBuf]) -> CliResult<GrayF32> {
     let images: Vec<GrayF32> = paths.par_iter().map(|p| load_gray(p)).collect::<Result<_, _>>()?;
     if let Some(k) = images.iter().position(|i| (i.width, i.height) != (images[0].width, images[0].height)) {
@@ -299,7 +299,13 @@ fn rim_input(paths: &[PathBuf]) -> CliResult<GrayF32> {
             images[0].height
         )));
     }
-    rim::range_image(&images).map_err(CliError::new)
+    let name = |k: usize| paths[k].display().to_string();
+    let source = if paths.len() == 1 { name(0) } else { format!("{} images", paths.len()) };
+    let chosen = rim::rim_image(&images, &rim::RimOptions::default()).map_err(|e| format!("{source}: {e}"))?;
+    if let (rim::RimSource::Single(k), Some(why)) = (chosen.source, &chosen.range_error) {
+        eprintln!("the range of the {source} shows no mirror rim ({why}); using the best single image, {}", name(k));
+    }
+    Ok(chosen.image)
 }
 
 /// The annulus of [`rim::detect_rim`], reported on stderr; errors name `source`.

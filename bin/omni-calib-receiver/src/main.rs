@@ -636,7 +636,8 @@ fn calibrate(args: &CalibArgs) -> CliResult {
         }
     }
     print_summary(&cal);
-    let warnings = receiver::validate::warnings(&cal, &opts);
+    let warnings: Vec<String> =
+        corners.board_size_warning().into_iter().chain(receiver::validate::warnings(&cal, &opts)).collect();
     for w in &warnings {
         omni_cli::warn("omni-calib-receiver", w);
     }

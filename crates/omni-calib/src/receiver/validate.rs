@@ -205,13 +205,16 @@ pub fn warnings(cal: &Calibration, opts: &Options) -> Vec<String> {
         ));
     }
     let rms = cal.rms_per_corner_px();
-    if opts.model == ModelKind::Hyperbolic && rms > 1.0 {
+    let mismatched_mirror = opts.model == ModelKind::Hyperbolic && rms > 1.0;
+    if mismatched_mirror {
         out.push(format!(
             "the hyperbolic model with this mirror leaves {rms:.2} px RMS per corner (above 1 px): the mirror (--mirror) does not match or the camera is off its focus; use --model mei"
         ));
     }
+    // (Beyond 1 px the hyperbolic model's mirror is in doubt, and the warning above says so.)
     if let Some(c) = &cal.model_check
         && c.ratio() > MODEL_CHECK_RATIO
+        && !mismatched_mirror
     {
         let (name, fix) = match opts.model {
             ModelKind::Hyperbolic => ("hyperbolic", "use --model mei, or --model hyperbolic --non-central"),

@@ -75,6 +75,10 @@ struct CalibArgs {
     /// default: the paper's mirror.
     #[arg(long)]
     mirror: Option<PathBuf>,
+    /// For --model hyperbolic: also fit the camera's offset from the mirror's focus and its tilt
+    /// (a non-central model; for a camera off the focus, which the model check warns about).
+    #[arg(long)]
+    non_central: bool,
     /// Also export OCamCalib calib_results.txt (needs --model ocam).
     #[arg(long, value_name = "FILE")]
     export_ocam: Option<PathBuf>,
@@ -281,7 +285,7 @@ fn resolve_annulus(args: &CalibArgs, boards: &[PathBuf]) -> CliResult<Option<([f
     Ok(Some((a, Some((img.width, img.height, source)))))
 }
 
-/// One image as it is, several as their per-pixel range ([`rim::range_image`]).
+/// One image as it is, several as their per-pixel range or the best single one ([`rim::rim_image`]).
 fn rim_input(paths: &[PathBuf]) -> CliResult<GrayF32> {
     let images: Vec<GrayF32> = paths.par_iter().map(|p| load_gray(p)).collect::<Result<_, _>>()?;
     if let Some(k) = images.iter().position(|i| (i.width, i.height) != (images[0].width, images[0].height)) {
@@ -295,7 +299,13 @@ fn rim_input(paths: &[PathBuf]) -> CliResult<GrayF32> {
             images[0].height
         )));
     }
-    rim::range_image(&images).map_err(CliError::new)
+    let name = |k: usize| paths[k].display().to_string();
+    let source = if paths.len() == 1 { name(0) } else { format!("{} images", paths.len()) };
+    let chosen = rim::rim_image(&images, &rim::RimOptions::default()).map_err(|e| format!("{source}: {e}"))?;
+    if let (rim::RimSource::Single(k), Some(why)) = (chosen.source, &chosen.range_error) {
+        eprintln!("the range of the {source} shows no mirror rim ({why}); using the best single image, {}", name(k));
+    }
+    Ok(chosen.image)
 }
 
 /// The annulus of [`rim::detect_rim`], reported on stderr; errors name `source`.
@@ -606,7 +616,14 @@ fn calibrate(args: &CalibArgs) -> CliResult {
     }
     let corners = &detected.corners;
     let obs = corners.observations(board.square_mm);
-    let opts = Options { model: args.model, huber_px: args.huber_px, mirror, annulus, ..Default::default() };
+    let opts = Options {
+        model: args.model,
+        huber_px: args.huber_px,
+        mirror,
+        annulus,
+        non_central: args.non_central,
+        ..Default::default()
+    };
     let mut cal = receiver::calibrate(corners.width, corners.height, &obs, &opts).map_err(|e| {
         let reasons: Vec<String> =
             corners.images.iter().filter_map(|i| i.reason.as_ref().map(|r| format!("{}: {r}", i.name))).collect();
@@ -619,7 +636,8 @@ fn calibrate(args: &CalibArgs) -> CliResult {
         }
     }
     print_summary(&cal);
-    let warnings = receiver::validate::warnings(&cal, &opts);
+    let warnings: Vec<String> =
+        corners.board_size_warning().into_iter().chain(receiver::validate::warnings(&cal, &opts)).collect();
     for w in &warnings {
         omni_cli::warn("omni-calib-receiver", w);
     }

@@ -97,17 +97,25 @@ fn to_gray(f: &omni_simulator::Frame16) -> GrayImage {
 }
 
 fn bench(object: BenchObject, opts: &RenderOptions, params: RidgeParams) -> Tally {
+    bench_each(object, opts, &[params]).pop().unwrap()
+}
+
+/// One tally per detector setting, all on the same rendered frames (rendering dominates).
+fn bench_each(object: BenchObject, opts: &RenderOptions, params: &[RidgeParams]) -> Vec<Tally> {
     let sensor = Sensor::paper_scaled(SIZE);
     let scene = Scene::from_file(paper_bench(object)).unwrap();
     let circle = sensor.camera.mirror_circle();
-    let det = RidgeDetector::new(SIZE, SIZE, circle, params);
-    let mut t = Tally::default();
+    let detectors: Vec<RidgeDetector> = params.iter().map(|p| RidgeDetector::new(SIZE, SIZE, circle, *p)).collect();
+    let mut tallies: Vec<Tally> = params.iter().map(|_| Tally::default()).collect();
     for (i, alpha) in [15.0f64, 17.5, 20.0, 22.5, 25.0, 27.5].into_iter().enumerate() {
         let o = RenderOptions { seed: i as u64, ..opts.clone() };
         let f = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &o);
-        add(&mut t, &det.detect(&to_gray(&f.image)), &f.truth, (circle.centre.x, circle.centre.y));
+        let image = to_gray(&f.image);
+        for (det, t) in detectors.iter().zip(&mut tallies) {
+            add(t, &det.detect(&image), &f.truth, (circle.centre.x, circle.centre.y));
+        }
     }
-    t
+    tallies
 }
 
 /// Ideal optics (Gaussian blur 0.7 px, no speckle): the stripe centre within 0.015 px RMS and
@@ -135,8 +143,11 @@ fn ideal_optics_accuracy_on_the_bench() {
 #[test]
 fn realistic_sensor_coverage_and_speckle() {
     let opts = RenderOptions::default();
-    let alone = bench(BenchObject::Plane, &opts, RidgeParams::default());
-    let along = bench(BenchObject::Plane, &opts, RidgeParams { along_stripe_px: 3.0, ..Default::default() });
+    let along_params = RidgeParams { along_stripe_px: 3.0, ..Default::default() };
+    let [alone, along] =
+        <[Tally; 2]>::try_from(bench_each(BenchObject::Plane, &opts, &[RidgeParams::default(), along_params]))
+            .ok()
+            .unwrap();
     eprintln!("{}\n{}", alone.line("realistic plane"), along.line("realistic plane, along ±3"));
     assert!(alone.coverage(8).unwrap() >= 0.9, "coverage {:?}", alone.coverage(8));
     assert!(alone.rms_bias().0 <= 0.09, "rms {:.4}", alone.rms_bias().0);
@@ -189,7 +200,7 @@ fn the_plane_edges_add_no_error_under_any_lighting() {
     let sensor = Sensor::paper_scaled(SIZE);
     let circle = sensor.camera.mirror_circle();
     let det = RidgeDetector::new(SIZE, SIZE, circle, RidgeParams::default());
-    for level in [0.1, 1.0, 2.0, 3.0] {
+    for level in [0.1, 1.0, 3.0] {
         let mut file = paper_bench(BenchObject::Plane);
         file.lighting = Some(Lighting { level, gradient: None, patches: vec![] });
         let scene = Scene::from_file(file).unwrap();
@@ -320,8 +331,9 @@ fn a_static_ambient_estimate_needs_several_mirror_angles() {
 fn the_along_stripe_fit_adds_no_bias_on_curved_stripes_under_speckle() {
     for object in [BenchObject::Cylinder, BenchObject::Sphere] {
         let opts = RenderOptions::default();
-        let alone = bench(object, &opts, RidgeParams::default());
-        let along = bench(object, &opts, RidgeParams { along_stripe_px: 3.0, ..Default::default() });
+        let along_params = RidgeParams { along_stripe_px: 3.0, ..Default::default() };
+        let [alone, along] =
+            <[Tally; 2]>::try_from(bench_each(object, &opts, &[RidgeParams::default(), along_params])).ok().unwrap();
         eprintln!("{}\n{}", alone.line(&format!("realistic {object:?}")), along.line("  along ±3"));
         let ((rms0, bias0), (rms3, bias3)) = (alone.rms_bias(), along.rms_bias());
         assert!((bias3 - bias0).abs() <= 0.005, "{object:?}: bias {bias0:+.4} → {bias3:+.4} px");

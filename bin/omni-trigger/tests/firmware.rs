@@ -295,6 +295,9 @@ fn a_stalled_motor_switches_the_lasers_off_and_ends_the_scan_with_an_error() {
     let (frames, status) = read_manifest(&h.manifest_path());
     assert!(!status.complete && frames.len() <= 5, "{status:?}");
     assert!(status.errors.iter().any(|e| e.contains("fault=stall")), "{status:?}");
+    if h.log().contains("behind real time") {
+        eprintln!("the harness fell behind real time, its frames look early by the lag:\n{}", h.log());
+    }
     assert_frames_true(&frames, &h.truth());
     h.wait_exit(Duration::from_secs(20));
 
@@ -317,7 +320,8 @@ fn a_stalled_motor_switches_the_lasers_off_and_ends_the_scan_with_an_error() {
     assert_eq!(on_late.count(), 0, "a laser came on after the polygon stopped: {lasers:?}");
     assert!(off_after < 215.0, "lasers off {off_after:.1} µs after the last encoder edge");
     // The stall watch: no count change at 2 Timer1 overflows in a row (32.768 ms each) at 60 rpm,
-    // i.e. 65.5..98.3 ms after the last edge, then STS fault=stall at once.
+    // i.e. 65.5..98.3 ms after the last edge, then STS fault=stall as soon as the main loop has
+    // composed it (its 64-bit decimals take 2.6-3.2 ms).
     let lines = h.edges("line");
     let fault = lines
         .iter()
@@ -326,7 +330,7 @@ fn a_stalled_motor_switches_the_lasers_off_and_ends_the_scan_with_an_error() {
         })
         .unwrap_or_else(|| panic!("no STS fault=stall: {lines:?}"));
     let fault_after_ms = us(fault["cycle"].as_u64().unwrap() - last_edge) / 1000.0;
-    assert!((65.5..100.0).contains(&fault_after_ms), "fault reported {fault_after_ms:.2} ms after the last edge");
+    assert!((65.5..103.0).contains(&fault_after_ms), "fault reported {fault_after_ms:.2} ms after the last edge");
     // The host's STOP ended the faulted run.
     assert!(lines.iter().any(|l| l["text"].as_str().unwrap().starts_with("DONE fired=5 ")), "{lines:?}");
     eprintln!(

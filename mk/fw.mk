@@ -3,15 +3,15 @@
 # omni-trigger talks to it (bin/omni-trigger/tests/firmware.rs, ignored by a plain `cargo test`).
 # One test at a time: the harness keeps real time.
 #   fw-test       every firmware test (make test): protocol, refusals, retries, STOP, info, host
-#                 disconnect -> lasers off, and full scans paired with frames at 60/30 rpm and
-#                 with corrupted lines
+#                 disconnect -> lasers off, and full scans paired with frames at 60/30 rpm,
+#                 with corrupted lines and with a stalled motor
 #   fw-test-scan  the scans alone: the frames' times need the simulation at real speed, which a
 #                 busy machine does not give the harness (it warns "behind real time")
 .PHONY: fw fw-test fw-test-scan
 EXTRA_TESTS += fw-test
 FW_OUT := $(CURDIR)/firmware/build
 FW_ENV := FW_HARNESS=$(FW_OUT)/fw-harness FW_ELF=$(FW_OUT)/omni-fw.elf
-FW_SCAN_TESTS := scans_at_two_polygon_speeds corrupted_lines_in_both_directions
+FW_SCAN_TESTS := scans_at_two_polygon_speeds corrupted_lines_in_both_directions a_stalled_motor
 
 fw:
 	$(MAKE) -C firmware all harness OUT=$(FW_OUT)

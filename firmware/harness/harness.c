@@ -8,7 +8,10 @@
  *     modification time at the edge, its ground truth appended to --truth (the emulator's
  *     TruthRecord: path, trigger_seq = edge number, true alpha_deg, facet, lasers);
  *   - line faults in both directions: --bad-crc P (a CRC digit changed), --garbage P (junk bytes
- *     before a line).
+ *     before a line);
+ *   - a stalled polygon: --stall-after N (the encoder stops at the rising edge of trigger N) or
+ *     --stall-at-ms T (at T ms of simulated time); the stall and every line the firmware sends
+ *     are recorded in --edges too.
  * Usage: fw-harness --firmware ELF --frames DIR [--truth FILE] [--edges FILE] [options]; --help. */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -49,6 +52,8 @@ static const char *usage =
     "  --bad-crc P         probability per line (both directions) of a corrupted CRC\n"
     "  --garbage P         probability per line (both directions) of junk bytes before it\n"
     "  --fault-seed N      seed of the fault and jitter generator\n"
+    "  --stall-after N     the polygon stops (no more encoder edges) at the rising edge of trigger N\n"
+    "  --stall-at-ms T     the polygon stops T ms (simulated) after power-up\n"
     "  --persist           keep running after the host closes the port (else exit 50 ms later)\n"
     "Prints the port path on the first line of stdout; everything else goes to stderr.\n";
 
@@ -60,6 +65,8 @@ static struct {
     uint64_t seed;
     long start_count;
     int persist;
+    unsigned long stall_after; /* trigger number from 1; 0 = never */
+    double stall_at_ms;        /* 0 = never */
 } opt = {.cpr = 36000, .facets = 12, .lasers = 2, .jitter = 0.2, .speed_scale = 1.0, .start_count = 35000};
 
 static avr_t *avr;
@@ -103,6 +110,7 @@ static avr_cycle_count_t last_enc_edge; /* when the current count was reached */
 static avr_cycle_count_t last_motor_toggle;
 static double motor_half_cycles;
 static int encoder_running;
+static int stalled; /* the polygon stopped for good (--stall-after, --stall-at-ms) */
 
 static const uint8_t gray[4] = {0, 2, 3, 1}; /* (A<<1)|B for count mod 4: A leads B */
 
@@ -140,6 +148,35 @@ static avr_cycle_count_t encoder_edge(avr_t *a, avr_cycle_count_t when, void *pa
     return next_edge_time();
 }
 
+/* The polygon stops: no encoder edge after the last one (the pins keep their levels). */
+static void stall_polygon(const char *why)
+{
+    if (stalled)
+        return;
+    stalled = 1;
+    if (encoder_running)
+        avr_cycle_timer_cancel(avr, encoder_edge, NULL);
+    encoder_running = 0;
+    if (edges_f) {
+        fprintf(edges_f,
+                "{\"kind\":\"stall\",\"why\":\"%s\",\"cycle\":%llu,\"t_us\":%.4f,\"last_count_cycle\":%llu,"
+                "\"count\":%ld}\n",
+                why, (unsigned long long)avr->cycle, us_of(avr->cycle), (unsigned long long)last_enc_edge,
+                (long)(((enc_pos % opt.cpr) + opt.cpr) % opt.cpr));
+        fflush(edges_f);
+    }
+    fprintf(stderr, "fw-harness: the polygon stalls (%s)\n", why);
+}
+
+static avr_cycle_count_t stall_timer(avr_t *a, avr_cycle_count_t when, void *param)
+{
+    (void)a;
+    (void)when;
+    (void)param;
+    stall_polygon("time");
+    return 0;
+}
+
 /* The motor reference clock toggled: lock the polygon to its frequency. */
 static void motor_clock(avr_irq_t *irq, uint32_t value, void *param)
 {
@@ -148,7 +185,7 @@ static void motor_clock(avr_irq_t *irq, uint32_t value, void *param)
     (void)param;
     avr_cycle_count_t now = avr->cycle;
     static double prev_half;
-    if (last_motor_toggle) {
+    if (last_motor_toggle && !stalled) {
         double half = (double)(now - last_motor_toggle);
         /* Lock when two half periods agree; the firmware toggles in an interrupt, so ignore its
          * few cycles of latency jitter. */
@@ -236,6 +273,8 @@ static void trigger_pin(avr_irq_t *irq, uint32_t value, void *param)
         rise_period_us = count_cycles / (F_CPU / 1e6);
         rise_lasers = laser_level;
         write_frame(edge_n, now, rise_count, rise_lasers);
+        if (opt.stall_after && edge_n + 1 == opt.stall_after)
+            stall_polygon("trigger");
         return;
     }
     if (!pulse_high)
@@ -295,14 +334,38 @@ static size_t with_faults(const char *line, size_t n, char *out)
     return k + n;
 }
 
+/* A line from the firmware, as sent (before the faults), with the cycle of its first byte. */
+static void log_line(const char *line, size_t n, avr_cycle_count_t first_byte)
+{
+    if (!edges_f)
+        return;
+    fprintf(edges_f, "{\"kind\":\"line\",\"cycle\":%llu,\"t_us\":%.4f,\"text\":\"", (unsigned long long)first_byte,
+            us_of(first_byte));
+    for (size_t i = 0; i < n; i++) {
+        unsigned char c = (unsigned char)line[i];
+        if (c == '"' || c == '\\')
+            fprintf(edges_f, "\\%c", c);
+        else if (c >= 0x20 && c < 0x7F)
+            fputc(c, edges_f);
+        else if (c != '\n')
+            fprintf(edges_f, "\\u%04x", c);
+    }
+    fputs("\"}\n", edges_f);
+    fflush(edges_f);
+}
+
 static void uart_out(avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq;
     (void)param;
+    static avr_cycle_count_t first_byte;
+    if (fw_line_len == 0)
+        first_byte = avr->cycle;
     if (fw_line_len < LINE_MAX)
         fw_line[fw_line_len++] = (char)value;
     if (value != '\n' && fw_line_len < LINE_MAX)
         return;
+    log_line(fw_line, fw_line_len, first_byte);
     char buf[2 * LINE_MAX];
     rng_stream = RNG_TO_HOST;
     size_t n = with_faults(fw_line, fw_line_len, buf);
@@ -405,6 +468,8 @@ static void parse_args(int argc, char **argv)
         else if (!strcmp(a, "--bad-crc")) opt.bad_crc = strtod(v, &end);
         else if (!strcmp(a, "--garbage")) opt.garbage = strtod(v, &end);
         else if (!strcmp(a, "--fault-seed")) opt.seed = strtoull(v, &end, 10);
+        else if (!strcmp(a, "--stall-after")) opt.stall_after = strtoul(v, &end, 10);
+        else if (!strcmp(a, "--stall-at-ms")) opt.stall_at_ms = strtod(v, &end);
         else die("unknown option %s (see --help)", a);
         if (end && *end)
             die("bad value %s (see --help)", v);
@@ -412,6 +477,8 @@ static void parse_args(int argc, char **argv)
     }
     if (!opt.firmware || !opt.frames)
         die("%s", "--firmware and --frames are required (see --help)");
+    if (!(opt.stall_at_ms >= 0))
+        die("%s", "bad --stall-at-ms (see --help)");
     if (!(opt.jitter >= 0 && opt.jitter <= 0.45) || !(opt.speed_scale > 0) || opt.facets == 0 ||
         opt.cpr % opt.facets || opt.cpr % 4 || opt.lasers == 0 || opt.lasers > 4)
         die("%s", "bad --jitter, --speed-scale, --cpr, --facets or --lasers (see --help)");
@@ -527,6 +594,9 @@ int main(int argc, char **argv)
                                 (void *)(uintptr_t)j);
     enc_pos = opt.start_count;
     set_encoder_pins();
+    if (opt.stall_at_ms > 0)
+        avr_cycle_timer_register(avr, (avr_cycle_count_t)llround(opt.stall_at_ms * 1e-3 * (double)F_CPU), stall_timer,
+                                 NULL);
 
     signal(SIGTERM, on_signal);
     signal(SIGINT, on_signal);

@@ -28,6 +28,11 @@
 /* Motor reference clock: pulses per polygon revolution (a PLL polygon-motor driver's CLK input).
  * With 60, rpm = 1e6 / half-period in 0.5 µs ticks. */
 #define MOTOR_PPR 60U
+/* Stall watch while running: the run faults (trigger and lasers off, STS fault=stall) when the
+ * encoder count has not changed for STALL_COUNTS count periods at the run's speed, and for at
+ * least STALL_MIN_CHECKS Timer1 overflows (32.768 ms each, the period of the check). */
+#define STALL_COUNTS 16U
+#define STALL_MIN_CHECKS 2U
 #define FW_VERSION "omni-avr-0.1.0"
 
 #define PER_FACET ((uint16_t)(CPR / FACETS))

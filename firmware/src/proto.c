@@ -179,6 +179,8 @@ void proto_send_status(void)
     out_u64(now_us());
     out_P(PSTR(" slips="));
     out_u32(scan_slips());
+    if (scan_fault() == FAULT_STALL)
+        out_P(PSTR(" fault=stall"));
     out_end();
 }
 

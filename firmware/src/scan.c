@@ -6,7 +6,9 @@
  *    lags the encoder edge by the interrupt entry only (firmware/README.md has the numbers).
  *  - Raising the trigger pin (PB1, PCINT1) requests the pin-change interrupt PCINT0, which does
  *    the bookkeeping with interrupts enabled (the encoder keeps preempting it): the event for the
- *    host, the pulse end on Timer1 compare A, the next target, revolutions and the run's end. */
+ *    host, the pulse end on Timer1 compare A, the next target, revolutions and the run's end.
+ * The Timer1 overflow (every 32.768 ms) also watches a running run: an encoder count that stays
+ * the same for the run's stall limit faults it (stall: trigger and lasers off, nothing fires). */
 #include <avr/interrupt.h>
 #include <avr/io.h>
 #include "scan.h"
@@ -50,6 +52,11 @@ static volatile uint32_t slips;
 static volatile uint8_t done_flag;
 static volatile uint8_t booking;
 static volatile uint32_t motor_half;
+static volatile uint8_t fault;
+static volatile uint8_t status_due;
+static uint16_t stall_checks;   /* overflows without a count change that make a stall */
+static uint16_t silent_checks;  /* overflows so far without one */
+static uint16_t watched_count;  /* the count at the last overflow */
 static uint32_t motor_left;
 static struct trigger_event queue[QUEUE_LEN];
 static volatile uint8_t q_head, q_tail;
@@ -89,9 +96,11 @@ void scan_init(void)
     z_prev = PIND & ENC_Z;
 }
 
-static volatile uint8_t status_due;
+static void stall(void);
 
-/* Every 32.768 ms; 30 of them (0.98 s) make the status period while running. */
+/* Every 32.768 ms; 30 of them (0.98 s) make the status period while running. Watches the run:
+ * the count unchanged at `stall_checks` overflows in a row is a stalled polygon (or a dead
+ * encoder). Not before the first index (RUN_WAITING_INDEX): the motor may still spin up. */
 ISR(TIMER1_OVF_vect)
 {
     static uint8_t overflows;
@@ -99,6 +108,13 @@ ISR(TIMER1_OVF_vect)
     if (++overflows == 30) {
         overflows = 0;
         status_due = 1;
+    }
+    uint16_t c = count;
+    if (state != RUN_RUNNING || fault || c != watched_count) {
+        watched_count = c;
+        silent_checks = 0;
+    } else if (++silent_checks >= stall_checks) {
+        stall();
     }
 }
 
@@ -232,6 +248,20 @@ static void end_run(uint8_t cut)
     done_flag = 1;
 }
 
+/* The encoder stopped during a run: trigger and lasers off now (a pulse in progress is cut),
+ * and nothing fires any more, also if the polygon turns again; the run stays running with the
+ * fault until STOP or the host leaving ends it; STS reports it at once. Interrupts off. */
+static void stall(void)
+{
+    PORTC &= (uint8_t)~LASER_MASK;
+    PORTB &= (uint8_t)~TRIGGER;
+    TIMSK1 &= (uint8_t)~(1 << OCIE1A);
+    start_target = NO_TARGET;
+    target = NO_TARGET;
+    fault = FAULT_STALL;
+    status_due = 1;
+}
+
 static void book_revolution(void)
 {
     if (state == RUN_WAITING_INDEX) {
@@ -299,7 +329,8 @@ static void book_trigger(void)
         uint16_t t = position_of(i_facet, i_count);
         cli();
         las_next = las;
-        target = t;
+        if (!fault)
+            target = t;
         sei();
     } else if (revs_wanted != 0 && rev + 1U >= revs_wanted) {
         cli();
@@ -374,6 +405,7 @@ void scan_arm(void)
     overruns = 0;
     q_head = q_tail = 0;
     done_flag = 0;
+    fault = FAULT_NONE;
     target = start_target = NO_TARGET;
     state = RUN_ARMED;
     sei();
@@ -387,9 +419,23 @@ void scan_disarm(void)
     sei();
 }
 
+/* Timer1 overflows in STALL_COUNTS count periods of the motor speed (half-period ticks): a count
+ * period is 2 * MOTOR_PPR * half / CPR ticks. */
+static uint16_t stall_checks_for(uint32_t half)
+{
+    uint64_t ticks = (uint64_t)STALL_COUNTS * 2U * MOTOR_PPR * half / CPR;
+    uint64_t checks = (ticks + 0xFFFFU) >> 16;
+    if (checks < STALL_MIN_CHECKS)
+        checks = STALL_MIN_CHECKS;
+    return checks > 0xFFFFU ? 0xFFFFU : (uint16_t)checks;
+}
+
 void scan_start(uint32_t revs)
 {
+    uint16_t checks = stall_checks_for(motor_half);
     cli();
+    stall_checks = checks;
+    silent_checks = 0;
     revs_wanted = revs;
     target = NO_TARGET;
     rev_pending = fire_pending = 0;
@@ -410,6 +456,7 @@ void scan_stop(void)
 }
 
 enum run_state scan_state(void) { return state; }
+enum fault scan_fault(void) { return (enum fault)fault; }
 
 uint8_t scan_pop_event(struct trigger_event *ev)
 {

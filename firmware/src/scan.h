@@ -28,6 +28,9 @@ struct schedule {
 };
 
 enum run_state { RUN_IDLE = 0, RUN_ARMED, RUN_WAITING_INDEX, RUN_RUNNING };
+/* FAULT_STALL: the encoder stopped while running; the run stays running, firing nothing, until
+ * STOP (or the host leaving) ends it. Cleared by the next ARM. */
+enum fault { FAULT_NONE = 0, FAULT_STALL };
 
 extern struct schedule sched;
 
@@ -39,7 +42,8 @@ void motor_set(uint32_t half_period_ticks);
 /* Resets counters and sequence for a new armed schedule. */
 void scan_arm(void);
 void scan_disarm(void);
-/* Starts triggering at the next index for `revs` revolutions (0 = until stopped). */
+/* Starts triggering at the next index for `revs` revolutions (0 = until stopped); the stall
+ * watch uses the speed of the last motor_set. */
 void scan_start(uint32_t revs);
 /* Ends the run now: trigger and lasers off. */
 void scan_stop(void);
@@ -52,6 +56,7 @@ uint8_t scan_take_done(uint32_t *fired);
 uint8_t scan_status_due(void);
 /* 1 if there is no event and no end of run to report (call with interrupts off). */
 uint8_t scan_idle(void);
+enum fault scan_fault(void);
 uint32_t scan_fired(void);
 uint32_t scan_overruns(void);
 /* Index pulses that found the count off zero (missed or extra encoder edges). */

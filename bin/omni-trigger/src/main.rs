@@ -201,7 +201,8 @@ struct EmulateArgs {
     /// Fault: close the port after this many triggers (an unplugged cable).
     #[arg(long, allow_negative_numbers = true)]
     disconnect_after: Option<u64>,
-    /// Fault: the motor stalls after this many triggers (the run never ends).
+    /// Fault: the motor stalls after this many triggers (the controller reports fault=stall; 0:
+    /// before the first index, where nothing watches, and the run never ends).
     #[arg(long, allow_negative_numbers = true)]
     stall_after: Option<u64>,
     /// Seed of the fault generator.

@@ -308,13 +308,31 @@ fn a_stalled_motor_ends_the_scan_with_an_error_and_a_status_record() {
     let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40", "--stall-after", "5"]);
     let started = Instant::now();
     let out = emu.scan(&FAST);
+    // The controller reports the stall 65.5 ms after the 5th trigger (its stall watch, as the
+    // firmware's); the host stops at once instead of waiting for its own timeout (6.2 s).
+    assert!(started.elapsed() < Duration::from_secs(4), "{:?}", started.elapsed());
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("fault=stall") && stderr.contains("lasers off"), "{stderr}");
+    let (frames, status) = read_manifest(&emu.manifest_path());
+    assert!(!status.complete && frames.len() <= 5, "{status:?}");
+    assert!(status.errors.iter().any(|e| e.contains("fault=stall")), "{status:?}");
+    assert_frames_true(&frames, &emu.truth());
+}
+
+#[test]
+fn a_motor_stalled_before_the_index_times_the_scan_out() {
+    // Nothing watches a run before its first index (the motor may still spin up): the host's own
+    // timeout ends it, as with a controller that never reports a stall.
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40", "--stall-after", "0"]);
+    let started = Instant::now();
+    let out = emu.scan(&FAST);
     // One revolution takes 0.6 s; the scan gives up at 2 x 0.6 + 5 s.
     assert!(started.elapsed() < Duration::from_secs(12), "{:?}", started.elapsed());
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("still running"));
     let (frames, status) = read_manifest(&emu.manifest_path());
-    assert!(!status.complete && frames.len() <= 5, "{status:?}");
-    assert_frames_true(&frames, &emu.truth());
+    assert!(!status.complete && frames.is_empty(), "{status:?}");
 }
 
 #[test]

@@ -278,6 +278,69 @@ fn the_host_closing_the_port_mid_scan_switches_the_lasers_off() {
     }
 }
 
+#[test]
+#[ignore = "needs the firmware and fw-harness: make fw-test"]
+fn a_stalled_motor_switches_the_lasers_off_and_ends_the_scan_with_an_error() {
+    // The emulator's stalled-motor test (cli.rs) on the firmware. The polygon stops at the rising
+    // edge of the 5th trigger: its encoder edge is the last one, and the lasers are on then.
+    // Like the other scans, the frames pair only while the harness keeps real time (a lagging
+    // simulation makes them look early by the lag, into an earlier trigger's window).
+    let mut h = Harness::start(&["--stall-after", "5"]);
+    let started = Instant::now();
+    let out = h.scan(&["--angles", "0,15", "--revolutions", "1", "--rpm", "60"]);
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    // The firmware's fault ends the scan (not the host's own timeout, 2 x 1 + 5 s after START).
+    assert_eq!(out.status.code(), Some(1), "{stderr}\nharness: {}", h.log());
+    assert!(stderr.contains("fault=stall") && stderr.contains("lasers off"), "{stderr}");
+    let (frames, status) = read_manifest(&h.manifest_path());
+    assert!(!status.complete && frames.len() <= 5, "{status:?}");
+    assert!(status.errors.iter().any(|e| e.contains("fault=stall")), "{status:?}");
+    if h.log().contains("behind real time") {
+        eprintln!("the harness fell behind real time, its frames look early by the lag:\n{}", h.log());
+    }
+    assert_frames_true(&frames, &h.truth());
+    h.wait_exit(Duration::from_secs(20));
+
+    let stall = h.edges("stall");
+    assert_eq!(stall.len(), 1, "{stall:?}");
+    let last_edge = stall[0]["last_count_cycle"].as_u64().unwrap();
+    let us = |cycles: u64| cycles as f64 / 16.0;
+    let triggers = h.edges("trigger");
+    assert_eq!(triggers.len(), 5, "no trigger after the polygon stopped");
+    // The lasers were switched on by the 5th trigger and are off a pulse width later; none comes
+    // on again.
+    let lasers = h.edges("laser");
+    let mut off_after = 0.0f64;
+    for j in 0..2 {
+        let last = lasers.iter().rev().find(|e| e["laser"] == j).expect("laser edges");
+        assert_eq!(last["on"], false, "laser {j} left on: {last}");
+        off_after = off_after.max(us(last["cycle"].as_u64().unwrap() - last_edge));
+    }
+    let on_late = lasers.iter().filter(|e| e["on"] == true && e["cycle"].as_u64().unwrap() > last_edge + 16 * 20);
+    assert_eq!(on_late.count(), 0, "a laser came on after the polygon stopped: {lasers:?}");
+    assert!(off_after < 215.0, "lasers off {off_after:.1} µs after the last encoder edge");
+    // The stall watch: no count change at 2 Timer1 overflows in a row (32.768 ms each) at 60 rpm,
+    // i.e. 65.5..98.3 ms after the last edge, then STS fault=stall as soon as the main loop has
+    // composed it (its 64-bit decimals take 2.6-3.2 ms).
+    let lines = h.edges("line");
+    let fault = lines
+        .iter()
+        .find(|l| {
+            l["text"].as_str().unwrap().starts_with("STS ") && l["text"].as_str().unwrap().contains(" fault=stall")
+        })
+        .unwrap_or_else(|| panic!("no STS fault=stall: {lines:?}"));
+    let fault_after_ms = us(fault["cycle"].as_u64().unwrap() - last_edge) / 1000.0;
+    assert!((65.5..103.0).contains(&fault_after_ms), "fault reported {fault_after_ms:.2} ms after the last edge");
+    // The host's STOP ended the faulted run.
+    assert!(lines.iter().any(|l| l["text"].as_str().unwrap().starts_with("DONE fired=5 ")), "{lines:?}");
+    eprintln!(
+        "stalled motor: lasers off {off_after:.1} µs after the last encoder edge; fault=stall sent {fault_after_ms:.2} ms \
+         after it; {} of 5 frames paired; scan failed after {:.2} s",
+        frames.len(),
+        started.elapsed().as_secs_f64()
+    );
+}
+
 /// A raw protocol line session over the pty: exact ids, so retries can be replayed.
 struct Line {
     port: Box<dyn serialport::SerialPort>,

@@ -39,6 +39,20 @@ const START_DELAY_US: u64 = 20_000;
 pub const MIN_RPM: f64 = 1e-3;
 /// Ids remembered for retry detection.
 const REMEMBERED_IDS: usize = 64;
+/// Stall watch (firmware/src/config.h): a running run faults when the encoder count has not
+/// changed for this many count periods at its speed, checked every [`STALL_CHECK_US`], for at
+/// least [`STALL_MIN_CHECKS`] checks.
+pub const STALL_COUNTS: f64 = 16.0;
+/// Period of the firmware's stall check (its Timer1 overflow: 65 536 ticks of 0.5 µs).
+pub const STALL_CHECK_US: u64 = 32_768;
+pub const STALL_MIN_CHECKS: u64 = 2;
+
+/// How long after the last encoder count the stall watch faults a run at `us_per_count` µs per
+/// count: the firmware's earliest (it detects within one check period after this).
+pub fn stall_timeout_us(us_per_count: f64) -> u64 {
+    let checks = (STALL_COUNTS * us_per_count / STALL_CHECK_US as f64).ceil() as u64;
+    checks.max(STALL_MIN_CHECKS) * STALL_CHECK_US
+}
 
 #[derive(Debug, Clone)]
 struct Run {
@@ -49,6 +63,8 @@ struct Run {
     revolutions: u64,
     next_seq: u64,
     stop_requested: bool,
+    /// The polygon stops after this many of the run's triggers (a stalled motor).
+    stall_after: Option<u64>,
 }
 
 impl Run {
@@ -77,6 +93,7 @@ pub struct Controller {
     fired: u64,
     overruns: u64,
     crc_errors: u64,
+    fault: Option<String>,
     answered: VecDeque<(u32, DeviceMessage)>,
 }
 
@@ -96,6 +113,7 @@ impl Controller {
             fired: 0,
             overruns: 0,
             crc_errors: 0,
+            fault: None,
             answered: VecDeque::new(),
         }
     }
@@ -133,6 +151,18 @@ impl Controller {
             crc_errors: self.crc_errors,
             rpm: self.armed.as_ref().map(|a| a.1).unwrap_or(0.0),
             t_us: now_us,
+            fault: self.fault.clone(),
+        }
+    }
+
+    /// The polygon stops turning right after the run's `triggers`-th trigger (0: before the
+    /// first index): nothing fires after it. As in the firmware, the run then faults
+    /// [`stall_timeout_us`] after that trigger (`fault=stall`, a `STS` at once) and stays running,
+    /// firing nothing, until `STOP`; a run stalled before its first index is not watched and
+    /// just waits. No effect without a run.
+    pub fn stall_motor_after(&mut self, triggers: u64) {
+        if let Some(run) = &mut self.run {
+            run.stall_after = Some(triggers);
         }
     }
 
@@ -246,6 +276,7 @@ impl Controller {
                     revolutions: *revolutions,
                     next_seq: 0,
                     stop_requested: false,
+                    stall_after: None,
                 });
                 self.state = DeviceState::Running;
             }
@@ -287,6 +318,7 @@ impl Controller {
             ));
         }
         self.armed = Some((schedule, rpm));
+        self.fault = None;
         self.fired = 0;
         self.overruns = 0;
         self.state = DeviceState::Armed;
@@ -305,7 +337,10 @@ impl Controller {
     pub fn poll(&mut self, now_us: u64) -> Vec<DeviceMessage> {
         let mut out = Vec::new();
         let Some(run) = &mut self.run else { return out };
-        while !run.stop_requested && run.total().is_none_or(|n| run.next_seq < n) && run.time_of(run.next_seq) <= now_us
+        while !run.stop_requested
+            && run.total().is_none_or(|n| run.next_seq < n)
+            && run.stall_after.is_none_or(|k| run.next_seq < k)
+            && run.time_of(run.next_seq) <= now_us
         {
             let seq = run.next_seq;
             let e = run.schedule.expected(seq);
@@ -324,6 +359,12 @@ impl Controller {
             out.push(DeviceMessage::Done { fired: self.fired, t_us: now_us });
             self.run = None;
             self.disarm();
+        } else if self.fault.is_none()
+            && let Some(k) = run.stall_after.filter(|&k| k > 0 && run.next_seq >= k)
+            && now_us >= run.time_of(k - 1) + stall_timeout_us(run.us_per_count)
+        {
+            self.fault = Some("stall".into());
+            out.push(DeviceMessage::Status(self.status(now_us)));
         }
         out
     }
@@ -406,6 +447,37 @@ mod tests {
         // Trigger 7 = revolution 1, facet 0, count 1000.
         assert_eq!(trg[7].t_us, 1000 + START_DELAY_US + (36000 + 1000) * 20);
         assert!(trg.windows(2).all(|w| w[1].t_us - w[0].t_us >= 20_000), "never faster than 50 Hz");
+    }
+
+    #[test]
+    fn a_stalled_motor_faults_the_run_once_after_the_stall_timeout_and_stop_ends_it() {
+        let mut c = configured();
+        lines(&mut c, "ARM 3", 0);
+        lines(&mut c, "START 4 2", 1000);
+        c.stall_motor_after(2);
+        // 20 µs per count: trigger 1 (count 1000) at 1000 + START_DELAY_US + 20 000 µs.
+        let last = 1000 + START_DELAY_US + 1000 * 20;
+        let trg = |m: &[DeviceMessage]| m.iter().filter(|m| matches!(m, DeviceMessage::Trigger(_))).count();
+        assert_eq!(trg(&c.poll(last)), 2);
+        // 16 count periods are 320 µs: the floor of two 32.768 ms checks applies.
+        assert_eq!(stall_timeout_us(20.0), 65_536);
+        assert!(c.poll(last + 65_535).is_empty(), "no trigger, no fault before the timeout");
+        let out = c.poll(last + 65_536);
+        let [DeviceMessage::Status(s)] = out.as_slice() else { panic!("{out:?}") };
+        assert_eq!((s.state, s.fired, s.fault.as_deref()), (DeviceState::Running, 2, Some("stall")));
+        assert!(c.poll(last + 10_000_000).is_empty(), "reported once, nothing fires, the run goes on");
+        lines(&mut c, "STOP 5", last + 10_000_000);
+        assert_eq!(c.poll(last + 10_000_001), vec![DeviceMessage::Done { fired: 2, t_us: last + 10_000_001 }]);
+        assert_eq!(c.status(0).fault.as_deref(), Some("stall"), "kept until the next ARM");
+        lines(&mut c, "ARM 6", 0);
+        assert_eq!(c.status(0).fault, None);
+    }
+
+    #[test]
+    fn the_stall_timeout_is_sixteen_count_periods_in_whole_checks_as_the_firmware_computes_it() {
+        // 0.01 rpm at 36 000 counts: 166 667 µs per count; 16 of them are 81.4 checks of 32.768 ms.
+        assert_eq!(stall_timeout_us(60e6 / (0.01 * 36000.0)), 82 * 32_768);
+        assert_eq!(stall_timeout_us(60e6 / (60.0 * 36000.0)), 2 * 32_768);
     }
 
     #[test]

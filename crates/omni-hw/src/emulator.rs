@@ -191,8 +191,10 @@ pub struct Faults {
     pub duplicate_events: f64,
     /// Close the port after this many triggers (an unplugged cable).
     pub disconnect_after: Option<u64>,
-    /// The motor stalls after this many triggers: no more triggers, the run never ends, status
-    /// lines keep coming.
+    /// The motor stalls after this many triggers: no more triggers; the controller faults the
+    /// run as the firmware does (`STS … fault=stall`, see [`Controller::stall_motor_after`]) and
+    /// keeps it running until `STOP`. Stalled before a run's first index (0, or reached in an
+    /// earlier run) it is not watched: that run never ends.
     pub stall_after: Option<u64>,
     /// Seed of the fault generator (same seed, same faults).
     pub seed: u64,
@@ -286,13 +288,21 @@ pub fn serve<P: Read + Write>(
     let mut link = Link { port, rng: SplitMix64::new(options.faults.seed), faults: &options.faults };
     let mut connected = false;
     let mut fired = 0u64;
+    let mut stall_set = false;
     let mut last_status = Instant::now();
     let mut buf = [0u8; 256];
     loop {
         let mut outgoing = Vec::new();
         let mut disconnect = false;
-        let stalled = options.faults.stall_after.is_some_and(|n| fired >= n);
-        let fired_now = if stalled { vec![] } else { controller.poll(clock()) };
+        let running = controller.state() == DeviceState::Running;
+        if let Some(n) = options.faults.stall_after
+            && running
+            && !stall_set
+        {
+            controller.stall_motor_after(n.saturating_sub(fired));
+        }
+        stall_set = running;
+        let fired_now = controller.poll(clock());
         for msg in fired_now {
             if let DeviceMessage::Trigger(ev) = &msg {
                 camera.trigger(shot_for(ev, &options.spec, sys0));

@@ -152,6 +152,19 @@ pub struct DeviceStatus {
     pub rpm: f64,
     /// Controller clock (µs).
     pub t_us: u64,
+    /// The run's fault (`fault=` word, absent when there is none): `stall` = the encoder stopped
+    /// during the run, the controller switched the trigger and lasers off and fires no more.
+    pub fault: Option<String>,
+}
+
+/// What a controller fault word means, for people (docs/PROTOCOL.md §4).
+pub fn describe_fault(fault: &str) -> String {
+    match fault {
+        "stall" => "the encoder stopped during the run (a stalled polygon motor or a dead encoder); the controller \
+                    switched the trigger and lasers off"
+            .into(),
+        other => format!("a fault this host does not know ({other:?})"),
+    }
 }
 
 /// A line from the controller.
@@ -337,13 +350,14 @@ impl DeviceMessage {
                 format_list(&e.lasers)
             ),
             DeviceMessage::Status(s) => format!(
-                "STS state={} fired={} overruns={} crc={} rpm={} t={}",
+                "STS state={} fired={} overruns={} crc={} rpm={} t={}{}",
                 s.state.as_str(),
                 s.fired,
                 s.overruns,
                 s.crc_errors,
                 s.rpm,
-                s.t_us
+                s.t_us,
+                s.fault.as_ref().map(|f| format!(" fault={f}")).unwrap_or_default()
             ),
             DeviceMessage::Done { fired, t_us } => format!("DONE fired={fired} t={t_us}"),
         }
@@ -400,6 +414,7 @@ impl DeviceMessage {
                     crc_errors: f.get("crc")?,
                     rpm: f.finite("rpm")?,
                     t_us: f.get("t")?,
+                    fault: f.map.get("fault").map(|v| v.to_string()),
                 }))
             }
             "DONE" => {
@@ -479,6 +494,16 @@ mod tests {
                 crc_errors: 2,
                 rpm: 3.75,
                 t_us: 99,
+                fault: None,
+            }),
+            DeviceMessage::Status(DeviceStatus {
+                state: DeviceState::Running,
+                fired: 5,
+                overruns: 0,
+                crc_errors: 0,
+                rpm: 60.0,
+                t_us: 7,
+                fault: Some("stall".into()),
             }),
             DeviceMessage::Done { fired: 10, t_us: 1000 },
         ];

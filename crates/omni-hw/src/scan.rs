@@ -4,7 +4,7 @@
 
 use crate::client::{Client, HwError, host_time_us};
 use crate::framing::MAX_BODY;
-use crate::message::{Command, DeviceInfo, DeviceMessage, DeviceState, DeviceStatus, format_list};
+use crate::message::{Command, DeviceInfo, DeviceMessage, DeviceState, DeviceStatus, describe_fault, format_list};
 use crate::pairing::{FrameSource, PairEvent, PairOptions, PairStats, Pairer};
 use crate::schedule::{AngleSpec, Schedule};
 use omni_formats::stream::Status;
@@ -195,8 +195,9 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
             }
             DeviceMessage::Status(s) => {
                 self.pairer.observe_clock(s.t_us, at_us);
+                let fault = self.fault(&s);
                 self.controller = Some(s);
-                Ok(())
+                fault
             }
             // Late duplicate replies of retried commands, or a HELLO after a controller reset.
             DeviceMessage::Ack { .. } | DeviceMessage::Nak { .. } | DeviceMessage::Hello(_) => Ok(()),
@@ -228,10 +229,23 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
         }
     }
 
+    /// A fault the controller reports during the run (e.g. a stalled motor) ends the scan with
+    /// an error: the run will fire nothing more.
+    fn fault(&self, s: &DeviceStatus) -> Result<(), String> {
+        match &s.fault {
+            Some(f) if self.done.is_none() => Err(format!("the controller reports fault={f}: {}", describe_fault(f))),
+            _ => Ok(()),
+        }
+    }
+
     /// Silence: ask the controller what it is doing; an idle controller means the run ended
     /// and its `DONE` line was lost.
     fn check_alive(&mut self) -> Result<(), String> {
         let s = self.client.status().map_err(|e| e.to_string())?;
+        if let Err(e) = self.fault(&s) {
+            self.controller = Some(s);
+            return Err(e);
+        }
         if s.state != DeviceState::Running && self.done.is_none() {
             self.done = Some(Instant::now());
             let out = self.pairer.on_run_end(s.fired);
@@ -242,7 +256,8 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
     }
 
     /// `expected`: how long the run should take (Revolutions mode); a run still going at twice
-    /// that plus 5 s (a stalled motor, a controller that forgot to stop) is an error.
+    /// that plus 5 s (a stalled motor the controller does not report, a controller that forgot
+    /// to stop) is an error, as is a fault the controller reports.
     fn main_loop(&mut self, cfg: &ScanConfig, revolutions: u64, expected: Option<Duration>) -> Result<(), String> {
         // Map the controller clock onto ours before the first frame: each round trip bounds the
         // offset from above; the smallest of a few is within one fast round trip.

@@ -284,3 +284,88 @@ fn a_stream_cut_short_is_warned_about_or_refused_with_strict() {
     assert!(err.contains("cut.jsonl") && err.contains("--strict"), "{err}");
     assert!(!d.join("strict.ply").exists());
 }
+
+/// Odometry samples of `pose` every 10 ms over [0, `end_us`].
+fn write_poses(path: &Path, end_us: u64, pose: &dyn Fn(u64) -> Isometry3<f64>) {
+    let samples: Vec<PoseSample> = (0..=end_us / 10_000)
+        .map(|i| {
+            let p = pose(i * 10_000);
+            let q = p.rotation;
+            PoseSample {
+                t_us: i * 10_000,
+                translation_mm: p.translation.vector.into(),
+                quaternion_wxyz: [q.w, q.i, q.j, q.k],
+            }
+        })
+        .collect();
+    write_odometry(path, &samples).unwrap();
+}
+
+#[test]
+fn normals_under_poses_face_the_sensor_of_their_own_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A wall through n·p = 1000 mm (n tilted from +x). Frames 0–3 (t 0–30 ms) see its y < 0 half
+    // from the origin; the sensor then drives round it and frames 4–7 (t 200–230 ms) see the
+    // y > 0 half from behind, at 2000·n + (0, 300, 0) turned 180° about z. The world origin lies
+    // on the front side, so normals turned towards it would face away from frames 4–7's sensor.
+    let n = Vector3::new(1.0, 0.2, 0.1).normalize();
+    let a = Isometry3::identity();
+    let b = Isometry3::from_parts(
+        Translation3::from(2000.0 * n + Vector3::new(0.0, 300.0, 0.0)),
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI),
+    );
+    let pose = |t_us: u64| {
+        let s = ((t_us as f64 - 50_000.0) / 100_000.0).clamp(0.0, 1.0);
+        a.lerp_slerp(&b, s)
+    };
+    write_poses(&d.join("odo.jsonl"), 300_000, &pose);
+    let (e1, e2) = (n.cross(&Vector3::z()).normalize(), n.cross(&n.cross(&Vector3::z())).normalize());
+    let mut rng = SplitMix64::new(21);
+    let mut frames = Vec::new();
+    for k in 0..8u64 {
+        let t = if k < 4 { k * 10_000 } else { 200_000 + (k - 4) * 10_000 };
+        // e1 ≈ −y: frames 0–3 take the patch at e1 > 20 mm (y < 0), frames 4–7 at e1 < −20 mm.
+        let side = if k < 4 { 1.0 } else { -1.0 };
+        let inv = pose(t).inverse();
+        let pts = (0..250)
+            .map(|_| {
+                let w = 1000.0 * n
+                    + e1 * side * (20.0 + rng.uniform() * 200.0)
+                    + e2 * (rng.uniform() * 300.0 - 150.0)
+                    + n * rng.normal() * 0.1;
+                (inv * Point3::from(w)).coords.into()
+            })
+            .collect();
+        frames.push((pts, Some(t)));
+    }
+    write_stream(&d.join("walk.jsonl"), &frames);
+    let viewpoint = |seq: f32| pose(if seq < 3.5 { 0 } else { 200_000 }).translation.vector;
+    assert!(n.dot(&viewpoint(5.0)) > 1000.0 && n.dot(&viewpoint(0.0)) < 1000.0, "the sensor sees both sides");
+
+    for (name, extra) in [("points.ply", &[][..]), ("voxels.ply", &["--voxel", "15"][..])] {
+        let mut args = vec!["--poses", "odo.jsonl", "walk.jsonl", "-o", name, "--normals"];
+        args.extend(extra);
+        ok(&run(d, &args));
+        let cloud = read_ply(&d.join(name)).unwrap();
+        assert!(cloud.len() > if extra.is_empty() { 1999 } else { 300 }, "{name}: {}", cloud.len());
+        let names: Vec<&str> = cloud.scalars.iter().map(|s| s.name.as_str()).collect();
+        assert!(names.ends_with(&["nx", "ny", "nz"]) && !names.iter().any(|s| s.contains("viewpoint")), "{names:?}");
+        let [nx, ny, nz] = ["nx", "ny", "nz"].map(|f| cloud.scalar(f).unwrap());
+        let seq = cloud.scalar("scalar_frame").unwrap();
+        let mut back = 0;
+        for (i, p) in cloud.positions.iter().enumerate() {
+            let normal = Vector3::new(nx[i], ny[i], nz[i]).cast::<f64>();
+            // A voxel holds one side's points only (the halves are 40 mm apart, a voxel's
+            // diagonal 26 mm), so its mean frame number tells the side.
+            let to_view = viewpoint(seq[i]) - Vector3::from(*p);
+            assert!(normal.dot(&to_view) > 0.0, "{name}: point {i} (frame {}) faces away from its sensor", seq[i]);
+            let truth = if seq[i] < 3.5 { -n } else { n };
+            // 0.1 mm noise over a 16-neighbour patch ~ 10 mm across (voxels: ~ 60 mm): < 3°.
+            let angle = normal.angle(&truth).to_degrees();
+            assert!(angle < 3.0, "{name}: point {i}: {angle}° from the wall's normal");
+            back += (seq[i] > 3.5) as usize;
+        }
+        assert!(back > cloud.len() / 3, "{name}: {back} of {} points seen from behind", cloud.len());
+    }
+}

@@ -1,7 +1,7 @@
 //! The cloud-output options shared by `omni-merge` and `omni-triangulate` (format, coordinate
 //! type and unit, normals, ROS 2 bag), and the grouping of frames into bag messages.
 
-use crate::normals::add_normals;
+use crate::normals::{Viewpoints, add_normals_seen_from};
 use omni_formats::export::{CloudFormat, CloudOptions, Units, write_cloud};
 use omni_formats::ply::PointCloud;
 use omni_formats::rosbag::{BagMessage, BagOptions, write_rosbag};
@@ -27,7 +27,8 @@ pub struct CloudOutputArgs {
     #[arg(long, value_name = "m|mm", default_value = "mm", value_parser = Units::parse)]
     pub units: Units,
     /// Add normals nx ny nz (PCD and bags: normal_x …): the plane fitted to each point's
-    /// --normal-neighbours nearest points, turned to face the sensor (the world origin).
+    /// --normal-neighbours nearest points, turned to face the sensor (the origin of the sensor
+    /// frame; with omni-merge --poses, where the sensor was when it took the point's frame).
     #[arg(long)]
     pub normals: bool,
     /// Neighbours (the point itself counted) of the normals' plane fit.
@@ -83,9 +84,23 @@ impl CloudOutputArgs {
         CloudFormat::for_output(path, self.format)
     }
 
-    /// Adds normals if asked for (the sensor at the world origin).
+    /// Adds normals if asked for, facing the sensor at the origin.
     pub fn finish_cloud(&self, cloud: &mut PointCloud) -> Result<(), String> {
-        if self.normals { add_normals(cloud, self.normal_neighbours, [0.0; 3]) } else { Ok(()) }
+        self.finish_cloud_seen_from(cloud, None)
+    }
+
+    /// Adds normals if asked for, each facing its point's viewpoint (mm, the cloud's frame; the
+    /// origin for all if `None`).
+    pub fn finish_cloud_seen_from(
+        &self,
+        cloud: &mut PointCloud,
+        viewpoints: Option<&[[f64; 3]]>,
+    ) -> Result<(), String> {
+        if !self.normals {
+            return Ok(());
+        }
+        let views = viewpoints.map_or(Viewpoints::Fixed([0.0; 3]), Viewpoints::PerPoint);
+        add_normals_seen_from(cloud, self.normal_neighbours, views)
     }
 
     /// Writes the cloud file (if `path`) and the bag (if --rosbag) with `messages`.

@@ -369,3 +369,85 @@ fn normals_under_poses_face_the_sensor_of_their_own_frame() {
         assert!(back > cloud.len() / 3, "{name}: {back} of {} points seen from behind", cloud.len());
     }
 }
+
+/// The omniscan temporary entries (files or directories) in `dir`.
+fn temporaries(dir: &Path) -> Vec<std::path::PathBuf> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains(".omniscan-tmp-"))
+        .map(|e| e.path())
+        .collect()
+}
+
+/// Starts `omni-merge big.ply --rosbag bag` and stops it (SIGSTOP) while the bag's temporary
+/// directory exists; `None` if the write finished before it could be caught.
+fn stopped_mid_bag_write(d: &Path) -> Option<std::process::Child> {
+    let mut child = Command::new(BIN)
+        .current_dir(d)
+        .args(["big.ply", "--rosbag", "bag"])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let pid = child.id() as libc::pid_t;
+    loop {
+        if temporaries(d).iter().any(|p| p.is_dir()) {
+            // SAFETY: kill sends a signal to our own child.
+            assert_eq!(unsafe { libc::kill(pid, libc::SIGSTOP) }, 0);
+            // Stopped mid-write only if the temporary is still there and the bag is not.
+            if temporaries(d).iter().any(|p| p.is_dir()) && !d.join("bag").exists() {
+                return Some(child);
+            }
+            unsafe { libc::kill(pid, libc::SIGCONT) };
+        }
+        if child.try_wait().unwrap().is_some() {
+            let _ = std::fs::remove_dir_all(d.join("bag"));
+            return None;
+        }
+    }
+}
+
+#[test]
+fn an_interrupted_bag_write_leaves_no_directory_and_a_killed_ones_is_swept() {
+    use std::os::unix::process::ExitStatusExt;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Big enough that writing its bag (~ 40 bytes a point) takes tens of milliseconds; each
+    // missed attempt doubles it.
+    let mut n = 100_000;
+    let mut caught = |signal: i32| loop {
+        let mut rng = SplitMix64::new(n as u64);
+        let positions: Vec<[f64; 3]> = (0..n).map(|_| [rng.uniform() * 1e3, rng.uniform() * 1e3, 500.0]).collect();
+        let scalars = omni_cloud::cloud::POINT_SCALARS
+            .iter()
+            .map(|name| ScalarField::new(name.to_string(), vec![1.0; n]))
+            .collect();
+        write_ply(&d.join("big.ply"), &PointCloud { positions, scalars }, Encoding::BinaryLittleEndian).unwrap();
+        if let Some(mut child) = stopped_mid_bag_write(d) {
+            let pid = child.id() as libc::pid_t;
+            // SAFETY: signals to our own stopped child.
+            unsafe {
+                assert_eq!(libc::kill(pid, signal), 0);
+                libc::kill(pid, libc::SIGCONT);
+            }
+            return child.wait().unwrap();
+        }
+        n *= 2;
+        assert!(n <= 800_000, "the bag write was never caught in progress");
+    };
+    for signal in [libc::SIGTERM, libc::SIGINT] {
+        let status = caught(signal);
+        assert_eq!(status.signal(), Some(signal), "{status:?}");
+        assert!(!d.join("bag").exists(), "signal {signal} left the bag directory");
+        assert_eq!(temporaries(d), Vec::<std::path::PathBuf>::new(), "signal {signal} left a temporary");
+    }
+    // SIGKILL cannot be caught: the temporary directory stays, and the next run in the
+    // directory sweeps it (its process is gone) before writing its own bag.
+    let status = caught(libc::SIGKILL);
+    assert_eq!(status.signal(), Some(libc::SIGKILL));
+    let left = temporaries(d);
+    assert!(left.len() == 1 && left[0].is_dir() && !d.join("bag").exists(), "{left:?}");
+    ok(&run(d, &["big.ply", "--rosbag", "bag2"]));
+    assert_eq!(temporaries(d), Vec::<std::path::PathBuf>::new(), "the stale temporary directory was not swept");
+    assert!(d.join("bag2/bag2_0.mcap").is_file() && d.join("bag2/metadata.yaml").is_file());
+}

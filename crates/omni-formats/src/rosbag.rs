@@ -14,7 +14,7 @@ use crate::ply::{PointCloud, ScalarType};
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// The message type and its `ros2msg` schema: PointCloud2, then each dependency after a line of
 /// 80 `=` and `MSG: package/Type`, as rosbag2 and Foxglove write them.
@@ -189,8 +189,9 @@ fn encode_pointcloud2(cloud: &PointCloud, range: Range<usize>, stamp_ns: u64, op
 }
 
 /// Writes the rosbag2 directory `dir` (which must not exist yet): `<name>_0.mcap` and
-/// `metadata.yaml`, built in a temporary sibling and renamed into place, so a failure leaves
-/// nothing. Messages must be in time order.
+/// `metadata.yaml`, built in a temporary sibling ([`crate::io::TempDir`]) and renamed into
+/// place, so a failure or a signal leaves nothing (and a later run sweeps what a killed one
+/// left). Messages must be in time order.
 pub fn write_rosbag(dir: &Path, cloud: &PointCloud, messages: &[BagMessage], opts: &BagOptions) -> Result<()> {
     let name = dir.display().to_string();
     cloud
@@ -215,23 +216,28 @@ pub fn write_rosbag(dir: &Path, cloud: &PointCloud, messages: &[BagMessage], opt
     }
     let base = dir.file_name().map(|s| s.to_string_lossy().into_owned()).filter(|s| !s.is_empty() && s != "..");
     let base = base.ok_or_else(|| Error::new(&name, "", "is not a directory name"))?;
-    let tmp = crate::io::temp_path(dir);
-    let result = write_bag_files(&tmp, &base, cloud, messages, opts).and_then(|_| std::fs::rename(&tmp, dir));
-    if let Err(e) = result {
-        let _ = std::fs::remove_dir_all(&tmp);
-        return Err(Error::io(name, &e));
+    // Dropped on an error (removed with what it holds); removed by the CLI's signal handler.
+    let result = crate::io::TempDir::create(dir)
+        .and_then(|tmp| write_bag_files(tmp.path(), &base, cloud, messages, opts).map(|_| tmp))
+        .and_then(|tmp| tmp.commit());
+    match result {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(Error::new(
+            &name,
+            "",
+            "already exists (a bag directory is never overwritten; remove it or choose another)",
+        )),
+        Err(e) => Err(Error::io(name, &e)),
     }
-    Ok(())
 }
 
 fn write_bag_files(
-    tmp: &PathBuf,
+    tmp: &Path,
     base: &str,
     cloud: &PointCloud,
     messages: &[BagMessage],
     opts: &BagOptions,
 ) -> std::io::Result<()> {
-    std::fs::create_dir(tmp)?;
     let mcap_name = format!("{base}_0.mcap");
     let file = std::fs::File::create(tmp.join(&mcap_name))?;
     let mut out = std::io::BufWriter::with_capacity(1 << 16, file);

@@ -10,11 +10,14 @@ every other output must hold the same points, fields and values:
     plane fit (brute-force neighbours, eigh) oriented towards the same viewpoint;
   * rosbag2 directories: rosbags (metadata.yaml + MCAP, its own PointCloud2 definition) and
     mcap-ros2-support (decodes with the schema text in the file), per frame and per revolution,
-    one message larger than the MCAP chunk size.
+    one message larger than the MCAP chunk size; with --rosbag-images the frames as Image
+    (mono8, and mono16 from a 2-frame 16-bit scan) equal to the PNGs as OpenCV reads them, and
+    CameraInfo equal to camera.json (hyperbolic, and a Mei model with xi first in D).
 
 Run by `make test-cloud` (mk/cloud.mk) with OMNI_BIN naming the directory of the built binaries.
 """
 
+import json
 import os
 import pathlib
 import subprocess
@@ -23,6 +26,7 @@ import numpy as np
 import pytest
 
 try:
+    import cv2
     import laspy
     import plyfile
     from pypcd4 import PointCloud as PcdCloud
@@ -269,3 +273,99 @@ def test_merge_rosbag_holds_the_merged_cloud(scan):
     msgs = bag_points_rosbags(bag)
     assert len(msgs) == 1 and msgs[0][1].header.frame_id == "map"
     check_bag_equals_ply(msgs, ref)
+
+
+def frames_of(stream):
+    """(seq, image path) of each frame record of a stripe stream, its frames_dir resolved
+    against the stream's directory."""
+    frames, frames_dir = [], stream.parent
+    for line in stream.read_text().splitlines():
+        rec = json.loads(line)
+        if rec["type"] == "header" and rec.get("frames_dir"):
+            frames_dir = stream.parent / rec["frames_dir"]
+        elif rec["type"] == "frame":
+            frames.append((rec["seq"], frames_dir / rec["path"]))
+    return frames
+
+
+def check_image_bag(bag, stream, camera, expect_model):
+    """The bag's Image and CameraInfo messages against the PNG files (OpenCV) and camera.json,
+    decoded by rosbags (its own types) and mcap-ros2-support (the file's schemas)."""
+    frames = frames_of(stream)
+    typestore = get_typestore(Stores.ROS2_HUMBLE)
+    by_topic = {}
+    with BagReader(bag) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        assert types == {"/omniscan/points": "sensor_msgs/msg/PointCloud2",
+                         "/omniscan/image_raw": "sensor_msgs/msg/Image",
+                         "/omniscan/camera_info": "sensor_msgs/msg/CameraInfo"}, types
+        for conn, t, raw in reader.messages():
+            by_topic.setdefault(conn.topic, []).append((t, typestore.deserialize_cdr(raw, conn.msgtype)))
+    images, infos = by_topic["/omniscan/image_raw"], by_topic["/omniscan/camera_info"]
+    assert len(images) == len(infos) == len(frames)
+    model = json.loads(camera.read_text())["model"]
+    for (seq, png), (t, img), (ti, info) in zip(frames, images, infos):
+        stamp = round(seq * STAMP_PERIOD_MS * 1e6)
+        assert t == ti == stamp == img.header.stamp.sec * 10**9 + img.header.stamp.nanosec
+        want = cv2.imread(str(png), cv2.IMREAD_UNCHANGED)
+        assert want is not None and want.ndim == 2, png
+        depth = 2 if want.dtype == np.uint16 else 1
+        assert img.encoding == ("mono16" if depth == 2 else "mono8") and img.is_bigendian == 0
+        assert (img.height, img.width, img.step) == (want.shape[0], want.shape[1], want.shape[1] * depth)
+        got = np.frombuffer(bytes(img.data), dtype="<u2" if depth == 2 else "u1").reshape(want.shape)
+        assert np.array_equal(got, want), png
+        assert img.header.frame_id == info.header.frame_id == "omniscan"
+        assert (info.width, info.height) == (model["width"], model["height"])
+        assert info.distortion_model == expect_model
+        fx, fy, cx, cy = (model[k] for k in ("fx_px", "fy_px", "cx_px", "cy_px"))
+        assert list(info.k) == [fx, 0, cx, 0, fy, cy, 0, 0, 1]
+        assert list(info.p) == [fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0]
+        assert list(info.r) == [1, 0, 0, 0, 1, 0, 0, 0, 1]
+        if expect_model == "mei":
+            assert list(info.d) == [model["xi"], model["k1"], model["k2"], model["p1"], model["p2"]]
+        else:
+            assert list(info.d) == [model["a_mm"], model["b_mm"], model["rim_radius_mm"], model["inner_radius_mm"],
+                                    *model["camera_offset_mm"], *model["camera_tilt_deg"]]
+    # The file's own order is time order; at one stamp, image and camera info before the points.
+    with open(next(bag.glob("*.mcap")), "rb") as f:
+        order = [(m.log_time, c.topic) for _, c, m in make_reader(f).iter_messages(log_time_order=False)]
+    assert order == sorted(order, key=lambda o: (o[0], ["/omniscan/image_raw", "/omniscan/camera_info",
+                                                        "/omniscan/points"].index(o[1])))
+    decoded = {}
+    for d in read_ros2_messages(str(next(bag.glob("*.mcap")))):
+        decoded.setdefault(d.channel.topic, []).append(d.ros_msg)
+    assert len(decoded["/omniscan/image_raw"]) == len(frames)
+    for (_, a), b in zip(images, decoded["/omniscan/image_raw"]):
+        assert (a.encoding, a.width, a.height, bytes(a.data)) == (b.encoding, b.width, b.height, bytes(b.data))
+    for (_, a), b in zip(infos, decoded["/omniscan/camera_info"]):
+        assert (a.distortion_model, list(a.d), list(a.k)) == (b.distortion_model, list(b.d), list(b.k))
+    return by_topic["/omniscan/points"] if "/omniscan/points" in by_topic else []
+
+
+def test_rosbag_images_mono8_and_camera_info_of_the_hyperbolic_model(scan):
+    bag = scan["dir"] / "bag_images"
+    tool("omni-triangulate", "--camera", scan["camera"], "--scanner", scan["scanner"], scan["ridges"],
+         "--rosbag", bag, "--rosbag-images", "--stamp-period-ms", STAMP_PERIOD_MS,
+         "--cloud", scan["dir"] / "images_ref.ply")
+    points = check_image_bag(bag, scan["ridges"], scan["camera"], "omniscan_hyperbolic")
+    _, ref = read_ply(scan["dir"] / "images_ref.ply")
+    check_bag_equals_ply(points, ref)
+
+
+def test_rosbag_images_mono16_and_camera_info_of_a_mei_model(scan):
+    d = scan["dir"] / "scan16"
+    d.mkdir()
+    tool("omni-sim", "scan", "--camera", scan["camera"], "--scanner", scan["scanner"],
+         "--scene", scan["dir"] / "plane.json", "--angles", "16:17:0.5", "--bit-depth", "16",
+         "--frames", d / "frames", "-o", d / "scan.jsonl")
+    tool("omni-ridge", "--camera", scan["camera"], d / "scan.jsonl", "-o", d / "ridges.jsonl")
+    # A Mei model with every distortion coefficient distinct, so D's order shows.
+    mei = {"format": "omniscan.camera", "version": 1,
+           "model": {"kind": "mei", "xi": 0.85, "fx_px": 210.5, "fy_px": 211.25, "cx_px": 127.5, "cy_px": 128.0,
+                     "k1": -0.125, "k2": 0.03125, "p1": 0.001, "p2": -0.002, "width": 256, "height": 256}}
+    (d / "mei.json").write_text(json.dumps(mei))
+    bag = d / "bag"
+    tool("omni-triangulate", "--camera", d / "mei.json", "--scanner", scan["scanner"], d / "ridges.jsonl",
+         "--rosbag", bag, "--rosbag-images", "--stamp-period-ms", STAMP_PERIOD_MS)
+    assert len(frames_of(d / "ridges.jsonl")) == 2
+    check_image_bag(bag, d / "ridges.jsonl", d / "mei.json", "mei")

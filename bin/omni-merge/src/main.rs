@@ -20,7 +20,8 @@ use std::path::{Path, PathBuf};
 clouds (by the .ply extension), optionally moves each frame by the sensor pose interpolated from an \
 odometry file at the frame's timestamp_us (slerp + lerp), then crops, voxel-downsamples and removes \
 outliers, in that order, and writes one cloud: PLY, PCD or LAS by the output's extension (or \
---format), optionally with normals facing the sensor, and/or a ROS 2 bag (--rosbag) with the merged \
+--format), optionally with normals facing the sensor (with --poses: its position when it took \
+each point's frame), and/or a ROS 2 bag (--rosbag) with the merged \
 cloud as one sensor_msgs/msg/PointCloud2 message in frame `map`, stamped with the latest frame \
 timestamp. Scalar fields keep their PLY types (uchar colours stay uchar).\n\n\
 Outlier removal matches Open3D: --statistical K,STD_RATIO is remove_statistical_outlier(nb_neighbors=K, \
@@ -142,7 +143,9 @@ fn options(args: &Args) -> Result<MergeOptions, CliError> {
     {
         return Err(CliError::usage("--radius: R must be positive"));
     }
-    Ok(MergeOptions { voxel: args.voxel, statistical, radius, crop_box, crop_range })
+    // With poses, each point's normal faces the sensor where its own frame was taken.
+    let viewpoints = args.cloud.normals && args.poses.is_some();
+    Ok(MergeOptions { voxel: args.voxel, statistical, radius, crop_box, crop_range, viewpoints })
 }
 
 fn is_ply(p: &Path) -> bool {
@@ -191,11 +194,11 @@ fn main() -> std::process::ExitCode {
                 latest_us = latest_us.max(latest);
             }
         }
-        let (mut cloud, stats) = merger.finish()?;
+        let (mut cloud, stats, viewpoints) = merger.finish_with_viewpoints()?;
         if cloud.is_empty() {
             omni_cli::warn("omni-merge", "no points left after cropping and filtering; writing an empty cloud");
         }
-        args.cloud.finish_cloud(&mut cloud)?;
+        args.cloud.finish_cloud_seen_from(&mut cloud, viewpoints.as_deref())?;
         let message = BagMessage { stamp_ns: latest_us.unwrap_or(0) * 1000, points: 0..cloud.len() };
         args.cloud.write(&cloud, args.output.as_deref(), &[message], "map")?;
         if args.stats {

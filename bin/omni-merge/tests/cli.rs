@@ -284,3 +284,170 @@ fn a_stream_cut_short_is_warned_about_or_refused_with_strict() {
     assert!(err.contains("cut.jsonl") && err.contains("--strict"), "{err}");
     assert!(!d.join("strict.ply").exists());
 }
+
+/// Odometry samples of `pose` every 10 ms over [0, `end_us`].
+fn write_poses(path: &Path, end_us: u64, pose: &dyn Fn(u64) -> Isometry3<f64>) {
+    let samples: Vec<PoseSample> = (0..=end_us / 10_000)
+        .map(|i| {
+            let p = pose(i * 10_000);
+            let q = p.rotation;
+            PoseSample {
+                t_us: i * 10_000,
+                translation_mm: p.translation.vector.into(),
+                quaternion_wxyz: [q.w, q.i, q.j, q.k],
+            }
+        })
+        .collect();
+    write_odometry(path, &samples).unwrap();
+}
+
+#[test]
+fn normals_under_poses_face_the_sensor_of_their_own_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A wall through n·p = 1000 mm (n tilted from +x). Frames 0–3 (t 0–30 ms) see its y < 0 half
+    // from the origin; the sensor then drives round it and frames 4–7 (t 200–230 ms) see the
+    // y > 0 half from behind, at 2000·n + (0, 300, 0) turned 180° about z. The world origin lies
+    // on the front side, so normals turned towards it would face away from frames 4–7's sensor.
+    let n = Vector3::new(1.0, 0.2, 0.1).normalize();
+    let a = Isometry3::identity();
+    let b = Isometry3::from_parts(
+        Translation3::from(2000.0 * n + Vector3::new(0.0, 300.0, 0.0)),
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI),
+    );
+    let pose = |t_us: u64| {
+        let s = ((t_us as f64 - 50_000.0) / 100_000.0).clamp(0.0, 1.0);
+        a.lerp_slerp(&b, s)
+    };
+    write_poses(&d.join("odo.jsonl"), 300_000, &pose);
+    let (e1, e2) = (n.cross(&Vector3::z()).normalize(), n.cross(&n.cross(&Vector3::z())).normalize());
+    let mut rng = SplitMix64::new(21);
+    let mut frames = Vec::new();
+    for k in 0..8u64 {
+        let t = if k < 4 { k * 10_000 } else { 200_000 + (k - 4) * 10_000 };
+        // e1 ≈ −y: frames 0–3 take the patch at e1 > 20 mm (y < 0), frames 4–7 at e1 < −20 mm.
+        let side = if k < 4 { 1.0 } else { -1.0 };
+        let inv = pose(t).inverse();
+        let pts = (0..250)
+            .map(|_| {
+                let w = 1000.0 * n
+                    + e1 * side * (20.0 + rng.uniform() * 200.0)
+                    + e2 * (rng.uniform() * 300.0 - 150.0)
+                    + n * rng.normal() * 0.1;
+                (inv * Point3::from(w)).coords.into()
+            })
+            .collect();
+        frames.push((pts, Some(t)));
+    }
+    write_stream(&d.join("walk.jsonl"), &frames);
+    let viewpoint = |seq: f32| pose(if seq < 3.5 { 0 } else { 200_000 }).translation.vector;
+    assert!(n.dot(&viewpoint(5.0)) > 1000.0 && n.dot(&viewpoint(0.0)) < 1000.0, "the sensor sees both sides");
+
+    for (name, extra) in [("points.ply", &[][..]), ("voxels.ply", &["--voxel", "15"][..])] {
+        let mut args = vec!["--poses", "odo.jsonl", "walk.jsonl", "-o", name, "--normals"];
+        args.extend(extra);
+        ok(&run(d, &args));
+        let cloud = read_ply(&d.join(name)).unwrap();
+        assert!(cloud.len() > if extra.is_empty() { 1999 } else { 300 }, "{name}: {}", cloud.len());
+        let names: Vec<&str> = cloud.scalars.iter().map(|s| s.name.as_str()).collect();
+        assert!(names.ends_with(&["nx", "ny", "nz"]) && !names.iter().any(|s| s.contains("viewpoint")), "{names:?}");
+        let [nx, ny, nz] = ["nx", "ny", "nz"].map(|f| cloud.scalar(f).unwrap());
+        let seq = cloud.scalar("scalar_frame").unwrap();
+        let mut back = 0;
+        for (i, p) in cloud.positions.iter().enumerate() {
+            let normal = Vector3::new(nx[i], ny[i], nz[i]).cast::<f64>();
+            // A voxel holds one side's points only (the halves are 40 mm apart, a voxel's
+            // diagonal 26 mm), so its mean frame number tells the side.
+            let to_view = viewpoint(seq[i]) - Vector3::from(*p);
+            assert!(normal.dot(&to_view) > 0.0, "{name}: point {i} (frame {}) faces away from its sensor", seq[i]);
+            let truth = if seq[i] < 3.5 { -n } else { n };
+            // 0.1 mm noise over a 16-neighbour patch ~ 10 mm across (voxels: ~ 60 mm): < 3°.
+            let angle = normal.angle(&truth).to_degrees();
+            assert!(angle < 3.0, "{name}: point {i}: {angle}° from the wall's normal");
+            back += (seq[i] > 3.5) as usize;
+        }
+        assert!(back > cloud.len() / 3, "{name}: {back} of {} points seen from behind", cloud.len());
+    }
+}
+
+/// The omniscan temporary entries (files or directories) in `dir`.
+fn temporaries(dir: &Path) -> Vec<std::path::PathBuf> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains(".omniscan-tmp-"))
+        .map(|e| e.path())
+        .collect()
+}
+
+/// Starts `omni-merge big.ply --rosbag bag` and stops it (SIGSTOP) while the bag's temporary
+/// directory exists; `None` if the write finished before it could be caught.
+fn stopped_mid_bag_write(d: &Path) -> Option<std::process::Child> {
+    let mut child = Command::new(BIN)
+        .current_dir(d)
+        .args(["big.ply", "--rosbag", "bag"])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let pid = child.id() as libc::pid_t;
+    loop {
+        if temporaries(d).iter().any(|p| p.is_dir()) {
+            // SAFETY: kill sends a signal to our own child.
+            assert_eq!(unsafe { libc::kill(pid, libc::SIGSTOP) }, 0);
+            // Stopped mid-write only if the temporary is still there and the bag is not.
+            if temporaries(d).iter().any(|p| p.is_dir()) && !d.join("bag").exists() {
+                return Some(child);
+            }
+            unsafe { libc::kill(pid, libc::SIGCONT) };
+        }
+        if child.try_wait().unwrap().is_some() {
+            let _ = std::fs::remove_dir_all(d.join("bag"));
+            return None;
+        }
+    }
+}
+
+#[test]
+fn an_interrupted_bag_write_leaves_no_directory_and_a_killed_ones_is_swept() {
+    use std::os::unix::process::ExitStatusExt;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Big enough that writing its bag (~ 40 bytes a point) takes tens of milliseconds; each
+    // missed attempt doubles it.
+    let mut n = 100_000;
+    let mut caught = |signal: i32| loop {
+        let mut rng = SplitMix64::new(n as u64);
+        let positions: Vec<[f64; 3]> = (0..n).map(|_| [rng.uniform() * 1e3, rng.uniform() * 1e3, 500.0]).collect();
+        let scalars = omni_cloud::cloud::POINT_SCALARS
+            .iter()
+            .map(|name| ScalarField::new(name.to_string(), vec![1.0; n]))
+            .collect();
+        write_ply(&d.join("big.ply"), &PointCloud { positions, scalars }, Encoding::BinaryLittleEndian).unwrap();
+        if let Some(mut child) = stopped_mid_bag_write(d) {
+            let pid = child.id() as libc::pid_t;
+            // SAFETY: signals to our own stopped child.
+            unsafe {
+                assert_eq!(libc::kill(pid, signal), 0);
+                libc::kill(pid, libc::SIGCONT);
+            }
+            return child.wait().unwrap();
+        }
+        n *= 2;
+        assert!(n <= 800_000, "the bag write was never caught in progress");
+    };
+    for signal in [libc::SIGTERM, libc::SIGINT] {
+        let status = caught(signal);
+        assert_eq!(status.signal(), Some(signal), "{status:?}");
+        assert!(!d.join("bag").exists(), "signal {signal} left the bag directory");
+        assert_eq!(temporaries(d), Vec::<std::path::PathBuf>::new(), "signal {signal} left a temporary");
+    }
+    // SIGKILL cannot be caught: the temporary directory stays, and the next run in the
+    // directory sweeps it (its process is gone) before writing its own bag.
+    let status = caught(libc::SIGKILL);
+    assert_eq!(status.signal(), Some(libc::SIGKILL));
+    let left = temporaries(d);
+    assert!(left.len() == 1 && left[0].is_dir() && !d.join("bag").exists(), "{left:?}");
+    ok(&run(d, &["big.ply", "--rosbag", "bag2"]));
+    assert_eq!(temporaries(d), Vec::<std::path::PathBuf>::new(), "the stale temporary directory was not swept");
+    assert!(d.join("bag2/bag2_0.mcap").is_file() && d.join("bag2/metadata.yaml").is_file());
+}

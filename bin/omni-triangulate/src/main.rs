@@ -3,11 +3,12 @@
 use clap::Parser;
 use omni_cli::CliError;
 use omni_cloud::cloud::{append_frame_points, empty_point_cloud};
-use omni_cloud::export::{BagGrouping, CloudOutputArgs, FrameSpan, bag_messages};
+use omni_cloud::export::{BagGrouping, CloudOutputArgs, FrameSpan, bag_messages, frame_stamp_ns};
 use omni_cloud::triangulate::{DEFAULT_MIN_INCIDENCE_DEG, Rejections, Triangulator};
 use omni_formats::export::CloudFormat;
 use omni_formats::ply::PointCloud;
-use omni_formats::stream::{Header, Record, Status, StreamReader, StreamWriter};
+use omni_formats::rosbag::{BagImage, BagImages, camera_info, camera_info_topic};
+use omni_formats::stream::{Header, Record, Status, StreamReader, StreamWriter, resolve_frames_dir};
 use omni_formats::{CameraFile, ScannerFile};
 use std::io::Write;
 use std::path::PathBuf;
@@ -27,12 +28,15 @@ Rays meeting the plane at less than --min-incidence-deg are refused: the range e
 1/sin(angle). Writes the stream with a `points` array added to each frame \
 ([x, y, z, laser, range, stripe_index], mm, world = receiver frame), and/or a point cloud (PLY, PCD or \
 LAS by the extension, or --format), and/or a ROS 2 bag (--rosbag) with one \
-sensor_msgs/msg/PointCloud2 per frame or per revolution, stamped with the frames' timestamp_us.",
+sensor_msgs/msg/PointCloud2 per frame or per revolution, stamped with the frames' timestamp_us; with \
+--rosbag-images the bag also holds every frame's image as sensor_msgs/msg/Image and the receiver model \
+as sensor_msgs/msg/CameraInfo.",
     after_help = "Examples:\n  \
 omni-ridge scan.jsonl | omni-triangulate --camera camera.json --scanner scanner.json > points.jsonl\n  \
 omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl -o cloud.ply\n  \
 omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl -o points.jsonl --cloud cloud.pcd\n  \
-omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl --rosbag scan_bag --bag-per revolution\n\n\
+omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl --rosbag scan_bag --bag-per revolution\n  \
+omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl --rosbag scan_bag --rosbag-images\n\n\
 PLY scalar fields: intensity, scalar_frame, scalar_laser, scalar_alpha_deg, scalar_range (mm), scalar_u, scalar_v (px).\n\
 Exit codes: 0 ok, 1 bad input or I/O error (nothing half-written), 2 usage error."
 )]
@@ -59,6 +63,14 @@ struct Args {
     /// Bag messages: one PointCloud2 per frame or per revolution.
     #[arg(long, value_enum, default_value_t = BagGrouping::Frame)]
     bag_per: BagGrouping,
+    /// Also put every frame's image into the bag (--rosbag): sensor_msgs/msg/Image, mono8 or
+    /// mono16 as the file is (colour frames as their luma), stamped as the frame, and the
+    /// receiver model (--camera) as sensor_msgs/msg/CameraInfo beside each (docs/FORMATS.md).
+    #[arg(long)]
+    rosbag_images: bool,
+    /// The bag's image topic; the CameraInfo goes on `camera_info` in its namespace.
+    #[arg(long, value_name = "NAME", default_value = "/omniscan/image_raw")]
+    image_topic: String,
     /// Stamp frames that have no timestamp_us (simulated scans) seq × MS milliseconds.
     #[arg(long, value_name = "MS")]
     stamp_period_ms: Option<f64>,
@@ -74,7 +86,7 @@ struct Args {
 fn main() -> std::process::ExitCode {
     omni_cli::main("omni-triangulate", || {
         let args = Args::parse();
-        let (_, camera) = CameraFile::load(&args.camera)?;
+        let (camera_file, camera) = CameraFile::load(&args.camera)?;
         let (_, transmitter) = ScannerFile::load(&args.scanner)?;
         let tri = Triangulator::new(camera.as_ref(), &transmitter, args.min_incidence_deg).map_err(CliError::usage)?;
         args.cloud_out.check().map_err(CliError::usage)?;
@@ -84,6 +96,15 @@ fn main() -> std::process::ExitCode {
             return Err(CliError::usage("--stamp-period-ms must be a positive number"));
         }
         let bag = args.cloud_out.rosbag.is_some();
+        if args.rosbag_images && !bag {
+            return Err(CliError::usage("--rosbag-images needs --rosbag DIR"));
+        }
+        if !args.image_topic.starts_with('/') || args.image_topic.ends_with('/') {
+            return Err(CliError::usage(format!(
+                "--image-topic: a ROS topic name starts with `/`, got {:?}",
+                args.image_topic
+            )));
+        }
         let (stream_out, mut cloud_out) = match (&args.output, &args.cloud) {
             (Some(o), p) if CloudFormat::has_cloud_extension(o) => {
                 if p.is_some() {
@@ -102,7 +123,15 @@ fn main() -> std::process::ExitCode {
         let mut cloud = (cloud_out.is_some() || bag).then(empty_point_cloud);
         let input = omni_formats::io::open_input(&args.input)?;
         let name = omni_formats::io::display_name(&args.input, "stdin");
+        // Relative frames_dir: against the stream file's directory (as omni-ridge reads it).
+        let base_dir = match args.input.parent() {
+            Some(p) if args.input != std::path::Path::new("-") && !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
         let mut run = Run {
+            base_dir,
+            frames_dir: None,
+            images: Vec::new(),
             tri: &tri,
             args: &args,
             cloud: cloud.as_mut(),
@@ -130,17 +159,47 @@ fn main() -> std::process::ExitCode {
             None => run.process(input, &name, None).map_err(CliError::new)?,
         }
         let spans = std::mem::take(&mut run.spans);
+        let frames = std::mem::take(&mut run.images);
         if let Some(mut cloud) = cloud {
             let period_us = args.stamp_period_ms.map(|ms| ms * 1000.0);
             let messages = if bag { bag_messages(&spans, args.bag_per, period_us)? } else { Vec::new() };
             args.cloud_out.finish_cloud(&mut cloud)?;
-            args.cloud_out.write(&cloud, cloud_out.take().as_deref(), &messages, "omniscan")?;
+            let mut load = |i: usize| {
+                let g = omni_vision::image_io::load_gray(&frames[i].2)?;
+                Ok(BagImage { width: g.width, height: g.height, bit_depth: g.bit_depth, samples: g.data })
+            };
+            let mut images = match args.rosbag_images {
+                true => Some(BagImages {
+                    topic: args.image_topic.clone(),
+                    info_topic: camera_info_topic(&args.image_topic),
+                    stamps_ns: frames
+                        .iter()
+                        .map(|(seq, ts, _)| frame_stamp_ns(*seq, *ts, period_us))
+                        .collect::<Result<_, _>>()?,
+                    load: &mut load,
+                    camera_info: Some(camera_info(&camera_file.model)),
+                }),
+                false => None,
+            };
+            args.cloud_out.write_with_images(
+                &cloud,
+                cloud_out.take().as_deref(),
+                &messages,
+                images.as_mut(),
+                "omniscan",
+            )?;
         }
         Ok(())
     })
 }
 
 struct Run<'a> {
+    /// The directory a relative `frames_dir` is resolved against.
+    base_dir: PathBuf,
+    /// The header's frames directory, resolved.
+    frames_dir: Option<String>,
+    /// Each frame's seq, timestamp and image file (for --rosbag-images).
+    images: Vec<(u64, Option<u64>, PathBuf)>,
     tri: &'a Triangulator<'a>,
     args: &'a Args,
     cloud: Option<&'a mut PointCloud>,
@@ -168,8 +227,15 @@ impl Run<'_> {
         let mut first = true;
         while let Some(record) = reader.next_record().map_err(|e| fail(e.to_string()))? {
             let record = match record {
-                Record::Header(h) => Record::Header(self.header(h)),
+                Record::Header(h) => {
+                    self.frames_dir = h.frames_dir.as_deref().map(|d| resolve_frames_dir(&self.base_dir, d));
+                    Record::Header(self.header(h))
+                }
                 Record::Frame(mut frame) => {
+                    if self.args.rosbag_images {
+                        let path = frame.resolve_path(self.frames_dir.as_deref(), &frame.path);
+                        self.images.push((frame.seq, frame.timestamp_us, path));
+                    }
                     let loc = format!("{name}: line {} (frame {})", reader.line(), frame.seq);
                     let res = self.tri.triangulate_frame(&frame).map_err(|m| fail(format!("{loc}: {m}")))?;
                     self.rejections.add(&res.rejections);

@@ -298,3 +298,23 @@ fn a_stream_cut_short_is_warned_about_and_passed_on_incomplete_or_refused_with_s
     let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "--strict"]);
     assert!(out.status.success() && out.stderr.is_empty(), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+#[test]
+fn rosbag_images_need_the_bag_and_every_frame_image() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let base = ["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "--stamp-period-ms", "5"];
+    let out = run(d, &[&base[..], &["--rosbag-images", "-o", "c.ply"]].concat());
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--rosbag-images needs --rosbag"));
+    // The fixture's frames name images 0.png … that do not exist: the bag is refused whole.
+    let out = run(d, &[&base[..], &["--rosbag", "bag", "--rosbag-images"]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("0.png") && err.lines().count() == 1, "{err}");
+    assert!(!fx.path("bag").exists() && temp_files(d).is_empty());
+    // Without the images the same bag is written.
+    let out = run(d, &[&base[..], &["--rosbag", "bag"]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(fx.path("bag/metadata.yaml").exists());
+}

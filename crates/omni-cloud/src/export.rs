@@ -1,10 +1,10 @@
 //! The cloud-output options shared by `omni-merge` and `omni-triangulate` (format, coordinate
 //! type and unit, normals, ROS 2 bag), and the grouping of frames into bag messages.
 
-use crate::normals::add_normals;
+use crate::normals::{Viewpoints, add_normals_seen_from};
 use omni_formats::export::{CloudFormat, CloudOptions, Units, write_cloud};
 use omni_formats::ply::PointCloud;
-use omni_formats::rosbag::{BagMessage, BagOptions, write_rosbag};
+use omni_formats::rosbag::{BagImages, BagMessage, BagOptions, write_rosbag_with_images};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -27,7 +27,8 @@ pub struct CloudOutputArgs {
     #[arg(long, value_name = "m|mm", default_value = "mm", value_parser = Units::parse)]
     pub units: Units,
     /// Add normals nx ny nz (PCD and bags: normal_x …): the plane fitted to each point's
-    /// --normal-neighbours nearest points, turned to face the sensor (the world origin).
+    /// --normal-neighbours nearest points, turned to face the sensor (the origin of the sensor
+    /// frame; with omni-merge --poses, where the sensor was when it took the point's frame).
     #[arg(long)]
     pub normals: bool,
     /// Neighbours (the point itself counted) of the normals' plane fit.
@@ -83,9 +84,23 @@ impl CloudOutputArgs {
         CloudFormat::for_output(path, self.format)
     }
 
-    /// Adds normals if asked for (the sensor at the world origin).
+    /// Adds normals if asked for, facing the sensor at the origin.
     pub fn finish_cloud(&self, cloud: &mut PointCloud) -> Result<(), String> {
-        if self.normals { add_normals(cloud, self.normal_neighbours, [0.0; 3]) } else { Ok(()) }
+        self.finish_cloud_seen_from(cloud, None)
+    }
+
+    /// Adds normals if asked for, each facing its point's viewpoint (mm, the cloud's frame; the
+    /// origin for all if `None`).
+    pub fn finish_cloud_seen_from(
+        &self,
+        cloud: &mut PointCloud,
+        viewpoints: Option<&[[f64; 3]]>,
+    ) -> Result<(), String> {
+        if !self.normals {
+            return Ok(());
+        }
+        let views = viewpoints.map_or(Viewpoints::Fixed([0.0; 3]), Viewpoints::PerPoint);
+        add_normals_seen_from(cloud, self.normal_neighbours, views)
     }
 
     /// Writes the cloud file (if `path`) and the bag (if --rosbag) with `messages`.
@@ -96,12 +111,25 @@ impl CloudOutputArgs {
         messages: &[BagMessage],
         default_frame_id: &str,
     ) -> Result<(), String> {
+        self.write_with_images(cloud, path, messages, None, default_frame_id)
+    }
+
+    /// [`CloudOutputArgs::write`], with the camera frames in the bag if `images` is given.
+    pub fn write_with_images(
+        &self,
+        cloud: &PointCloud,
+        path: Option<&Path>,
+        messages: &[BagMessage],
+        images: Option<&mut BagImages>,
+        default_frame_id: &str,
+    ) -> Result<(), String> {
         if let Some(path) = path {
             let format = self.format_for(path)?;
             write_cloud(path, cloud, format, &self.cloud_options()).map_err(|e| e.to_string())?;
         }
         if let Some(dir) = &self.rosbag {
-            write_rosbag(dir, cloud, messages, &self.bag_options(default_frame_id)).map_err(|e| e.to_string())?;
+            write_rosbag_with_images(dir, cloud, messages, images, &self.bag_options(default_frame_id))
+                .map_err(|e| e.to_string())?;
         }
         Ok(())
     }
@@ -127,6 +155,21 @@ pub struct FrameSpan {
     pub points: Range<usize>,
 }
 
+/// A frame's bag stamp (ns): its `timestamp_us`, else `seq × period_us` if a period is given,
+/// else an error naming the frame.
+pub fn frame_stamp_ns(seq: u64, timestamp_us: Option<u64>, period_us: Option<f64>) -> Result<u64, String> {
+    let stamp_us = match (timestamp_us, period_us) {
+        (Some(t), _) => t as f64,
+        (None, Some(p)) => seq as f64 * p,
+        (None, None) => {
+            return Err(format!(
+                "frame {seq}: no timestamp_us to stamp its bag message with (give --stamp-period-ms for streams without timestamps)"
+            ));
+        }
+    };
+    Ok((stamp_us * 1000.0).round() as u64)
+}
+
 /// The bag messages of frames (in stream order, contiguous point ranges): one per frame or per
 /// revolution (consecutive frames of one revolution; stamped with its first frame), empty ones
 /// left out. A frame without `timestamp_us` is stamped `seq × period_us` if a period is given,
@@ -138,17 +181,7 @@ pub fn bag_messages(
 ) -> Result<Vec<BagMessage>, String> {
     let mut out: Vec<(u64, BagMessage)> = Vec::new();
     for f in frames {
-        let stamp_us = match (f.timestamp_us, period_us) {
-            (Some(t), _) => t as f64,
-            (None, Some(p)) => f.seq as f64 * p,
-            (None, None) => {
-                return Err(format!(
-                    "frame {}: no timestamp_us to stamp its bag message with (give --stamp-period-ms for streams without timestamps)",
-                    f.seq
-                ));
-            }
-        };
-        let stamp_ns = (stamp_us * 1000.0).round() as u64;
+        let stamp_ns = frame_stamp_ns(f.seq, f.timestamp_us, period_us)?;
         match out.last_mut() {
             Some((rev, m))
                 if grouping == BagGrouping::Revolution && *rev == f.revolution && m.points.end == f.points.start =>

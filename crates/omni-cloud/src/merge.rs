@@ -6,6 +6,11 @@
 //! the occupied voxels' sums, so memory grows with occupied voxels); otherwise the
 //! kept points are stored once (positions f64 + f32 scalars) and outlier removal filters that
 //! one copy in place.
+//!
+//! With `viewpoints` set, each point also carries the sensor position it was measured from (the
+//! frame pose's translation; the origin without a pose or for a PLY input) as three hidden f32
+//! fields that go through the voxel grid (averaged: the mean of positions on the seen side of a
+//! surface stays on that side) and the filters with the point, and come out beside the cloud.
 
 use crate::cloud::POINT_SCALARS;
 use crate::filter::{CropBox, VoxelGrid, radius_outlier_mask, retain, statistical_outlier_mask};
@@ -27,7 +32,12 @@ pub struct MergeOptions {
     pub crop_box: Option<CropBox>,
     /// Keep points whose measured range (distance from the viewpoint, mm) is in [min, max].
     pub crop_range: Option<(f64, f64)>,
+    /// Keep each point's viewpoint (for normals facing the sensor of the point's own frame).
+    pub viewpoints: bool,
 }
+
+/// The hidden fields that carry each point's viewpoint through the merge (never written out).
+const VIEWPOINT_FIELDS: [&str; 3] = ["\u{0}viewpoint_x", "\u{0}viewpoint_y", "\u{0}viewpoint_z"];
 
 /// Counts for the report.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
@@ -57,6 +67,8 @@ pub struct Merger {
     map: Vec<usize>,
     range_index: Option<usize>,
     buf: Vec<f32>,
+    /// The viewpoint of the points being added (mm, world frame).
+    viewpoint: [f64; 3],
 }
 
 impl Merger {
@@ -80,6 +92,7 @@ impl Merger {
             map: Vec::new(),
             range_index: None,
             buf: Vec::new(),
+            viewpoint: [0.0; 3],
         })
     }
 
@@ -96,13 +109,20 @@ impl Merger {
             return Err(format!("internal: {} types for {} scalar fields", types.len(), scalar_names.len()));
         }
         if self.sink.is_none() {
+            if let Some(n) = scalar_names.iter().find(|n| VIEWPOINT_FIELDS.contains(&n.as_str())) {
+                return Err(format!("scalar field name {n:?} is reserved"));
+            }
             self.names = scalar_names.to_vec();
             self.types = types.to_vec();
+            let mut fields = self.names.clone();
+            if self.opts.viewpoints {
+                fields.extend(VIEWPOINT_FIELDS.iter().map(|n| n.to_string()));
+            }
             self.sink = Some(match self.opts.voxel {
-                Some(size) => Sink::Voxels(VoxelGrid::new(size, [0.0; 3], self.names.clone())?),
+                Some(size) => Sink::Voxels(VoxelGrid::new(size, [0.0; 3], fields)?),
                 None => Sink::Points(PointCloud {
                     positions: Vec::new(),
-                    scalars: self.names.iter().map(|n| ScalarField::new(n.clone(), Vec::new())).collect(),
+                    scalars: fields.into_iter().map(|n| ScalarField::new(n, Vec::new())).collect(),
                 }),
             });
         }
@@ -119,7 +139,8 @@ impl Merger {
         if self.opts.crop_range.is_some() && self.range_index.is_none() {
             return Err("has no `scalar_range` field, needed by the range crop".into());
         }
-        self.buf = vec![0.0; self.names.len()];
+        self.buf = vec![0.0; self.names.len() + if self.opts.viewpoints { 3 } else { 0 }];
+        self.viewpoint = [0.0; 3];
         Ok(())
     }
 
@@ -144,6 +165,12 @@ impl Merger {
         for (o, &i) in self.buf.iter_mut().zip(&self.map) {
             *o = scalars[i];
         }
+        if self.opts.viewpoints {
+            let n = self.names.len();
+            for (o, v) in self.buf[n..].iter_mut().zip(self.viewpoint) {
+                *o = v as f32;
+            }
+        }
         match self.sink.as_mut().ok_or("internal: add before begin_input")? {
             Sink::Voxels(g) => g.add(p, &self.buf)?,
             Sink::Points(c) => {
@@ -162,9 +189,11 @@ impl Merger {
         self.begin_input(&names)
     }
 
-    /// Adds a triangulated frame's points, mapped by `pose` (sensor → world) if given. Call
-    /// [`Merger::begin_stream_input`] first for each stream.
+    /// Adds a triangulated frame's points, mapped by `pose` (sensor → world) if given; their
+    /// viewpoint is the sensor origin moved by the pose. Call [`Merger::begin_stream_input`]
+    /// first for each stream.
     pub fn add_frame(&mut self, frame: &Frame, pose: Option<&Isometry3<f64>>) -> Result<(), String> {
+        self.viewpoint = pose.map_or([0.0; 3], |iso| iso.translation.vector.into());
         let points = frame.points.as_ref().ok_or("no `points` field (run omni-triangulate first)")?;
         let stripe = frame.stripe.as_deref().unwrap_or(&[]);
         for (i, p) in points.iter().enumerate() {
@@ -195,7 +224,14 @@ impl Merger {
     }
 
     /// Finishes: voxel centroids, then statistical and radius outlier removal.
-    pub fn finish(mut self) -> Result<(PointCloud, MergeStats), String> {
+    pub fn finish(self) -> Result<(PointCloud, MergeStats), String> {
+        self.finish_with_viewpoints().map(|(cloud, stats, _)| (cloud, stats))
+    }
+
+    /// [`Merger::finish`], with each output point's viewpoint (mm, world frame) if
+    /// [`MergeOptions::viewpoints`] is set (a voxel's: the mean of its points').
+    #[allow(clippy::type_complexity)]
+    pub fn finish_with_viewpoints(mut self) -> Result<(PointCloud, MergeStats, Option<Vec<[f64; 3]>>), String> {
         let mut cloud = match self.sink.take() {
             None => return Err("no input points".into()),
             Some(Sink::Points(c)) => c,
@@ -218,6 +254,10 @@ impl Merger {
             self.stats.radius_removed = (before - cloud.len()) as u64;
         }
         self.stats.points_out = cloud.len() as u64;
-        Ok((cloud, self.stats))
+        let viewpoints = self.opts.viewpoints.then(|| {
+            let axes: Vec<ScalarField> = cloud.scalars.drain(self.names.len()..).collect();
+            (0..cloud.len()).map(|i| [0, 1, 2].map(|a| axes[a].values[i] as f64)).collect()
+        });
+        Ok((cloud, self.stats, viewpoints))
     }
 }

@@ -1,7 +1,8 @@
 //! Surface normals: the least-squares plane through each point's k nearest neighbours (the
 //! eigenvector of their covariance with the smallest eigenvalue, as PCL's and Open3D's normal
 //! estimation), flipped to face the viewpoint (the sensor), so that shading and meshing know
-//! which side was seen.
+//! which side was seen. The viewpoint is one point for the whole cloud or one per point (a
+//! moving sensor: where it was when it measured that point).
 
 use crate::kdtree::KdTree;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -11,20 +12,52 @@ use rayon::prelude::*;
 /// The scalar fields normals are stored in (PLY's names; PCD and ROS call them `normal_x` …).
 pub const NORMAL_FIELDS: [&str; 3] = ["nx", "ny", "nz"];
 
+/// Where the sensor was when it measured the points (mm, the cloud's frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Viewpoints<'a> {
+    /// One viewpoint for every point (a sensor that did not move, or the sensor frame).
+    Fixed([f64; 3]),
+    /// One viewpoint per point, in the cloud's order.
+    PerPoint(&'a [[f64; 3]]),
+}
+
+impl Viewpoints<'_> {
+    fn of(&self, i: usize) -> Vector3<f64> {
+        match self {
+            Viewpoints::Fixed(v) => Vector3::from(*v),
+            Viewpoints::PerPoint(v) => Vector3::from(v[i]),
+        }
+    }
+}
+
 /// Unit normals of `points` (mm) from their `k` nearest neighbours (the point itself counted),
 /// oriented so that `normal · (viewpoint − point) ≥ 0`. A point with fewer than 3 neighbours,
 /// or whose neighbours lie on a line, gets the unit vector towards the viewpoint.
 pub fn estimate_normals(points: &[[f64; 3]], k: usize, viewpoint: [f64; 3]) -> Result<Vec<[f64; 3]>, String> {
+    estimate_normals_seen_from(points, k, Viewpoints::Fixed(viewpoint))
+}
+
+/// [`estimate_normals`] with each point turned towards its own viewpoint.
+pub fn estimate_normals_seen_from(
+    points: &[[f64; 3]],
+    k: usize,
+    viewpoints: Viewpoints,
+) -> Result<Vec<[f64; 3]>, String> {
     if k < 3 {
         return Err(format!("normals need at least 3 neighbours, got {k}"));
     }
+    if let Viewpoints::PerPoint(v) = viewpoints
+        && v.len() != points.len()
+    {
+        return Err(format!("internal: {} viewpoints for {} points", v.len(), points.len()));
+    }
     let tree = KdTree::build(points);
-    let view = Vector3::from(viewpoint);
     Ok(points
         .par_iter()
-        .map_init(Vec::new, |nearest, p| {
+        .enumerate()
+        .map_init(Vec::new, |nearest, (i, p)| {
             tree.knn(p, k, nearest);
-            let to_view = view - Vector3::from(*p);
+            let to_view = viewpoints.of(i) - Vector3::from(*p);
             let n = plane_normal(points, nearest).unwrap_or_else(|| to_view.normalize());
             let n = if n.dot(&to_view) < 0.0 { -n } else { n };
             if n.iter().all(|c| c.is_finite()) { n.into() } else { [0.0; 3] }
@@ -57,7 +90,12 @@ fn plane_normal(points: &[[f64; 3]], nearest: &[(f64, u32)]) -> Option<Vector3<f
 
 /// Adds (or replaces) the `nx ny nz` float fields of `cloud` with [`estimate_normals`].
 pub fn add_normals(cloud: &mut PointCloud, k: usize, viewpoint: [f64; 3]) -> Result<(), String> {
-    let normals = estimate_normals(&cloud.positions, k, viewpoint)?;
+    add_normals_seen_from(cloud, k, Viewpoints::Fixed(viewpoint))
+}
+
+/// [`add_normals`] with each point turned towards its own viewpoint.
+pub fn add_normals_seen_from(cloud: &mut PointCloud, k: usize, viewpoints: Viewpoints) -> Result<(), String> {
+    let normals = estimate_normals_seen_from(&cloud.positions, k, viewpoints)?;
     cloud.scalars.retain(|s| !NORMAL_FIELDS.contains(&s.name.as_str()));
     for (axis, name) in NORMAL_FIELDS.iter().enumerate() {
         cloud.scalars.push(ScalarField::new(*name, normals.iter().map(|n| n[axis] as f32).collect()));
@@ -123,6 +161,35 @@ mod tests {
                 assert!(a < 3.0, "view {view:?}: {a}° at {p:?}");
             }
         }
+    }
+
+    #[test]
+    fn each_point_faces_its_own_viewpoint() {
+        // The plane z = 0.2·y (mm), half of it measured from above (x < 0, sensor at z = +600)
+        // and half from below (x ≥ 0, sensor at z = −600): one fixed viewpoint would turn half
+        // the normals the wrong way.
+        let mut rng = SplitMix64::new(9);
+        let pts: Vec<[f64; 3]> = (0..3000)
+            .map(|_| {
+                let (x, y) = (rng.uniform() * 400.0 - 200.0, rng.uniform() * 400.0 - 200.0);
+                [x, y, 0.2 * y + (rng.uniform() - 0.5) * 0.2]
+            })
+            .collect();
+        let views: Vec<[f64; 3]> =
+            pts.iter().map(|p| if p[0] < 0.0 { [-100.0, 0.0, 600.0] } else { [100.0, 50.0, -600.0] }).collect();
+        let up = Vector3::new(0.0, -0.2, 1.0).normalize();
+        let normals = estimate_normals_seen_from(&pts, 16, Viewpoints::PerPoint(&views)).unwrap();
+        for ((p, n), v) in pts.iter().zip(&normals).zip(&views) {
+            let to_view = Vector3::from(*v) - Vector3::from(*p);
+            assert!(Vector3::from(*n).dot(&to_view) > 0.0, "{p:?} faces away from {v:?}");
+            let truth = if p[0] < 0.0 { up } else { -up };
+            // 0.1 mm uniform noise over a neighbourhood ~ 8 mm wide: well under 2°.
+            let a = angle_deg(*n, truth.into());
+            assert!(a < 2.0, "{a}° at {p:?}");
+        }
+        let fixed = estimate_normals(&pts, 16, [0.0, 0.0, 600.0]).unwrap();
+        assert!(fixed.iter().all(|n| n[2] > 0.0), "one viewpoint turns every normal up");
+        assert!(estimate_normals_seen_from(&pts, 16, Viewpoints::PerPoint(&views[1..])).is_err());
     }
 
     #[test]

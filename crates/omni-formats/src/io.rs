@@ -1,5 +1,6 @@
 //! Input/output helpers: `-` means stdin/stdout, and files are written atomically (devices and
 //! FIFOs are written straight into; temporary files are removed on failure and on a signal).
+//! Directories (a ROS 2 bag) are built the same way in a temporary sibling ([`TempDir`]).
 
 use crate::{Error, Result};
 use std::fs::File;
@@ -101,9 +102,27 @@ fn temp_files() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
 pub fn remove_temp_files() {
     let guard = temp_files();
     for p in guard.iter() {
-        let _ = std::fs::remove_file(p);
+        remove_temp(p);
     }
     std::mem::forget(guard);
+}
+
+/// Removes a temporary file or directory (a directory whose writer is still adding files to
+/// it may need a second pass).
+fn remove_temp(path: &Path) {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.is_dir() => {
+            for _ in 0..3 {
+                if std::fs::remove_dir_all(path).is_ok() || !path.exists() {
+                    break;
+                }
+            }
+        }
+        Ok(_) => {
+            let _ = std::fs::remove_file(path);
+        }
+        Err(_) => {}
+    }
 }
 
 /// A temporary file that becomes `target` on [`TempFile::commit`]; removed if dropped before,
@@ -120,14 +139,12 @@ impl TempFile {
     pub fn create(target: &Path) -> std::io::Result<TempFile> {
         sweep_stale(parent_dir(target));
         let path = temp_path(target);
-        temp_files().push(path.clone());
-        match File::create(&path) {
-            Ok(f) => Ok(TempFile { path, target: target.to_path_buf(), file: Some(f) }),
-            Err(e) => {
-                forget_temp(&path);
-                Err(e)
-            }
-        }
+        // Created and listed under the lock: a signal handler either sees it or runs first
+        // (and then this waits for the end).
+        let mut list = temp_files();
+        let f = File::create(&path)?;
+        list.push(path.clone());
+        Ok(TempFile { path, target: target.to_path_buf(), file: Some(f) })
     }
 
     /// The open temporary file.
@@ -140,11 +157,91 @@ impl TempFile {
         let f = self.file.take().expect("open until commit");
         f.sync_all()?;
         drop(f);
-        std::fs::rename(&self.path, &self.target)?;
-        forget_temp(&self.path);
+        commit_temp(&self.path, |tmp| std::fs::rename(tmp, &self.target))?;
         self.path = PathBuf::new();
         Ok(())
     }
+}
+
+/// Renames a listed temporary into place and unlists it, under the list's lock: after a signal
+/// handler has removed the temporaries, nothing more is renamed into place.
+fn commit_temp(path: &Path, rename: impl FnOnce(&Path) -> std::io::Result<()>) -> std::io::Result<()> {
+    let mut list = temp_files();
+    rename(path)?;
+    if let Some(k) = list.iter().rposition(|p| p == path) {
+        list.swap_remove(k);
+    }
+    Ok(())
+}
+
+/// A temporary directory that becomes `target` on [`TempDir::commit`] (which refuses an existing
+/// `target`); removed with its contents if dropped before, and by [`remove_temp_files`] (a
+/// signal) while in progress. Named as [`temp_path`] says, and swept as temporary files are.
+pub struct TempDir {
+    path: PathBuf,
+    target: PathBuf,
+}
+
+impl TempDir {
+    /// Creates the empty temporary sibling of `target`, after sweeping stale temporaries of
+    /// dead processes from the parent directory.
+    pub fn create(target: &Path) -> std::io::Result<TempDir> {
+        sweep_stale(parent_dir(target));
+        let path = temp_path(target);
+        let mut list = temp_files();
+        std::fs::create_dir(&path)?;
+        list.push(path.clone());
+        Ok(TempDir { path, target: target.to_path_buf() })
+    }
+
+    /// The temporary directory, to fill.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Renames the directory to the target; an existing target (even an empty directory) is
+    /// an `AlreadyExists` error, never replaced.
+    pub fn commit(mut self) -> std::io::Result<()> {
+        commit_temp(&self.path, |tmp| rename_no_replace(tmp, &self.target))?;
+        self.path = PathBuf::new();
+        Ok(())
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        if !self.path.as_os_str().is_empty() {
+            let _ = std::fs::remove_dir_all(&self.path);
+            forget_temp(&self.path);
+        }
+    }
+}
+
+/// `rename(from, to)` that fails if `to` exists (Linux glibc: `renameat2(RENAME_NOREPLACE)`; other
+/// systems, or file systems without it: a check just before).
+fn rename_no_replace(from: &Path, to: &Path) -> std::io::Result<()> {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        let c = |p: &Path| {
+            std::ffi::CString::new(p.as_os_str().as_bytes()).map_err(|_| std::io::Error::other("NUL in path"))
+        };
+        let (a, b) = (c(from)?, c(to)?);
+        // SAFETY: two valid C strings; renameat2 reads them only.
+        let r =
+            unsafe { libc::renameat2(libc::AT_FDCWD, a.as_ptr(), libc::AT_FDCWD, b.as_ptr(), libc::RENAME_NOREPLACE) };
+        if r == 0 {
+            return Ok(());
+        }
+        let e = std::io::Error::last_os_error();
+        if !matches!(e.raw_os_error(), Some(libc::EINVAL) | Some(libc::ENOSYS)) {
+            return Err(e);
+        }
+    }
+    if to.symlink_metadata().is_ok() {
+        return Err(std::io::Error::new(std::io::ErrorKind::AlreadyExists, "already exists"));
+    }
+    std::fs::rename(from, to)
 }
 
 impl Drop for TempFile {
@@ -164,8 +261,8 @@ fn forget_temp(path: &Path) {
     }
 }
 
-/// Removes `.NAME.omniscan-tmp-PID` files of processes that no longer run from `dir`, once per
-/// directory in this process.
+/// Removes `.NAME.omniscan-tmp-PID` files and directories of processes that no longer run from
+/// `dir`, once per directory in this process.
 fn sweep_stale(dir: &Path) {
     {
         let mut swept = SWEPT_DIRS.lock().unwrap_or_else(|e| e.into_inner());
@@ -178,8 +275,18 @@ fn sweep_stale(dir: &Path) {
     for entry in entries.flatten() {
         let name = entry.file_name();
         let Some(pid) = stale_temp_pid(&name.to_string_lossy()) else { continue };
-        if pid != std::process::id() && !process_alive(pid) && entry.file_type().is_ok_and(|t| t.is_file()) {
-            let _ = std::fs::remove_file(entry.path());
+        if pid == std::process::id() || process_alive(pid) {
+            continue;
+        }
+        match entry.file_type() {
+            Ok(t) if t.is_file() => {
+                let _ = std::fs::remove_file(entry.path());
+            }
+            // A bag directory a killed run was building (never a symbolic link to one).
+            Ok(t) if t.is_dir() => {
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
+            _ => {}
         }
     }
 }
@@ -296,5 +403,41 @@ mod tests {
         write_atomic(&dir.path().join("a.ply"), |w| w.write_all(b"ok")).unwrap();
         assert!(!stale.exists(), "a dead process's temporary file is swept");
         assert!(live.exists() && other.exists(), "live and foreign files are left alone");
+    }
+
+    #[test]
+    fn temp_dirs_are_renamed_into_place_never_over_a_directory_and_swept_when_stale() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("bag");
+        let tmp = TempDir::create(&target).unwrap();
+        std::fs::write(tmp.path().join("a"), b"x").unwrap();
+        let tmp_path = tmp.path().to_path_buf();
+        drop(tmp);
+        assert!(!tmp_path.exists(), "a dropped temporary directory is removed with its contents");
+        // An empty directory appearing meanwhile is not replaced (plain rename would).
+        let tmp = TempDir::create(&target).unwrap();
+        std::fs::create_dir(&target).unwrap();
+        assert_eq!(tmp.commit().unwrap_err().kind(), std::io::ErrorKind::AlreadyExists);
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "only the existing directory is left");
+        std::fs::remove_dir(&target).unwrap();
+        let tmp = TempDir::create(&target).unwrap();
+        std::fs::write(tmp.path().join("a"), b"x").unwrap();
+        tmp.commit().unwrap();
+        assert_eq!(std::fs::read(target.join("a")).unwrap(), b"x");
+
+        let other = tempfile::tempdir().unwrap();
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let dead = child.id();
+        child.wait().unwrap();
+        let stale = other.path().join(format!(".bag.omniscan-tmp-{dead}"));
+        std::fs::create_dir(&stale).unwrap();
+        std::fs::write(stale.join("bag_0.mcap"), b"half").unwrap();
+        let real = other.path().join("real");
+        std::fs::create_dir(&real).unwrap();
+        let link = other.path().join(format!(".l.omniscan-tmp-{dead}"));
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        TempDir::create(&other.path().join("b2")).unwrap().commit().unwrap();
+        assert!(!stale.exists(), "a dead process's temporary directory is swept");
+        assert!(real.exists() && link.symlink_metadata().is_ok(), "a link is not followed or removed");
     }
 }

@@ -285,6 +285,18 @@ pub struct StreamReader<R> {
     base_dir: Option<std::path::PathBuf>,
 }
 
+/// A header's `frames_dir` as [`StreamReader::with_base_dir`] resolves it against `base` (the
+/// stream file's directory): `base/frames_dir` unless it is absolute, `base` is `.`, or only the
+/// current directory has it.
+pub fn resolve_frames_dir(base: &std::path::Path, frames_dir: &str) -> String {
+    let rel = std::path::Path::new(frames_dir);
+    if rel.is_absolute() || base == std::path::Path::new(".") {
+        return frames_dir.to_string();
+    }
+    let joined = base.join(rel);
+    if joined.is_dir() || !rel.is_dir() { joined.display().to_string() } else { frames_dir.to_string() }
+}
+
 impl StreamReader<Box<dyn BufRead + Send>> {
     /// Opens a stream file (`-` = stdin). A header's relative `frames_dir` is resolved against
     /// the file's own directory (see [`StreamReader::with_base_dir`]); from stdin, against the
@@ -326,14 +338,7 @@ impl<R: BufRead> StreamReader<R> {
 
     fn resolve_frames_dir(&self, header: &mut Header) {
         let (Some(base), Some(d)) = (&self.base_dir, &header.frames_dir) else { return };
-        let rel = std::path::Path::new(d);
-        if rel.is_absolute() || base == std::path::Path::new(".") {
-            return;
-        }
-        let joined = base.join(rel);
-        if joined.is_dir() || !rel.is_dir() {
-            header.frames_dir = Some(joined.display().to_string());
-        }
+        header.frames_dir = Some(resolve_frames_dir(base, d));
     }
 
     /// Whether the stream has ended without its final `status` record: it was cut short

@@ -83,7 +83,7 @@ pub fn main(tool: &str, body: impl FnOnce() -> CliResult) -> ExitCode {
 }
 
 /// Watches SIGINT, SIGTERM and SIGHUP from a thread: on the first one, removes the temporary
-/// files of atomic writes in progress and ends the process by that signal's default action (so
+/// files and bag directories of atomic writes in progress and ends the process by that signal's default action (so
 /// the shell sees an interrupted tool). A tool that installs its own handler afterwards (an
 /// orderly stop) replaces this one.
 pub fn remove_temp_files_on_signal() {

@@ -17,11 +17,15 @@
 //! polynomial by linear least squares) and is then refined the same way. The exact hyperbolic
 //! model is the Mei model with ξ fixed by the given mirror and no distortion; only the focal
 //! lengths and the principal point are fitted.
+//!
+//! [`session`] runs the commands of `omni-calib-receiver` (detection, fit, report, exports,
+//! conversions) on top of these.
 
 pub mod convert;
 pub mod corners_file;
 pub mod export;
 pub mod query;
+pub mod session;
 pub mod validate;
 mod yaml;
 

@@ -1,0 +1,105 @@
+//! The mirror annulus of a calibration: given as numbers, or found ([`omni_vision::rim`]) in an
+//! image of a lit scene or in the per-pixel range of the board images.
+
+use super::{Error, Reporter};
+use omni_vision::corners::{GrayF32, load_gray};
+use omni_vision::image_io::expand_image_paths;
+use omni_vision::rim;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// `CX,CY,R_IN,R_OUT` (px): four finite numbers with 0 ≤ R_IN < R_OUT.
+pub fn parse_annulus(s: &str) -> Result<[f64; 4], Error> {
+    let v: Vec<f64> = s.split(',').filter_map(|t| t.trim().parse().ok()).collect();
+    match v[..] {
+        [cx, cy, r0, r1]
+            if v.iter().all(|c: &f64| c.is_finite()) && s.split(',').count() == 4 && r0 >= 0.0 && r0 < r1 =>
+        {
+            Ok([cx, cy, r0, r1])
+        }
+        _ => Err(Error::Usage(format!("--annulus: expected CX,CY,R_IN,R_OUT in px with 0 ≤ R_IN < R_OUT, got {s:?}"))),
+    }
+}
+
+/// Where a detected annulus came from: the image's size (to check against the board images) and
+/// its name for messages.
+pub(super) type RimSource = (usize, usize, String);
+
+/// The annulus to use (px), with its source if it was detected.
+pub(super) struct Resolved {
+    pub annulus: [f64; 4],
+    pub source: Option<RimSource>,
+}
+
+/// The annulus from `--annulus CX,CY,R_IN,R_OUT`, `--annulus auto` (the rim circle of the board
+/// images' range image) or `--rim-image FILE`; `None` if neither is given.
+pub(super) fn resolve(
+    annulus: Option<&str>,
+    rim_image: Option<&Path>,
+    boards: &[PathBuf],
+    out: &dyn Reporter,
+) -> Result<Option<Resolved>, Error> {
+    let (img, source) = match (annulus, rim_image) {
+        (None, None) => return Ok(None),
+        (Some("auto"), _) => {
+            if boards.is_empty() {
+                return Err(Error::Usage(
+                    "--annulus auto needs board images (not --corners); give --rim-image or numbers".into(),
+                ));
+            }
+            (rim_input(boards)?, "--annulus auto (board images)".to_string())
+        }
+        (Some(numbers), _) => {
+            return Ok(Some(Resolved { annulus: parse_annulus(numbers)?, source: None }));
+        }
+        (None, Some(path)) => (load_gray(path)?, path.display().to_string()),
+    };
+    let annulus = detect(&img, &source, out)?;
+    Ok(Some(Resolved { annulus, source: Some((img.width, img.height, source)) }))
+}
+
+/// One image as it is, several as their per-pixel range ([`rim::range_image`]).
+fn rim_input(paths: &[PathBuf]) -> Result<GrayF32, Error> {
+    let images: Vec<GrayF32> = paths.par_iter().map(|p| load_gray(p)).collect::<Result<_, _>>()?;
+    if let Some(k) = images.iter().position(|i| (i.width, i.height) != (images[0].width, images[0].height)) {
+        return Err(Error::Failed(format!(
+            "{}: image is {} × {} px but {} is {} × {} px (all images must come from one camera)",
+            paths[k].display(),
+            images[k].width,
+            images[k].height,
+            paths[0].display(),
+            images[0].width,
+            images[0].height
+        )));
+    }
+    Ok(rim::range_image(&images)?)
+}
+
+/// The annulus of [`rim::detect_rim`], reported; errors name `source`.
+fn detect(img: &GrayF32, source: &str, out: &dyn Reporter) -> Result<[f64; 4], Error> {
+    let found = rim::detect_rim(img, &rim::RimOptions::default()).map_err(|e| format!("{source}: {e}"))?;
+    let a = found.annulus();
+    out.say(&format!(
+        "mirror annulus from {source}: centre ({:.2}, {:.2}) px, radii {:.2}–{:.2} px (rim fit RMS {:.3} px, {:.0} % of the rays{})",
+        a[0],
+        a[1],
+        a[2],
+        a[3],
+        found.outer.rms_px,
+        100.0 * found.outer.support,
+        if found.inner.is_some() { "" } else { "; no blind-centre circle" }
+    ));
+    Ok(a)
+}
+
+/// The annulus `[cx, cy, r_in, r_out]` (px) of one lit image, or of the per-pixel range of several
+/// (files or directories), as `omni-calib-receiver find-annulus` prints it.
+pub fn find_annulus(images: &[PathBuf], out: &dyn Reporter) -> Result<[f64; 4], Error> {
+    let paths = expand_image_paths(images)?;
+    let img = rim_input(&paths)?;
+    let source = match &paths[..] {
+        [one] => one.display().to_string(),
+        _ => format!("{} images", paths.len()),
+    };
+    detect(&img, &source, out)
+}

@@ -3,12 +3,21 @@ CARGO ?= cargo
 OUT ?= out/demo
 FUZZ_SECONDS ?= 60
 
-.PHONY: all build test test-rust deps lint tools fmt bench demo fuzz clean
+.PHONY: all build test test-suite test-build test-rust deps lint tools fmt bench demo fuzz clean
 
-# Parts of the build with their own tests (firmware, Python, ...): each appends to EXTRA_TESTS;
-# FEATURE_TESTS run last, because they build crates with cargo features the others do not use.
+# One cargo feature set for every command of `make test`, so that each crate is compiled once
+# and the parts below reuse the workspace's debug build: the GenICam frame source is on wherever
+# libaravis-0.8 is installed (scripts/deps.sh installs it; `make test` evaluates this after).
+ifndef FEATURES
+FEATURES := $(shell pkg-config --exists aravis-0.8 2>/dev/null && echo --features omni-trigger/aravis)
+endif
+WORKSPACE := --workspace $(FEATURES)
+TARGET_DIR := $(or $(CARGO_TARGET_DIR),$(CURDIR)/target)
+# The tools and the Python extension as `make test-build` leaves them.
+DEBUG_DIR := $(TARGET_DIR)/debug
+
+# Parts of the build with their own tests (firmware, Python, ...): each appends to EXTRA_TESTS.
 EXTRA_TESTS :=
-FEATURE_TESTS :=
 .DEFAULT_GOAL := all
 -include mk/*.mk
 
@@ -22,14 +31,26 @@ tools:
 	@$(CARGO) fmt --version >/dev/null 2>&1 || { echo "make: rustfmt is missing; install it with: rustup component add rustfmt clippy" >&2; exit 1; }
 	@$(CARGO) clippy --version >/dev/null 2>&1 || { echo "make: clippy is missing; install it with: rustup component add rustfmt clippy" >&2; exit 1; }
 
+# Clippy with $(FEATURES) sees the feature-gated code; `cargo check -p omni-trigger` keeps the
+# build without the feature (a machine without libaravis) compiling.
 lint: tools
 	$(CARGO) fmt --all -- --check
-	$(CARGO) clippy --workspace --all-targets -- -D warnings
+	$(CARGO) clippy $(WORKSPACE) --all-targets -- -D warnings
+	$(CARGO) check -q -p omni-trigger
 
-test: deps lint test-rust $(EXTRA_TESTS) $(FEATURE_TESTS)
+# The installs first, then a fresh make, so that FEATURES sees what deps installed.
+test: deps
+	$(MAKE) --no-print-directory test-suite
 
-test-rust:
-	$(CARGO) test --workspace
+test-suite: lint test-rust $(EXTRA_TESTS)
+
+# Everything `cargo test` compiles, plus the Python extension (a cdylib, which no test target
+# builds), with one feature resolution: the parts' tests run these binaries without a rebuild.
+test-build:
+	$(CARGO) build $(WORKSPACE) --lib --bins --tests --examples
+
+test-rust: test-build
+	$(CARGO) test $(WORKSPACE)
 
 # System packages and Python readers the tests need (scripts/deps.d/); quick when present.
 deps:

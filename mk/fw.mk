@@ -17,7 +17,7 @@ fw:
 	$(MAKE) -C firmware all harness OUT=$(FW_OUT)
 
 fw-test: fw
-	$(FW_ENV) $(CARGO) test -p omni-trigger --test firmware -- --ignored --test-threads=1
+	$(FW_ENV) $(CARGO) test $(WORKSPACE) --test firmware -- --ignored --test-threads=1
 
 fw-test-scan: fw
-	$(FW_ENV) $(CARGO) test -p omni-trigger --test firmware -- --ignored --test-threads=1 $(FW_SCAN_TESTS)
+	$(FW_ENV) $(CARGO) test $(WORKSPACE) --test firmware -- --ignored --test-threads=1 $(FW_SCAN_TESTS)

@@ -1,35 +1,28 @@
-# The Python package (python/, PyO3 + maturin) and the batch workflow (workflow/, Snakemake):
-# `make test-py` builds the package into the project venv and runs its pytest suite,
-# `make test-workflow` runs the workflow on tiny simulated scans. scripts/deps.d/50-py.sh
-# installs maturin, pytest, OpenCV (cv2.omnidir), plyfile and snakemake into the venv.
+# The Python package (python/, PyO3, a workspace member) and the batch workflow (workflow/,
+# Snakemake). `make test-py` puts the extension `make test-build` compiled into python/omniscan/
+# (where `maturin develop` would put it) and runs the pytest suite on it; `make test-workflow`
+# runs the workflow on tiny simulated scans; `make py-develop` is maturin's editable install into
+# the venv, for development. scripts/deps.d/50-py.sh installs maturin, pytest, OpenCV
+# (cv2.omnidir), plyfile and snakemake into the venv.
 PY_VENV ?= .venv
-# One target directory for the workspace and the package (a workspace of its own, see
-# docs/DECISIONS.md), so the package reuses the crates `cargo test --workspace` compiled.
-PY_TARGET_DIR := $(or $(CARGO_TARGET_DIR),$(CURDIR)/target)
-# The tools the tests run, in the dev profile `cargo test --workspace` builds.
-PY_TOOLS := omni-sim omni-ridge omni-triangulate omni-merge omni-eval omni-calib-receiver omni-calib-plane
+PY_EXT_SUFFIX = $(shell $(PY_VENV)/bin/python -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')
 
-.PHONY: test-py test-workflow py-develop py-tools py-lint py-venv-check
+.PHONY: test-py test-workflow py-develop py-extension py-venv-check
 EXTRA_TESTS += test-py test-workflow
 
 py-venv-check:
-	@test -x $(PY_VENV)/bin/maturin || { echo "make: $(PY_VENV)/bin/maturin is missing; run scripts/deps.sh" >&2; exit 1; }
+	@test -x $(PY_VENV)/bin/pytest || { echo "make: $(PY_VENV)/bin/pytest is missing; run scripts/deps.sh" >&2; exit 1; }
 
-# Builds the extension (debug profile: python/Cargo.toml) and installs it into the venv.
+# The cdylib under the name CPython imports it by.
+py-extension: test-build py-venv-check
+	cp --remove-destination $(DEBUG_DIR)/lib_native.so python/omniscan/_native$(PY_EXT_SUFFIX)
+
 py-develop: py-venv-check
-	CARGO_TARGET_DIR=$(PY_TARGET_DIR) VIRTUAL_ENV=$(CURDIR)/$(PY_VENV) PATH=$(CURDIR)/$(PY_VENV)/bin:$$PATH \
+	VIRTUAL_ENV=$(CURDIR)/$(PY_VENV) PATH=$(CURDIR)/$(PY_VENV)/bin:$$PATH \
 		$(PY_VENV)/bin/maturin develop --quiet -m python/Cargo.toml
 
-py-lint: py-venv-check
-	$(CARGO) fmt --manifest-path python/Cargo.toml -- --check
-	CARGO_TARGET_DIR=$(PY_TARGET_DIR) PYO3_PYTHON=$(CURDIR)/$(PY_VENV)/bin/python \
-		$(CARGO) clippy --manifest-path python/Cargo.toml --all-targets -- -D warnings
+test-py: py-extension
+	PYTHONPATH=$(CURDIR)/python OMNISCAN_BIN=$(DEBUG_DIR) $(PY_VENV)/bin/python -m pytest -q python/tests
 
-py-tools:
-	$(CARGO) build $(addprefix -p ,$(PY_TOOLS))
-
-test-py: py-lint py-develop py-tools
-	OMNISCAN_BIN=$(PY_TARGET_DIR)/debug $(PY_VENV)/bin/python -m pytest -q python/tests
-
-test-workflow: py-venv-check py-tools
-	OMNISCAN_BIN=$(PY_TARGET_DIR)/debug $(PY_VENV)/bin/python -m pytest -q workflow/tests
+test-workflow: test-build py-venv-check
+	OMNISCAN_BIN=$(DEBUG_DIR) $(PY_VENV)/bin/python -m pytest -q workflow/tests

@@ -76,6 +76,10 @@ struct CalibArgs {
     /// default: the paper's mirror.
     #[arg(long)]
     mirror: Option<PathBuf>,
+    /// For --model hyperbolic: also fit the camera's offset from the mirror's focus and its tilt
+    /// (a non-central model; for a camera off the focus, which the model check warns about).
+    #[arg(long)]
+    non_central: bool,
     /// Also export OCamCalib calib_results.txt (needs --model ocam).
     #[arg(long, value_name = "FILE")]
     export_ocam: Option<PathBuf>,
@@ -261,6 +265,7 @@ fn calibrate(a: CalibArgs, out: &Stderr) -> Result<(), Error> {
         overlay: a.overlay,
         output: a.output,
         mirror: a.mirror,
+        non_central: a.non_central,
         export_ocam: a.export_ocam,
         export_kalibr: a.export_kalibr,
         export_opencv: a.export_opencv,

@@ -425,3 +425,25 @@ fn held_out_rms_on_the_real_images() {
     assert!(test >= 0.9 * train && test < 1.0, "test {test} px, training {train} px");
     assert_eq!(r["warnings"], serde_json::json!([]));
 }
+
+/// A board file off by one row (7 × 10 for the real 7 × 11 board) calibrates (the corners are
+/// labeled on a part of the board) but is warned about with the likely size, on stderr and in
+/// the report; --non-central is for the hyperbolic model only.
+#[test]
+fn a_board_file_off_by_one_is_warned_about_with_the_likely_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let camera = dir.path().join("camera.json");
+    let images: Vec<PathBuf> = (1..=6).map(|k| real_dir().join(format!("MiniOmni{k}.jpg"))).collect();
+    let out = bin().arg("--board").arg(write_board(dir.path(), 7, 10)).arg("-o").arg(&camera).args(&images).output();
+    let out = out.unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("the board is probably 7 × 11"), "{}", stderr(&out));
+    let cam: serde_json::Value = serde_json::from_slice(&std::fs::read(&camera).unwrap()).unwrap();
+    let warnings = cam["report"]["warnings"].as_array().unwrap();
+    assert!(warnings.iter().any(|w| w.as_str().unwrap().contains("probably 7 × 11")), "{warnings:?}");
+    let board = write_board(dir.path(), 7, 11);
+    let out = bin().arg("--board").arg(&board).arg("--non-central").arg("-o").arg(&camera).args(&images).output();
+    let out = out.unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("non-central fit is for the hyperbolic model"), "{}", stderr(&out));
+}

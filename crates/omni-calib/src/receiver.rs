@@ -16,7 +16,15 @@
 //! The polynomial (OCamCalib) model starts from the fitted Mei model (its rays give the
 //! polynomial by linear least squares) and is then refined the same way. The exact hyperbolic
 //! model is the Mei model with ξ fixed by the given mirror and no distortion; only the focal
-//! lengths and the principal point are fitted.
+//! lengths and the principal point are fitted. With [`Options::non_central`] the camera's offset
+//! from the mirror's focus and its tilt are then fitted too, projecting exactly (ray tracing
+//! through the mirror, each corner's projection iterated from its observed pixel); its board
+//! poses are in the mirror's frame (focus F at (0, 0, 2c)), as the central hyperbolic ones.
+//! The hyperbolic camera's blind centre comes from the annulus' inner circle, else it is shrunk
+//! (if needed) to keep every observed corner.
+//!
+//! The polynomial and central hyperbolic fits are checked against a Mei fit of the same images
+//! ([`validate::compare_with_mei`], [`Calibration::model_check`]).
 //!
 //! [`session`] runs the commands of `omni-calib-receiver` (detection, fit, report, exports,
 //! conversions) on top of these.
@@ -35,7 +43,7 @@ use omni_formats::CameraSpec;
 use omni_geom::lm;
 use omni_model::mei::{mei_project, mei_unproject};
 use omni_model::ocam::{ocam_project, ocam_unproject};
-use omni_model::{HyperbolicParams, MeiParams, OcamParams};
+use omni_model::{CameraModel as _, HyperbolicCamera, HyperbolicParams, MeiParams, OcamParams};
 use serde_json::json;
 
 /// The camera model to fit.
@@ -119,6 +127,12 @@ pub struct Options {
     /// its centre, the focal-length search scales with its outer radius, and the fitted Mei and
     /// polynomial models are valid inside it (else in the whole image).
     pub annulus: Option<[f64; 4]>,
+    /// For the hyperbolic model: fit the camera's offset from the mirror's focus and its tilt
+    /// too (non-central model), after the central fit.
+    pub non_central: bool,
+    /// For the polynomial and the central hyperbolic model: fit a Mei model to the same images
+    /// as well and report both ([`Calibration::model_check`], [`validate::warnings`]).
+    pub compare_models: bool,
 }
 
 impl Default for Options {
@@ -134,6 +148,8 @@ impl Default for Options {
             max_iterations: 60,
             reweight_images: true,
             annulus: None,
+            non_central: false,
+            compare_models: true,
         }
     }
 }
@@ -169,6 +185,9 @@ pub struct Calibration {
     pub std_devs: Vec<f64>,
     /// Whether the corner labeling was mirrored (see [`Observation::mirrored`]).
     pub mirrored_labels: bool,
+    /// The fitted model against a Mei model fitted to the same images (polynomial and central
+    /// hyperbolic fits with [`Options::compare_models`]): see [`validate::ModelCheck`].
+    pub model_check: Option<validate::ModelCheck>,
 }
 
 impl Calibration {
@@ -206,6 +225,7 @@ impl Calibration {
             "images_used": self.images.iter().filter(|i| i.used).count(),
             "images_rejected": self.images.iter().filter(|i| !i.used).count(),
             "mirrored_labels": self.mirrored_labels,
+            "model_check": self.model_check.as_ref().map(|c| c.to_json()),
             "parameters": params,
             "images": self.images.iter().map(|i| json!({
                 "name": i.name,
@@ -238,6 +258,9 @@ struct Model {
     /// ρ normalisation of the polynomial coefficients (px).
     rho_scale: f64,
     rho_max: f64,
+    /// The non-central hyperbolic model: the mirror, with `full` = [fx, fy, cx, cy (px), camera
+    /// offset x, y, z (mm), tilt about x, y (deg)]; world frame of [`omni_model::HyperbolicCamera`].
+    non_central: Option<HyperbolicParams>,
 }
 
 impl Model {
@@ -253,7 +276,61 @@ impl Model {
             names,
             rho_scale: 1.0,
             rho_max: 0.0,
+            non_central: None,
         }
+    }
+
+    /// The non-central hyperbolic model started from a fitted central one (`central`: the Mei
+    /// vector with ξ of `mirror`): offset and tilt zero, the pinhole focal lengths f = γ·(a² + c²)/b².
+    fn non_central(central: &Model, mirror: &HyperbolicParams) -> Model {
+        let f = &central.full;
+        let k = hyperbolic_focal_factor(mirror);
+        let full = vec![f[1] * k, f[2] * k, f[3], f[4], 0.0, 0.0, 0.0, 0.0, 0.0];
+        let names = [
+            "fx_px",
+            "fy_px",
+            "cx_px",
+            "cy_px",
+            "camera_offset_x_mm",
+            "camera_offset_y_mm",
+            "camera_offset_z_mm",
+            "camera_tilt_x_deg",
+            "camera_tilt_y_deg",
+        ];
+        // The fit must not refuse a corner for lying in the blind centre or beyond the rim.
+        let mirror =
+            HyperbolicParams { inner_radius_mm: 0.0, rim_radius_mm: mirror.rim_radius_mm * 2.0, ..mirror.clone() };
+        Model {
+            kind: ModelKind::Hyperbolic,
+            full,
+            free: (0..9).collect(),
+            names: names.iter().map(|s| s.to_string()).collect(),
+            rho_scale: 1.0,
+            rho_max: 0.0,
+            non_central: Some(mirror),
+        }
+    }
+
+    /// The non-central camera of a full vector.
+    fn camera(&self, full: &[f64]) -> Option<HyperbolicCamera> {
+        let m = self.non_central.as_ref()?;
+        HyperbolicCamera::new(HyperbolicParams {
+            fx_px: full[0],
+            fy_px: full[1],
+            cx_px: full[2],
+            cy_px: full[3],
+            camera_offset_mm: [full[4], full[5], full[6]],
+            camera_tilt_deg: [full[7], full[8]],
+            ..m.clone()
+        })
+        .ok()
+    }
+
+    /// Smallest finite-difference step of the free parameter at full index `i` (÷ 10⁶): the
+    /// offsets (mm) and tilts (deg) start at 0 and need steps well above the projection's
+    /// iteration tolerance.
+    fn step_floor(&self, i: usize) -> f64 {
+        if self.non_central.is_some() && i >= 4 { 1.0 } else { 1e-2 }
     }
 
     fn free_values(&self) -> Vec<f64> {
@@ -279,7 +356,12 @@ impl Model {
         v
     }
 
+    /// Pixel of a viewing direction (central models; for the non-central one the direction seen
+    /// from the mirror's focus, at 10 m).
     fn project(&self, full: &[f64], d: &Vector3<f64>) -> Option<Vector2<f64>> {
+        if let Some(cam) = self.camera(full) {
+            return cam.point_to_pixel(&(cam.viewpoint() + 1e4 * d.normalize()));
+        }
         match self.kind {
             ModelKind::Mei | ModelKind::Hyperbolic => mei_project(full, d),
             ModelKind::Ocam => ocam_project(&self.ocam_vector(full), d, self.rho_max),
@@ -287,6 +369,9 @@ impl Model {
     }
 
     fn unproject(&self, full: &[f64], px: &Vector2<f64>) -> Option<Vector3<f64>> {
+        if let Some(cam) = self.camera(full) {
+            return cam.pixel_to_ray(px).map(|r| r.dir.into_inner());
+        }
         match self.kind {
             ModelKind::Mei | ModelKind::Hyperbolic => mei_unproject(full, px),
             ModelKind::Ocam => ocam_unproject(&self.ocam_vector(full), px),
@@ -296,9 +381,19 @@ impl Model {
 
 /// Per-image residuals (2 per corner) for a pose given as 6 parameters.
 fn image_residuals(model: &Model, full: &[f64], pose: &[f64], obs: &Observation, out: &mut [f64]) {
+    let camera = model.camera(full);
+    if model.non_central.is_some() && camera.is_none() {
+        out.fill(UNPROJECTABLE_PX);
+        return;
+    }
     for (k, (xy, px)) in obs.board_mm.iter().zip(&obs.pixels).enumerate() {
         let p = board_to_world(pose, *xy);
-        match model.project(full, &p.coords) {
+        // The non-central projection iterates from the observed pixel.
+        let q = match &camera {
+            Some(cam) => cam.project_from(&p, &Vector2::new(px[0], px[1])),
+            None => model.project(full, &p.coords),
+        };
+        match q {
             Some(q) => {
                 out[2 * k] = q.x - px[0];
                 out[2 * k + 1] = q.y - px[1];
@@ -370,7 +465,7 @@ impl lm::Problem for Joint<'_> {
         let mut minus = vec![0.0; self.n_res];
         let mut q = p.to_vec();
         for j in 0..ni {
-            let h = 1e-6 * p[j].abs().max(1e-2);
+            let h = 1e-6 * p[j].abs().max(self.model.step_floor(self.model.free[j]));
             q[j] = p[j] + h;
             self.residuals(&q, &mut plus);
             q[j] = p[j] - h;
@@ -466,6 +561,7 @@ fn initialise_mei(
 
 /// Joint refinement with outlier rejection. Returns the model, poses (per `obs` index, `None` =
 /// rejected) and rejection reasons.
+#[derive(Debug, Clone)]
 struct Fit {
     model: Model,
     poses: Vec<Option<[f64; 6]>>,
@@ -584,6 +680,7 @@ fn ocam_from_mei(mei: &Model, obs: &[Observation], degree: usize, width: u32, he
         names,
         rho_scale,
         rho_max: (width as f64).hypot(height as f64).max(2.0 * rho_max),
+        non_central: None,
     })
 }
 
@@ -618,6 +715,9 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
     {
         return Err(format!("annulus {a:?}: expected finite centre and 0 ≤ inner radius < outer radius (px)"));
     }
+    if opts.non_central && opts.model != ModelKind::Hyperbolic {
+        return Err(format!("the non-central fit is for the hyperbolic model, not {:?}", opts.model));
+    }
     let (xi, fixed) = match opts.model {
         ModelKind::Hyperbolic => {
             let (a, b2) = (opts.mirror.a_mm, opts.mirror.b_mm * opts.mirror.b_mm);
@@ -633,7 +733,10 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
     let poses: Vec<Option<[f64; 6]>> =
         sub.iter().map(|o| initial_pose(&model, &model.full, o, 20).map(|x| x.0)).collect();
     let mut fit = joint_fit(model, &sub, poses, opts).ok_or("the joint fit found no usable board")?;
+    // The Mei fit the polynomial starts from: the reference of the model check.
+    let mut mei_start = None;
     if opts.model == ModelKind::Ocam {
+        mei_start = Some(fit.clone());
         let used: Vec<Observation> =
             (0..sub.len()).filter(|&k| fit.reasons[k].is_none()).map(|k| sub[k].clone()).collect();
         let ocam = ocam_from_mei(&fit.model, &used, opts.ocam_degree, width, height)
@@ -647,6 +750,32 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
             }
         }
     }
+    // The central hyperbolic model's viewpoint is the origin of its fit; the camera's world frame
+    // (HyperbolicCamera) has it at the mirror's upper focus F = (0, 0, 2c).
+    let focus = Vector3::new(0.0, 0.0, 2.0 * opts.mirror.a_mm.hypot(opts.mirror.b_mm));
+    if opts.model == ModelKind::Hyperbolic && opts.non_central {
+        let nc = Model::non_central(&fit.model, &opts.mirror);
+        let poses = fit
+            .poses
+            .iter()
+            .zip(&fit.reasons)
+            .map(|(p, r)| {
+                let p = (*p).filter(|_| r.is_none())?;
+                Some([p[0], p[1], p[2], p[3] + focus.x, p[4] + focus.y, p[5] + focus.z])
+            })
+            .collect();
+        let reasons = fit.reasons.clone();
+        fit = joint_fit(nc, &sub, poses, opts).ok_or("the non-central fit found no usable board")?;
+        for (k, r) in reasons.into_iter().enumerate() {
+            if r.is_some() {
+                fit.reasons[k] = r;
+            }
+        }
+    }
+    if opts.model == ModelKind::Hyperbolic && !opts.non_central {
+        mei_start = Some(fit.clone());
+    }
+    let pose_shift = if opts.model == ModelKind::Hyperbolic && !opts.non_central { focus } else { Vector3::zeros() };
     // Per-image report.
     let mut all_res = Vec::new();
     for (s, &k) in usable.iter().enumerate() {
@@ -654,7 +783,7 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
             let mut r = vec![0.0; 2 * sub[s].pixels.len()];
             image_residuals(&fit.model, &fit.model.full, &p, &sub[s], &mut r);
             images[k].rms_px = Some(rms(&r));
-            images[k].pose = Some(params_to_pose(&p));
+            images[k].pose = Some(nalgebra::Translation3::from(pose_shift) * params_to_pose(&p));
             if fit.reasons[s].is_none() {
                 images[k].used = true;
                 all_res.extend(r);
@@ -673,7 +802,27 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
         }
         intrinsic_std_devs(&fit.model, &used, &x, opts.huber_px)
     };
-    let (names, params, std_devs, spec) = describe(&fit.model, &std_free, width, height, opts);
+    let (names, params, std_devs, mut spec) = describe(&fit.model, &std_free, width, height, opts);
+    let used: Vec<usize> = (0..sub.len()).filter(|&k| fit.reasons[k].is_none() && fit.poses[k].is_some()).collect();
+    // Without an annulus' inner circle the mirror's blind centre may not refuse an observed corner.
+    if let CameraSpec::Hyperbolic(p) = &mut spec
+        && opts.annulus.is_none_or(|a| a[2] <= 0.0)
+    {
+        let innermost = used
+            .iter()
+            .flat_map(|&k| &sub[k].pixels)
+            .filter_map(|px| mirror_radius_mm(p, &Vector2::new(px[0], px[1])))
+            .fold(f64::INFINITY, f64::min);
+        if innermost.is_finite() {
+            p.inner_radius_mm = p.inner_radius_mm.min(BLIND_CENTRE_MARGIN * innermost);
+        }
+    }
+    let model_check = match mei_start {
+        Some(start) if opts.compare_models => {
+            validate::compare_with_mei(&start, &fit, &sub, &used, &spec, width, height, opts)
+        }
+        _ => None,
+    };
     Ok(Calibration {
         spec,
         rms_px: rms(&all_res),
@@ -682,8 +831,13 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
         params,
         std_devs,
         mirrored_labels: mirrored,
+        model_check,
     })
 }
+
+/// Without a known blind centre, the hyperbolic model's inner mirror radius is at most this
+/// fraction of the innermost observed corner's.
+const BLIND_CENTRE_MARGIN: f64 = 0.9;
 
 /// Standard deviations of the free intrinsics: σ²·(JᵀWJ)⁻¹ with σ² = Σw·r²/(m − n), inverted
 /// after Jacobi scaling (the parameters differ by many orders of magnitude). NaN if singular.
@@ -724,6 +878,38 @@ fn intrinsic_std_devs(model: &Model, obs: &[Observation], x: &[f64], huber: f64)
     }
 }
 
+/// f = γ·(a² + c²)/b²: the pinhole focal length of the hyperbolic camera whose Mei model has the
+/// generalised focal length γ.
+fn hyperbolic_focal_factor(mirror: &HyperbolicParams) -> f64 {
+    let (a2, b2) = (mirror.a_mm * mirror.a_mm, mirror.b_mm * mirror.b_mm);
+    (a2 + (a2 + b2)) / b2
+}
+
+/// Mirror radius (mm) seen at a pixel of the hyperbolic camera `p` (rim and blind centre not
+/// checked).
+fn mirror_radius_mm(p: &HyperbolicParams, px: &Vector2<f64>) -> Option<f64> {
+    let open = HyperbolicParams { inner_radius_mm: 0.0, ..p.clone() };
+    let m = HyperbolicCamera::new(open).ok()?.mirror_point(px)?;
+    Some(m.x.hypot(m.y))
+}
+
+/// The blind-centre radius on the mirror (mm) of the annulus' inner circle [cx, cy, inner, _] px:
+/// the mean mirror radius seen on it (12 pixels around it; a camera off the focus images the
+/// circle slightly off the annulus' centre); `None` without an inner circle.
+fn blind_centre_mm(p: &HyperbolicParams, annulus: [f64; 4]) -> Option<f64> {
+    if annulus[2] <= 0.0 {
+        return None;
+    }
+    let radii: Vec<f64> = (0..12)
+        .filter_map(|k| {
+            let a = k as f64 * std::f64::consts::TAU / 12.0;
+            mirror_radius_mm(p, &Vector2::new(annulus[0] + annulus[2] * a.cos(), annulus[1] + annulus[2] * a.sin()))
+        })
+        .collect();
+    let r = radii.iter().sum::<f64>() / radii.len() as f64;
+    (r.is_finite() && r < p.rim_radius_mm).then_some(r)
+}
+
 /// Names, values, standard deviations of the fitted parameters and the camera spec.
 fn describe(
     model: &Model,
@@ -746,23 +932,40 @@ fn describe(
         }
         ModelKind::Hyperbolic => {
             let m = &opts.mirror;
-            let (a, b2) = (m.a_mm, m.b_mm * m.b_mm);
-            let c = (a * a + b2).sqrt();
-            let k = (a * a + c * c) / b2; // f = γ·(a² + c²)/b²
-            let p = HyperbolicParams {
-                fx_px: f[1] * k,
-                fy_px: f[2] * k,
-                cx_px: f[3],
-                cy_px: f[4],
-                width,
-                height,
-                camera_offset_mm: [0.0; 3],
-                camera_tilt_deg: [0.0; 2],
-                ..m.clone()
+            let (mut p, names, values, stds) = if model.non_central.is_some() {
+                let p = HyperbolicParams {
+                    fx_px: f[0],
+                    fy_px: f[1],
+                    cx_px: f[2],
+                    cy_px: f[3],
+                    width,
+                    height,
+                    camera_offset_mm: [f[4], f[5], f[6]],
+                    camera_tilt_deg: [f[7], f[8]],
+                    ..m.clone()
+                };
+                (p, model.names.clone(), f.clone(), std_full)
+            } else {
+                let k = hyperbolic_focal_factor(m);
+                let p = HyperbolicParams {
+                    fx_px: f[1] * k,
+                    fy_px: f[2] * k,
+                    cx_px: f[3],
+                    cy_px: f[4],
+                    width,
+                    height,
+                    camera_offset_mm: [0.0; 3],
+                    camera_tilt_deg: [0.0; 2],
+                    ..m.clone()
+                };
+                let names = vec!["fx_px".into(), "fy_px".into(), "cx_px".into(), "cy_px".into()];
+                let values = vec![p.fx_px, p.fy_px, p.cx_px, p.cy_px];
+                let stds = vec![std_full[1] * k, std_full[2] * k, std_full[3], std_full[4]];
+                (p, names, values, stds)
             };
-            let names = vec!["fx_px".into(), "fy_px".into(), "cx_px".into(), "cy_px".into()];
-            let values = vec![p.fx_px, p.fy_px, p.cx_px, p.cy_px];
-            let stds = vec![std_full[1] * k, std_full[2] * k, std_full[3], std_full[4]];
+            if let Some(inner) = opts.annulus.and_then(|a| blind_centre_mm(&p, a)) {
+                p.inner_radius_mm = inner;
+            }
             (names, values, stds, CameraSpec::Hyperbolic(p))
         }
         ModelKind::Ocam => {

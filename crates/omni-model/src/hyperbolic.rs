@@ -177,6 +177,11 @@ impl HyperbolicCamera {
     }
 
     fn ideal_project(&self, p: &Point3<f64>) -> Option<Vector2<f64>> {
+        self.ideal_project_any_radius(p).filter(|(_, m)| self.radius_ok(m)).map(|(px, _)| px)
+    }
+
+    /// The ideal camera's pixel of `p` and its mirror point, at any mirror radius.
+    fn ideal_project_any_radius(&self, p: &Point3<f64>) -> Option<(Vector2<f64>, Point3<f64>)> {
         let f = self.viewpoint();
         let d = (p - f).try_normalize(1e-300)?;
         // Distance from F to the mirror along d (focal property): t = b²/(a − c·dz).
@@ -189,27 +194,41 @@ impl HyperbolicCamera {
             return None; // the point is between the viewpoint and the mirror
         }
         let m = f + d * t;
-        if !self.radius_ok(&m) || m.z <= 0.0 {
+        if m.z <= 0.0 {
             return None;
         }
         let q = &self.params;
-        Some(Vector2::new(q.cx_px + q.fx_px * m.x / m.z, q.cy_px + q.fy_px * m.y / m.z))
+        Some((Vector2::new(q.cx_px + q.fx_px * m.x / m.z, q.cy_px + q.fy_px * m.y / m.z), m))
     }
 
     /// Gauss–Newton on the pixel so that its traced ray passes through `p` (non-central case).
     fn general_project(&self, p: &Point3<f64>) -> Option<Vector2<f64>> {
-        let mut px = self.ideal_project(p).or_else(|| {
+        let start = self.ideal_project_any_radius(p).map(|(px, _)| px).or_else(|| {
             let c = self.mirror_circle();
             let d = Vector2::new(p.x, p.y).try_normalize(1e-300)?;
             Some(c.centre + d * 0.5 * (c.inner_radius + c.outer_radius))
         })?;
+        self.project_from(p, &start)
+    }
+
+    /// The pixel whose traced ray passes through `p`, by Gauss–Newton on the pixel from `start`
+    /// (px; a pixel near the answer, e.g. where `p` was observed): the exact projection of the
+    /// non-central camera, to 1e-10 px. Unlike [`CameraModel::point_to_pixel`] it does not
+    /// check the image bounds; `None` if the iteration leaves the mirror or does not converge.
+    pub fn project_from(&self, p: &Point3<f64>, start: &Vector2<f64>) -> Option<Vector2<f64>> {
+        let mut px = *start;
+        // The angle between the pixel's ray and the direction to `p`, in a fixed basis; the
+        // iteration may pass the rim or the blind centre, the answer may not.
+        let first = self.reflect(&px)?;
+        let (e1, e2) = omni_geom::fit::orthonormal_basis(&first.dir);
         let residual = |px: &Vector2<f64>| -> Option<Vector2<f64>> {
-            let ray = self.trace(px)?;
-            let w = (p - ray.origin).normalize();
-            let (e1, e2) = omni_geom::fit::orthonormal_basis(&ray.dir);
-            Some(Vector2::new(w.dot(&e1), w.dot(&e2)))
+            let ray = self.reflect(px)?;
+            let w = (p - ray.origin).try_normalize(1e-300)?;
+            let d = ray.dir.into_inner() - w;
+            Some(Vector2::new(d.dot(&e1), d.dot(&e2)))
         };
         let h = 1e-4;
+        let mut converged = false;
         for _ in 0..30 {
             let r0 = residual(&px)?;
             let rx = residual(&(px + Vector2::new(h, 0.0)))?;
@@ -217,22 +236,32 @@ impl HyperbolicCamera {
             let j = nalgebra::Matrix2::from_columns(&[(rx - r0) / h, (ry - r0) / h]);
             let step = j.try_inverse()? * r0;
             px -= step;
-            if step.norm() < 1e-12 {
+            if step.norm() < 1e-10 {
+                converged = true;
                 break;
             }
         }
         let ray = self.trace(&px)?;
         let along = (p - ray.origin).dot(&ray.dir);
-        (along > 0.0 && ray.distance_to_line(p) < 1e-6 * along.max(1.0)).then_some(px)
+        (converged && along > 0.0 && ray.distance_to_line(p) < 1e-6 * along.max(1.0)).then_some(px)
     }
 
-    /// Exact reflection of the pixel's camera ray off the mirror.
+    /// Where the pixel's camera ray meets the mirror (mm, world frame), at any radius (the rim
+    /// and the blind centre are not checked): e.g. to express an image radius on the mirror.
+    pub fn mirror_point(&self, px: &Vector2<f64>) -> Option<Point3<f64>> {
+        self.hit_mirror(&self.centre, &self.pixel_dir(px))
+    }
+
+    /// Exact reflection of the pixel's camera ray off the mirror, inside the rim and outside the
+    /// blind centre.
     fn trace(&self, px: &Vector2<f64>) -> Option<Ray> {
+        self.reflect(px).filter(|ray| self.radius_ok(&ray.origin))
+    }
+
+    /// Exact reflection of the pixel's camera ray off the mirror sheet, at any radius.
+    fn reflect(&self, px: &Vector2<f64>) -> Option<Ray> {
         let d = self.pixel_dir(px);
         let m = self.hit_mirror(&self.centre, &d)?;
-        if !self.radius_ok(&m) {
-            return None;
-        }
         let n = self.mirror_normal(&m);
         let dn = d.normalize();
         let r = dn - n * (2.0 * dn.dot(&n));
@@ -301,16 +330,31 @@ impl CameraModel for HyperbolicCamera {
 
     fn mirror_circle(&self) -> MirrorCircle {
         let p = &self.params;
-        let f = 0.5 * (p.fx_px + p.fy_px);
-        let r_img = |r: f64| f * r / (self.mirror_z(r) - p.camera_offset_mm[2]);
-        MirrorCircle {
-            centre: Vector2::new(
-                p.cx_px - f * p.camera_offset_mm[0] / self.mirror_z(0.0),
-                p.cy_px - f * p.camera_offset_mm[1] / self.mirror_z(0.0),
-            ),
-            inner_radius: r_img(p.inner_radius_mm),
-            outer_radius: r_img(p.rim_radius_mm),
+        if self.ideal {
+            let f = 0.5 * (p.fx_px + p.fy_px);
+            let r_img = |r: f64| f * r / self.mirror_z(r);
+            return MirrorCircle {
+                centre: Vector2::new(p.cx_px, p.cy_px),
+                inner_radius: r_img(p.inner_radius_mm),
+                outer_radius: r_img(p.rim_radius_mm),
+            };
         }
+        // Off the focus: the rim and blind-centre circles projected through the (offset, tilted)
+        // pinhole; centre of the rim's image, each circle's mean radius about its own centre.
+        let circle = |r: f64| -> (Vector2<f64>, f64) {
+            let z = self.mirror_z(r);
+            let pts: Vec<Vector2<f64>> = (0..360)
+                .map(|k| {
+                    let a = (k as f64).to_radians();
+                    let q = self.rot.inverse() * (Point3::new(r * a.cos(), r * a.sin(), z) - self.centre);
+                    Vector2::new(p.cx_px + p.fx_px * q.x / q.z, p.cy_px + p.fy_px * q.y / q.z)
+                })
+                .collect();
+            let c = pts.iter().sum::<Vector2<f64>>() / pts.len() as f64;
+            (c, pts.iter().map(|q| (q - c).norm()).sum::<f64>() / pts.len() as f64)
+        };
+        let (centre, outer_radius) = circle(p.rim_radius_mm);
+        MirrorCircle { centre, inner_radius: circle(p.inner_radius_mm).1, outer_radius }
     }
 }
 

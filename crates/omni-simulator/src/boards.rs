@@ -161,12 +161,18 @@ pub fn calibration_board_poses(
 ) -> Result<Vec<Isometry3<f64>>, String> {
     board.validate()?;
     let circle = sensor.camera.mirror_circle();
-    let rim_ray = |radius: f64| {
-        sensor.camera.pixel_to_ray(&(circle.centre + omni_geom::Vector2::new(radius, 0.0))).ok_or_else(|| {
-            format!("the camera has no ray at {radius:.1} px from the mirror centre (is the mirror circle valid?)")
-        })
+    // The first ray from `radius` px (along +x of the mirror centre) stepping by `step` px: a
+    // camera off the mirror's focus images the blind centre slightly off the rim's centre.
+    let rim_ray = |radius: f64, step: f64| {
+        (0..20)
+            .find_map(|k| {
+                sensor.camera.pixel_to_ray(&(circle.centre + omni_geom::Vector2::new(radius + k as f64 * step, 0.0)))
+            })
+            .ok_or_else(|| {
+                format!("the camera has no ray at {radius:.1} px from the mirror centre (is the mirror circle valid?)")
+            })
     };
-    let (inner, outer) = (rim_ray(circle.inner_radius + 0.5)?, rim_ray(circle.outer_radius - 0.5)?);
+    let (inner, outer) = (rim_ray(circle.inner_radius + 0.5, 0.5)?, rim_ray(circle.outer_radius - 0.5, -0.5)?);
     let elevation = |d: &Vector3<f64>| d.z.atan2(d.x.hypot(d.y));
     let (e_inner, e_outer) = (elevation(&inner.dir), elevation(&outer.dir));
     let margin = 5f64.to_radians();

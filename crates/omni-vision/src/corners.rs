@@ -110,6 +110,11 @@ pub struct BoardCorners {
     pub rows: u32,
     pub corners: Vec<BoardCorner>,
     pub orientation: Orientation,
+    /// The board's size in inner corners (longer side, shorter side) as the image shows it,
+    /// whatever `cols × rows` was asked for: the corner grid grown without the board's limits,
+    /// when all four of its sides end at the board's outer squares ([`seen_board_size`]);
+    /// `None` if a side is cut (image, mirror rim, occlusion) or unclear.
+    pub seen_size: Option<[u32; 2]>,
 }
 
 impl BoardCorners {
@@ -182,7 +187,8 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     // smaller board would otherwise be "found" inside a larger one). One extra row or column is
     // tolerated: on tiny, blurred boards the junctions along the border can pass for corners.
     let unbounded = GrowLimits { max_long: 4 * limits.max_long + 8, max_short: 4 * limits.max_long + 8, ..limits };
-    let (i0, i1, j0, j1) = grid::grow_best_grid(&cands, &unbounded, opts.max_seeds, &verify).bounds();
+    let wide = grid::grow_best_grid(&cands, &unbounded, opts.max_seeds, &verify);
+    let (i0, i1, j0, j1) = wide.bounds();
     let (wi, wj) = (i1 - i0 + 1, j1 - j0 + 1);
     if wi.max(wj) > limits.max_long + 1 || wi.min(wj) > limits.max_short + 1 {
         return Err(Rejection::LargerThanBoard { found: (wi.max(0) as u32, wj.max(0) as u32) });
@@ -202,7 +208,78 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     }
     let positions = canonical_handedness(positions);
     let colours = cell_colours(&refine_img, &positions).ok_or(Rejection::InconsistentColours)?;
-    place_on_board(positions, colours, cols, rows, opts.first_square_dark)
+    let mut found = place_on_board(positions, colours, cols, rows, opts.first_square_dark)?;
+    let wide: HashMap<Cell, [f64; 2]> = wide.cells.iter().map(|(c, &k)| (*c, cands[k].px)).collect();
+    found.seen_size = seen_board_size(&refine_img, &wide, &mask);
+    Ok(found)
+}
+
+/// The size (longer, shorter side, inner corners) of a grid of corner positions if all four of
+/// its sides end at the board's outer squares: beyond the outermost line of corners, half a
+/// square out, the squares still alternate (the board's outer squares, ≥ half the contrast of
+/// the last inner squares), and one square further they do not (< a quarter: the margin or the
+/// background). Grid lines are extrapolated quadratically (the mirror bends them); every sample
+/// must lie in the image and in `inside` (the annulus).
+pub fn seen_board_size(
+    img: &GrayF32,
+    pos: &HashMap<Cell, [f64; 2]>,
+    inside: &dyn Fn(f64, f64) -> bool,
+) -> Option<[u32; 2]> {
+    if pos.is_empty() {
+        return None;
+    }
+    let (i0, i1, j0, j1) = bounds(pos.keys());
+    // Each side: the cell of line `l` inwards (0 = outermost) at position `u` along it.
+    type Side = Box<dyn Fn(i32, i32) -> Cell>;
+    let sides: [(Side, i32, i32); 4] = [
+        (Box::new(move |l, u| (i1 - l, u)), j0, j1),
+        (Box::new(move |l, u| (i0 + l, u)), j0, j1),
+        (Box::new(move |l, u| (u, j1 - l)), i0, i1),
+        (Box::new(move |l, u| (u, j0 + l)), i0, i1),
+    ];
+    let sample = |p: [f64; 2], along: [f64; 2], across: [f64; 2]| -> Option<f64> {
+        let mut sum = 0.0;
+        for (a, b) in [(0.0, 0.0), (0.2, 0.0), (-0.2, 0.0), (0.0, 0.2), (0.0, -0.2)] {
+            let (x, y) = (p[0] + a * along[0] + b * across[0], p[1] + a * along[1] + b * across[1]);
+            if !img.inside(x, y, 2.0) || !inside(x, y) {
+                return None;
+            }
+            sum += img.bilinear(x, y) as f64;
+        }
+        Some(sum / 5.0)
+    };
+    for (cell, u0, u1) in &sides {
+        let (mut inner, mut half, mut beyond) = (Vec::new(), Vec::new(), Vec::new());
+        for u in *u0..*u1 {
+            // Midpoints of the segment (u, u + 1) on lines 0, 1, 2.
+            let mid = |l: i32| -> Option<[f64; 2]> {
+                let (a, b) = (pos.get(&cell(l, u))?, pos.get(&cell(l, u + 1))?);
+                Some([0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])])
+            };
+            let (Some(m0), Some(m1)) = (mid(0), mid(1)) else { return None };
+            let grad = [m0[0] - m1[0], m0[1] - m1[1]];
+            let curve = mid(2).map_or([0.0; 2], |m2| [m0[0] - 2.0 * m1[0] + m2[0], m0[1] - 2.0 * m1[1] + m2[1]]);
+            let at = |t: f64| {
+                let q = 0.5 * t * (t + 1.0);
+                [m0[0] + t * grad[0] + q * curve[0], m0[1] + t * grad[1] + q * curve[1]]
+            };
+            let (a, b) = (pos.get(&cell(0, u))?, pos.get(&cell(0, u + 1))?);
+            let along = [b[0] - a[0], b[1] - a[1]];
+            inner.push(sample(at(-0.5), along, grad)?);
+            half.push(sample(at(0.5), along, grad)?);
+            beyond.push(sample(at(1.5), along, grad)?);
+        }
+        if inner.len() < 2 {
+            return None;
+        }
+        let alternation = |v: &[f64]| v.windows(2).map(|w| (w[0] - w[1]).abs()).sum::<f64>() / (v.len() - 1) as f64;
+        let contrast = alternation(&inner);
+        if !(alternation(&half) > 0.5 * contrast && alternation(&beyond) < 0.25 * contrast) {
+            return None;
+        }
+    }
+    let (wi, wj) = ((i1 - i0 + 1) as u32, (j1 - j0 + 1) as u32);
+    Some([wi.max(wj), wi.min(wj)])
 }
 
 /// An X-junction test at the grid's own scale: a circle of 0.35 × the corner spacing stays inside
@@ -459,7 +536,7 @@ fn place_on_board(
         })
         .collect();
     corners.sort_by_key(|c| (c.index[1], c.index[0]));
-    Ok(BoardCorners { cols, rows, corners, orientation })
+    Ok(BoardCorners { cols, rows, corners, orientation, seen_size: None })
 }
 
 fn bounds<'a>(cells: impl Iterator<Item = &'a Cell>) -> (i32, i32, i32, i32) {

@@ -85,6 +85,9 @@ pub struct CalibrateOptions {
     pub output: PathBuf,
     /// camera.json of kind hyperbolic giving the mirror; default [`HyperbolicParams::paper`].
     pub mirror: Option<PathBuf>,
+    /// For [`ModelKind::Hyperbolic`]: fit the camera's offset from the mirror's focus and its
+    /// tilt too ([`Options::non_central`]).
+    pub non_central: bool,
     /// OCamCalib calib_results.txt to export (needs [`ModelKind::Ocam`]).
     pub export_ocam: Option<PathBuf>,
     /// Kalibr camchain.yaml to export (needs [`ModelKind::Mei`]).
@@ -120,6 +123,7 @@ impl CalibrateOptions {
             overlay: None,
             output: PathBuf::from("camera.json"),
             mirror: None,
+            non_central: false,
             export_ocam: None,
             export_kalibr: None,
             export_opencv: None,
@@ -275,7 +279,14 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     }
     let corners = &detected.corners;
     let obs = corners.observations(board.square_mm);
-    let fit = Options { model: opts.model, huber_px: opts.huber_px, mirror, annulus, ..Default::default() };
+    let fit = Options {
+        model: opts.model,
+        huber_px: opts.huber_px,
+        mirror,
+        annulus,
+        non_central: opts.non_central,
+        ..Default::default()
+    };
     let mut cal = super::calibrate(corners.width, corners.height, &obs, &fit).map_err(|e| {
         let reasons: Vec<String> =
             corners.images.iter().filter_map(|i| i.reason.as_ref().map(|r| format!("{}: {r}", i.name))).collect();
@@ -290,7 +301,8 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     for line in summary_lines(&cal) {
         out.say(&line);
     }
-    let warnings = validate::warnings(&cal, &fit);
+    let warnings: Vec<String> =
+        corners.board_size_warning().into_iter().chain(validate::warnings(&cal, &fit)).collect();
     for w in &warnings {
         out.warn(w);
     }

@@ -5,10 +5,18 @@
 //! groups, and their corners' reprojection errors pooled into a test RMS, as BabelCalib reports
 //! it. All RMS values here are per corner (Euclidean: √(mean of dx² + dy²)), the convention of
 //! OpenCV and Kalibr.
+//!
+//! [`compare_with_mei`]: a polynomial or central hyperbolic fit is repeated with the Mei model
+//! on the same images; if the Mei model fits them [`MODEL_CHECK_RATIO`] times better (per-corner
+//! RMS), the chosen model has a systematic error the board poses partly absorbed (a camera off
+//! the mirror's focus or tilted: the image is no longer symmetric about one centre), and
+//! [`warnings`] says so with the two models' ray difference and names the model to use.
 
-use super::{Calibration, ModelKind, Observation, Options, calibrate};
+use super::{Calibration, Fit, ModelKind, Observation, Options, calibrate, describe, image_residuals, joint_fit, rms};
 use crate::pose::estimate_board_pose;
-use nalgebra::{Point3, Vector2};
+use nalgebra::{Point3, Vector2, Vector3};
+use omni_formats::CameraSpec;
+use omni_model::CameraModel;
 
 /// Test and training RMS of a k-fold validation (per corner, px).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -25,6 +33,124 @@ pub struct HeldOut {
 /// Fewest usable images for a calibration without a warning.
 pub const MIN_IMAGES: usize = 6;
 
+/// A fitted model warns when its per-corner RMS exceeds the Mei model's on the same images by
+/// this factor.
+pub const MODEL_CHECK_RATIO: f64 = 1.15;
+
+/// The fitted model against a Mei model fitted to the same images (per-corner RMS, px) and how
+/// far apart their rays are over the annulus (deg, after the best common rotation: the board
+/// poses cannot observe one).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModelCheck {
+    pub model_rms_px: f64,
+    pub mei_rms_px: f64,
+    pub ray_median_deg: f64,
+    pub ray_max_deg: f64,
+}
+
+impl ModelCheck {
+    /// The fitted model's RMS over the Mei model's.
+    pub fn ratio(&self) -> f64 {
+        self.model_rms_px / self.mei_rms_px.max(1e-12)
+    }
+
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "model_rms_per_corner_px": self.model_rms_px,
+            "mei_rms_per_corner_px": self.mei_rms_px,
+            "ray_difference_median_deg": self.ray_median_deg,
+            "ray_difference_max_deg": self.ray_max_deg,
+        })
+    }
+}
+
+/// Fits the Mei model (all 9 intrinsics, from `start`'s model and poses) to the images `used` of
+/// `sub` that `fit` kept, without rejecting any, and compares it with `fit` (whose camera is
+/// `spec`). `None` if the Mei fit fails.
+pub(super) fn compare_with_mei(
+    start: &Fit,
+    fit: &Fit,
+    sub: &[Observation],
+    used: &[usize],
+    spec: &CameraSpec,
+    width: u32,
+    height: u32,
+    opts: &Options,
+) -> Option<ModelCheck> {
+    let used: Vec<usize> = used.iter().copied().filter(|&k| start.poses[k].is_some()).collect();
+    let obs: Vec<Observation> = used.iter().map(|&k| sub[k].clone()).collect();
+    let mut mei = start.model.clone();
+    mei.kind = ModelKind::Mei;
+    mei.free = (0..9).collect();
+    mei.non_central = None;
+    let keep_all = Options { outlier_factor: f64::INFINITY, ..opts.clone() };
+    let mei = joint_fit(mei, &obs, used.iter().map(|&k| start.poses[k]).collect(), &keep_all)?;
+    let residuals = |f: &Fit, poses: &[Option<[f64; 6]>], obs: &[Observation]| {
+        let mut all = Vec::new();
+        for (o, p) in obs.iter().zip(poses) {
+            let mut r = vec![0.0; 2 * o.pixels.len()];
+            image_residuals(&f.model, &f.model.full, &(*p)?, o, &mut r);
+            all.extend(r);
+        }
+        Some(rms(&all) * std::f64::consts::SQRT_2)
+    };
+    let mei_rms = residuals(&mei, &mei.poses, &obs)?;
+    let model_poses: Vec<Option<[f64; 6]>> = used.iter().map(|&k| fit.poses[k]).collect();
+    let model_rms = residuals(fit, &model_poses, &obs)?;
+    let mei_opts = Options { model: ModelKind::Mei, ..opts.clone() };
+    let (_, _, _, mei_spec) = describe(&mei.model, &[f64::NAN; 9], width, height, &mei_opts);
+    let (a, b) = (spec.build().ok()?, mei_spec.build().ok()?);
+    let centre = a.mirror_circle().centre;
+    let (r_min, r_max) = match opts.annulus {
+        Some(an) => (an[2] + 0.5, an[3] - 0.5),
+        None => obs.iter().flat_map(|o| &o.pixels).fold((f64::INFINITY, 0.0f64), |(lo, hi), px| {
+            let r = (px[0] - centre.x).hypot(px[1] - centre.y);
+            (lo.min(r), hi.max(r))
+        }),
+    };
+    let (ray_median_deg, ray_max_deg) =
+        ray_difference_deg(a.as_ref(), b.as_ref(), [centre.x, centre.y], r_min, r_max).unwrap_or((f64::NAN, f64::NAN));
+    Some(ModelCheck { model_rms_px: model_rms, mei_rms_px: mei_rms, ray_median_deg, ray_max_deg })
+}
+
+/// Angle (deg) between the ray directions of two cameras on a polar grid of pixels (40 radii in
+/// [r_min, r_max] × 72 azimuths about `centre`) seen by both, after the rotation that best aligns
+/// them (Kabsch): (median, max); `None` if fewer than 100 pixels are seen by both.
+pub fn ray_difference_deg(
+    a: &dyn CameraModel,
+    b: &dyn CameraModel,
+    centre: [f64; 2],
+    r_min: f64,
+    r_max: f64,
+) -> Option<(f64, f64)> {
+    let mut pairs: Vec<(Vector3<f64>, Vector3<f64>)> = Vec::new();
+    for k in 0..40 {
+        let r = r_min + (r_max - r_min) * k as f64 / 39.0;
+        for m in 0..72 {
+            let phi = m as f64 * std::f64::consts::TAU / 72.0;
+            let px = Vector2::new(centre[0] + r * phi.cos(), centre[1] + r * phi.sin());
+            if let (Some(ra), Some(rb)) = (a.pixel_to_ray(&px), b.pixel_to_ray(&px)) {
+                pairs.push((rb.dir.into_inner(), ra.dir.into_inner()));
+            }
+        }
+    }
+    if pairs.len() < 100 {
+        return None;
+    }
+    let h = pairs.iter().fold(nalgebra::Matrix3::zeros(), |h, (x, y)| h + x * y.transpose());
+    let svd = h.svd(true, true);
+    let (u, vt) = (svd.u?, svd.v_t?);
+    let mut rot = vt.transpose() * u.transpose();
+    if rot.determinant() < 0.0 {
+        let mut v = vt.transpose();
+        v.column_mut(2).neg_mut();
+        rot = v * u.transpose();
+    }
+    let mut errs: Vec<f64> = pairs.iter().map(|(x, y)| (rot * x).angle(y).to_degrees()).collect();
+    errs.sort_by(|a, b| a.total_cmp(b));
+    Some((errs[errs.len() / 2], errs[errs.len() - 1]))
+}
+
 /// The k-fold test RMS (see the module docs); needs at least 2 folds and 2 images per training set.
 pub fn k_fold(width: u32, height: u32, obs: &[Observation], opts: &Options, folds: usize) -> Result<HeldOut, String> {
     let usable: Vec<&Observation> =
@@ -40,7 +166,7 @@ pub fn k_fold(width: u32, height: u32, obs: &[Observation], opts: &Options, fold
     for f in 0..folds {
         let (train, test): (Vec<_>, Vec<_>) = usable.iter().enumerate().partition(|(k, _)| k % folds != f);
         let train: Vec<Observation> = train.into_iter().map(|(_, o)| (*o).clone()).collect();
-        let cal = calibrate(width, height, &train, opts)?;
+        let cal = calibrate(width, height, &train, &Options { compare_models: false, ..opts.clone() })?;
         let corners: usize = cal.images.iter().filter(|i| i.used).map(|i| i.corners).sum();
         train_sq += cal.rms_per_corner_px().powi(2) * corners as f64;
         train_n += corners;
@@ -69,7 +195,7 @@ pub fn k_fold(width: u32, height: u32, obs: &[Observation], opts: &Options, fold
 }
 
 /// What the user should know about a calibration: too few images, a hyperbolic fit that does
-/// not match its mirror.
+/// not match its mirror, a model that fits clearly worse than the Mei model (see the module docs).
 pub fn warnings(cal: &Calibration, opts: &Options) -> Vec<String> {
     let mut out = Vec::new();
     let used = cal.images.iter().filter(|i| i.used).count();
@@ -79,9 +205,28 @@ pub fn warnings(cal: &Calibration, opts: &Options) -> Vec<String> {
         ));
     }
     let rms = cal.rms_per_corner_px();
-    if opts.model == ModelKind::Hyperbolic && rms > 1.0 {
+    let mismatched_mirror = opts.model == ModelKind::Hyperbolic && rms > 1.0;
+    if mismatched_mirror {
         out.push(format!(
             "the hyperbolic model with this mirror leaves {rms:.2} px RMS per corner (above 1 px): the mirror (--mirror) does not match or the camera is off its focus; use --model mei"
+        ));
+    }
+    // (Beyond 1 px the hyperbolic model's mirror is in doubt, and the warning above says so.)
+    if let Some(c) = &cal.model_check
+        && c.ratio() > MODEL_CHECK_RATIO
+        && !mismatched_mirror
+    {
+        let (name, fix) = match opts.model {
+            ModelKind::Hyperbolic => ("hyperbolic", "use --model mei, or --model hyperbolic --non-central"),
+            _ => ("ocam", "use --model mei"),
+        };
+        out.push(format!(
+            "the {name} model leaves {:.3} px RMS per corner where the Mei model leaves {:.3} px on the same images ({:.1} ×): the camera is probably off the mirror's focus or tilted, which the {name} model cannot follow; the two models' rays differ by {:.2}° (median), {:.2}° (max); {fix}",
+            c.model_rms_px,
+            c.mei_rms_px,
+            c.ratio(),
+            c.ray_median_deg,
+            c.ray_max_deg
         ));
     }
     out

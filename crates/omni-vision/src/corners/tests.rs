@@ -52,3 +52,73 @@ fn a_smaller_board_size_is_refused_not_found_inside_the_real_board() {
     // The same image with its true size (either axis order) is found.
     assert_eq!(detect_board(&img, 11, 7, &DetectorOptions::default()).unwrap().corners.len(), 77);
 }
+
+/// A board file off by one (8 × 6 or 10 × 6 for a 9 × 6 board) is no reason to fail, but the
+/// image tells the board's real size: the grid grown without the board's limits ends at the
+/// board's outer squares on all four sides. Rendered whole boards (512 px) and the real MiniOmni
+/// images (7 × 11; those whose board is cut by the image border say nothing).
+#[test]
+fn a_whole_board_shows_its_size_whatever_the_board_file_says() {
+    use omni_simulator::{RenderOptions, Sensor, render_board_image};
+    let sensor = Sensor::paper_scaled(512);
+    let board = omni_formats::BoardFile::new(9, 6, 30.0);
+    let c = omni_model::CameraModel::mirror_circle(sensor.camera.as_ref());
+    let opts = DetectorOptions {
+        annulus: Some([c.centre.x, c.centre.y, c.inner_radius, c.outer_radius]),
+        ..Default::default()
+    };
+    for (k, pose) in whole_board_poses(&board, 3).iter().enumerate() {
+        let (frame, truth) = render_board_image(
+            &sensor,
+            pose,
+            &board,
+            &RenderOptions { seed: k as u64, ..RenderOptions::calibration() },
+        );
+        assert_eq!(truth.iter().flatten().count(), 54);
+        let img = GrayF32 {
+            width: frame.width as usize,
+            height: frame.height as usize,
+            data: frame.data.iter().map(|&v| v as f32 * 255.0 / frame.max_value() as f32).collect(),
+        };
+        for (cols, rows, corners) in [(9, 6, 54), (8, 6, 48), (10, 6, 54), (6, 9, 54)] {
+            let b = detect_board(&img, cols, rows, &opts).unwrap();
+            assert_eq!((b.corners.len(), b.seen_size), (corners, Some([9, 6])), "board {k} as {cols} × {rows}");
+        }
+    }
+    // Measured: MiniOmni 1–4, 9, 10, 12 show 11 × 7 (as 7 × 11, 7 × 10, 7 × 12, 6 × 11, 8 × 11); the
+    // other 8 are cut (a corner or the margin outside the image) and show none.
+    for (k, whole) in [(1, true), (4, true), (9, true), (5, false), (13, false)] {
+        let img = load_gray(&real_dir().join(format!("MiniOmni{k}.jpg"))).unwrap();
+        for (cols, rows) in [(7, 11), (7, 10), (8, 11)] {
+            let b = detect_board(&img, cols, rows, &DetectorOptions::default()).unwrap();
+            assert_eq!(b.seen_size, whole.then_some([11, 7]), "MiniOmni{k} as {cols} × {rows}");
+        }
+    }
+}
+
+/// `count` poses of `board` seen whole: 260 mm from the mirror's focus, at the horizon, facing it,
+/// spread in azimuth and turned by 10° about alternating axes.
+fn whole_board_poses(board: &omni_formats::BoardFile, count: usize) -> Vec<nalgebra::Isometry3<f64>> {
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+    (0..count)
+        .map(|k| {
+            let a = k as f64 * std::f64::consts::TAU / count as f64 + 0.3;
+            let dir = Vector3::new(a.cos(), a.sin(), 0.05);
+            let centre = Vector3::new(0.0, 0.0, 80.0) + 260.0 * dir.normalize();
+            // Board z into the board (away from the viewpoint), x horizontal, y down.
+            let z = dir.normalize();
+            let x = Vector3::z().cross(&z).normalize();
+            let y = z.cross(&x);
+            let rot = UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_basis_unchecked(&[x, y, z]))
+                * UnitQuaternion::from_scaled_axis(Vector3::new(
+                    if k % 2 == 0 { 0.17 } else { 0.0 },
+                    if k % 2 == 1 { 0.17 } else { 0.0 },
+                    0.0,
+                ));
+            let s = board.square_mm;
+            let half =
+                Vector3::new((board.inner_cols as f64 - 1.0) * s / 2.0, (board.inner_rows as f64 - 1.0) * s / 2.0, 0.0);
+            Isometry3::from_parts(Translation3::from(centre - rot * half), rot)
+        })
+        .collect()
+}

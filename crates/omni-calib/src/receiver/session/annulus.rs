@@ -1,5 +1,5 @@
 //! The mirror annulus of a calibration: given as numbers, or found ([`omni_vision::rim`]) in an
-//! image of a lit scene or in the per-pixel range of the board images.
+//! image of a lit scene, or in the board images (their per-pixel range, or the best single one).
 
 use super::{Error, Reporter};
 use omni_vision::corners::{GrayF32, load_gray};
@@ -47,7 +47,7 @@ pub(super) fn resolve(
                     "--annulus auto needs board images (not --corners); give --rim-image or numbers".into(),
                 ));
             }
-            (rim_input(boards)?, "--annulus auto (board images)".to_string())
+            (rim_input(boards, out)?, "--annulus auto (board images)".to_string())
         }
         (Some(numbers), _) => {
             return Ok(Some(Resolved { annulus: parse_annulus(numbers)?, source: None }));
@@ -58,8 +58,9 @@ pub(super) fn resolve(
     Ok(Some(Resolved { annulus, source: Some((img.width, img.height, source)) }))
 }
 
-/// One image as it is, several as their per-pixel range ([`rim::range_image`]).
-fn rim_input(paths: &[PathBuf]) -> Result<GrayF32, Error> {
+/// One image as it is, several as their per-pixel range or the best single one
+/// ([`rim::rim_image`]); says when a single image was taken.
+fn rim_input(paths: &[PathBuf], out: &dyn Reporter) -> Result<GrayF32, Error> {
     let images: Vec<GrayF32> = paths.par_iter().map(|p| load_gray(p)).collect::<Result<_, _>>()?;
     if let Some(k) = images.iter().position(|i| (i.width, i.height) != (images[0].width, images[0].height)) {
         return Err(Error::Failed(format!(
@@ -72,7 +73,16 @@ fn rim_input(paths: &[PathBuf]) -> Result<GrayF32, Error> {
             images[0].height
         )));
     }
-    Ok(rim::range_image(&images)?)
+    let name = |k: usize| paths[k].display().to_string();
+    let source = if paths.len() == 1 { name(0) } else { format!("{} images", paths.len()) };
+    let chosen = rim::rim_image(&images, &rim::RimOptions::default()).map_err(|e| format!("{source}: {e}"))?;
+    if let (rim::RimSource::Single(k), Some(why)) = (chosen.source, &chosen.range_error) {
+        out.say(&format!(
+            "the range of the {source} shows no mirror rim ({why}); using the best single image, {}",
+            name(k)
+        ));
+    }
+    Ok(chosen.image)
 }
 
 /// The annulus of [`rim::detect_rim`], reported; errors name `source`.
@@ -96,7 +106,7 @@ fn detect(img: &GrayF32, source: &str, out: &dyn Reporter) -> Result<[f64; 4], E
 /// (files or directories), as `omni-calib-receiver find-annulus` prints it.
 pub fn find_annulus(images: &[PathBuf], out: &dyn Reporter) -> Result<[f64; 4], Error> {
     let paths = expand_image_paths(images)?;
-    let img = rim_input(&paths)?;
+    let img = rim_input(&paths, out)?;
     let source = match &paths[..] {
         [one] => one.display().to_string(),
         _ => format!("{} images", paths.len()),

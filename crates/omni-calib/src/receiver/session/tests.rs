@@ -122,6 +122,7 @@ fn three_image_calibration() -> Calibration {
         params: vec![312.25, -0.001],
         std_devs: vec![0.0123, 2.0],
         mirrored_labels: false,
+        model_check: None,
     }
 }
 
@@ -172,9 +173,19 @@ fn synthetic_corners(dir: &Path) -> (PathBuf, PathBuf) {
     for (obs, _) in synthetic_boards(&truth, 12, 0.1, 7) {
         let corners =
             obs.board_mm.iter().zip(&obs.pixels).map(|(b, p)| [b[0] / 25.0, b[1] / 25.0, p[0], p[1]]).collect();
-        file.images.push(ImageCorners { name: format!("{}.png", obs.name), corners, reason: None });
+        file.images.push(ImageCorners {
+            name: format!("{}.png", obs.name),
+            corners,
+            reason: None,
+            seen_board_size: None,
+        });
     }
-    file.images.push(ImageCorners { name: "empty.png".into(), corners: vec![], reason: Some("no board found".into()) });
+    file.images.push(ImageCorners {
+        name: "empty.png".into(),
+        corners: vec![],
+        reason: Some("no board found".into()),
+        seen_board_size: None,
+    });
     let (corners, board) = (dir.join("corners.json"), dir.join("board.json"));
     write_doc(&corners, &file).unwrap();
     write_doc(&board, &BoardFile::new(9, 6, 25.0)).unwrap();

@@ -100,8 +100,8 @@ pub struct CalibrateOptions {
     pub folds: usize,
     /// Huber threshold of the robust loss (px).
     pub huber_px: f64,
-    /// The fitted model's viewpoint in the world frame, `X,Y,Z` (mm) as typed; read when the
-    /// camera is written.
+    /// The fitted model's viewpoint in the world frame, `X,Y,Z` (mm) as typed; parsed before
+    /// anything is read.
     pub viewpoint_mm: String,
     /// `CX,CY,R_IN,R_OUT` (px) or `auto` (found in the board images); `None` with no
     /// `rim_image`: the whole image.
@@ -138,19 +138,31 @@ impl CalibrateOptions {
     }
 }
 
-/// Checks the option combinations a parser cannot: exports that need another model, the Huber
-/// threshold.
-fn check_options(opts: &CalibrateOptions) -> Result<(), Error> {
+/// The options read before any file is: the viewpoint and the annulus as given.
+struct Checked<'a> {
+    viewpoint_mm: [f64; 3],
+    annulus: Option<annulus::Given<'a>>,
+}
+
+/// Checks what a parser cannot, before anything is read or written: exports that need another
+/// model, overlays without images, the Huber threshold; parses the viewpoint and the annulus.
+fn check_options(opts: &CalibrateOptions) -> Result<Checked<'_>, Error> {
     if opts.export_ocam.is_some() && opts.model != ModelKind::Ocam {
         return Err(Error::Usage("--export-ocam needs --model ocam".into()));
     }
     if (opts.export_kalibr.is_some() || opts.export_opencv.is_some()) && opts.model != ModelKind::Mei {
         return Err(Error::Usage("--export-kalibr and --export-opencv need --model mei".into()));
     }
+    if opts.overlay.is_some() && opts.corners.is_some() {
+        return Err(Error::Usage("--overlay needs images (it cannot be used with --corners)".into()));
+    }
     if !(opts.huber_px.is_finite() && opts.huber_px > 0.0) {
         return Err(Error::Usage("--huber-px must be a positive number".into()));
     }
-    Ok(())
+    Ok(Checked {
+        viewpoint_mm: parse_viewpoint(&opts.viewpoint_mm)?,
+        annulus: annulus::given(opts.annulus.as_deref(), opts.rim_image.as_deref(), opts.corners.is_none())?,
+    })
 }
 
 /// `X,Y,Z` (mm), all finite.
@@ -248,11 +260,12 @@ fn load_corners(path: &Path, board: &BoardFile) -> Result<CornersFile, Error> {
     Ok(file)
 }
 
-/// Calibrates: reads the board, finds the annulus, detects (or reads) the corners, fits, reports
-/// the fit, writes the overlays and exports asked for and finally camera.json with its report.
-/// camera.json is written only if everything before succeeded.
+/// Calibrates: checks the options and parses the numbers in them (bad ones are refused before any
+/// file is read or written), reads the board, finds the annulus, detects (or reads) the corners,
+/// fits, reports the fit, writes the overlays and exports asked for and finally camera.json with
+/// its report. camera.json is written only if everything before succeeded.
 pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Error> {
-    check_options(opts)?;
+    let checked = check_options(opts)?;
     let board: BoardFile = read_doc(&opts.board)?;
     board.validate().map_err(|e| format!("{}: {e}", opts.board.display()))?;
     let mirror = match &opts.mirror {
@@ -260,7 +273,7 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
         None => HyperbolicParams::paper(),
     };
     let paths = if opts.corners.is_some() { Vec::new() } else { expand_image_paths(&opts.images)? };
-    let annulus = annulus::resolve(opts.annulus.as_deref(), opts.rim_image.as_deref(), &paths, out)?;
+    let annulus = annulus::resolve(checked.annulus.as_ref(), &paths, out)?;
     let detected = match &opts.corners {
         Some(path) => Detected { corners: load_corners(path, &board)?, images: Vec::new() },
         None => detect(&paths, &board, annulus.as_ref().map(|a| a.annulus), opts.overlay.is_some(), out)?,
@@ -322,7 +335,7 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     }
     write_exports(opts, &cal, out)?;
     let mut spec = cal.spec.clone();
-    set_viewpoint(&mut spec, parse_viewpoint(&opts.viewpoint_mm)?);
+    set_viewpoint(&mut spec, checked.viewpoint_mm);
     let mut file = CameraFile::new(spec);
     file.report = Some(report(&cal, opts.model, &board, annulus, &warnings, held_out.as_ref()));
     write_doc(&opts.output, &file)?;
@@ -386,9 +399,6 @@ pub fn summary_lines(cal: &Calibration) -> Vec<String> {
 
 /// One PNG per image in `dir` (named after the image) with the detected and reprojected corners.
 fn write_overlays(dir: &Path, cal: &Calibration, obs: &[Observation], images: &[Option<GrayF32>]) -> Result<(), Error> {
-    if images.is_empty() {
-        return Err(Error::Usage("--overlay needs images (it cannot be used with --corners)".into()));
-    }
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     for (k, (o, img)) in obs.iter().zip(images).enumerate() {
         let Some(img) = img else { continue };

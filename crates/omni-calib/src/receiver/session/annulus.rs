@@ -31,28 +31,46 @@ pub(super) struct Resolved {
     pub source: Option<RimSource>,
 }
 
-/// The annulus from `--annulus CX,CY,R_IN,R_OUT`, `--annulus auto` (the rim circle of the board
-/// images' range image) or `--rim-image FILE`; `None` if neither is given.
-pub(super) fn resolve(
+/// The annulus as the options give it: `--annulus CX,CY,R_IN,R_OUT` parsed, `--annulus auto`,
+/// or `--rim-image FILE` (`--annulus` wins if both are given).
+#[derive(Debug, Clone, PartialEq)]
+pub(super) enum Given<'a> {
+    Numbers([f64; 4]),
+    Auto,
+    RimImage(&'a Path),
+}
+
+const AUTO_NEEDS_IMAGES: &str = "--annulus auto needs board images (not --corners); give --rim-image or numbers";
+
+/// Reads the annulus options before anything else is: numbers parsed ([`parse_annulus`]),
+/// `auto` refused without board images; `None` if neither option is given.
+pub(super) fn given<'a>(
     annulus: Option<&str>,
-    rim_image: Option<&Path>,
+    rim_image: Option<&'a Path>,
+    have_images: bool,
+) -> Result<Option<Given<'a>>, Error> {
+    Ok(match (annulus, rim_image) {
+        (None, None) => None,
+        (Some("auto"), _) if !have_images => return Err(Error::Usage(AUTO_NEEDS_IMAGES.into())),
+        (Some("auto"), _) => Some(Given::Auto),
+        (Some(numbers), _) => Some(Given::Numbers(parse_annulus(numbers)?)),
+        (None, Some(path)) => Some(Given::RimImage(path)),
+    })
+}
+
+/// The annulus to use: the numbers given, or the rim found in the board images (`auto`: their
+/// range image or the best single one) or in the rim image.
+pub(super) fn resolve(
+    given: Option<&Given>,
     boards: &[PathBuf],
     out: &dyn Reporter,
 ) -> Result<Option<Resolved>, Error> {
-    let (img, source) = match (annulus, rim_image) {
-        (None, None) => return Ok(None),
-        (Some("auto"), _) => {
-            if boards.is_empty() {
-                return Err(Error::Usage(
-                    "--annulus auto needs board images (not --corners); give --rim-image or numbers".into(),
-                ));
-            }
-            (rim_input(boards, out)?, "--annulus auto (board images)".to_string())
-        }
-        (Some(numbers), _) => {
-            return Ok(Some(Resolved { annulus: parse_annulus(numbers)?, source: None }));
-        }
-        (None, Some(path)) => (load_gray(path)?, path.display().to_string()),
+    let (img, source) = match given {
+        None => return Ok(None),
+        Some(Given::Numbers(a)) => return Ok(Some(Resolved { annulus: *a, source: None })),
+        Some(Given::Auto) if boards.is_empty() => return Err(Error::Usage(AUTO_NEEDS_IMAGES.into())),
+        Some(Given::Auto) => (rim_input(boards, out)?, "--annulus auto (board images)".to_string()),
+        Some(Given::RimImage(path)) => (load_gray(path)?, path.display().to_string()),
     };
     let annulus = detect(&img, &source, out)?;
     Ok(Some(Resolved { annulus, source: Some((img.width, img.height, source)) }))

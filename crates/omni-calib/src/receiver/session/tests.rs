@@ -55,11 +55,20 @@ fn viewpoint_parses_three_finite_numbers() {
 #[test]
 fn annulus_auto_without_board_images_is_a_usage_error() {
     let out = Lines::default();
-    let err = annulus::resolve(Some("auto"), None, &[], &out).err();
-    assert_eq!(err, Some(usage("--annulus auto needs board images (not --corners); give --rim-image or numbers")));
-    let given = annulus::resolve(Some("1,2,0,3"), None, &[], &out).unwrap().unwrap();
+    let want = usage("--annulus auto needs board images (not --corners); give --rim-image or numbers");
+    assert_eq!(annulus::given(Some("auto"), None, false), Err(want.clone()));
+    assert_eq!(annulus::resolve(Some(&annulus::Given::Auto), &[], &out).err(), Some(want));
+    let rim = Path::new("lit.png");
+    assert_eq!(
+        annulus::given(Some("1,2,0,3"), Some(rim), false),
+        Ok(Some(annulus::Given::Numbers([1.0, 2.0, 0.0, 3.0])))
+    );
+    assert_eq!(annulus::given(None, Some(rim), true), Ok(Some(annulus::Given::RimImage(rim))));
+    assert_eq!(annulus::given(Some("auto"), None, true), Ok(Some(annulus::Given::Auto)));
+    assert_eq!(annulus::given(None, None, true), Ok(None));
+    let given = annulus::resolve(Some(&annulus::Given::Numbers([1.0, 2.0, 0.0, 3.0])), &[], &out).unwrap().unwrap();
     assert_eq!((given.annulus, given.source), ([1.0, 2.0, 0.0, 3.0], None));
-    assert!(annulus::resolve(None, None, &[], &out).unwrap().is_none());
+    assert!(annulus::resolve(None, &[], &out).unwrap().is_none());
     assert!(out.said.lock().unwrap().is_empty());
 }
 
@@ -92,6 +101,22 @@ fn option_combinations_are_checked_first() {
         ),
         (CalibrateOptions { huber_px: 0.0, ..base.clone() }, "--huber-px must be a positive number"),
         (CalibrateOptions { huber_px: f64::NAN, ..base.clone() }, "--huber-px must be a positive number"),
+        (
+            CalibrateOptions { overlay: Some("o".into()), corners: Some("c.json".into()), ..base.clone() },
+            "--overlay needs images (it cannot be used with --corners)",
+        ),
+        (
+            CalibrateOptions { viewpoint_mm: "0,0".into(), ..base.clone() },
+            "--viewpoint-mm: expected X,Y,Z in mm, got \"0,0\"",
+        ),
+        (
+            CalibrateOptions { annulus: Some("1,2,3".into()), ..base.clone() },
+            "--annulus: expected CX,CY,R_IN,R_OUT in px with 0 ≤ R_IN < R_OUT, got \"1,2,3\"",
+        ),
+        (
+            CalibrateOptions { annulus: Some("auto".into()), corners: Some("c.json".into()), ..base.clone() },
+            "--annulus auto needs board images (not --corners); give --rim-image or numbers",
+        ),
     ];
     for (opts, want) in cases {
         assert_eq!(calibrate(&opts, &out), Err(usage(want)));
@@ -227,16 +252,44 @@ fn calibrates_from_a_corners_file_and_writes_the_report() {
     assert!(rms > 0.07 && rms < 0.12, "{rms}");
     assert!(std::fs::read_to_string(&kalibr).unwrap().contains("camera_model: omni"));
 
-    // --overlay needs images: a usage error after the fit, and camera.json is not written.
-    let again = dir.path().join("again.json");
-    let opts = CalibrateOptions { overlay: Some(dir.path().join("overlay")), output: again.clone(), ..opts };
-    assert_eq!(calibrate(&opts, &out), Err(usage("--overlay needs images (it cannot be used with --corners)")));
-    assert!(!again.exists());
-    let opts = CalibrateOptions { overlay: None, annulus: Some("auto".into()), ..opts };
-    assert_eq!(
-        calibrate(&opts, &out),
-        Err(usage("--annulus auto needs board images (not --corners); give --rim-image or numbers"))
-    );
+    // Bad options are refused before anything is read or written: no corners, overlay, export
+    // or camera file, and nothing reported.
+    let again = dir.path().join("again");
+    std::fs::create_dir(&again).unwrap();
+    let opts = CalibrateOptions {
+        output: again.join("camera.json"),
+        save_corners: Some(again.join("corners.json")),
+        export_kalibr: Some(again.join("camchain.yaml")),
+        export_opencv: Some(again.join("omnidir.yaml")),
+        ..opts
+    };
+    let out = Lines::default();
+    let cases = [
+        (
+            CalibrateOptions { viewpoint_mm: "0,0,x".into(), ..opts.clone() },
+            "--viewpoint-mm: expected X,Y,Z in mm, got \"0,0,x\"",
+        ),
+        (
+            CalibrateOptions { annulus: Some("512,512,500,0".into()), ..opts.clone() },
+            "--annulus: expected CX,CY,R_IN,R_OUT in px with 0 ≤ R_IN < R_OUT, got \"512,512,500,0\"",
+        ),
+        (
+            CalibrateOptions { overlay: Some(again.join("overlay")), ..opts.clone() },
+            "--overlay needs images (it cannot be used with --corners)",
+        ),
+        (
+            CalibrateOptions { annulus: Some("auto".into()), ..opts.clone() },
+            "--annulus auto needs board images (not --corners); give --rim-image or numbers",
+        ),
+    ];
+    for (opts, want) in cases {
+        assert_eq!(calibrate(&opts, &out), Err(usage(want)));
+    }
+    assert_eq!(std::fs::read_dir(&again).unwrap().count(), 0, "files written for bad options");
+    assert!(out.said.lock().unwrap().is_empty() && out.warned.lock().unwrap().is_empty());
+    // The same options with good numbers write all four files.
+    calibrate(&opts, &out).unwrap();
+    assert_eq!(std::fs::read_dir(&again).unwrap().count(), 4);
 }
 
 #[test]

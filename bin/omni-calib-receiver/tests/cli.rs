@@ -447,3 +447,36 @@ fn a_board_file_off_by_one_is_warned_about_with_the_likely_size() {
     assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
     assert!(stderr(&out).contains("non-central fit is for the hyperbolic model"), "{}", stderr(&out));
 }
+
+/// A bad --viewpoint-mm or --annulus is refused (one line, exit 2) before the corners are
+/// detected: no export, no corners file and no camera.json (the default output, in the working
+/// directory) are written.
+#[test]
+fn a_bad_viewpoint_or_annulus_writes_no_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = write_board(dir.path(), 7, 11);
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    for (flag, bad) in [("--viewpoint-mm", "0,0"), ("--viewpoint-mm", "0,0,nan"), ("--annulus", "376,240,200,100")] {
+        let out = bin()
+            .current_dir(&work)
+            .arg("--board")
+            .arg(&board)
+            .arg("--export-kalibr")
+            .arg("camchain.yaml")
+            .arg("--save-corners")
+            .arg("corners.json")
+            .arg(flag)
+            .arg(bad)
+            .arg(real_dir().join("MiniOmni1.jpg"))
+            .arg(real_dir().join("MiniOmni2.jpg"))
+            .output()
+            .unwrap();
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{flag} {bad}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains(flag) && err.contains(bad), "{err}");
+        let written: Vec<_> = std::fs::read_dir(&work).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert!(written.is_empty(), "{flag} {bad}: wrote {written:?}");
+    }
+}

@@ -2,15 +2,13 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use omni_cli::{CliError, CliResult};
-use omni_formats::stream::{Frame, Header, Record, Status, StreamWriter};
 use omni_formats::{BoardFile, CameraFile, CameraSpec, ScannerFile, write_doc};
 use omni_simulator::{
-    BenchObject, BoardPose, Imaging, Imperfections, Optics, RenderOptions, Rig, Scene, Sensor, TruthRecord,
-    check_boards_visible, paper_bench, paper_preset, parse_angles, random_board_poses, render_ambient_frame,
-    render_board_image, render_laser_frame, render_rig_pose_image, truth_header,
+    BenchObject, BoardPose, Imaging, Imperfections, Optics, RenderOptions, RenderedFrame, Rig, Scene, Sensor, Sweep,
+    check_boards_visible, paper_bench, paper_preset, parse_angles, random_board_poses, render_board_image,
+    render_rig_pose_image, render_sweep, write_manifest, write_truth,
 };
 use rayon::prelude::*;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -409,92 +407,22 @@ fn scene(a: SceneArgs) -> CliResult {
     Ok(())
 }
 
-/// One rendered frame: its manifest record and its ground truth.
-struct Rendered {
-    record: Frame,
-    truth: TruthRecord,
-}
-
-/// Renders laser frames (and optionally laser-off frames) in parallel and writes the PNGs.
+/// Renders the sweep into `frames_dir` with a progress bar.
 fn render_frames(
     sensor: &Sensor,
     scene: &Scene,
-    angles: &[f64],
-    facet: u32,
-    lasers: &[u32],
-    laser_off: bool,
+    sweep: &Sweep,
     frames_dir: &Path,
     opts: &RenderOptions,
-) -> CliResult<Vec<Rendered>> {
-    let bar = omni_cli::progress(Some(angles.len() as u64), "rendering");
-    let out = angles
-        .par_iter()
-        .enumerate()
-        .map(|(seq, &alpha_deg)| -> CliResult<Rendered> {
-            let frame = render_laser_frame(sensor, scene, alpha_deg.to_radians(), facet, lasers, opts);
-            let name = format!("frame_{seq:06}.png");
-            frame.image.to_png(&frames_dir.join(&name))?;
-            let mut record = Frame::new(seq as u64, name.clone(), alpha_deg, facet);
-            record.lasers = lasers.to_vec();
-            if laser_off {
-                let ambient_name = format!("ambient_{seq:06}.png");
-                let seeded = RenderOptions { seed: opts.seed ^ (0xA3B1 + seq as u64), ..opts.clone() };
-                render_ambient_frame(sensor, scene, &seeded).to_png(&frames_dir.join(&ambient_name))?;
-                record.ambient_path = Some(ambient_name);
-            }
-            bar.inc(1);
-            Ok(Rendered { truth: TruthRecord::new(seq as u64, &name, alpha_deg, facet, &frame.truth), record })
-        })
-        .collect::<CliResult<Vec<_>>>();
+) -> CliResult<Vec<RenderedFrame>> {
+    let bar = omni_cli::progress(Some(sweep.angles_deg.len() as u64), "rendering");
+    let out = render_sweep(sensor, scene, sweep, frames_dir, opts, &|| bar.inc(1));
     bar.finish_and_clear();
-    out
+    Ok(out?)
 }
 
-/// Writes the manifest stream (header, frames, status); files atomically, `-` to stdout.
-fn write_manifest(path: &Path, frames_dir: &Path, camera: &Path, scanner: &Path, frames: &[Rendered]) -> CliResult {
-    let mut header = Header::new(concat!("omni-sim ", env!("CARGO_PKG_VERSION")));
-    header.frames_dir = Some(frames_dir.display().to_string());
-    header.camera = Some(camera.display().to_string());
-    header.scanner = Some(scanner.display().to_string());
-    let status = Status {
-        frames: frames.len() as u64,
-        frames_missing: 0,
-        frames_failed: 0,
-        complete: true,
-        errors: vec![],
-        extra: Default::default(),
-    };
-    let write = |w: &mut dyn Write| -> std::io::Result<()> {
-        let mut s = StreamWriter::new(w, "manifest");
-        s.flush_each = false;
-        let io = |e: omni_formats::Error| std::io::Error::other(e.to_string());
-        s.write(&Record::Header(header.clone())).map_err(io)?;
-        for f in frames {
-            s.write(&Record::Frame(Box::new(f.record.clone()))).map_err(io)?;
-        }
-        s.write(&Record::Status(status.clone())).map_err(io)?;
-        s.flush().map_err(io)
-    };
-    if path == Path::new("-") {
-        let stdout = std::io::stdout();
-        let mut lock = stdout.lock();
-        write(&mut lock).map_err(|e| CliError::new(format!("stdout: {e}")))
-    } else {
-        Ok(omni_formats::io::write_atomic(path, |w| write(w))?)
-    }
-}
-
-fn write_truth(path: &Path, scene_name: &str, frames: &[Rendered]) -> CliResult {
-    Ok(omni_formats::io::write_atomic(path, |w| {
-        serde_json::to_writer(&mut *w, &truth_header(scene_name)).map_err(std::io::Error::other)?;
-        w.write_all(b"\n")?;
-        for f in frames {
-            serde_json::to_writer(&mut *w, &f.truth).map_err(std::io::Error::other)?;
-            w.write_all(b"\n")?;
-        }
-        Ok(())
-    })?)
-}
+/// The producer named in the manifests' headers.
+const PRODUCER: &str = concat!("omni-sim ", env!("CARGO_PKG_VERSION"));
 
 fn load_board(path: &Path) -> CliResult<BoardFile> {
     let board: BoardFile = omni_formats::read_doc(path)?;
@@ -538,11 +466,12 @@ fn scan(a: ScanArgs) -> CliResult {
     let scene = Scene::load(&a.scene)?;
     check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("{}: {e}", a.scene.display())))?;
     create_dir(&a.frames)?;
-    let frames = render_frames(&sensor, &scene, &angles, a.facet, &a.lasers, a.laser_off, &a.frames, &opts)?;
+    let sweep = Sweep { angles_deg: &angles, facet: a.facet, lasers: &a.lasers, laser_off: a.laser_off };
+    let frames = render_frames(&sensor, &scene, &sweep, &a.frames, &opts)?;
     if let Some(t) = &a.truth {
         write_truth(t, &a.scene.display().to_string(), &frames)?;
     }
-    write_manifest(&a.output, &a.frames, &a.camera, &a.scanner, &frames)
+    Ok(write_manifest(&a.output, PRODUCER, &a.frames, &a.camera, &a.scanner, &frames)?)
 }
 
 fn boards(a: BoardsArgs) -> CliResult {
@@ -590,7 +519,8 @@ fn rig(a: RigArgs) -> CliResult {
     let lit = a.render.lit_options(optics)?;
     let (pose_image, corners) = render_rig_pose_image(&sensor, &rig, &lit);
     pose_image.to_png(&a.out.join("pose.png"))?;
-    let frames = render_frames(&sensor, &scene, &angles, a.facet, &[0, 1], a.laser_off, &a.out, &opts)?;
+    let sweep = Sweep { angles_deg: &angles, facet: a.facet, lasers: &[0, 1], laser_off: a.laser_off };
+    let frames = render_frames(&sensor, &scene, &sweep, &a.out, &opts)?;
     write_truth(&a.out.join("truth.jsonl"), "rig", &frames)?;
     write_doc(&a.out.join("scene.json"), &scene_file)?;
     write_doc(&a.out.join("rig.json"), &rig.rig_file())?;
@@ -604,5 +534,5 @@ fn rig(a: RigArgs) -> CliResult {
     });
     write_doc(&a.out.join("rig_truth.json"), &truth)?;
     // The manifest last: its presence means the rig directory is complete.
-    write_manifest(&a.out.join("scan.jsonl"), &a.out, &a.camera, &a.scanner, &frames)
+    Ok(write_manifest(&a.out.join("scan.jsonl"), PRODUCER, &a.out, &a.camera, &a.scanner, &frames)?)
 }

@@ -25,11 +25,15 @@
 //!
 //! The polynomial and central hyperbolic fits are checked against a Mei fit of the same images
 //! ([`validate::compare_with_mei`], [`Calibration::model_check`]).
+//!
+//! [`session`] runs the commands of `omni-calib-receiver` (detection, fit, report, exports,
+//! conversions) on top of these.
 
 pub mod convert;
 pub mod corners_file;
 pub mod export;
 pub mod query;
+pub mod session;
 pub mod validate;
 mod yaml;
 

@@ -1,5 +1,5 @@
 //! Image I/O helpers: frames on disk (PNG 8/16-bit, JPEG, binary PGM 8/16-bit) to a grey buffer,
-//! and PNG output.
+//! PNG output, and image lists given as files or directories ([`expand_image_paths`]).
 //!
 //! Every error is an [`omni_formats::Error`] naming the file, so a tool can print it as is:
 //! `frames/000012.png: truncated or corrupt image: …`.
@@ -10,7 +10,38 @@
 //! ```
 
 use omni_formats::Error;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// File name extensions (lower case) that [`expand_image_paths`] takes from a directory.
+pub const IMAGE_EXTENSIONS: [&str; 7] = ["png", "jpg", "jpeg", "tif", "tiff", "bmp", "pgm"];
+
+/// The image files of a command line: files as given, each directory replaced by its files whose
+/// extension is one of [`IMAGE_EXTENSIONS`] (any case), sorted by path. A directory without one
+/// is an error naming it (`boards: no images in directory`).
+pub fn expand_image_paths(paths: &[PathBuf]) -> Result<Vec<PathBuf>, Error> {
+    let mut out = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            let name = p.display().to_string();
+            let mut files: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| Error::io(name.as_str(), &e))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| {
+                    let ext = f.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+                    IMAGE_EXTENSIONS.contains(&ext.as_str())
+                })
+                .collect();
+            files.sort();
+            if files.is_empty() {
+                return Err(Error::new(name, "", "no images in directory"));
+            }
+            out.extend(files);
+        } else {
+            out.push(p.clone());
+        }
+    }
+    Ok(out)
+}
 
 /// A single-channel image. Samples are stored as `u16` whatever the file's depth; `bit_depth`
 /// says which range they use (8 → 0–255, 16 → 0–65535). Row-major, `data[y * width + x]`,
@@ -192,6 +223,36 @@ pub fn write_gray_png(path: &Path, img: &GrayImage) -> Result<(), Error> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn directories_expand_to_their_images_sorted_files_stay_as_given() {
+        let dir = tempfile::tempdir().unwrap();
+        let boards = dir.path().join("boards");
+        std::fs::create_dir(&boards).unwrap();
+        for name in ["c.PNG", "a.jpg", "b.tiff", "notes.txt", "d.pgm", "noext", "e.jpeg.bak"] {
+            std::fs::write(boards.join(name), b"x").unwrap();
+        }
+        let single = dir.path().join("z.png");
+        let got = expand_image_paths(&[single.clone(), boards.clone(), PathBuf::from("missing.jpg")]).unwrap();
+        let want: Vec<PathBuf> = vec![
+            single,
+            boards.join("a.jpg"),
+            boards.join("b.tiff"),
+            boards.join("c.PNG"),
+            boards.join("d.pgm"),
+            PathBuf::from("missing.jpg"),
+        ];
+        assert_eq!(got, want);
+    }
+
+    #[test]
+    fn a_directory_without_images_is_an_error_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("readme.txt"), b"x").unwrap();
+        let err = expand_image_paths(&[dir.path().to_path_buf()]).unwrap_err();
+        assert_eq!(err.to_string(), format!("{}: no images in directory", dir.path().display()));
+        assert_eq!(expand_image_paths(&[]).unwrap(), Vec::<PathBuf>::new());
+    }
 
     fn ramp(bit_depth: u8) -> GrayImage {
         let mut img = GrayImage::new(7, 5, bit_depth);

@@ -123,18 +123,7 @@ fn poses_put_a_moving_sensors_slices_into_one_world_frame() {
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), (0.2 * t).to_radians()),
         )
     };
-    let samples: Vec<PoseSample> = (0..=20)
-        .map(|i| {
-            let p = pose(i * 10_000);
-            let q = p.rotation;
-            PoseSample {
-                t_us: i * 10_000,
-                translation_mm: p.translation.vector.into(),
-                quaternion_wxyz: [q.w, q.i, q.j, q.k],
-            }
-        })
-        .collect();
-    write_odometry(&dir.path().join("odo.jsonl"), &samples).unwrap();
+    write_poses(&dir.path().join("odo.jsonl"), 200_000, &pose);
     let world: Vec<Point3<f64>> =
         (0..200).map(|i| Point3::new(1000.0 + i as f64, 300.0 - 2.0 * i as f64, 50.0)).collect();
     let frames: Vec<(Vec<[f64; 3]>, Option<u64>)> = (0..10)

@@ -23,8 +23,9 @@ EXTRA_TESTS :=
 
 all: build
 
+# The tools; the Python package is built by pip or maturin (python/), not here.
 build:
-	$(CARGO) build --workspace --release
+	$(CARGO) build --workspace --exclude omniscan-py --release
 
 # rustfmt and clippy are rustup components a fresh toolchain may lack: say how to get them.
 tools:
@@ -64,7 +65,7 @@ bench: build
 
 # The demo profile (Cargo.toml): no LTO, parallel codegen, a fraction of the release build time.
 demo:
-	$(CARGO) build --workspace --profile demo
+	$(CARGO) build --workspace --exclude omniscan-py --profile demo
 	OUT=$(OUT) BIN=$(CURDIR)/target/demo scripts/demo.sh
 
 # Mutation fuzzing of every reader, FUZZ_SECONDS per target (crates/omni-fuzz; crashes are

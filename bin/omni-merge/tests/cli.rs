@@ -44,14 +44,7 @@ fn write_stream(path: &Path, frames: &[(Vec<[f64; 3]>, Option<u64>)]) {
         );
         w.write(&Record::Frame(Box::new(f))).unwrap();
     }
-    let status = Status {
-        frames: frames.len() as u64,
-        frames_missing: 0,
-        frames_failed: 0,
-        complete: true,
-        errors: vec![],
-        extra: Default::default(),
-    };
+    let status = Status::complete(frames.len() as u64);
     w.write(&Record::Status(status)).unwrap();
 }
 

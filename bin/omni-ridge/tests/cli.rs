@@ -38,14 +38,7 @@ fn frame(seq: u64, path: &str) -> Record {
 }
 
 fn status(frames: u64) -> Record {
-    Record::Status(Status {
-        frames,
-        frames_missing: 0,
-        frames_failed: 0,
-        complete: true,
-        errors: vec![],
-        extra: Default::default(),
-    })
+    Record::Status(Status::complete(frames))
 }
 
 fn stream_text(records: &[Record]) -> String {

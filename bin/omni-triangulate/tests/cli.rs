@@ -57,15 +57,7 @@ fn fixture() -> Fixture {
             w.write(&Record::Frame(Box::new(f))).unwrap();
             truth.push(pts);
         }
-        w.write(&Record::Status(omni_formats::stream::Status {
-            frames: 3,
-            frames_missing: 0,
-            frames_failed: 0,
-            complete: true,
-            errors: vec![],
-            extra: Default::default(),
-        }))
-        .unwrap();
+        w.write(&Record::Status(omni_formats::stream::Status::complete(3))).unwrap();
     }
     std::fs::write(dir.path().join("ridges.jsonl"), text).unwrap();
     Fixture { dir, truth }

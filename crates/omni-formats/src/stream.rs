@@ -234,6 +234,11 @@ pub struct Status {
 }
 
 impl Status {
+    /// The status of a stream of `frames` frames that ended normally: nothing missing or failed.
+    pub fn complete(frames: u64) -> Self {
+        Status { complete: true, errors: vec![], ..Status::cut_short(frames, "") }
+    }
+
     /// The status a tool passes on for an input that was cut short (no status record):
     /// `complete: false`, with the reason.
     pub fn cut_short(frames: u64, message: impl Into<String>) -> Self {
@@ -455,18 +460,8 @@ mod tests {
         let mut f = Frame::new(3, "f.png", 12.5, 4);
         f.stripe = Some(vec![StripePoint { u: 1.5, v: 2.25, intensity: 200.0, width: 3.0, quality: 0 }]);
         f.extra.insert("exposure_us".into(), 500.into());
-        let recs = vec![
-            Record::Header(Header::new("test")),
-            Record::Frame(Box::new(f)),
-            Record::Status(Status {
-                frames: 1,
-                frames_missing: 0,
-                frames_failed: 0,
-                complete: true,
-                errors: vec![],
-                extra: Default::default(),
-            }),
-        ];
+        let recs =
+            vec![Record::Header(Header::new("test")), Record::Frame(Box::new(f)), Record::Status(Status::complete(1))];
         let mut w = StreamWriter::new(Vec::new(), "mem");
         for r in &recs {
             w.write(r).unwrap();

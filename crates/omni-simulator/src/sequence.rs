@@ -79,14 +79,7 @@ pub fn write_manifest(
     header.frames_dir = Some(frames_dir.display().to_string());
     header.camera = Some(camera.display().to_string());
     header.scanner = Some(scanner.display().to_string());
-    let status = Status {
-        frames: frames.len() as u64,
-        frames_missing: 0,
-        frames_failed: 0,
-        complete: true,
-        errors: vec![],
-        extra: Default::default(),
-    };
+    let status = Status::complete(frames.len() as u64);
     let write = |w: &mut dyn Write| -> std::io::Result<()> {
         let mut s = StreamWriter::new(w, "manifest");
         s.flush_each = false;

@@ -16,8 +16,9 @@
 //!   or tapering ([`MAX_WIDTH_SLOPE`]);
 //! * gives each point the stripe's local curvature κ, from a parabola through its neighbours,
 //!   and removes the blur's pull towards the centre of curvature, σ²κ/2, with σ² measured on the
-//!   frame itself (its median profile variance), so that the pull comes out right for any lens
-//!   without being told its blur;
+//!   frame itself (the median over its profiles of the second moment that scales the pull, see
+//!   [`RidgeDetector::pull_variance`]), so that the pull comes out right for any lens, Gaussian
+//!   or defocused, without being told its blur;
 //! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): a
 //!   line through the neighbours once a wider parabola's curvature is taken out, so that a curved
 //!   stripe keeps its centre.
@@ -62,9 +63,6 @@ const NARROW_PERCENTILE: usize = 10;
 /// A stripe whose half-maximum width changes faster than this (px per px along it, over ±3 px)
 /// is a tapering lit area, not the laser's line.
 pub const MAX_WIDTH_SLOPE: f64 = 0.2;
-/// The quantile (%) of the frame's profile variances taken as the blur: the median, robust to
-/// noisy widths and to the few stripes that a grazing sheet widens.
-const BLUR_PERCENTILE: usize = 50;
 /// A fit that moves its point farther than this (px) is not trusted (a kink, another stripe).
 const MAX_MOVE_PX: f64 = 0.5;
 /// FWHM / σ of a Gaussian.
@@ -100,6 +98,9 @@ struct Centre {
     half_width: f64,
     /// (flank towards −n − flank towards +n) / their sum (see [`MAX_ASYMMETRY`]).
     asymmetry: f64,
+    /// The variance (px²) that scales the blur's pull on this profile's centre if the stripe
+    /// curves ([`pull_variance`]); `None` for a saturated profile.
+    pull_variance: Option<f64>,
 }
 
 impl RidgeDetector {
@@ -313,14 +314,46 @@ impl RidgeDetector {
         }
         let flags = if saturated { quality::SATURATED } else { 0 } | self.contrast_and_width_flags(peak, width, t);
         let point = StripePoint { u, v, intensity: peak as f64, width, quality: flags };
-        Some(Centre { point, normal: (nx, ny), half_width, asymmetry })
+        let pull_variance = (!saturated).then(|| self.pull_variance(raw, q, &seg, t, index)).flatten();
+        Some(Centre { point, normal: (nx, ny), half_width, asymmetry, pull_variance })
+    }
+
+    /// The variance σ² (px²) for which the blur moves this profile's centre by σ²κ/2 towards the
+    /// centre of curvature of a stripe curving by κ (1/px), for the configured estimator.
+    ///
+    /// For an isotropic PSF the tangential spread behind the pull follows from the profile L
+    /// across the stripe itself (M(y) = ∫_{|y|}^∞ t·L(t) dt), and for the windowed centroid (weights
+    /// L − t over the window where L > t) it integrates to σ² = Σ y²·L / Σ (L − t) over that
+    /// window, whatever the PSF's shape: a Gaussian's variance, but about half the variance a
+    /// defocused lens's half-maximum width suggests. The centroid weighs raw intensities; the
+    /// Gaussian fit and Blais–Rioux assume a Gaussian profile, whose variance the half-maximum
+    /// width gives.
+    fn pull_variance(&self, raw: &[f32], q: &[f32], seg: &Segment, t: f32, index: f64) -> Option<f64> {
+        let moment = |weight: &dyn Fn(usize) -> f64| {
+            let (mut m2, mut sw) = (0.0, 0.0);
+            for k in seg.start..seg.end {
+                let y = (k as f64 - index) * SAMPLE_STEP_PX;
+                m2 += y * y * q[k] as f64;
+                sw += weight(k);
+            }
+            (sw > 0.0).then(|| m2 / sw)
+        };
+        match self.params.method {
+            super::Method::Windowed | super::Method::Hessian => moment(&|k| (q[k] - t).max(0.0) as f64),
+            super::Method::Centroid => moment(&|k| raw[k] as f64),
+            super::Method::Gauss | super::Method::BlaisRioux => {
+                let peak = q[seg.peak];
+                let (ha, hb) = estimators::crossings(q, seg, 0.5 * peak)?;
+                Some(((hb - ha) * SAMPLE_STEP_PX / FWHM_PER_SIGMA).powi(2))
+            }
+        }
     }
 
     /// Links each centre to its neighbours on the same stripe and returns the points that
     /// survive the checks, corrected for the blur's pull and fitted along the stripe (module docs).
     fn link_and_correct(&self, centres: &[Centre]) -> Vec<StripePoint> {
-        // The blur: the median profile's variance, from its half-maximum width.
-        let blur_variance = half_width_quantile(centres, BLUR_PERCENTILE).map_or(0.0, |w| (w / FWHM_PER_SIGMA).powi(2));
+        // The blur: the median of the profiles' pull variances.
+        let blur_variance = pull_variance_median(centres).unwrap_or(0.0);
         let widest =
             half_width_quantile(centres, NARROW_PERCENTILE).map_or(f64::INFINITY, |w| MAX_HALF_WIDTH_RATIO * w);
         let along = self.params.along_stripe_px;
@@ -467,6 +500,17 @@ fn segment_near(q: &[f32], mid: usize, t: f32) -> Option<Segment> {
     super::segment_at(q, peak, t)
 }
 
+/// The median of the frame's pull variances (px², [`RidgeDetector::pull_variance`]); `None` if
+/// no profile has one.
+fn pull_variance_median(centres: &[Centre]) -> Option<f64> {
+    let mut v: Vec<f64> = centres.iter().filter_map(|c| c.pull_variance).collect();
+    if v.is_empty() {
+        return None;
+    }
+    let k = (v.len() - 1) / 2;
+    Some(*v.select_nth_unstable_by(k, f64::total_cmp).1)
+}
+
 /// The `percent` quantile of the frame's unsaturated half-maximum widths (px); `None` if there
 /// are none.
 fn half_width_quantile(centres: &[Centre], percent: usize) -> Option<f64> {
@@ -607,6 +651,48 @@ mod tests {
                 );
                 assert!(n > 0.6 * std::f64::consts::TAU * radius, "σ {sigma} R {radius}: {n} points");
                 assert!(bias.abs() <= 0.01, "σ {sigma} R {radius}: bias {bias:+.4} px");
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod defocus_tests {
+    use super::super::tests::render;
+    use super::super::*;
+    use omni_geom::Vector2;
+
+    /// A thin ring of radius `radius` seen through a defocused lens (a uniform blur disc of
+    /// radius `rho`), at distance `r` from its centre: the ring's arc inside the disc over the
+    /// disc's area.
+    fn defocused_ring(r: f64, radius: f64, rho: f64) -> f64 {
+        if r <= 0.0 {
+            return 0.0;
+        }
+        let cos = ((radius * radius + r * r - rho * rho) / (2.0 * radius * r)).clamp(-1.0, 1.0);
+        2.0 * radius * cos.acos() / (std::f64::consts::PI * rho * rho)
+    }
+
+    /// The pull of a defocused lens (a disc PSF, far from Gaussian) on a curved stripe is removed
+    /// too: the detector takes it from the profile's own second moment, not from a Gaussian
+    /// fitted to its half-maximum width.
+    #[test]
+    fn curved_stripes_keep_their_centre_under_defocus() {
+        let (w, h) = (160u32, 160u32);
+        let (cx, cy) = (80.3, 79.6);
+        for diameter in [2.0, 4.0, 6.0] {
+            for radius in [15.0, 30.0] {
+                let img = render(w, h, 16, 0.0, 1, |x, y| {
+                    30000.0 * defocused_ring((x - cx).hypot(y - cy), radius, 0.5 * diameter)
+                });
+                let circle = MirrorCircle { centre: Vector2::new(cx, cy), inner_radius: 2.0, outer_radius: 75.0 };
+                let det = RidgeDetector::new(w, h, circle, RidgeParams::default());
+                let errors: Vec<f64> = det.detect(&img).iter().map(|p| (p.u - cx).hypot(p.v - cy) - radius).collect();
+                let n = errors.len() as f64;
+                let bias = errors.iter().sum::<f64>() / n;
+                eprintln!("defocus disc {diameter} px, R {radius} px: {n} points, bias {bias:+.4} px");
+                assert!(n > 0.6 * std::f64::consts::TAU * radius, "disc {diameter} R {radius}: {n} points");
+                assert!(bias.abs() <= 0.01, "disc {diameter} R {radius}: bias {bias:+.4} px");
             }
         }
     }

@@ -280,7 +280,10 @@ fn run_with_stdin(args: &[&std::ffi::OsStr], stdin: &str) -> Output {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    child.stdin.take().unwrap().write_all(stdin.as_bytes()).unwrap();
+    // A query that fails on a bad line exits without reading the rest: the pipe may be closed.
+    if let Err(e) = child.stdin.take().unwrap().write_all(stdin.as_bytes()) {
+        assert_eq!(e.kind(), std::io::ErrorKind::BrokenPipe, "writing the tool's stdin: {e}");
+    }
     child.wait_with_output().unwrap()
 }
 

@@ -2,6 +2,10 @@
 //!
 //! A frame is written atomically (temporary file + rename, so `omni-ridge` reading the
 //! directory never sees half a file), with its modification time set to the exposure time.
+//! Frames are not synced one by one unless asked ([`FrameWriter::sync_each_frame`], `scan
+//! --sync-frames`): the rename already makes every listed file whole for readers and safe from a
+//! crash of the process, the kernel writes it back, and a sync per frame costs capture rate,
+//! so only a power cut can lose the last frames, as it can the manifest written beside them.
 //! Formats: PNG (compressed, slow to encode at camera rates) and binary PGM (`P5`: a text header
 //! and the raw samples, 16-bit big-endian), which every reader of `omni_vision::image_io` loads.
 
@@ -37,6 +41,11 @@ impl FrameFormat {
             FrameFormat::Png => "png",
             FrameFormat::Pgm => "pgm",
         }
+    }
+
+    /// The file name of a frame with this stem, e.g. `000012` → `000012.pgm`.
+    pub fn file_name(self, stem: &str) -> String {
+        format!("{stem}.{}", self.extension())
     }
 }
 
@@ -115,18 +124,20 @@ pub fn encode(frame: &RawFrame, format: FrameFormat) -> std::io::Result<Vec<u8>>
     }
 }
 
-/// Writes `bytes` to `path` atomically, with modification time `exposure`.
-fn write_file(path: &Path, bytes: &[u8], exposure: SystemTime) -> std::io::Result<()> {
+/// Writes `bytes` to `path` atomically, with modification time `exposure`, synced to disk
+/// before the rename if `sync`.
+fn write_file(path: &Path, bytes: &[u8], exposure: SystemTime, sync: bool) -> std::io::Result<()> {
     let mut tmp = omni_formats::io::TempFile::create(path)?;
     tmp.file().write_all(bytes)?;
     tmp.file().set_modified(exposure)?;
-    tmp.commit()
+    if sync { tmp.commit() } else { tmp.commit_unsynced() }
 }
 
 struct Job {
     order: u64,
     frame: CapturedFrame,
     image: RawFrame,
+    sync: bool,
 }
 
 type Done = (u64, std::io::Result<CapturedFrame>);
@@ -138,6 +149,7 @@ type Done = (u64, std::io::Result<CapturedFrame>);
 pub struct FrameWriter {
     dir: PathBuf,
     format: FrameFormat,
+    sync: bool,
     jobs: Option<SyncSender<Job>>,
     done: Receiver<Done>,
     workers: Vec<JoinHandle<()>>,
@@ -156,14 +168,14 @@ impl FrameWriter {
         let (done_tx, done) = std::sync::mpsc::channel::<Done>();
         let workers = (0..threads.max(1))
             .map(|_| {
-                let rx = rx.clone();
-                let done_tx = done_tx.clone();
+                let (rx, done_tx) = (rx.clone(), done_tx.clone());
                 std::thread::spawn(move || work(&rx, &done_tx, format))
             })
             .collect();
         Ok(FrameWriter {
             dir: dir.to_path_buf(),
             format,
+            sync: false,
             jobs: Some(jobs),
             done,
             workers,
@@ -173,16 +185,22 @@ impl FrameWriter {
         })
     }
 
+    /// Syncs each frame submitted from now on to disk before renaming it into place, so that a
+    /// power cut loses none of them once handed back.
+    pub fn sync_each_frame(&mut self, sync: bool) {
+        self.sync = sync;
+    }
+
     /// The file name of a frame with this stem, e.g. `000012` → `000012.pgm`.
     pub fn file_name(&self, stem: &str) -> String {
-        format!("{stem}.{}", self.format.extension())
+        self.format.file_name(stem)
     }
 
     /// Queues `image` to be written as `frame.name` in the directory; `frame` (its `path` set
     /// here) comes back from [`FrameWriter::written`] once the file is complete.
     pub fn submit(&mut self, mut frame: CapturedFrame, image: RawFrame) -> std::io::Result<()> {
         frame.path = self.dir.join(&frame.name);
-        let job = Job { order: self.submitted, frame, image };
+        let job = Job { order: self.submitted, frame, image, sync: self.sync };
         let jobs = self.jobs.as_ref().ok_or_else(|| std::io::Error::other("frame writer closed"))?;
         jobs.send(job).map_err(|_| std::io::Error::other("frame writer threads stopped"))?;
         self.submitted += 1;
@@ -245,7 +263,7 @@ fn work(jobs: &Mutex<Receiver<Job>>, done: &std::sync::mpsc::Sender<Done>, forma
         let exposure = SystemTime::UNIX_EPOCH + Duration::from_micros(job.frame.time_us.max(0) as u64);
         let name = job.frame.path.display().to_string();
         let result = encode(&job.image, format)
-            .and_then(|bytes| write_file(&job.frame.path, &bytes, exposure))
+            .and_then(|bytes| write_file(&job.frame.path, &bytes, exposure, job.sync))
             .map(|_| job.frame)
             .map_err(|e| std::io::Error::new(e.kind(), format!("{name}: {e}")));
         if done.send((job.order, result)).is_err() {
@@ -282,6 +300,24 @@ mod tests {
         assert_eq!(samples, (0..6).map(|i| (i * 257 + 1) as u16).collect::<Vec<_>>());
         let f8 = ramp(4, 1, 8, 250);
         assert_eq!(encode(&f8, FrameFormat::Pgm).unwrap(), b"P5\n4 1\n255\n\xfa\xfb\xfc\xfd");
+    }
+
+    /// Synced or not, a frame file holds exactly its encoding, and no temporary is left.
+    #[test]
+    fn synced_and_unsynced_frames_are_the_same_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut w = FrameWriter::new(dir.path(), FrameFormat::Pgm, 2, 4).unwrap();
+        for k in 0..4u32 {
+            w.sync_each_frame(k % 2 == 1);
+            let name = w.file_name(&format!("{k:06}"));
+            w.submit(CapturedFrame::new(PathBuf::new(), name, 0), ramp(16, 4, 8, k)).unwrap();
+        }
+        let got = w.flush(Duration::from_secs(20)).unwrap();
+        assert_eq!(got.len(), 4);
+        for (k, f) in got.iter().enumerate() {
+            assert_eq!(std::fs::read(&f.path).unwrap(), encode(&ramp(16, 4, 8, k as u32), FrameFormat::Pgm).unwrap());
+        }
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 4, "no temporary file left");
     }
 
     #[test]

@@ -292,10 +292,16 @@ fn run(o: &Options) -> Result<(), String> {
         Some(r) => {
             let out = r.finish(o.frames)?;
             read_cpu = out.read_cpu;
-            let total = out.out_at.last().expect("frames").duration_since(t0).as_secs_f64();
-            let fps = o.frames as f64 / total;
+            let (first, last) = (out.out_at[0], *out.out_at.last().expect("frames"));
+            let total = last.duration_since(t0).as_secs_f64();
+            // Paced, the rate the points came out at (a steady delay does not lower it, a
+            // pipeline falling behind does); else all frames over all the time.
+            let fps = match o.rate_hz {
+                Some(_) => (o.frames - 1) as f64 / last.duration_since(first).as_secs_f64(),
+                None => o.frames as f64 / total,
+            };
             let mut line = format!(
-                "capture {what} + omni-ridge: {} frames in {total:.2} s = {fps:.0} frames/s to stripe points ({:.0} \
+                "capture {what} + omni-ridge: {} frames in {total:.2} s, {fps:.0} frames/s to stripe points ({:.0} \
                  points per frame)",
                 o.frames,
                 out.points as f64 / o.frames as f64,

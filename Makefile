@@ -23,9 +23,11 @@ EXTRA_TESTS :=
 
 all: build
 
-# The tools; the Python package is built by pip or maturin (python/), not here.
+# The tools; the Python package is built by pip or maturin (python/), not here. With $(FEATURES),
+# so that omni-trigger drives GenICam cameras wherever libaravis is installed (and `make bench`
+# runs a real scan from Aravis's fake camera).
 build:
-	$(CARGO) build --workspace --exclude omniscan-py --release
+	$(CARGO) build --workspace --exclude omniscan-py --release $(FEATURES)
 
 # rustfmt and clippy are rustup components a fresh toolchain may lack: say how to get them.
 tools:

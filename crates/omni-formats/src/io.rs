@@ -153,9 +153,22 @@ impl TempFile {
     }
 
     /// Syncs the file and renames it over the target.
-    pub fn commit(mut self) -> std::io::Result<()> {
+    pub fn commit(self) -> std::io::Result<()> {
+        self.rename_into_place(true)
+    }
+
+    /// Renames the file over the target without syncing it first: readers still never see a
+    /// partial file and a crash of this process loses nothing, but a power cut may lose what
+    /// the kernel had not written back yet. For files written faster than a sync each allows.
+    pub fn commit_unsynced(self) -> std::io::Result<()> {
+        self.rename_into_place(false)
+    }
+
+    fn rename_into_place(mut self, sync: bool) -> std::io::Result<()> {
         let f = self.file.take().expect("open until commit");
-        f.sync_all()?;
+        if sync {
+            f.sync_all()?;
+        }
         drop(f);
         commit_temp(&self.path, |tmp| std::fs::rename(tmp, &self.target))?;
         self.path = PathBuf::new();

@@ -2,10 +2,15 @@
 //!
 //! A frame is written atomically (temporary file + rename, so `omni-ridge` reading the
 //! directory never sees half a file), with its modification time set to the exposure time.
+//! Frames are not synced one by one unless asked ([`FrameWriter::sync_each_frame`], `scan
+//! --sync-frames`): the rename already makes every listed file whole for readers and safe from a
+//! crash of the process, the kernel writes it back, and a sync per frame costs capture rate,
+//! so only a power cut can lose the last frames, as it can the manifest written beside them.
 //! Formats: PNG (compressed, slow to encode at camera rates) and binary PGM (`P5`: a text header
 //! and the raw samples, 16-bit big-endian), which every reader of `omni_vision::image_io` loads.
 
 use crate::pairing::CapturedFrame;
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -37,6 +42,11 @@ impl FrameFormat {
             FrameFormat::Png => "png",
             FrameFormat::Pgm => "pgm",
         }
+    }
+
+    /// The file name of a frame with this stem, e.g. `000012` → `000012.pgm`.
+    pub fn file_name(self, stem: &str) -> String {
+        format!("{stem}.{}", self.extension())
     }
 }
 
@@ -74,21 +84,32 @@ impl RawFrame {
 
 /// The file contents of `frame` in `format`.
 pub fn encode(frame: &RawFrame, format: FrameFormat) -> std::io::Result<Vec<u8>> {
+    let (mut head, body) = encode_parts(frame, format)?;
+    head.extend_from_slice(&body);
+    Ok(head)
+}
+
+/// The file contents of `frame` in `format` as a head and a body to write after it: an 8-bit
+/// PGM's body is the camera's own samples, written without a copy.
+fn encode_parts(frame: &RawFrame, format: FrameFormat) -> std::io::Result<(Vec<u8>, Cow<'_, [u8]>)> {
     frame.check().map_err(std::io::Error::other)?;
     let n = frame.width as usize * frame.height as usize;
     match format {
         FrameFormat::Pgm => {
             let max = if frame.bit_depth == 16 { 65535 } else { 255 };
-            let mut out = format!("P5\n{} {}\n{max}\n", frame.width, frame.height).into_bytes();
-            if frame.bit_depth == 16 {
-                out.reserve(2 * n);
-                for s in frame.data[..2 * n].chunks_exact(2) {
-                    out.extend_from_slice(&u16::from_le_bytes([s[0], s[1]]).to_be_bytes());
+            let head = format!("P5\n{} {}\n{max}\n", frame.width, frame.height).into_bytes();
+            let body = if frame.bit_depth == 16 {
+                // Little-endian samples to PGM's big-endian ones (a loop the compiler vectorises).
+                let mut be = vec![0u8; 2 * n];
+                for (d, s) in be.chunks_exact_mut(2).zip(frame.data[..2 * n].chunks_exact(2)) {
+                    d[0] = s[1];
+                    d[1] = s[0];
                 }
+                Cow::Owned(be)
             } else {
-                out.extend_from_slice(&frame.data[..n]);
-            }
-            Ok(out)
+                Cow::Borrowed(&frame.data[..n])
+            };
+            Ok((head, body))
         }
         FrameFormat::Png => {
             let mut buf = std::io::Cursor::new(Vec::new());
@@ -97,9 +118,9 @@ pub fn encode(frame: &RawFrame, format: FrameFormat) -> std::io::Result<Vec<u8>>
                     .chunks_exact(2)
                     .flat_map(|s| u16::from_le_bytes([s[0], s[1]]).to_ne_bytes())
                     .collect();
-                (ne, image::ExtendedColorType::L16)
+                (Cow::Owned(ne), image::ExtendedColorType::L16)
             } else {
-                (frame.data[..n].to_vec(), image::ExtendedColorType::L8)
+                (Cow::Borrowed(&frame.data[..n]), image::ExtendedColorType::L8)
             };
             image::write_buffer_with_format(
                 &mut buf,
@@ -110,23 +131,33 @@ pub fn encode(frame: &RawFrame, format: FrameFormat) -> std::io::Result<Vec<u8>>
                 image::ImageFormat::Png,
             )
             .map_err(std::io::Error::other)?;
-            Ok(buf.into_inner())
+            Ok((buf.into_inner(), Cow::Borrowed(&[])))
         }
     }
 }
 
-/// Writes `bytes` to `path` atomically, with modification time `exposure`.
-fn write_file(path: &Path, bytes: &[u8], exposure: SystemTime) -> std::io::Result<()> {
+/// Writes `frame` to `path` in `format` atomically, with modification time `exposure`, synced
+/// to disk before the rename if `sync`.
+fn write_frame(
+    path: &Path,
+    frame: &RawFrame,
+    format: FrameFormat,
+    exposure: SystemTime,
+    sync: bool,
+) -> std::io::Result<()> {
+    let (head, body) = encode_parts(frame, format)?;
     let mut tmp = omni_formats::io::TempFile::create(path)?;
-    tmp.file().write_all(bytes)?;
+    tmp.file().write_all(&head)?;
+    tmp.file().write_all(&body)?;
     tmp.file().set_modified(exposure)?;
-    tmp.commit()
+    if sync { tmp.commit() } else { tmp.commit_unsynced() }
 }
 
 struct Job {
     order: u64,
     frame: CapturedFrame,
     image: RawFrame,
+    sync: bool,
 }
 
 type Done = (u64, std::io::Result<CapturedFrame>);
@@ -138,6 +169,7 @@ type Done = (u64, std::io::Result<CapturedFrame>);
 pub struct FrameWriter {
     dir: PathBuf,
     format: FrameFormat,
+    sync: bool,
     jobs: Option<SyncSender<Job>>,
     done: Receiver<Done>,
     workers: Vec<JoinHandle<()>>,
@@ -156,14 +188,14 @@ impl FrameWriter {
         let (done_tx, done) = std::sync::mpsc::channel::<Done>();
         let workers = (0..threads.max(1))
             .map(|_| {
-                let rx = rx.clone();
-                let done_tx = done_tx.clone();
+                let (rx, done_tx) = (rx.clone(), done_tx.clone());
                 std::thread::spawn(move || work(&rx, &done_tx, format))
             })
             .collect();
         Ok(FrameWriter {
             dir: dir.to_path_buf(),
             format,
+            sync: false,
             jobs: Some(jobs),
             done,
             workers,
@@ -173,16 +205,22 @@ impl FrameWriter {
         })
     }
 
+    /// Syncs each frame submitted from now on to disk before renaming it into place, so that a
+    /// power cut loses none of them once handed back.
+    pub fn sync_each_frame(&mut self, sync: bool) {
+        self.sync = sync;
+    }
+
     /// The file name of a frame with this stem, e.g. `000012` → `000012.pgm`.
     pub fn file_name(&self, stem: &str) -> String {
-        format!("{stem}.{}", self.format.extension())
+        self.format.file_name(stem)
     }
 
     /// Queues `image` to be written as `frame.name` in the directory; `frame` (its `path` set
     /// here) comes back from [`FrameWriter::written`] once the file is complete.
     pub fn submit(&mut self, mut frame: CapturedFrame, image: RawFrame) -> std::io::Result<()> {
         frame.path = self.dir.join(&frame.name);
-        let job = Job { order: self.submitted, frame, image };
+        let job = Job { order: self.submitted, frame, image, sync: self.sync };
         let jobs = self.jobs.as_ref().ok_or_else(|| std::io::Error::other("frame writer closed"))?;
         jobs.send(job).map_err(|_| std::io::Error::other("frame writer threads stopped"))?;
         self.submitted += 1;
@@ -244,8 +282,7 @@ fn work(jobs: &Mutex<Receiver<Job>>, done: &std::sync::mpsc::Sender<Done>, forma
         };
         let exposure = SystemTime::UNIX_EPOCH + Duration::from_micros(job.frame.time_us.max(0) as u64);
         let name = job.frame.path.display().to_string();
-        let result = encode(&job.image, format)
-            .and_then(|bytes| write_file(&job.frame.path, &bytes, exposure))
+        let result = write_frame(&job.frame.path, &job.image, format, exposure, job.sync)
             .map(|_| job.frame)
             .map_err(|e| std::io::Error::new(e.kind(), format!("{name}: {e}")));
         if done.send((job.order, result)).is_err() {
@@ -282,6 +319,29 @@ mod tests {
         assert_eq!(samples, (0..6).map(|i| (i * 257 + 1) as u16).collect::<Vec<_>>());
         let f8 = ramp(4, 1, 8, 250);
         assert_eq!(encode(&f8, FrameFormat::Pgm).unwrap(), b"P5\n4 1\n255\n\xfa\xfb\xfc\xfd");
+    }
+
+    /// Synced or not, 8- or 16-bit, a frame file holds exactly its encoding (checked against
+    /// the netpbm layout above), and no temporary is left.
+    #[test]
+    fn synced_and_unsynced_frames_are_the_same_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut w = FrameWriter::new(dir.path(), FrameFormat::Pgm, 2, 4).unwrap();
+        let frame = |k: u32| ramp(16, 4, if k < 2 { 8 } else { 16 }, k);
+        for k in 0..4u32 {
+            w.sync_each_frame(k % 2 == 1);
+            let name = w.file_name(&format!("{k:06}"));
+            w.submit(CapturedFrame::new(PathBuf::new(), name, 0), frame(k)).unwrap();
+        }
+        let got = w.flush(Duration::from_secs(20)).unwrap();
+        assert_eq!(got.len(), 4);
+        for (k, f) in got.iter().enumerate() {
+            assert_eq!(std::fs::read(&f.path).unwrap(), encode(&frame(k as u32), FrameFormat::Pgm).unwrap());
+        }
+        let last = std::fs::read(&got[3].path).unwrap();
+        assert_eq!(last.len(), b"P5\n16 4\n65535\n".len() + 2 * 64);
+        assert_eq!(&last[last.len() - 2..], ((63 * 257 + 3) as u16).to_be_bytes(), "big-endian samples");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 4, "no temporary file left");
     }
 
     #[test]

@@ -10,8 +10,9 @@
 //!   source sits behind the small [`pairing::FrameSource`] trait.
 //! * [`frame_id`], [`frame_writer`]: camera frame ids (the 16-bit GigE block id wraps), the
 //!   record of software triggers, and writing captured frames (PNG, PGM) in capture order.
-//! * `genicam` (feature `aravis`, needs the system libaravis-0.8): GenICam cameras through
-//!   Aravis as a frame source — listing, setup, software or hardware-line trigger.
+//! * [`genicam`]: GenICam cameras through Aravis as a frame source — listing, setup, software
+//!   or hardware-line trigger. The settings' checks and the frames' bookkeeping are always
+//!   built; the camera itself needs feature `aravis` (the system libaravis-0.8).
 //! * [`scan`]: a whole scan session (configure, arm, run, pair) producing stream records.
 //! * [`controller`] and [`emulator`]: the firmware logic and a virtual controller + camera that
 //!   serve it on a pseudo-terminal, with fault injection.
@@ -61,7 +62,6 @@ pub mod emulator;
 pub mod frame_id;
 pub mod frame_writer;
 pub mod framing;
-#[cfg(feature = "aravis")]
 pub mod genicam;
 pub mod message;
 pub mod pairing;

@@ -5,8 +5,8 @@
 #   fw-test       every firmware test (make test): protocol, refusals, retries, STOP, info, host
 #                 disconnect -> lasers off, and full scans paired with frames at 60/30 rpm,
 #                 with corrupted lines and with a stalled motor
-#   fw-test-scan  the scans alone: the frames' times need the simulation at real speed, which a
-#                 busy machine does not give the harness (it warns "behind real time")
+#   fw-test-scan  the scans alone: the frames' times need the simulation at real speed (the
+#                 harness warns "behind real time" when it falls behind; the test then retries)
 .PHONY: fw fw-test fw-test-scan
 EXTRA_TESTS += fw-test
 FW_OUT := $(CURDIR)/firmware/build

@@ -28,6 +28,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "avr_extint.h"
 #include "avr_ioport.h"
 #include "avr_uart.h"
 #include "sim_avr.h"
@@ -575,6 +576,11 @@ int main(int argc, char **argv)
     avr->frequency = (uint32_t)F_CPU;
     avr_load_firmware(avr, &fw);
     avr->sleep = no_sleep;
+    /* The encoder's A and B pins are also INT0/INT1, which the firmware leaves masked at their
+     * reset low-level sense; simavr's strict level emulation samples such a pin on every cycle
+     * while it is low, which would cost the harness its real time for nothing. */
+    avr_extint_set_strict_lvl_trig(avr, 0, 0);
+    avr_extint_set_strict_lvl_trig(avr, 1, 0);
 
     uint32_t flags = 0;
     avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);

@@ -251,7 +251,7 @@ fn scan_at(rpm: &str, laser_off: bool) -> Timing {
 fn scans_at_two_polygon_speeds_fire_every_trigger_at_its_scheduled_count() {
     // 60 rpm = 36 000 counts/s, and 30 rpm with --laser-off: two revolutions, the first with the
     // lasers off. (The firmware keeps up with ~100 000 counts/s, firmware/README.md; the harness
-    // needs about a core per 75 000 counts/s to keep real time, which the frames' times need.)
+    // takes ~0.1 core at 60 rpm to keep the real time the frames' times need.)
     in_real_time(|| {
         scan_at("60", false);
         scan_at("30", true);

@@ -45,7 +45,9 @@ lint: tools
 test: deps
 	$(MAKE) --no-print-directory test-suite
 
-test-suite: lint test-rust $(EXTRA_TESTS)
+# The build before clippy: clippy then reuses the build's dependencies (about 45 s instead of
+# 2.5-4 min when it runs first on a clean target, which would check every dependency again).
+test-suite: test-build lint test-rust $(EXTRA_TESTS)
 
 # Everything `cargo test` compiles, plus the Python extension (a cdylib, which no test target
 # builds), with one feature resolution: the parts' tests run these binaries without a rebuild.

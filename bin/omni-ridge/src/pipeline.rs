@@ -13,6 +13,7 @@ use omni_vision::stripe::{self, RidgeDetector, RidgeParams};
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -58,6 +59,44 @@ struct Detectors {
     /// Laser-off frames, decoded once for all the frames that share them.
     laser_off: stripe::LaserOffCache,
     static_ambient: Option<GrayImage>,
+    along: AlongStripeTally,
+}
+
+/// The points `--along-stripe` kept and refused over the run (stripes shorter than its window).
+#[derive(Default)]
+struct AlongStripeTally {
+    kept: AtomicUsize,
+    refused: AtomicUsize,
+    /// The longest stripe span seen (px), as f64 bits (non-negative floats order as their bits).
+    longest_bits: AtomicU64,
+}
+
+impl AlongStripeTally {
+    /// The fit's window is 2L; refusing stripes shorter than it is the user's business to hear
+    /// about, and a run where it refused everything is an error.
+    fn verdict(&self, along_px: f64) -> CliResult {
+        let (kept, refused) = (self.kept.load(Ordering::Relaxed), self.refused.load(Ordering::Relaxed));
+        if refused == 0 {
+            return Ok(());
+        }
+        let longest = f64::from_bits(self.longest_bits.load(Ordering::Relaxed));
+        let window = 2.0 * along_px;
+        if kept == 0 {
+            return Err(CliError::new(format!(
+                "--along-stripe {along_px} px fits over {window} px of stripe, longer than every stripe found \
+                 (the longest spans {longest:.1} px end to end): nothing was measured; use --along-stripe {} or less",
+                (longest / 2.0).floor()
+            )));
+        }
+        omni_cli::warn(
+            "omni-ridge",
+            &format!(
+                "--along-stripe {along_px} px: {refused} of {} points refused, on stripes shorter than its {window} px window",
+                kept + refused
+            ),
+        );
+        Ok(())
+    }
 }
 
 impl Detectors {
@@ -89,6 +128,7 @@ pub fn run(input: Input, writer: impl Write, output_name: &str, config: Config) 
         from_first_frame: OnceLock::new(),
         laser_off: stripe::LaserOffCache::default(),
         static_ambient: config.static_ambient,
+        along: AlongStripeTally::default(),
     });
     let threads = config.threads.max(1);
     let window = 2 * threads + 2;
@@ -115,7 +155,8 @@ pub fn run(input: Input, writer: impl Write, output_name: &str, config: Config) 
         std::thread::spawn(move || worker(&job_rx, &out_tx, &detectors, overlay.as_deref().map(|p| p.as_path())));
     }
     drop(out_tx);
-    write_in_order(out_rx, token_tx, writer, output_name, config.keep_going, &read_error)
+    write_in_order(out_rx, token_tx, writer, output_name, config.keep_going, &read_error)?;
+    detectors.along.verdict(config.params.along_stripe_px)
 }
 
 /// What the reader thread does with the stream besides reading it.
@@ -231,7 +272,16 @@ fn process_frame(
         img.subtract_saturating(ambient).map_err(|m| format!("{}: static ambient's {m}", path.display()))?;
     }
     let (detector, what) = detectors.for_image(&img)?;
-    let points = stripe::frame_points(&img, detector, what).map_err(|m| format!("{}: {m}", path.display()))?;
+    let mut points = stripe::frame_points(&img, detector, what).map_err(|m| format!("{}: {m}", path.display()))?;
+    let along = detectors.params.along_stripe_px;
+    if along > 0.0 {
+        let short = stripe::refuse_short_stripes(points, 2.0 * along);
+        let tally = &detectors.along;
+        tally.kept.fetch_add(short.kept.len(), Ordering::Relaxed);
+        tally.refused.fetch_add(short.refused, Ordering::Relaxed);
+        tally.longest_bits.fetch_max(short.longest_px.to_bits(), Ordering::Relaxed);
+        points = short.kept;
+    }
     if let Some(dir) = overlay {
         let rgb = stripe::draw_overlay(&img, &points);
         write_rgb_png(&dir.join(format!("{:06}.png", frame.seq)), img.width, img.height, &rgb)

@@ -351,3 +351,57 @@ fn static_ambient_removes_a_pattern_that_stays_put() {
         stderr(&out)
     );
 }
+
+/// A straight stripe `length` px long (σ 1.5 px across, ends tapering over 2 px) at y = 100.
+fn short_stripe(length: f64) -> GrayImage {
+    let mut img = GrayImage::new(SIZE, SIZE, 8);
+    let (x0, x1) = (CENTRE - 0.5 * length, CENTRE + 0.5 * length);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            let (fx, fy) = (x as f64, y as f64);
+            let along = ((fx - x0).min(x1 - fx) / 2.0).clamp(0.0, 1.0);
+            let v = 180.0 * along * (-(fy - 100.0).powi(2) / 4.5).exp();
+            img.data[(y * SIZE + x) as usize] = v.round() as u16;
+        }
+    }
+    img
+}
+
+#[test]
+fn an_along_stripe_fit_longer_than_the_stripe_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    write_gray_png(&dir.path().join("ring.png"), &ring(40.0, 180.0, |_, _| 0.0)).unwrap();
+    write_gray_png(&dir.path().join("short.png"), &short_stripe(14.0)).unwrap();
+    let only_short = stream_text(&[header(dir.path()), frame(0, "short.png"), status(1)]);
+    // ±3 px fits on the 14 px stripe.
+    let out = run(&["--along-stripe", "3"], &only_short);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let Record::Frame(f) = &records(&out.stdout)[1] else { panic!("no frame") };
+    assert!(f.stripe.as_ref().unwrap().len() >= 5, "{:?}", f.stripe);
+    // ±10 px does not: the run fails, names the option and says what would fit; the output
+    // file is not written.
+    let path = dir.path().join("out.jsonl");
+    let mut child = Command::new(BIN)
+        .args(["--along-stripe", "10", "-o", path.to_str().unwrap()])
+        .stdin(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(only_short.as_bytes()).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let e = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{e}");
+    assert!(e.contains("--along-stripe 10 px") && e.contains("longer than every stripe found"), "{e}");
+    assert!(e.contains("use --along-stripe ") && e.contains(" or less"), "{e}");
+    assert_eq!(e.lines().count(), 1, "{e}");
+    assert!(!path.exists());
+    // With a long stripe in the stream the short one's points are dropped, with a warning.
+    let mixed = stream_text(&[header(dir.path()), frame(0, "ring.png"), frame(1, "short.png"), status(2)]);
+    let out = run(&["--along-stripe", "10"], &mixed);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("points refused, on stripes shorter than its 20 px window"), "{}", stderr(&out));
+    let recs = records(&out.stdout);
+    let (Record::Frame(ring), Record::Frame(short)) = (&recs[1], &recs[2]) else { panic!("frames") };
+    assert!(ring.stripe.as_ref().unwrap().len() > 200);
+    assert!(short.stripe.as_ref().unwrap().is_empty());
+}

@@ -53,6 +53,7 @@ mod rowscan;
 mod sampling;
 mod steger;
 
+pub use along::{ShortStripes, refuse_short_stripes};
 pub use estimators::Segment;
 pub use frames::{
     LaserOffCache, STATIC_AMBIENT_MAX_FRAMES, STATIC_AMBIENT_MIN_FRAMES, check_size, frame_points, load_frame_image,

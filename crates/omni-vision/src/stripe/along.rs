@@ -94,6 +94,98 @@ pub fn fit_along_stripe(points: &[StripePoint], centre: (f64, f64), half_px: f64
     out
 }
 
+/// Points of one stripe lie at most this far (px) from their nearest neighbour on it: about one
+/// per pixel of length, with gaps where a point was dropped (a dark speckle).
+const STRIPE_LINK_PX: f64 = 2.5;
+
+/// What [`refuse_short_stripes`] kept and refused.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ShortStripes {
+    pub kept: Vec<StripePoint>,
+    /// Points removed: their stripe spans less than the window.
+    pub refused: usize,
+    /// The longest end-to-end span of a stripe in the frame (px).
+    pub longest_px: f64,
+}
+
+/// Removes the points of stripes that span less than `window_px` end to end, which a fit along
+/// the stripe over that window cannot be made on. A stripe is a chain of points each within
+/// [`STRIPE_LINK_PX`] of the next; its span is the distance between its two farthest points
+/// (the chord, shorter than the arc on a curved stripe). Order and attributes are kept.
+pub fn refuse_short_stripes(points: Vec<StripePoint>, window_px: f64) -> ShortStripes {
+    let labels = stripe_labels(&points);
+    let stripes = labels.iter().max().map_or(0, |&m| m + 1);
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); stripes];
+    for (i, &l) in labels.iter().enumerate() {
+        members[l].push(i);
+    }
+    let spans: Vec<f64> = members.iter().map(|m| span_px(&points, m)).collect();
+    let longest_px = spans.iter().cloned().fold(0.0, f64::max);
+    let total = points.len();
+    let kept: Vec<StripePoint> =
+        points.into_iter().zip(&labels).filter(|(_, l)| spans[**l] >= window_px).map(|(p, _)| p).collect();
+    ShortStripes { refused: total - kept.len(), kept, longest_px }
+}
+
+/// The stripe (connected chain, 0-based) of every point: union-find over a grid of cells
+/// [`STRIPE_LINK_PX`] wide.
+fn stripe_labels(points: &[StripePoint]) -> Vec<usize> {
+    let cell = |p: &StripePoint| ((p.u / STRIPE_LINK_PX).floor() as i64, (p.v / STRIPE_LINK_PX).floor() as i64);
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = std::collections::HashMap::new();
+    for (i, p) in points.iter().enumerate() {
+        grid.entry(cell(p)).or_default().push(i);
+    }
+    let mut parent: Vec<usize> = (0..points.len()).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    for (i, p) in points.iter().enumerate() {
+        let (cx, cy) = cell(p);
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let Some(others) = grid.get(&(cx + dx, cy + dy)) else { continue };
+                for &j in others.iter().filter(|&&j| j > i) {
+                    if (points[j].u - p.u).hypot(points[j].v - p.v) <= STRIPE_LINK_PX {
+                        let (a, b) = (root(&mut parent, i), root(&mut parent, j));
+                        parent[a.max(b)] = a.min(b);
+                    }
+                }
+            }
+        }
+    }
+    // Roots in order of first appearance become labels 0, 1, ...
+    let mut label_of_root = vec![usize::MAX; points.len()];
+    let mut next = 0;
+    (0..points.len())
+        .map(|i| {
+            let r = root(&mut parent, i);
+            if label_of_root[r] == usize::MAX {
+                label_of_root[r] = next;
+                next += 1;
+            }
+            label_of_root[r]
+        })
+        .collect()
+}
+
+/// The distance (px) between the two farthest of `members`, from two sweeps (farthest from the
+/// first point, then farthest from that one): exact for a chain that does not curl back.
+fn span_px(points: &[StripePoint], members: &[usize]) -> f64 {
+    let farthest = |from: usize| {
+        members
+            .iter()
+            .map(|&j| (j, (points[j].u - points[from].u).hypot(points[j].v - points[from].v)))
+            .fold((from, 0.0), |best, c| if c.1 > best.1 { c } else { best })
+    };
+    let Some(&first) = members.first() else { return 0.0 };
+    let (end, _) = farthest(first);
+    farthest(end).1
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -142,5 +234,20 @@ mod tests {
         for (p, q) in pts.iter().zip(&fitted) {
             assert!((polar(p, c).1 - polar(q, c).1).abs() < 1e-9);
         }
+    }
+    #[test]
+    fn stripes_shorter_than_the_window_are_refused_and_the_longest_span_reported() {
+        // A straight stripe 30 px long (points 1 px apart, one gap of 2 px) and a 6 px one.
+        let at = |u: f64, v: f64| StripePoint { u, v, intensity: 50.0, width: 3.0, quality: 0 };
+        let mut pts: Vec<StripePoint> = (0..=30).filter(|&i| i != 15).map(|i| at(10.0 + i as f64, 20.0)).collect();
+        pts.extend((0..=6).map(|i| at(10.0 + i as f64, 40.0)));
+        let r = refuse_short_stripes(pts.clone(), 10.0);
+        assert_eq!((r.kept.len(), r.refused), (30, 7));
+        assert!((r.longest_px - 30.0).abs() < 1e-9, "{}", r.longest_px);
+        assert_eq!(r.kept, pts[..30].to_vec());
+        let none = refuse_short_stripes(pts.clone(), 31.0);
+        assert_eq!((none.kept.len(), none.refused), (0, 37));
+        assert_eq!(refuse_short_stripes(pts.clone(), 6.0).kept, pts);
+        assert_eq!(refuse_short_stripes(Vec::new(), 6.0), ShortStripes::default());
     }
 }

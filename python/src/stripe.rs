@@ -72,7 +72,7 @@ pub fn detect_stripe<'py>(
     params.max_width = max_width.unwrap_or(params.max_width);
     params.hessian_sigma = hessian_sigma.unwrap_or(params.hessian_sigma);
     params.along_stripe_px = along_stripe_px.unwrap_or(params.along_stripe_px);
-    params.optics_blur_px = optics_blur_px.unwrap_or(params.optics_blur_px);
+    params.optics_blur_px = optics_blur_px.or(params.optics_blur_px);
     params.validate().map_err(crate::value_error)?;
 
     let mut img = gray_image(image, "image")?;

@@ -73,10 +73,10 @@ struct Args {
     #[arg(long, default_value_t = 0.0, value_name = "PX", allow_negative_numbers = true)]
     along_stripe: f64,
     /// With --sampling rays only: the camera's optical blur (Gaussian PSF σ, px; pixel area not
-    /// included), whose pull on curved stripes is removed. The normal sampling measures the blur
-    /// on each frame instead.
-    #[arg(long, default_value_t = 0.7, value_name = "PX", allow_negative_numbers = true)]
-    optics_blur: f64,
+    /// included), whose pull on curved stripes is removed [default: measured on each frame, as
+    /// the normal sampling always does].
+    #[arg(long, value_name = "PX", allow_negative_numbers = true)]
+    optics_blur: Option<f64>,
     /// Write each frame with its detected centres drawn as DIR/<seq>.png.
     #[arg(long, value_name = "DIR")]
     overlay: Option<PathBuf>,

@@ -167,9 +167,9 @@ pub struct RidgeParams {
     /// lateral resolution.
     pub along_stripe_px: f64,
     /// With [`Sampling::Rays`] only: the camera's optical blur (Gaussian PSF σ, px), pixel
-    /// integration not included, whose pull on curved stripes the `normal` post-pass removes.
-    /// The normal sampling measures the blur on each frame instead.
-    pub optics_blur_px: f64,
+    /// integration not included, whose pull on curved stripes the `normal` post-pass removes;
+    /// `None` (the default) measures the blur on each frame, as the normal sampling always does.
+    pub optics_blur_px: Option<f64>,
 }
 
 impl Default for RidgeParams {
@@ -182,7 +182,7 @@ impl Default for RidgeParams {
             max_width: 12.0,
             hessian_sigma: 1.0,
             along_stripe_px: 0.0,
-            optics_blur_px: 0.7,
+            optics_blur_px: None,
         }
     }
 }
@@ -212,8 +212,10 @@ impl RidgeParams {
         if !(self.along_stripe_px.is_finite() && (0.0..=20.0).contains(&self.along_stripe_px)) {
             return Err(format!("along-stripe fit must be in [0, 20] px, got {}", self.along_stripe_px));
         }
-        if !(self.optics_blur_px.is_finite() && (0.0..=5.0).contains(&self.optics_blur_px)) {
-            return Err(format!("optics blur must be in [0, 5] px, got {}", self.optics_blur_px));
+        if let Some(blur) = self.optics_blur_px
+            && !(blur.is_finite() && (0.0..=5.0).contains(&blur))
+        {
+            return Err(format!("optics blur must be in [0, 5] px, got {blur}"));
         }
         Ok(())
     }

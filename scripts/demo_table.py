@@ -78,15 +78,19 @@ def targets(out, results, b):
         if sigma <= target:
             continue
         if sweep is None:
-            sweep = [(f, budget(out, f)["total_mm"]) for f in F_STOPS]
-        scaled = [(f, sigma * total / b["total_mm"]) for f, total in sweep]
+            sweep = [(f, budget(out, f)) for f in F_STOPS]
+        scaled = [(f, sigma * line["total_mm"] / b["total_mm"]) for f, line in sweep]
         print("            scaled by the budget: " + ", ".join(f"F/{f:g} {s:.3f}" for f, s in scaled))
         meeting = [f for f, s in scaled if s <= target]
         if meeting:
             print(f"            the target needs F/{max(meeting):g} or a wider aperture")
         else:
-            print(f"            no aperture from F/{F_STOPS[0]:g} to F/{F_STOPS[-1]:g} meets it: speckle sets the "
-                  f"limit (budget {sweep[0][1]:.3f} mm per point at 500 mm even at F/{F_STOPS[0]:g})")
+            widest = sweep[0][1]
+            terms = {"speckle": widest["speckle_mm"], "noise": widest["noise_mm"],
+                     "calibration": widest["calibration_mm"] or 0.0}
+            print(f"            no aperture from F/{F_STOPS[0]:g} to F/{F_STOPS[-1]:g} meets it: "
+                  f"{max(terms, key=terms.get)} sets the limit (budget {widest['total_mm']:.3f} mm per point "
+                  f"at 500 mm even at F/{F_STOPS[0]:g})")
         results[obj]["calibrated"]["f_number_sweep"] = dict((f"F/{f:g}", s) for f, s in scaled)
 
 

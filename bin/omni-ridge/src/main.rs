@@ -67,7 +67,7 @@ struct Args {
     /// either side (0 = off): a parabola across the normal (a line along rays). Averages speckle
     /// and noise at the price of lateral resolution: a step along the stripe rises 10-90 % over
     /// 1.6 × PX (5 px at 3; 2 px without the fit). Up to 3 keeps curved stripes unbiased; longer
-    /// fits suit flat surfaces only (at 6, a 50 mm sphere at 500 mm comes out 1.2 mm small).
+    /// fits suit flat surfaces only (at 6, `make demo`'s 50 mm sphere comes out 1.2 mm small).
     /// Stripes shorter than the window (2 × PX end to end) are refused: their points are dropped
     /// with a warning, and a run in which no stripe is that long fails.
     #[arg(long, default_value_t = 0.0, value_name = "PX", allow_negative_numbers = true)]

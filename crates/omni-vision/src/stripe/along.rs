@@ -235,6 +235,7 @@ mod tests {
             assert!((polar(p, c).1 - polar(q, c).1).abs() < 1e-9);
         }
     }
+
     #[test]
     fn stripes_shorter_than_the_window_are_refused_and_the_longest_span_reported() {
         // A straight stripe 30 px long (points 1 px apart, one gap of 2 px) and a 6 px one.

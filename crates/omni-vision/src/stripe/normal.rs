@@ -14,8 +14,8 @@
 //! whatever its width; the optics, the pixel area (1/12 px²) and the sampling kernel
 //! ([`super::sampling::SAMPLE_SIGMA_PX`]) add up. Their total σ² is measured on the frame (the
 //! median of its profiles' Gaussian-equivalent variances) unless the optics' σ is given
-//! ([`super::RidgeParams::optics_blur_px`]), and the shift is removed. Points keep the ray's measurement if saturated, with fewer than
-//! [`MIN_POINTS`] neighbours, when the new profile fails a check, or when the move would exceed
+//! ([`super::RidgeParams::optics_blur_px`]), and the shift is removed. Points keep the ray's
+//! measurement if saturated, with fewer than [`MIN_POINTS`] neighbours, when the new profile fails a check, or when the move would exceed
 //! [`MAX_MOVE_PX`]. Steger's Hessian method is left alone: its centre comes from the image's own
 //! second derivatives, not from the ray's profile.
 
@@ -450,8 +450,7 @@ mod tests {
     /// A thin line (a ring of radius 15 or 25 px, 0.3 px across) through optics of σ 0.4 to
     /// 1.5 px the detector is not told: the blur measured on the frame removes the pull (up to
     /// 0.066 px at σ 1.5, R 15) as well as the exact σ told would, to 0.005 px. What remains,
-    /// ≤ 0.015 px at R 15 and ≤ 0.01 at R 25, is there with the exact σ too (measured: the
-    /// sharpest lines' sampling).
+    /// ≤ 0.015 px at R 15 and ≤ 0.01 at R 25, is there with the exact σ too.
     #[test]
     fn the_pull_of_an_untold_blur_is_removed_on_a_ring() {
         let c = Vector2::new(140.0, 80.0);

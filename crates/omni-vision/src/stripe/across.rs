@@ -16,9 +16,10 @@
 //!   or tapering ([`MAX_WIDTH_SLOPE`]);
 //! * gives each point the stripe's local curvature κ, from a parabola through its neighbours,
 //!   and removes the blur's pull towards the centre of curvature, σ²κ/2, with σ² measured on the
-//!   frame itself (the median over its profiles of the second moment that scales the pull, see
-//!   [`RidgeDetector::pull_variance`]), so that the pull comes out right for any lens, Gaussian
-//!   or defocused, without being told its blur;
+//!   frame itself (the median, over the stripe points that pass the checks above, of the
+//!   second moment that scales the pull, see [`RidgeDetector::pull_variance`]), so that the pull
+//!   comes out right for any lens, Gaussian or defocused, without being told its blur, and lit
+//!   areas refused as stripes do not enter it;
 //! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): a
 //!   line through the neighbours once a wider parabola's curvature is taken out, so that a curved
 //!   stripe keeps its centre.
@@ -352,15 +353,14 @@ impl RidgeDetector {
     /// Links each centre to its neighbours on the same stripe and returns the points that
     /// survive the checks, corrected for the blur's pull and fitted along the stripe (module docs).
     fn link_and_correct(&self, centres: &[Centre]) -> Vec<StripePoint> {
-        // The blur: the median of the profiles' pull variances.
-        let blur_variance = pull_variance_median(centres).unwrap_or(0.0);
         let widest =
             half_width_quantile(centres, NARROW_PERCENTILE).map_or(f64::INFINITY, |w| MAX_HALF_WIDTH_RATIO * w);
         let along = self.params.along_stripe_px;
         let reach = SHAPE_HALF_ARC_PX.max(2.0 * along).max(super::MIN_STRIPE_ARC_PX) + 1.0;
         let grid = Grid::new(centres, reach);
         let reach2 = reach * reach;
-        let mut out = Vec::with_capacity(centres.len());
+        // The stripe's points: (centre, the bend c of d = c·t², the along-stripe fit's offset).
+        let mut kept: Vec<(usize, Option<f64>, f64)> = Vec::with_capacity(centres.len());
         let (mut neighbours, mut widths) = (Vec::new(), Vec::new());
         for (i, c) in centres.iter().enumerate() {
             let (px, py) = (c.point.u, c.point.v);
@@ -430,25 +430,29 @@ impl RidgeDetector {
             {
                 continue;
             }
-            let mut shift = 0.0;
             let curvature = fit_parabola(&neighbours, SHAPE_HALF_ARC_PX.max(2.0 * along)).map(|f| f[2]);
-            if let Some(c) = curvature {
-                // A parabola d = c·t² has its centre of curvature on the +n side for c > 0; the
-                // blur pulls the centre that way by σ²κ/2 = σ²·c.
-                shift -= blur_variance * c;
-                if along > 0.0
-                    // The offset at t = 0 once the wider parabola's curvature is taken out.
-                    && let Some((offset, _)) = fit_line(&neighbours, along, |n| n.1 - c * n.0 * n.0)
-                {
-                    shift += offset;
-                }
-            }
+            // The offset at t = 0 once the wider parabola's curvature is taken out.
+            let offset = match curvature {
+                Some(c) if along > 0.0 => fit_line(&neighbours, along, |n| n.1 - c * n.0 * n.0).map_or(0.0, |f| f.0),
+                _ => 0.0,
+            };
+            kept.push((i, curvature, offset));
+        }
+        // The blur, from the stripe's own profiles (a frame's other candidates, lit areas and
+        // textures refused above, are wider and would inflate it).
+        let blur_variance = pull_variance_median(kept.iter().map(|k| &centres[k.0])).unwrap_or(0.0);
+        let mut out = Vec::with_capacity(kept.len());
+        for (i, curvature, offset) in kept {
+            let c = &centres[i];
+            // A parabola d = c·t² has its centre of curvature on the +n side for c > 0; the blur
+            // pulls the centre that way by σ²κ/2 = σ²·c.
+            let shift = offset - curvature.map_or(0.0, |k| blur_variance * k);
             if shift.abs() > MAX_MOVE_PX {
                 continue;
             }
             let mut p = c.point;
-            p.u += shift * nx;
-            p.v += shift * ny;
+            p.u += shift * c.normal.0;
+            p.v += shift * c.normal.1;
             out.push(p);
         }
         out
@@ -500,10 +504,10 @@ fn segment_near(q: &[f32], mid: usize, t: f32) -> Option<Segment> {
     super::segment_at(q, peak, t)
 }
 
-/// The median of the frame's pull variances (px², [`RidgeDetector::pull_variance`]); `None` if
-/// no profile has one.
-fn pull_variance_median(centres: &[Centre]) -> Option<f64> {
-    let mut v: Vec<f64> = centres.iter().filter_map(|c| c.pull_variance).collect();
+/// The median of the centres' pull variances (px², [`RidgeDetector::pull_variance`]); `None`
+/// if no profile has one.
+fn pull_variance_median<'a>(centres: impl Iterator<Item = &'a Centre>) -> Option<f64> {
+    let mut v: Vec<f64> = centres.filter_map(|c| c.pull_variance).collect();
     if v.is_empty() {
         return None;
     }
@@ -653,6 +657,38 @@ mod tests {
                 assert!(bias.abs() <= 0.01, "σ {sigma} R {radius}: bias {bias:+.4} px");
             }
         }
+    }
+
+    /// The blur is measured on the stripe's own profiles, not on everything the frame offers:
+    /// beside a small ring, five long lit bands 2.5× wider than the laser's line (refused as
+    /// lit areas) give most of the profiles, and the ring is not over-corrected.
+    #[test]
+    fn the_blur_is_measured_on_the_stripe_not_on_lit_areas_beside_it() {
+        let (w, h) = (160u32, 160u32);
+        let (cx, cy) = (80.3, 79.6);
+        let (radius, sigma) = (15.0, 0.7);
+        let img = render(w, h, 16, 0.0, 1, |x, y| {
+            let ring = 40000.0 * blurred_ring((x - cx).hypot(y - cy), radius, sigma);
+            let bands: f64 = [20.0, 40.0, 120.0, 140.0]
+                .iter()
+                .map(|&b| 12000.0 * (-(x - b).powi(2) / (2.0 * 1.8 * 1.8)).exp())
+                .sum::<f64>()
+                + 12000.0 * (-(y - 140.0).powi(2) / (2.0 * 1.8 * 1.8)).exp();
+            ring + bands
+        });
+        let circle = MirrorCircle { centre: Vector2::new(cx, cy), inner_radius: 2.0, outer_radius: 75.0 };
+        let points = RidgeDetector::new(w, h, circle, RidgeParams::default()).detect(&img);
+        let errors: Vec<f64> =
+            points.iter().map(|p| (p.u - cx).hypot(p.v - cy) - radius).filter(|e| e.abs() < 2.0).collect();
+        let n = errors.len() as f64;
+        let bias = errors.iter().sum::<f64>() / n;
+        eprintln!(
+            "ring R {radius} px beside lit bands: {} of {} points, bias {bias:+.4} px",
+            errors.len(),
+            points.len()
+        );
+        assert!(n > 0.6 * std::f64::consts::TAU * radius, "{n} ring points");
+        assert!(bias.abs() <= 0.01, "bias {bias:+.4} px");
     }
 }
 

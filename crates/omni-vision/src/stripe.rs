@@ -1199,5 +1199,14 @@ fn fast_atan2(y: f64, x: f64) -> f64 {
 #[cfg(test)]
 pub(super) mod tests;
 
+/// The median of `v` (the lower of the two middle values for an even count); `None` if empty.
+fn lower_median(mut v: Vec<f64>) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    let k = (v.len() - 1) / 2;
+    Some(*v.select_nth_unstable_by(k, f64::total_cmp).1)
+}
+
 #[cfg(test)]
 mod sim_tests;

@@ -507,12 +507,7 @@ fn segment_near(q: &[f32], mid: usize, t: f32) -> Option<Segment> {
 /// The median of the centres' pull variances (px², [`RidgeDetector::pull_variance`]); `None`
 /// if no profile has one.
 fn pull_variance_median<'a>(centres: impl Iterator<Item = &'a Centre>) -> Option<f64> {
-    let mut v: Vec<f64> = centres.filter_map(|c| c.pull_variance).collect();
-    if v.is_empty() {
-        return None;
-    }
-    let k = (v.len() - 1) / 2;
-    Some(*v.select_nth_unstable_by(k, f64::total_cmp).1)
+    super::lower_median(centres.filter_map(|c| c.pull_variance).collect())
 }
 
 /// The `percent` quantile of the frame's unsaturated half-maximum widths (px); `None` if there

@@ -161,8 +161,7 @@ impl RidgeDetector {
 /// threshold-to-threshold width w at contrast A: w = 2σ·√(2 ln(A/T)).
 fn ray_bias(p: &StripePoint, shape: &Shape, kappa_inwards: f64, threshold: f64) -> f64 {
     let m2 = shape.slope * shape.slope;
-    let log_ratio = (p.intensity / threshold.max(1e-9)).max(1.5).ln();
-    let sigma2 = p.width * p.width / (8.0 * log_ratio);
+    let sigma2 = ray_profile_variance(p, threshold);
     let brightness = sigma2 * shape.log_intensity_slope * shape.slope / (1.0 + m2);
     let bend = 0.5 * sigma2 * kappa_inwards * m2 / (1.0 + m2);
     brightness.abs() + bend.abs()
@@ -175,20 +174,20 @@ fn ray_bias(p: &StripePoint, shape: &Shape, kappa_inwards: f64, threshold: f64) 
 /// under 0.1 px at this sensor's scale), so the profile's spread is the blurs'. `None` without a
 /// point of contrast ≥ 2T.
 fn measured_blur_variance(points: &[StripePoint], shapes: &[Option<Shape>], threshold: f64) -> Option<f64> {
-    let mut v: Vec<f64> = points
+    let v: Vec<f64> = points
         .iter()
         .zip(shapes)
         .filter(|(p, _)| p.quality & quality::SATURATED == 0 && p.intensity >= 2.0 * threshold)
-        .filter_map(|(p, shape)| {
-            let m2 = shape.as_ref()?.slope.powi(2);
-            Some(p.width * p.width / (8.0 * (p.intensity / threshold).ln()) / (1.0 + m2))
-        })
+        .filter_map(|(p, shape)| Some(ray_profile_variance(p, threshold) / (1.0 + shape.as_ref()?.slope.powi(2))))
         .collect();
-    if v.is_empty() {
-        return None;
-    }
-    let middle = v.len() / 2;
-    Some(*v.select_nth_unstable_by(middle, f64::total_cmp).1)
+    super::lower_median(v)
+}
+
+/// The Gaussian-equivalent variance (px²) of `p`'s profile along its ray, from its
+/// threshold-to-threshold width w at contrast A: w = 2σ·√(2 ln(A/T)), A/T taken as at least 1.5.
+fn ray_profile_variance(p: &StripePoint, threshold: f64) -> f64 {
+    let log_ratio = (p.intensity / threshold.max(1e-9)).max(1.5).ln();
+    p.width * p.width / (8.0 * log_ratio)
 }
 
 /// Curvature (1/px) of the polar curve r(φ) of the stripe, positive when it bends around the

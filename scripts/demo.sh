@@ -3,7 +3,8 @@
 #  1. create a realistic, imperfect virtual sensor (the truth the pipeline must recover);
 #  2. calibrate it as a user would calibrate hardware (scripts/calibrate.sh);
 #  3. scan the paper's test objects through omni-trigger (emulator) | omni-ridge |
-#     omni-triangulate | omni-merge (scripts/scan.sh);
+#     omni-triangulate | omni-merge (scripts/scan.sh), each frame with a laser-off frame (the
+#     room is lit: without it a silhouette's ambient edge cuts the last px of curved stripes);
 #  4. evaluate with omni-eval and print one table: the paper's numbers, ours with the calibrated
 #     sensor, ours with the true sensor files (the floor set by noise alone);
 #  5. leave PLY files and a PNG picture of each cloud in $OUT.
@@ -45,7 +46,8 @@ log "3/5 scans: $objects"
 for obj in $objects; do
   scene="$here/testdata/scenes/$obj.json"
   ANGLES=$scan_angles "$here/scripts/scan.sh" --camera "$OUT/calib/camera.json" --scanner "$OUT/calib/scanner.json" \
-    --emulate "$scene" --true-camera "$OUT/truth/camera.json" --true-scanner "$OUT/truth/scanner.json" --out "$OUT/$obj"
+    --emulate "$scene" --true-camera "$OUT/truth/camera.json" --true-scanner "$OUT/truth/scanner.json" \
+    --laser-off --out "$OUT/$obj"
   # The same stripes reconstructed with the true sensor files: the floor set by noise alone.
   omni-triangulate --camera "$OUT/truth/camera.json" --scanner "$OUT/truth/scanner.json" "$OUT/$obj/stripes.jsonl" \
     | omni-merge - --statistical 20,2.0 -o "$OUT/$obj/cloud_true_sensor.ply"

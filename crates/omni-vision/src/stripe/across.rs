@@ -10,7 +10,8 @@
 //! the same stripe (close, with nearly parallel normals), which
 //! * drops isolated specks and the last [`END_PX`] of a stripe;
 //! * drops profiles cut by a silhouette or a crease: lopsided on average along the stripe
-//!   ([`MAX_ASYMMETRY`]; one profile's lopsidedness is speckle) or much narrower than their
+//!   ([`MAX_ASYMMETRY`]; one profile's lopsidedness is speckle), lopsided by twice that where
+//!   the neighbours are too few to fit the stripe's shape, or much narrower than their
 //!   neighbours ([`MIN_WIDTH_RATIO`]);
 //! * drops lit areas of the ambient image, wider than the laser's line ([`MAX_HALF_WIDTH_RATIO`])
 //!   or tapering ([`MAX_WIDTH_SLOPE`]);
@@ -431,6 +432,11 @@ impl RidgeDetector {
                 continue;
             }
             let curvature = fit_parabola(&neighbours, SHAPE_HALF_ARC_PX.max(2.0 * along)).map(|f| f[2]);
+            // Too few neighbours on one side for the stripe's shape are too few to outvote a
+            // profile's own lopsidedness either: such a profile is taken as cut.
+            if curvature.is_none() && c.asymmetry.abs() > 2.0 * MAX_ASYMMETRY {
+                continue;
+            }
             // The offset at t = 0 once the wider parabola's curvature is taken out.
             let offset = match curvature {
                 Some(c) if along > 0.0 => fit_line(&neighbours, along, |n| n.1 - c * n.0 * n.0).map_or(0.0, |f| f.0),

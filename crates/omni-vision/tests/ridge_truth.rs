@@ -24,6 +24,12 @@ struct Tally {
     /// Truth stripe length (px) per 10° band of stripe-to-ray angle, and how much is covered.
     band_total: [f64; 9],
     band_covered: [f64; 9],
+    /// The same for the visible stripe only ([`Visibility`]); empty when not judged.
+    visible_total: [f64; 9],
+    visible_covered: [f64; 9],
+    /// Sum and count of the errors by the band of their nearest truth segment.
+    band_error_sum: [f64; 9],
+    band_error_count: [usize; 9],
 }
 
 impl Tally {
@@ -34,6 +40,19 @@ impl Tally {
     }
     fn coverage(&self, band: usize) -> Option<f64> {
         (self.band_total[band] >= MIN_BAND_PX).then(|| self.band_covered[band] / self.band_total[band])
+    }
+    fn visible_coverage(&self, band: usize) -> Option<f64> {
+        (self.visible_total[band] >= MIN_BAND_PX).then(|| self.visible_covered[band] / self.visible_total[band])
+    }
+    fn visible_line(&self) -> String {
+        let cov: Vec<String> =
+            (0..9).map(|b| self.visible_coverage(b).map_or("  -  ".into(), |c| format!("{:5.1}", 100.0 * c))).collect();
+        let total: f64 = self.visible_total.iter().sum();
+        format!(
+            "  visible stripe {total:6.0} px ({:.1} % of it) | coverage by 10° band: {}",
+            100.0 * total / self.band_total.iter().sum::<f64>().max(1.0),
+            cov.join(" ")
+        )
     }
     fn line(&self, name: &str) -> String {
         let (rms, bias) = self.rms_bias();
@@ -53,11 +72,22 @@ impl Tally {
 }
 
 fn add(t: &mut Tally, points: &[StripePoint], truth: &[TruthPoint], centre: (f64, f64)) {
+    add_judged(t, points, truth, centre, None);
+}
+
+/// As [`add`], also tallying the coverage of the stripe that `visible` judges visible.
+fn add_judged(
+    t: &mut Tally,
+    points: &[StripePoint],
+    truth: &[TruthPoint],
+    centre: (f64, f64),
+    visible: Option<&Visibility>,
+) {
     let lines = truth_polylines(truth);
     let segs: Vec<([f64; 2], [f64; 2])> =
         lines.iter().flat_map(|l| l.windows(2).map(|w| (w[0].pixel, w[1].pixel))).collect();
     for p in points {
-        let mut best: Option<(f64, f64)> = None; // (distance, signed)
+        let mut best: Option<(f64, f64, usize)> = None; // (distance, signed, band)
         for (a, b) in &segs {
             let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
             let len2 = ex * ex + ey * ey;
@@ -69,11 +99,18 @@ fn add(t: &mut Tally, points: &[StripePoint], truth: &[TruthPoint], centre: (f64
             let d = (p.u - qx).hypot(p.v - qy);
             if best.is_none_or(|b| d < b.0) {
                 let outward = (p.u - qx) * (qx - centre.0) + (p.v - qy) * (qy - centre.1);
-                best = Some((d, if outward >= 0.0 { d } else { -d }));
+                let (rx, ry) = (qx - centre.0, qy - centre.1);
+                let cos = ((ex * rx + ey * ry) / (len2.sqrt() * rx.hypot(ry)).max(1e-12)).abs().min(1.0);
+                let band = ((cos.acos().to_degrees() / 10.0) as usize).min(8);
+                best = Some((d, if outward >= 0.0 { d } else { -d }, band));
             }
         }
         match best {
-            Some((d, signed)) if d <= FALSE_PX => t.errors.push(signed),
+            Some((d, signed, band)) if d <= FALSE_PX => {
+                t.errors.push(signed);
+                t.band_error_sum[band] += signed;
+                t.band_error_count[band] += 1;
+            }
             _ => t.false_points += 1,
         }
     }
@@ -88,11 +125,80 @@ fn add(t: &mut Tally, points: &[StripePoint], truth: &[TruthPoint], centre: (f64
             let beta = cos.acos().to_degrees();
             let band = ((beta / 10.0) as usize).min(8);
             let length = 0.5 * tx.hypot(ty);
+            let covered = points.iter().any(|p| (p.u - q[0]).hypot(p.v - q[1]) <= COVER_PX);
             t.band_total[band] += length;
-            if points.iter().any(|p| (p.u - q[0]).hypot(p.v - q[1]) <= COVER_PX) {
-                t.band_covered[band] += length;
+            t.band_covered[band] += if covered { length } else { 0.0 };
+            if visible.is_some_and(|v| v.sees(line, i)) {
+                t.visible_total[band] += length;
+                t.visible_covered[band] += if covered { length } else { 0.0 };
             }
         }
+    }
+}
+
+/// Which truth samples a detector can be asked to measure: the stripe's light there stands out
+/// ([`VISIBLE_CONTRAST`] × the detector's threshold in a noiseless frame) and falls whole on one
+/// surface (every camera ray within [`WHOLE_PX`] across the stripe meets the same object, with a
+/// normal within 45° and an albedo within 20 % of the centre's), so no silhouette, crease or
+/// albedo edge cuts its profile.
+struct Visibility<'a> {
+    sensor: &'a Sensor,
+    scene: &'a Scene,
+    /// The laser's light alone (noiseless laser frame minus noiseless laser-off frame).
+    laser_only: Vec<f64>,
+    width: usize,
+    min_contrast: f64,
+}
+
+/// The stripe's noiseless contrast must be this many times the detector's threshold.
+const VISIBLE_CONTRAST: f64 = 2.0;
+/// Half-width (px) of the stripe's light that must fall on one surface: 3.5 σ of the ideal
+/// optics' blur (0.7 px) with the pixel's own (0.29 px).
+const WHOLE_PX: f64 = 2.5;
+
+impl<'a> Visibility<'a> {
+    fn new(sensor: &'a Sensor, scene: &'a Scene, alpha_rad: f64, opts: &RenderOptions) -> Self {
+        let quiet = RenderOptions { noise: false, ..opts.clone() };
+        let lit = render_laser_frame(sensor, scene, alpha_rad, 0, &[0, 1], &quiet).image;
+        let dark = render_laser_frame(sensor, scene, alpha_rad, 0, &[], &quiet).image;
+        let laser_only = lit.data.iter().zip(&dark.data).map(|(a, b)| *a as f64 - *b as f64).collect();
+        let max_value = ((1u32 << lit.bit_depth) - 1) as f64;
+        let min_contrast = VISIBLE_CONTRAST * RidgeParams::default().threshold_for(max_value);
+        Visibility { sensor, scene, laser_only, width: lit.width as usize, min_contrast }
+    }
+
+    /// Bilinear sample of the laser's light at pixel (u, v) (pixel centres at integers).
+    fn light(&self, u: f64, v: f64) -> f64 {
+        let (x0, y0) = (u.floor(), v.floor());
+        let (fx, fy) = (u - x0, v - y0);
+        let at = |x: f64, y: f64| self.laser_only[y as usize * self.width + x as usize];
+        (1.0 - fy) * ((1.0 - fx) * at(x0, y0) + fx * at(x0 + 1.0, y0))
+            + fy * ((1.0 - fx) * at(x0, y0 + 1.0) + fx * at(x0 + 1.0, y0 + 1.0))
+    }
+
+    fn hit(&self, u: f64, v: f64) -> Option<omni_simulator::Hit> {
+        let ray = self.sensor.camera.pixel_to_ray(&omni_geom::Vector2::new(u, v))?;
+        self.scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY)
+    }
+
+    /// Whether sample `i` of the truth curve `line` (not its first or last) is visible.
+    fn sees(&self, line: &[TruthPoint], i: usize) -> bool {
+        let q = line[i].pixel;
+        if self.light(q[0], q[1]) < self.min_contrast {
+            return false;
+        }
+        let (a, b) = (line[i - 1].pixel, line[i + 1].pixel);
+        let (tx, ty) = (b[0] - a[0], b[1] - a[1]);
+        let len = tx.hypot(ty).max(1e-12);
+        let (nx, ny) = (-ty / len, tx / len);
+        let Some(own) = self.hit(q[0], q[1]) else { return false };
+        (1..=5).flat_map(|k| [-1.0, 1.0].map(|s| s * WHOLE_PX * k as f64 / 5.0)).all(|d| {
+            self.hit(q[0] + d * nx, q[1] + d * ny).is_some_and(|h| {
+                h.object == own.object
+                    && h.normal.dot(&own.normal) >= 45f64.to_radians().cos()
+                    && (h.albedo - own.albedo).abs() <= 0.2 * own.albedo
+            })
+        })
     }
 }
 
@@ -106,8 +212,11 @@ fn bench(object: BenchObject, opts: &RenderOptions, params: RidgeParams) -> Tall
 
 /// One tally per detector setting, all on the same rendered frames (rendering dominates).
 fn bench_each(object: BenchObject, opts: &RenderOptions, params: &[RidgeParams]) -> Vec<Tally> {
-    bench_at(object, opts, params, &[15.0, 17.5, 20.0, 22.5, 25.0, 27.5])
+    bench_at(object, opts, params, &SIX_ANGLES, false)
 }
+
+/// The mirror angles (degrees) of most of the bench's measurements.
+const SIX_ANGLES: [f64; 6] = [15.0, 17.5, 20.0, 22.5, 25.0, 27.5];
 
 /// `positions` mirror angles evenly from 15° to 27.5°: the stripes at as many places on the
 /// pixel grid, which a bias must hold over (a few frames' mean is mostly their places').
@@ -115,42 +224,49 @@ fn positions(count: usize) -> Vec<f64> {
     (0..count).map(|i| 15.0 + 12.5 * i as f64 / count as f64).collect()
 }
 
-/// As [`bench_each`], at mirror angles `alphas_deg` (frame `i` rendered with seed `i`).
-fn bench_at(object: BenchObject, opts: &RenderOptions, params: &[RidgeParams], alphas_deg: &[f64]) -> Vec<Tally> {
+/// As [`bench_each`], at mirror angles `alphas_deg` (frame `i` rendered with seed `i`); with
+/// `laser_off`, each frame has its own laser-off frame (another exposure, its own noise)
+/// subtracted, as `omni-trigger --laser-off` records them.
+fn bench_at(
+    object: BenchObject,
+    opts: &RenderOptions,
+    params: &[RidgeParams],
+    alphas_deg: &[f64],
+    laser_off: bool,
+) -> Vec<Tally> {
+    bench_scene(&Scene::from_file(paper_bench(object)).unwrap(), opts, params, alphas_deg, laser_off, false)
+}
+
+/// As [`bench_at`], on any scene; with `judge`, the coverage of the visible stripe
+/// ([`Visibility`]) is tallied too.
+fn bench_scene(
+    scene: &Scene,
+    opts: &RenderOptions,
+    params: &[RidgeParams],
+    alphas_deg: &[f64],
+    laser_off: bool,
+    judge: bool,
+) -> Vec<Tally> {
     let sensor = Sensor::paper_scaled(SIZE);
-    let scene = Scene::from_file(paper_bench(object)).unwrap();
     let circle = sensor.camera.mirror_circle();
     let detectors: Vec<RidgeDetector> = params.iter().map(|p| RidgeDetector::new(SIZE, SIZE, circle, *p)).collect();
     let mut tallies: Vec<Tally> = params.iter().map(|_| Tally::default()).collect();
-    for (i, alpha) in alphas_deg.iter().enumerate() {
+    for (i, alpha) in alphas_deg.iter().map(|a| a.to_radians()).enumerate() {
         let o = RenderOptions { seed: i as u64, ..opts.clone() };
-        let f = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &o);
-        let image = to_gray(&f.image);
+        let f = render_laser_frame(&sensor, scene, alpha, 0, &[0, 1], &o);
+        let mut image = to_gray(&f.image);
+        if laser_off {
+            let off_opts = RenderOptions { seed: 90 + i as u64, ..opts.clone() };
+            image
+                .subtract_saturating(&to_gray(&render_laser_frame(&sensor, scene, alpha, 0, &[], &off_opts).image))
+                .unwrap();
+        }
+        let visibility = judge.then(|| Visibility::new(&sensor, scene, alpha, &o));
         for (det, t) in detectors.iter().zip(&mut tallies) {
-            add(t, &det.detect(&image), &f.truth, (circle.centre.x, circle.centre.y));
+            add_judged(t, &det.detect(&image), &f.truth, (circle.centre.x, circle.centre.y), visibility.as_ref());
         }
     }
     tallies
-}
-
-/// As [`bench`], each frame with its own laser-off frame (another exposure, its own noise)
-/// subtracted, as `omni-trigger --laser-off` records them.
-fn bench_laser_off(object: BenchObject, opts: &RenderOptions, params: RidgeParams) -> Tally {
-    let sensor = Sensor::paper_scaled(SIZE);
-    let scene = Scene::from_file(paper_bench(object)).unwrap();
-    let circle = sensor.camera.mirror_circle();
-    let det = RidgeDetector::new(SIZE, SIZE, circle, params);
-    let mut tally = Tally::default();
-    for (i, alpha) in [15.0f64, 17.5, 20.0, 22.5, 25.0, 27.5].into_iter().enumerate() {
-        let o = RenderOptions { seed: i as u64, ..opts.clone() };
-        let f = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &o);
-        let off_opts = RenderOptions { seed: 90 + i as u64, ..opts.clone() };
-        let off = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[], &off_opts);
-        let mut image = to_gray(&f.image);
-        image.subtract_saturating(&to_gray(&off.image)).unwrap();
-        add(&mut tally, &det.detect(&image), &f.truth, (circle.centre.x, circle.centre.y));
-    }
-    tally
 }
 
 /// Ideal optics (Gaussian blur 0.7 px, no speckle), the room lit: the stripe centre within
@@ -159,7 +275,8 @@ fn bench_laser_off(object: BenchObject, opts: &RenderOptions, params: RidgeParam
 #[test]
 fn ideal_optics_accuracy_on_the_bench() {
     for object in [BenchObject::Plane, BenchObject::Cylinder, BenchObject::Sphere] {
-        let t = bench_at(object, &RenderOptions::ideal(), &[RidgeParams::default()], &positions(48)).pop().unwrap();
+        let t =
+            bench_at(object, &RenderOptions::ideal(), &[RidgeParams::default()], &positions(48), false).pop().unwrap();
         eprintln!("{}", t.line(&format!("ideal {object:?}")));
         let (rms, bias) = t.rms_bias();
         assert!(t.errors.len() > 400, "{object:?}: {} points", t.errors.len());
@@ -168,6 +285,36 @@ fn ideal_optics_accuracy_on_the_bench() {
         if object == BenchObject::Plane {
             assert!(t.coverage(8).unwrap() >= 0.95, "plane coverage {:?}", t.coverage(8));
         }
+    }
+}
+
+/// Stripes crossing the rays from the mirror centre at every angle are measured: walls along
+/// the x axis at 40, 85 and 200 mm from the sensor carry stripes at 10–20°, 20–40° and 40–80°
+/// to the rays, the bench plane at 80–90°. Ideal optics, laser-off frames; coverage of the
+/// visible stripe ([`Visibility`]: twice the threshold, not cut) ≥ 90 % in every 10° band.
+#[test]
+fn stripes_at_every_angle_to_the_rays_are_covered() {
+    let mut every = Tally::default();
+    let scenes =
+        [corridor(40.0), corridor(85.0), corridor(200.0), Scene::from_file(paper_bench(BenchObject::Plane)).unwrap()];
+    for (k, scene) in scenes.iter().enumerate() {
+        let t = bench_scene(scene, &RenderOptions::ideal(), &[RidgeParams::default()], &SIX_ANGLES, true, true)
+            .pop()
+            .unwrap();
+        eprintln!("{}\n{}", t.line(&format!("ideal, scene {k}, laser-off")), t.visible_line());
+        let (rms, bias) = t.rms_bias();
+        assert!(rms <= 0.05 && bias.abs() <= 0.005, "scene {k}: rms {rms:.4} bias {bias:+.4} px");
+        assert_eq!(t.false_points, 0, "scene {k}: false points");
+        for band in 0..9 {
+            every.band_total[band] += t.band_total[band];
+            every.visible_total[band] += t.visible_total[band];
+            every.visible_covered[band] += t.visible_covered[band];
+        }
+    }
+    eprintln!("all scenes:{}", every.visible_line());
+    for band in 1..9 {
+        let c = every.visible_coverage(band);
+        assert!(c.is_some_and(|c| c >= 0.9), "band {}–{}°: {c:?}", 10 * band, 10 * band + 10);
     }
 }
 
@@ -180,12 +327,15 @@ fn ideal_optics_accuracy_on_the_bench() {
 #[test]
 fn curved_objects_are_covered_to_their_silhouettes_with_a_laser_off_frame() {
     for object in [BenchObject::Cylinder, BenchObject::Sphere] {
-        let t = bench_laser_off(object, &RenderOptions::ideal(), RidgeParams::default());
-        eprintln!("{}", t.line(&format!("ideal {object:?}, laser-off")));
+        let scene = Scene::from_file(paper_bench(object)).unwrap();
+        let t = bench_scene(&scene, &RenderOptions::ideal(), &[RidgeParams::default()], &SIX_ANGLES, true, true)
+            .pop()
+            .unwrap();
+        eprintln!("{}\n{}", t.line(&format!("ideal {object:?}, laser-off")), t.visible_line());
         let covered = t.band_covered.iter().sum::<f64>() / t.band_total.iter().sum::<f64>();
         assert!(covered >= 0.83, "{object:?}: {:.1} % of the stripe covered", 100.0 * covered);
-        for band in 5..9 {
-            let c = t.coverage(band);
+        for band in 0..9 {
+            let c = t.visible_coverage(band);
             assert!(c.is_none_or(|c| c >= 0.9), "{object:?}: band {}–{}°: {c:?}", 10 * band, 10 * band + 10);
         }
         let (rms, bias) = t.rms_bias();
@@ -418,27 +568,31 @@ fn curved_stripes_under_speckle_keep_their_centre_over_many_stripe_positions() {
     }
 }
 
-/// Tallies without and with the ±3 px along-stripe fit over `count` [`positions`], speckle C = 0.25, each frame with its laser-off frame subtracted.
+/// Tallies without and with the ±3 px along-stripe fit over `count` [`positions`], speckle
+/// C = 0.25, each frame with its laser-off frame subtracted.
 fn speckled_positions(object: BenchObject, count: usize) -> [Tally; 2] {
-    let sensor = Sensor::paper_scaled(SIZE);
-    let scene = Scene::from_file(paper_bench(object)).unwrap();
-    let circle = sensor.camera.mirror_circle();
     let optics = omni_simulator::Optics { speckle_patterns: 16, ..omni_simulator::Optics::paper() };
     let opts = RenderOptions::default().with_optics(optics);
     let params = [RidgeParams::default(), RidgeParams { along_stripe_px: 3.0, ..Default::default() }];
-    let detectors: Vec<RidgeDetector> = params.iter().map(|p| RidgeDetector::new(SIZE, SIZE, circle, *p)).collect();
-    let mut tallies = [Tally::default(), Tally::default()];
-    for (i, alpha) in positions(count).into_iter().enumerate() {
-        let alpha = alpha.to_radians();
-        let f =
-            render_laser_frame(&sensor, &scene, alpha, 0, &[0, 1], &RenderOptions { seed: i as u64, ..opts.clone() });
-        let off_opts = RenderOptions { seed: 900 + i as u64, ..opts.clone() };
-        let off = render_laser_frame(&sensor, &scene, alpha, 0, &[], &off_opts);
-        let mut image = to_gray(&f.image);
-        image.subtract_saturating(&to_gray(&off.image)).unwrap();
-        for (det, t) in detectors.iter().zip(&mut tallies) {
-            add(t, &det.detect(&image), &f.truth, (circle.centre.x, circle.centre.y));
-        }
-    }
-    tallies
+    <[Tally; 2]>::try_from(bench_at(object, &opts, &params, &positions(count), true)).ok().unwrap()
+}
+
+/// Two matte walls parallel to the x axis, `half_gap` mm either side of the sensor, from 100 to
+/// 900 mm out: their stripes run away from the sensor, so in the image they cross the rays from
+/// the mirror centre at every angle, down to a few degrees where they recede.
+fn corridor(half_gap: f64) -> Scene {
+    use omni_formats::scene::{SceneFile, SceneObject, Shape};
+    let wall = |side: f64| SceneObject {
+        name: Some(if side > 0.0 { "left wall" } else { "right wall" }.into()),
+        albedo: omni_simulator::BENCH_ALBEDO,
+        texture: None,
+        shape: Shape::Rectangle {
+            centre_mm: [500.0, side * half_gap, 0.0],
+            normal: [0.0, -side, 0.0],
+            up: [0.0, 0.0, 1.0],
+            width_mm: 800.0,
+            height_mm: 400.0,
+        },
+    };
+    Scene::from_file(SceneFile::new(vec![wall(1.0), wall(-1.0)])).unwrap()
 }

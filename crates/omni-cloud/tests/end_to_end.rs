@@ -17,12 +17,12 @@ use omni_vision::image_io::GrayImage;
 use omni_vision::stripe::{RidgeDetector, RidgeParams};
 use rayon::prelude::*;
 
-/// Mirror angles (degrees) of a sweep in 0.3° steps over the part of the facet whose light
-/// plane crosses the object: where laser 0's plane passes x = 500 mm within `z_range` (mm).
-/// Frames outside would hold no stripe on the object; leaving them out keeps the test fast.
-fn sweep(sensor: &Sensor, z_range: (f64, f64)) -> Vec<f64> {
-    (0..100)
-        .map(|i| 0.15 + 0.3 * i as f64)
+/// Mirror angles (degrees) of a sweep in `step` degree steps over the part of the facet whose
+/// light plane crosses the object: where laser 0's plane passes x = 500 mm within `z_range`
+/// (mm). Frames outside would hold no stripe on the object; leaving them out keeps the test fast.
+fn sweep(sensor: &Sensor, z_range: (f64, f64), step: f64) -> Vec<f64> {
+    (0..(30.0 / step) as usize)
+        .map(|i| 0.5 * step + step * i as f64)
         .filter(|&a| {
             let lp = sensor.transmitter.light_plane(f64::to_radians(a), 0, 0).unwrap();
             let (slope, intercept) = lp.slope_intercept();
@@ -43,17 +43,18 @@ struct Measured {
     radius_error: Option<f64>,
 }
 
-fn measure(object: BenchObject, kind: ShapeKind, z_range: (f64, f64)) -> Measured {
+fn measure(object: BenchObject, kind: ShapeKind, z_range: (f64, f64), step: f64) -> Measured {
     let sensor = Sensor::paper();
     let scene_file = paper_bench(object);
     let scene = Scene::from_file(scene_file.clone()).unwrap();
     let (w, h) = sensor.camera.image_size();
     let detector = RidgeDetector::new(w, h, sensor.camera.mirror_circle(), RidgeParams::default());
     let tri = Triangulator::new(sensor.camera.as_ref(), &sensor.transmitter, DEFAULT_MIN_INCIDENCE_DEG).unwrap();
-    let opts = RenderOptions { seed: 7, ..RenderOptions::ideal() };
+    let opts =
+        RenderOptions { seed: std::env::var("SEED").map_or(7, |s| s.parse().unwrap()), ..RenderOptions::ideal() };
     // The laser-off frame of the same view, subtracted as omni-ridge does with `ambient_path`.
     let ambient = to_gray(render_ambient_frame(&sensor, &scene, &RenderOptions { seed: 8, ..opts.clone() }));
-    let frames: Vec<Vec<Point3<f64>>> = sweep(&sensor, z_range)
+    let frames: Vec<Vec<Point3<f64>>> = sweep(&sensor, z_range, step)
         .into_par_iter()
         .enumerate()
         .map(|(seq, alpha_deg)| {
@@ -97,32 +98,36 @@ fn measure(object: BenchObject, kind: ShapeKind, z_range: (f64, f64)) -> Measure
     }
 }
 
-fn check(object: BenchObject, kind: ShapeKind, z_range: (f64, f64), paper_sigma: f64) {
-    let m = measure(object, kind, z_range);
+/// `step`: the sweep's mirror-angle step (degrees); the curved objects' radii need 4× the
+/// plane's frames to tell a systematic error of 0.03 mm from the scatter of one scan (±0.011 mm
+/// for the cylinder, ±0.015 mm for the sphere at 0.3°, measured over six noise seeds).
+fn check(object: BenchObject, kind: ShapeKind, z_range: (f64, f64), paper_sigma: f64, step: f64) {
+    let m = measure(object, kind, z_range, step);
     assert!(m.points.len() > 300, "{object:?}: only {} points", m.points.len());
     assert!(m.truth.std_dev < paper_sigma / 2.0, "{object:?}: σ {} ≥ {}", m.truth.std_dev, paper_sigma / 2.0);
     assert!(m.fit_sigma < paper_sigma / 2.0, "{object:?}: fit σ {}", m.fit_sigma);
     assert!(m.truth.mean.abs() < paper_sigma / 2.0, "{object:?}: mean {}", m.truth.mean);
-    // The fitted radius of a patch seen from one side trades off against the axis position: the
-    // cylinder's flanks (40–60° around it from the sensor) lie +0.01…+0.026 mm out, its middle
-    // −0.003…−0.018 mm, and the fit turns that into +0.074 mm of radius (the sphere +0.020 mm).
-    // Bound it with a margin, as a regression guard.
+    // The fitted radius of a patch seen from one side trades off against the axis position, so
+    // it shows a flank-to-middle difference of a few thousandths of a px threefold (measured
+    // here: cylinder +0.004 mm, sphere −0.023 mm; +0.065 / +0.009 mm while the blur's pull was
+    // taken as σ²κ/2 everywhere, also on the flanks where the stripe bends faster and dims).
+    // The target for ideal optics: 0.03 mm.
     if let Some(r) = m.radius_error {
-        assert!(r.abs() < 0.15, "{object:?}: radius error {r}");
+        assert!(r.abs() <= 0.03, "{object:?}: radius error {r}");
     }
 }
 
 #[test]
 fn paper_bench_plane() {
-    check(BenchObject::Plane, ShapeKind::Plane, (-90.0, 90.0), 0.49);
+    check(BenchObject::Plane, ShapeKind::Plane, (-90.0, 90.0), 0.49, 0.3);
 }
 
 #[test]
 fn paper_bench_cylinder() {
-    check(BenchObject::Cylinder, ShapeKind::Cylinder, (-110.0, 110.0), 0.93);
+    check(BenchObject::Cylinder, ShapeKind::Cylinder, (-110.0, 110.0), 0.93, 0.075);
 }
 
 #[test]
 fn paper_bench_sphere() {
-    check(BenchObject::Sphere, ShapeKind::Sphere, (-60.0, 60.0), 1.24);
+    check(BenchObject::Sphere, ShapeKind::Sphere, (-60.0, 60.0), 1.24, 0.075);
 }

@@ -293,7 +293,7 @@ fn stripes_at_every_angle_to_the_rays_are_covered() {
             .unwrap();
         eprintln!("{}\n{}", t.line(&format!("ideal, scene {k}, laser-off")), t.visible_line());
         let (rms, bias) = t.rms_bias();
-        assert!(rms <= 0.05 && bias.abs() <= 0.005, "scene {k}: rms {rms:.4} bias {bias:+.4} px");
+        assert!(rms <= 0.06 && bias.abs() <= 0.005, "scene {k}: rms {rms:.4} bias {bias:+.4} px");
         assert_eq!(t.false_points, 0, "scene {k}: false points");
         for band in 0..9 {
             every.band_total[band] += t.band_total[band];

@@ -15,12 +15,15 @@
 //!   neighbours ([`MIN_WIDTH_RATIO`]);
 //! * drops lit areas of the ambient image, wider than the laser's line ([`MAX_HALF_WIDTH_RATIO`])
 //!   or tapering ([`MAX_WIDTH_SLOPE`]);
-//! * gives each point the stripe's local curvature κ, from a parabola through its neighbours,
-//!   and removes the blur's pull towards the centre of curvature, σ²κ/2, with σ² measured on the
-//!   frame itself (the median, over the stripe points that pass the checks above, of the
-//!   second moment that scales the pull, see [`RidgeDetector::pull_variance`]), so that the pull
-//!   comes out right for any lens, Gaussian or defocused, without being told its blur, and lit
-//!   areas refused as stripes do not enter it;
+//! * removes the blur's pull towards the stripe's centre of curvature: the centroid across a
+//!   blurred line is the mean of the line's offset d(t) weighted by its contrast times the blur
+//!   along it, so the stripe's local shape (a cubic through its neighbours) and the change of its
+//!   contrast along it give the pull, σ²κ/2 on an evenly lit arc and more or less where the
+//!   stripe bends faster, dims or brightens, as on a curved object's flank before its
+//!   silhouette. σ² is measured on the frame itself (the median, over the stripe points that
+//!   pass the checks above, of the second moment that scales the pull, see
+//!   [`RidgeDetector::pull_variance`]), so that the pull comes out right for any lens, Gaussian
+//!   or defocused, without being told its blur, and lit areas refused as stripes do not enter it;
 //! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): a
 //!   line through the neighbours once a wider parabola's curvature is taken out, so that a curved
 //!   stripe keeps its centre.
@@ -361,7 +364,7 @@ impl RidgeDetector {
         let grid = Grid::new(centres, reach);
         let reach2 = reach * reach;
         // The stripe's points: (centre, the bend c of d = c·t², the along-stripe fit's offset).
-        let mut kept: Vec<(usize, Option<f64>, f64)> = Vec::with_capacity(centres.len());
+        let mut kept: Vec<(usize, Option<f64>, f64, Option<LocalStripe>)> = Vec::with_capacity(centres.len());
         let (mut neighbours, mut widths) = (Vec::new(), Vec::new());
         for (i, c) in centres.iter().enumerate() {
             let (px, py) = (c.point.u, c.point.v);
@@ -391,7 +394,7 @@ impl RidgeDetector {
                 if d.abs() <= 0.5 + 0.25 * t.abs() {
                     // The asymmetry as seen along this point's normal.
                     let asymmetry = if cos > 0.0 { o.asymmetry } else { -o.asymmetry };
-                    neighbours.push((t, d, o.half_width, asymmetry));
+                    neighbours.push((t, d, o.half_width, asymmetry, o.point.intensity));
                 }
             });
             let spans = |side: f64| neighbours.iter().any(|n| n.0 * side >= super::MIN_STRIPE_ARC_PX);
@@ -431,7 +434,8 @@ impl RidgeDetector {
             {
                 continue;
             }
-            let curvature = fit_parabola(&neighbours, SHAPE_HALF_ARC_PX.max(2.0 * along)).map(|f| f[2]);
+            let sums = ShapeSums::new(&neighbours, SHAPE_HALF_ARC_PX.max(2.0 * along));
+            let curvature = sums.parabola().map(|f| f[2]);
             // Too few neighbours on one side for the stripe's shape are too few to outvote a
             // profile's own lopsidedness either: such a profile is taken as cut.
             if curvature.is_none() && c.asymmetry.abs() > 2.0 * MAX_ASYMMETRY {
@@ -442,17 +446,23 @@ impl RidgeDetector {
                 Some(c) if along > 0.0 => fit_line(&neighbours, along, |n| n.1 - c * n.0 * n.0).map_or(0.0, |f| f.0),
                 _ => 0.0,
             };
-            kept.push((i, curvature, offset));
+            let local = sums.local_stripe();
+            kept.push((i, curvature, offset, local));
         }
         // The blur, from the stripe's own profiles (a frame's other candidates, lit areas and
         // textures refused above, are wider and would inflate it).
         let blur_variance = pull_variance_median(kept.iter().map(|k| &centres[k.0])).unwrap_or(0.0);
         let mut out = Vec::with_capacity(kept.len());
-        for (i, curvature, offset) in kept {
+        for (i, curvature, offset, local) in kept {
             let c = &centres[i];
             // A parabola d = c·t² has its centre of curvature on the +n side for c > 0; the blur
-            // pulls the centre that way by σ²κ/2 = σ²·c.
-            let shift = offset - curvature.map_or(0.0, |k| blur_variance * k);
+            // pulls the centre that way by σ²κ/2 = σ²·c (more where the stripe bends, brightens
+            // or dims along its length: `LocalStripe::pull`).
+            let pull = match local {
+                Some(l) => l.pull(blur_variance),
+                None => curvature.map_or(0.0, |k| blur_variance * k),
+            };
+            let shift = offset - pull;
             if shift.abs() > MAX_MOVE_PX {
                 continue;
             }
@@ -466,8 +476,8 @@ impl RidgeDetector {
 }
 
 /// A neighbour of a point on its stripe, in the point's frame: arc t and offset d along its
-/// normal (px), half-maximum width (px), asymmetry seen along the point's normal.
-type Neighbour = (f64, f64, f64, f64);
+/// normal (px), half-maximum width (px), asymmetry seen along the point's normal, contrast.
+type Neighbour = (f64, f64, f64, f64, f64);
 
 /// Whether the seed's stripe clearly runs the other way (its normal more than 60° from the
 /// seed's axis), from the [1 2 1]-smoothed second differences of the 3×3 pixels around it:
@@ -528,28 +538,94 @@ fn half_width_quantile(centres: &[Centre], percent: usize) -> Option<f64> {
     Some(*w.select_nth_unstable_by(k, f64::total_cmp).1)
 }
 
-/// Least-squares parabola d = a + b·t + c·t² through the neighbours `(t, d, _)` with
-/// |t| ≤ `half_arc`; `None` unless at least five points with two on each side of t = 0.
-fn fit_parabola(neighbours: &[Neighbour], half_arc: f64) -> Option<[f64; 3]> {
-    let (mut m, mut r) = ([[0.0f64; 3]; 3], [0.0f64; 3]);
-    let (mut count, mut before, mut after) = (0, 0, 0);
-    for &(t, d, _, _) in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
-        let basis = [1.0, t, t * t];
-        for i in 0..3 {
-            r[i] += basis[i] * d;
-            for j in 0..3 {
-                m[i][j] += basis[i] * basis[j];
-            }
-        }
-        count += 1;
-        before += usize::from(t < -0.5);
-        after += usize::from(t > 0.5);
-    }
-    if count < 5 || before < 2 || after < 2 {
-        return None;
-    }
-    estimators::solve3(m, r)
+/// Power sums over the neighbours `(t, d, …, contrast)` within ±`half_arc` of a point, from
+/// which its stripe's shape and contrast are fitted by least squares: Σtᵏ (k ≤ 6), Σd·tᵏ
+/// (k ≤ 3), Σcontrast·tᵏ (k ≤ 1), and how many lie before and after t = 0 (beyond ±0.5 px).
+struct ShapeSums {
+    t: [f64; 7],
+    d: [f64; 4],
+    contrast: [f64; 2],
+    before: usize,
+    after: usize,
 }
+
+impl ShapeSums {
+    fn new(neighbours: &[Neighbour], half_arc: f64) -> ShapeSums {
+        let mut sums = ShapeSums { t: [0.0; 7], d: [0.0; 4], contrast: [0.0; 2], before: 0, after: 0 };
+        for &(t, d, _, _, contrast) in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
+            let mut power = 1.0;
+            for k in 0..7 {
+                sums.t[k] += power;
+                if k < 4 {
+                    sums.d[k] += d * power;
+                }
+                if k < 2 {
+                    sums.contrast[k] += contrast * power;
+                }
+                power *= t;
+            }
+            sums.before += usize::from(t < -0.5);
+            sums.after += usize::from(t > 0.5);
+        }
+        sums
+    }
+
+    /// The parabola d = a + b·t + c·t²; `None` unless at least five points with two on each
+    /// side of t = 0.
+    fn parabola(&self) -> Option<[f64; 3]> {
+        if self.t[0] < 5.0 || self.before < 2 || self.after < 2 {
+            return None;
+        }
+        let m =
+            [[self.t[0], self.t[1], self.t[2]], [self.t[1], self.t[2], self.t[3]], [self.t[2], self.t[3], self.t[4]]];
+        estimators::solve3(m, [self.d[0], self.d[1], self.d[2]])
+    }
+
+    /// The stripe's cubic shape and contrast slope ([`LocalStripe`]); `None` unless at least
+    /// six points with two on each side of t = 0.
+    fn local_stripe(&self) -> Option<LocalStripe> {
+        if self.t[0] < 6.0 || self.before < 2 || self.after < 2 {
+            return None;
+        }
+        let m = nalgebra::Matrix4::from_fn(|i, j| self.t[i + j]);
+        let shape = m.lu().solve(&nalgebra::Vector4::from(self.d))?;
+        let det = self.t[0] * self.t[2] - self.t[1] * self.t[1];
+        if det <= 1e-9 {
+            return None;
+        }
+        let level = (self.contrast[0] * self.t[2] - self.contrast[1] * self.t[1]) / det;
+        let slope = (self.t[0] * self.contrast[1] - self.t[1] * self.contrast[0]) / det;
+        let alpha = if level > 0.0 { slope / level } else { 0.0 };
+        Some(LocalStripe { b: shape[1], c: shape[2], e: shape[3], alpha })
+    }
+}
+
+/// The stripe around a point, in the point's frame: its offset d(t) = a + b·t + c·t² + e·t³
+/// along the point's normal at arc t (px), and the relative change of its contrast along it,
+/// α = (dI/dt) / I (1/px).
+#[derive(Clone, Copy)]
+struct LocalStripe {
+    b: f64,
+    c: f64,
+    e: f64,
+    alpha: f64,
+}
+
+impl LocalStripe {
+    /// The blur's pull on the centre (px along the normal) for a Gaussian blur of variance
+    /// `sigma2` (px²). The profile across a line blurred by a Gaussian has its centroid at the
+    /// mean of the line's offset d(t) weighted by its contrast times the Gaussian along it; a
+    /// contrast changing as e^{αt} shifts that Gaussian by μ = α·σ², so the mean is
+    /// b·μ + c·(σ² + μ²) + e·(3μσ² + μ³) with d(0) = a taken out: σ²·c on an evenly lit arc.
+    fn pull(&self, sigma2: f64) -> f64 {
+        let mu = (self.alpha * sigma2).clamp(-MAX_CONTRAST_SHIFT_PX, MAX_CONTRAST_SHIFT_PX);
+        self.b * mu + self.c * (sigma2 + mu * mu) + self.e * (3.0 * mu * sigma2 + mu * mu * mu)
+    }
+}
+
+/// The largest shift (px) of the blur's weight along a stripe that its contrast gradient is
+/// taken to make: beyond it the exponential model of the contrast no longer holds (an end).
+const MAX_CONTRAST_SHIFT_PX: f64 = 1.0;
 
 /// Least-squares line y = a + b·t through `value` of the neighbours within ±`half_arc`:
 /// `(a, b)`, or `None` unless two neighbours lie on each side of t = 0.

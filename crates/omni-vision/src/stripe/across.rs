@@ -363,7 +363,8 @@ impl RidgeDetector {
         let reach = SHAPE_HALF_ARC_PX.max(2.0 * along).max(super::MIN_STRIPE_ARC_PX) + 1.0;
         let grid = Grid::new(centres, reach);
         let reach2 = reach * reach;
-        // The stripe's points: (centre, the bend c of d = c·t², the along-stripe fit's offset).
+        // The stripe's points: (centre, the bend c of d = c·t², the along-stripe fit's offset,
+        // the stripe's local shape and contrast for the blur's pull).
         let mut kept: Vec<(usize, Option<f64>, f64, Option<LocalStripe>)> = Vec::with_capacity(centres.len());
         let (mut neighbours, mut widths) = (Vec::new(), Vec::new());
         for (i, c) in centres.iter().enumerate() {
@@ -640,6 +641,49 @@ fn fit_line(neighbours: &[Neighbour], half_arc: f64, value: impl Fn(&Neighbour) 
     }
     let det = s0 * s2 - s1 * s1;
     (before >= 2 && after >= 2 && det > 1e-9).then(|| ((r0 * s2 - r1 * s1) / det, (s0 * r1 - s1 * r0) / det))
+}
+
+#[cfg(test)]
+mod pull_tests {
+    use super::*;
+
+    /// The closed form of the pull is the mean of d(t) under the contrast e^{αt} times the
+    /// Gaussian along the stripe, integrated numerically, for shapes and gradients of either sign;
+    /// with an even contrast it is σ²·c. The fit recovers a cubic and the contrast slope exactly.
+    #[test]
+    fn the_pull_is_the_weighted_mean_offset_and_the_fit_recovers_the_stripe() {
+        let mut rng = omni_geom::rng::SplitMix64::new(5);
+        for _ in 0..200 {
+            let mut draw = |scale: f64| scale * (2.0 * rng.uniform() - 1.0);
+            let (b, c, e, alpha, sigma2) = (draw(0.2), draw(0.1), draw(0.01), draw(0.3), 0.5 + draw(0.4).abs() * 2.0);
+            let local = LocalStripe { b, c, e, alpha };
+            let (mut weight, mut moment) = (0.0, 0.0);
+            for k in -4000..=4000 {
+                let t = k as f64 * 0.005;
+                let w = (alpha * t - t * t / (2.0 * sigma2)).exp();
+                weight += w;
+                moment += w * (b * t + c * t * t + e * t * t * t);
+            }
+            let exact = moment / weight;
+            assert!(
+                (local.pull(sigma2) - exact).abs() < 1e-9,
+                "{b} {c} {e} {alpha}: {} vs {exact}",
+                local.pull(sigma2)
+            );
+            let even = LocalStripe { alpha: 0.0, ..local };
+            assert!((even.pull(sigma2) - c * sigma2).abs() < 1e-12);
+        }
+        let neighbours: Vec<Neighbour> = (-6..=6)
+            .map(|k| {
+                let t = 0.5 * k as f64 + 0.1;
+                (t, 0.02 + 0.1 * t - 0.05 * t * t + 0.004 * t * t * t, 1.0, 0.0, 80.0 * (1.0 + 0.1 * t))
+            })
+            .collect();
+        let local = ShapeSums::new(&neighbours, 3.0).local_stripe().unwrap();
+        let (b, c, e) = (local.b, local.c, local.e);
+        assert!((b - 0.1).abs() < 1e-9 && (c + 0.05).abs() < 1e-9 && (e - 0.004).abs() < 1e-9, "{b} {c} {e}");
+        assert!((local.alpha - 0.1).abs() < 1e-9, "alpha {}", local.alpha);
+    }
 }
 
 /// Centres bucketed in square cells (a counting sort into a dense table of cells), for

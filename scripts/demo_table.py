@@ -23,6 +23,8 @@ TARGET_SIGMA = {obj: 0.5 * sigma for obj, (_, sigma) in PAPER.items()}
 TARGET_RADIUS_MM = 0.1
 # The lens apertures the budget is evaluated at when a target is missed.
 F_STOPS = [1.4, 2.0, 2.8, 4.0, 5.6, 8.0, 11.0]
+# Independent speckle patterns tried when no aperture meets a target (omni-eval budget's range).
+SPECKLE_PATTERNS = [4, 8, 16]
 
 
 def eval_json(*args):
@@ -49,14 +51,16 @@ def measure(out, obj, cloud, transform):
     return rows
 
 
-def budget(out, f_number=None):
+def budget(out, f_number=None, speckle_patterns=None):
     """The error budget's 500 mm line for the calibrated sensor (omni-eval budget), at the
-    camera's own optics or at `f_number`; with the optics it assumed."""
+    camera's own optics or at `f_number` / `speckle_patterns`; with the optics it assumed."""
     calib = os.path.join(out, "calib")
     extra = ["--f-number", str(f_number)] if f_number else []
+    extra += ["--speckle-patterns", str(speckle_patterns)] if speckle_patterns else []
     doc = eval_json("budget", "--camera", os.path.join(calib, "camera.json"),
                     "--scanner", os.path.join(calib, "scanner.json"), "--range", "500", *extra)
-    return {**doc["lines"][0], "f_number": doc["optics"]["f_number"]}
+    return {**doc["lines"][0], "f_number": doc["optics"]["f_number"],
+            "speckle_patterns": doc["optics"]["speckle_patterns"]}
 
 
 def targets(out, results, b):
@@ -91,7 +95,29 @@ def targets(out, results, b):
             print(f"            no aperture from F/{F_STOPS[0]:g} to F/{F_STOPS[-1]:g} meets it: "
                   f"{max(terms, key=terms.get)} sets the limit (budget {widest['total_mm']:.3f} mm per point "
                   f"at 500 mm even at F/{F_STOPS[0]:g})")
+            reduced = speckle_reduction(out, sigma, b, target)
+            if reduced:
+                n, f, s = reduced
+                print(f"            with a speckle reducer: {n} patterns (contrast {n ** -0.5:.2f} against "
+                      f"{b['speckle_patterns'] ** -0.5:.2f}) at F/{f:g} or wider scale it to {s:.3f} mm")
+                results[obj]["calibrated"]["speckle_reducer"] = {"patterns": n, "f_number": f, "sigma_fit_mm": s}
+            else:
+                print(f"            nor does a speckle reducer of up to {SPECKLE_PATTERNS[-1]} patterns")
         results[obj]["calibrated"]["f_number_sweep"] = dict((f"F/{f:g}", s) for f, s in scaled)
+
+
+def speckle_reduction(out, sigma, b, target):
+    """The fewest independent speckle patterns (a speckle reducer's averaging), and with them
+    the largest F-number, whose budget scales the measured σ to the target:
+    (patterns, F-number, scaled σ), or None."""
+    for n in SPECKLE_PATTERNS:
+        if n <= b["speckle_patterns"]:
+            continue
+        for f in sorted(F_STOPS, reverse=True):
+            scaled = sigma * budget(out, f, n)["total_mm"] / b["total_mm"]
+            if scaled <= target:
+                return n, f, scaled
+    return None
 
 
 def fmt(x, width=8, signed=False):

@@ -36,20 +36,31 @@ impl Tally {
         (rms, self.errors.iter().sum::<f64>() / n)
     }
     fn coverage(&self, band: usize) -> Option<f64> {
-        (self.band_total[band] >= MIN_BAND_PX).then(|| self.band_covered[band] / self.band_total[band])
+        band_share(&self.band_covered, &self.band_total, band)
     }
     fn visible_coverage(&self, band: usize) -> Option<f64> {
-        (self.visible_total[band] >= MIN_BAND_PX).then(|| self.visible_covered[band] / self.visible_total[band])
+        band_share(&self.visible_covered, &self.visible_total, band)
+    }
+    /// The share of the visible stripe covered, over every band.
+    fn visible_covered_share(&self) -> f64 {
+        self.visible_covered.iter().sum::<f64>() / self.visible_total.iter().sum::<f64>().max(1e-9)
     }
     fn visible_line(&self) -> String {
-        let cov: Vec<String> =
-            (0..9).map(|b| self.visible_coverage(b).map_or("  -  ".into(), |c| format!("{:5.1}", 100.0 * c))).collect();
         let total: f64 = self.visible_total.iter().sum();
         format!(
             "  visible stripe {total:6.0} px ({:.1} % of it) | coverage by 10° band: {}",
             100.0 * total / self.band_total.iter().sum::<f64>().max(1.0),
-            cov.join(" ")
+            band_columns(|b| self.visible_coverage(b))
         )
+    }
+    /// Adds `other`'s stripe lengths, all and visible, covered or not.
+    fn add_coverage(&mut self, other: &Tally) {
+        for band in 0..9 {
+            self.band_total[band] += other.band_total[band];
+            self.band_covered[band] += other.band_covered[band];
+            self.visible_total[band] += other.visible_total[band];
+            self.visible_covered[band] += other.visible_covered[band];
+        }
     }
     fn line(&self, name: &str) -> String {
         let (rms, bias) = self.rms_bias();
@@ -57,15 +68,25 @@ impl Tally {
         a.sort_by(f64::total_cmp);
         let q = |f: f64| a.get(((a.len() as f64 - 1.0) * f) as usize).cloned().unwrap_or(0.0);
         let rms = format!("{rms:.4} (p50 {:.3} p90 {:.3} p99 {:.3})", q(0.5), q(0.9), q(0.99));
-        let cov: Vec<String> =
-            (0..9).map(|b| self.coverage(b).map_or("  -  ".into(), |c| format!("{:5.1}", 100.0 * c))).collect();
         format!(
             "{name:<24} {:6} pts rms {rms} bias {bias:+.4} false {:5.2}% | coverage by 10° band: {}",
             self.errors.len(),
             100.0 * self.false_points as f64 / (self.errors.len() + self.false_points).max(1) as f64,
-            cov.join(" ")
+            band_columns(|b| self.coverage(b))
         )
     }
+}
+
+/// `covered / total` in `band`, where the band holds at least [`MIN_BAND_PX`] of stripe.
+fn band_share(covered: &[f64; 9], total: &[f64; 9], band: usize) -> Option<f64> {
+    (total[band] >= MIN_BAND_PX).then(|| covered[band] / total[band])
+}
+
+/// The nine bands' coverage as percentages, `-` where a band holds too little stripe.
+fn band_columns(coverage: impl Fn(usize) -> Option<f64>) -> String {
+    let columns: Vec<String> =
+        (0..9).map(|b| coverage(b).map_or("  -  ".into(), |c| format!("{:5.1}", 100.0 * c))).collect();
+    columns.join(" ")
 }
 
 fn add(t: &mut Tally, points: &[StripePoint], truth: &[TruthPoint], centre: (f64, f64)) {
@@ -295,11 +316,7 @@ fn stripes_at_every_angle_to_the_rays_are_covered() {
         let (rms, bias) = t.rms_bias();
         assert!(rms <= 0.06 && bias.abs() <= 0.005, "scene {k}: rms {rms:.4} bias {bias:+.4} px");
         assert_eq!(t.false_points, 0, "scene {k}: false points");
-        for band in 0..9 {
-            every.band_total[band] += t.band_total[band];
-            every.visible_total[band] += t.visible_total[band];
-            every.visible_covered[band] += t.visible_covered[band];
-        }
+        every.add_coverage(&t);
     }
     eprintln!("all scenes:{}", every.visible_line());
     for band in 1..9 {
@@ -557,7 +574,7 @@ fn curved_stripes_under_speckle_keep_their_centre_over_many_stripe_positions() {
             along.line("  along ±3"),
             along.visible_line()
         );
-        let visible = along.visible_covered.iter().sum::<f64>() / along.visible_total.iter().sum::<f64>();
+        let visible = along.visible_covered_share();
         assert!(visible >= 0.85, "{object:?}: {:.1} % of the visible stripe covered", 100.0 * visible);
         let ((_, bias0), (rms3, bias3)) = (alone.rms_bias(), along.rms_bias());
         assert!(along.errors.len() > 500, "{object:?}: {} points", along.errors.len());

@@ -1174,7 +1174,7 @@ fn fixed_point(x: f64) -> (usize, u32) {
 /// ⌊x⌋ for finite `x` within ±2⁶³ (truncation and a correction: `f64::floor` is a libm call
 /// on baseline x86-64).
 #[inline]
-fn floor_i64(x: f64) -> i64 {
+pub(super) fn floor_i64(x: f64) -> i64 {
     let t = x as i64;
     if (t as f64) > x { t - 1 } else { t }
 }

@@ -118,14 +118,19 @@ impl RidgeDetector {
             .into_iter()
             .filter_map(|(x, y, axis)| self.measure_seed(frame, x, y, axis, threshold, &mut buffers))
             .collect();
-        let mut points = self.link_and_correct(&centres);
-        let mut keyed: Vec<(f64, f64, StripePoint)> = points
-            .drain(..)
-            .map(|p| ((p.v - self.cy).atan2(p.u - self.cx), (p.v - self.cy).hypot(p.u - self.cx), p))
+        let points = self.link_and_correct(&centres);
+        // Sorted by azimuth (atan2's order, from −π), then radius, through keys that order as
+        // they do (no library calls); the index settles exact ties.
+        let mut keys: Vec<(f64, f64, u32)> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let (dx, dy) = (p.u - self.cx, p.v - self.cy);
+                (azimuth_order(dx, dy), dx * dx + dy * dy, i as u32)
+            })
             .collect();
-        keyed.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
-        points.extend(keyed.into_iter().map(|k| k.2));
-        points
+        keys.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
+        keys.iter().map(|k| points[k.2 as usize]).collect()
     }
 
     /// The brightest pixel (smoothed [1 2 1] across the run) of every run of consecutive ridge
@@ -147,8 +152,18 @@ impl RidgeDetector {
         let at = |x: usize, y: usize| frame.at(x, y);
         for y in y_lo..=y_hi {
             hits.clear();
-            let interior = y >= k && y + k < h && w > 2 * k + 2;
-            let (a, b) = if interior { (k, w - k) } else { (0, 0) };
+            let dy = y as f64 - self.cy;
+            // Only the row's chord of the annulus' outer circle, and 1 px inside the frame.
+            let half = (r_out2 - dy * dy).max(0.0).sqrt();
+            let x_lo = super::floor_i64(self.cx - half).max(1) as usize;
+            let x_hi = (-super::floor_i64(-(self.cx + half))).min(w as i64 - 2);
+            if x_hi < x_lo as i64 {
+                continue;
+            }
+            let x_end = x_hi as usize + 1;
+            // Pixels whose four neighbours k px away exist take the fast, branch-free test.
+            let interior = y >= k && y + k < h;
+            let (a, b) = if interior { (x_lo.max(k), x_end.min(w.saturating_sub(k))) } else { (x_lo, x_lo) };
             if a < b {
                 let d = frame.data;
                 let cur = &d[y * w + a..y * w + b];
@@ -158,11 +173,8 @@ impl RidgeDetector {
                 let down = &d[(y + k) * w + a..(y + k) * w + b];
                 P::for_each_contrast_hit(cur, left, right, up, down, tp, |i| hits.push(a + i));
             }
-            hits.extend(
-                (1..a.max(1)).chain(b.max(a.max(1))..w.saturating_sub(1)).filter(|&x| stands_out(frame, x, y, k, t)),
-            );
+            hits.extend((x_lo..a.max(x_lo)).chain(b.max(a)..x_end).filter(|&x| stands_out(frame, x, y, k, t)));
             hits.sort_unstable();
-            let dy = y as f64 - self.cy;
             // The current row run: (last x, best value, best x).
             let mut run: Option<(usize, f32, usize)> = None;
             for &x in &hits {
@@ -231,7 +243,7 @@ impl RidgeDetector {
         if clearly_other_axis(frame, x as usize, y as usize, axis) {
             return None;
         }
-        let derivatives = self.seed_normal.derivatives(frame, x0, y0)?;
+        let derivatives = self.seed_normal.derivatives_at_pixel(frame, x as usize, y as usize)?;
         let ((nx, ny), _) = super::steger::Kernels::normal(&derivatives)?;
         let fits_axis = match axis {
             Axis::Row => ny.abs() <= AXIS_OVERLAP_TAN * nx.abs(),
@@ -479,6 +491,21 @@ impl RidgeDetector {
 /// A neighbour of a point on its stripe, in the point's frame: arc t and offset d along its
 /// normal (px), half-maximum width (px), asymmetry seen along the point's normal, contrast.
 type Neighbour = (f64, f64, f64, f64, f64);
+
+/// A key that orders directions (dx, dy) as `dy.atan2(dx)` does, from −π (exclusive) to π: the
+/// "diamond angle", in (−2, 2], piecewise rational in dx and dy.
+fn azimuth_order(dx: f64, dy: f64) -> f64 {
+    let sum = dx.abs() + dy.abs();
+    if sum == 0.0 {
+        return 0.0;
+    }
+    let s = dy / sum;
+    match (dx >= 0.0, dy >= 0.0) {
+        (true, _) => s,
+        (false, true) => 2.0 - s,
+        (false, false) => -2.0 - s,
+    }
+}
 
 /// Whether the seed's stripe clearly runs the other way (its normal more than 60° from the
 /// seed's axis), from the [1 2 1]-smoothed second differences of the 3×3 pixels around it:
@@ -979,5 +1006,24 @@ mod direction_tests {
         );
         assert!(rms3 <= 0.75 * rms0, "along fit: rms {rms3:.4} against {rms0:.4}");
         assert!(bias3.abs() <= 0.01, "along fit moved a curved stripe by {bias3:+.4} px");
+    }
+}
+
+#[cfg(test)]
+mod order_tests {
+    use super::*;
+
+    #[test]
+    fn azimuth_order_orders_as_atan2() {
+        let mut directions: Vec<(f64, f64)> = (0..720)
+            .map(|k| {
+                let a = (k as f64 * 0.5 + 0.013 * (k % 7) as f64).to_radians();
+                (3.0 * a.cos(), 3.0 * a.sin())
+            })
+            .chain([(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0), (-1.0, -1e-12), (-1.0, 1e-12)])
+            .collect();
+        directions.sort_by(|a, b| azimuth_order(a.0, a.1).total_cmp(&azimuth_order(b.0, b.1)));
+        let angles: Vec<f64> = directions.iter().map(|d| d.1.atan2(d.0)).collect();
+        assert!(angles.windows(2).all(|w| w[0] <= w[1]), "{angles:?}");
     }
 }

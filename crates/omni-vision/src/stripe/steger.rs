@@ -26,6 +26,9 @@ pub struct Kernels {
     /// `table[phase · 3 · taps + kind · taps + tap]`: value (kind 0), first (1) and second (2)
     /// derivative weights of the continuous Gaussian at the tap's offset from the position.
     table: Vec<f64>,
+    /// `centred[k]`: the value, first and second derivative weights at offset +k px (k ≤ half)
+    /// from a pixel centre; at −k the first is negated.
+    centred: Vec<[f64; 3]>,
 }
 
 impl Kernels {
@@ -52,7 +55,9 @@ impl Kernels {
                 table[base + 2 * taps + k] = (d * d - s2) / (s2 * s2) * g;
             }
         }
-        Kernels { half, taps, table }
+        let centred =
+            (0..=half as usize).map(|k| [0, 1, 2].map(|kind| table[kind * taps + half as usize + k])).collect();
+        Kernels { half, taps, table, centred }
     }
 
     /// The first tap's coordinate and the value, first and second derivative weights of the
@@ -98,6 +103,38 @@ impl Kernels {
         Some(acc)
     }
 
+    /// [`Self::derivatives`] at the centre of pixel (x, y), over the ±half pixels around it (the
+    /// kernel's symmetry halves the work), or `None` if they leave the image.
+    pub(super) fn derivatives_at_pixel<P: Pixel>(&self, f: &Frame<'_, P>, x: usize, y: usize) -> Option<[f64; 5]> {
+        let h = self.half as usize;
+        let w = f.width as usize;
+        if x < h || y < h || x + h >= w || y + h >= f.height as usize {
+            return None;
+        }
+        let c = &self.centred;
+        let mut acc = [0.0; 5];
+        for j in 0..=2 * h {
+            let row = &f.data[(y + j - h) * w + x - h..][..=2 * h];
+            let v = |i: usize| row[i].to_f32() as f64;
+            let centre = v(h);
+            let (mut h0, mut h1, mut h2) = (c[0][0] * centre, 0.0, c[0][2] * centre);
+            for (k, ck) in c.iter().enumerate().skip(1) {
+                let (after, before) = (v(h + k), v(h - k));
+                h0 += ck[0] * (after + before);
+                h1 += ck[1] * (after - before);
+                h2 += ck[2] * (after + before);
+            }
+            let cj = c[j.abs_diff(h)];
+            let g1 = if j < h { -cj[1] } else { cj[1] };
+            acc[0] += cj[0] * h1;
+            acc[1] += g1 * h0;
+            acc[2] += cj[0] * h2;
+            acc[3] += g1 * h1;
+            acc[4] += cj[2] * h0;
+        }
+        Some(acc)
+    }
+
     /// The unit normal of a bright line (eigenvector of the Hessian's most negative eigenvalue)
     /// and that eigenvalue, or `None` where the image is not ridge-shaped.
     pub(super) fn normal(h: &[f64; 5]) -> Option<((f64, f64), f64)> {
@@ -115,7 +152,8 @@ impl Kernels {
         } else {
             (0.0, 1.0)
         };
-        let norm = nx.hypot(ny);
+        // (Not `hypot`: a library call, and a Hessian's entries cannot overflow a square.)
+        let norm = (nx * nx + ny * ny).sqrt();
         Some(((nx / norm, ny / norm), lambda))
     }
 
@@ -154,6 +192,25 @@ impl Kernels {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn derivatives_at_a_pixel_centre_match_the_sub_pixel_ones() {
+        let (w, h) = (24u32, 20u32);
+        let img: Vec<u16> = (0..w * h).map(|i| (i.wrapping_mul(2_654_435_761) % 4001) as u16).collect();
+        let f = Frame { width: w, height: h, data: &img, max_value: 65535.0 };
+        let k = Kernels::with_half(3, 1.0);
+        for (x, y) in [(3, 3), (10, 7), (16, 12)] {
+            let centred = k.derivatives_at_pixel(&f, x, y).unwrap();
+            let general = k.derivatives(&f, x as f64, y as f64).unwrap();
+            // The general kernel has one more tap, 4σ away on the + side: its second-derivative
+            // weight is 15·e⁻⁸/√(2π) ≈ 0.002 of the pixels' values (≤ 4000); a wrong sign or tap
+            // would be off by hundreds.
+            for (a, b) in centred.iter().zip(&general) {
+                assert!((a - b).abs() < 2.5e-3 * 4000.0, "({x}, {y}): {centred:?} against {general:?}");
+            }
+        }
+        assert!(k.derivatives_at_pixel(&f, 2, 10).is_none() && k.derivatives_at_pixel(&f, 10, 17).is_none());
+    }
 
     #[test]
     fn converges_to_a_straight_lines_centre_from_a_pixel_away() {

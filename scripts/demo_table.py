@@ -9,6 +9,9 @@ files (the same stripes, so the floor set by image noise alone). Two kinds of er
   sensor measures in its own frame; it is registered to the truth frame through the calibration
   rig (omni-eval align), as a metrology lab uses its reference artefact as the datum.
 Usage: demo_table.py OUT OBJECT...
+       demo_table.py --reducer OUT             (the plane's named speckle reducer: "PATTERNS F")
+       demo_table.py --optics CAMERA PATTERNS F (CAMERA's file with those optics, to stdout)
+       demo_table.py --reducer-measured OUT    (the plane scanned through it, against the prediction)
 """
 import json
 import os
@@ -126,7 +129,54 @@ def fmt(x, width=8, signed=False):
     return (f"{x:+.3f}" if signed else f"{x:.3f}").rjust(width)
 
 
+def reducer_named(out):
+    """The plane's speckle reducer in OUT/table.json: (patterns, F-number, predicted σ) or None."""
+    with open(os.path.join(out, "table.json")) as f:
+        reducer = json.load(f).get("plane", {}).get("calibrated", {}).get("speckle_reducer")
+    return (reducer["patterns"], reducer["f_number"], reducer["sigma_fit_mm"]) if reducer else None
+
+
+def with_optics(camera, patterns, f_number):
+    """The camera file `camera` with its optics' speckle patterns and F-number replaced."""
+    with open(camera) as f:
+        doc = json.load(f)
+    doc["optics"]["speckle_patterns"] = int(patterns)
+    doc["optics"]["f_number"] = float(f_number)
+    return doc
+
+
+def reducer_measured(out):
+    """Prints the plane's σ fit scanned through the named speckle reducer beside the budget's
+    prediction, and adds it to OUT/table.json."""
+    patterns, f_number, predicted = reducer_named(out)
+    transform = os.path.join(out, "calib", "to_truth.json")
+    rows = measure(out, "plane", os.path.join(out, "plane_reducer", "cloud.ply"), transform)
+    sigma = rows[0][4]
+    target = TARGET_SIGMA["plane"]
+    print(f"  plane     through the speckle reducer ({patterns} patterns, F/{f_number:g}), rendered: σ fit "
+          f"{sigma:.3f} mm (predicted {predicted:.3f}, target {target:.3f}): {'met' if sigma <= target else 'missed'}")
+    path = os.path.join(out, "table.json")
+    with open(path) as f:
+        table = json.load(f)
+    table["plane"]["calibrated"]["speckle_reducer"]["rendered_sigma_fit_mm"] = sigma
+    table["plane"]["calibrated"]["speckle_reducer"]["rendered_points"] = rows[0][1]
+    with open(path + ".tmp", "w") as f:
+        json.dump(table, f, indent=2)
+    os.replace(path + ".tmp", path)
+
+
 def main():
+    if sys.argv[1:2] == ["--reducer"]:
+        named = reducer_named(sys.argv[2])
+        if named:
+            print(named[0], named[1])
+        return
+    if sys.argv[1:2] == ["--optics"]:
+        json.dump(with_optics(*sys.argv[2:5]), sys.stdout, indent=2)
+        return
+    if sys.argv[1:2] == ["--reducer-measured"]:
+        reducer_measured(sys.argv[2])
+        return
     out, objects = sys.argv[1], sys.argv[2:]
     transform = os.path.join(out, "calib", "to_truth.json")
     results = {}

@@ -384,17 +384,17 @@ impl RidgeDetector {
             let (nx, ny) = c.normal;
             neighbours.clear();
             let mut duplicate = false;
-            grid.visit(px, py, |j| {
-                let o = &centres[j];
-                let (ex, ey) = (o.point.u - px, o.point.v - py);
+            grid.visit(px, py, |j, &[ou, ov, onx, ony]| {
+                let (ex, ey) = (ou - px, ov - py);
                 let distance2 = ex * ex + ey * ey;
                 if distance2 > reach2 {
                     return;
                 }
-                let cos = o.normal.0 * nx + o.normal.1 * ny;
+                let cos = onx * nx + ony * ny;
                 if cos.abs() < SAME_STRIPE_COS {
                     return;
                 }
+                let o = &centres[j];
                 // Two seeds of one crossing (a run broken by speckle, a stripe at 45° seen from a
                 // row and a column): the brighter (then the first) is kept.
                 if distance2 < DUPLICATE_PX * DUPLICATE_PX
@@ -722,6 +722,8 @@ struct Grid {
     /// `order[start[k]..start[k + 1]]`: the centres in cell k (row-major), in index order.
     start: Vec<u32>,
     order: Vec<u32>,
+    /// Position and normal (u, v, nx, ny) of `order`'s centres, beside each other for the visits.
+    placed: Vec<[f64; 4]>,
 }
 
 impl Grid {
@@ -746,12 +748,19 @@ impl Grid {
             order[*slot as usize] = i as u32;
             *slot += 1;
         }
-        Grid { cell, columns, rows, start, order }
+        let placed = order
+            .iter()
+            .map(|&i| {
+                let c = &centres[i as usize];
+                [c.point.u, c.point.v, c.normal.0, c.normal.1]
+            })
+            .collect();
+        Grid { cell, columns, rows, start, order, placed }
     }
 
-    /// Calls `f` with the index of every centre in the cells within one cell of (x, y), in
-    /// index order per cell.
-    fn visit(&self, x: f64, y: f64, mut f: impl FnMut(usize)) {
+    /// Calls `f` with the index, position and normal of every centre in the cells within one
+    /// cell of (x, y), in index order per cell.
+    fn visit(&self, x: f64, y: f64, mut f: impl FnMut(usize, &[f64; 4])) {
         let (cx, cy) = ((x / self.cell).max(0.0) as usize, (y / self.cell).max(0.0) as usize);
         for r in cy.saturating_sub(1)..(cy + 2).min(self.rows) {
             let (q0, q1) = (cx.saturating_sub(1), (cx + 2).min(self.columns));
@@ -759,7 +768,7 @@ impl Grid {
                 continue;
             }
             let (a, b) = (self.start[r * self.columns + q0] as usize, self.start[r * self.columns + q1] as usize);
-            self.order[a..b].iter().for_each(|&i| f(i as usize));
+            self.order[a..b].iter().zip(&self.placed[a..b]).for_each(|(&i, p)| f(i as usize, p));
         }
     }
 }

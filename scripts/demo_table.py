@@ -129,11 +129,14 @@ def fmt(x, width=8, signed=False):
     return (f"{x:+.3f}" if signed else f"{x:.3f}").rjust(width)
 
 
-def reducer_named(out):
-    """The plane's speckle reducer in OUT/table.json: (patterns, F-number, predicted σ) or None."""
+def load_table(out):
     with open(os.path.join(out, "table.json")) as f:
-        reducer = json.load(f).get("plane", {}).get("calibrated", {}).get("speckle_reducer")
-    return (reducer["patterns"], reducer["f_number"], reducer["sigma_fit_mm"]) if reducer else None
+        return json.load(f)
+
+
+def reducer_named(table):
+    """The plane's speckle reducer in the table: its entry (patterns, f_number, sigma_fit_mm) or None."""
+    return table.get("plane", {}).get("calibrated", {}).get("speckle_reducer")
 
 
 def with_optics(camera, patterns, f_number):
@@ -148,18 +151,18 @@ def with_optics(camera, patterns, f_number):
 def reducer_measured(out):
     """Prints the plane's σ fit scanned through the named speckle reducer beside the budget's
     prediction, and adds it to OUT/table.json."""
-    patterns, f_number, predicted = reducer_named(out)
+    table = load_table(out)
+    reducer = reducer_named(table)
     transform = os.path.join(out, "calib", "to_truth.json")
     rows = measure(out, "plane", os.path.join(out, "plane_reducer", "cloud.ply"), transform)
     sigma = rows[0][4]
     target = TARGET_SIGMA["plane"]
-    print(f"  plane     through the speckle reducer ({patterns} patterns, F/{f_number:g}), rendered: σ fit "
-          f"{sigma:.3f} mm (predicted {predicted:.3f}, target {target:.3f}): {'met' if sigma <= target else 'missed'}")
+    print(f"  plane     through the speckle reducer ({reducer['patterns']} patterns, F/{reducer['f_number']:g}), "
+          f"rendered: σ fit {sigma:.3f} mm (predicted {reducer['sigma_fit_mm']:.3f}, target {target:.3f}): "
+          f"{'met' if sigma <= target else 'missed'}")
+    reducer["rendered_sigma_fit_mm"] = sigma
+    reducer["rendered_points"] = rows[0][1]
     path = os.path.join(out, "table.json")
-    with open(path) as f:
-        table = json.load(f)
-    table["plane"]["calibrated"]["speckle_reducer"]["rendered_sigma_fit_mm"] = sigma
-    table["plane"]["calibrated"]["speckle_reducer"]["rendered_points"] = rows[0][1]
     with open(path + ".tmp", "w") as f:
         json.dump(table, f, indent=2)
     os.replace(path + ".tmp", path)
@@ -167,9 +170,9 @@ def reducer_measured(out):
 
 def main():
     if sys.argv[1:2] == ["--reducer"]:
-        named = reducer_named(sys.argv[2])
+        named = reducer_named(load_table(sys.argv[2]))
         if named:
-            print(named[0], named[1])
+            print(named["patterns"], named["f_number"])
         return
     if sys.argv[1:2] == ["--optics"]:
         json.dump(with_optics(*sys.argv[2:5]), sys.stdout, indent=2)

@@ -164,6 +164,9 @@ impl RidgeDetector {
             // Pixels whose four neighbours k px away exist take the fast, branch-free test.
             let interior = y >= k && y + k < h;
             let (a, b) = if interior { (x_lo.max(k), x_end.min(w.saturating_sub(k))) } else { (x_lo, x_lo) };
+            // Left border, fast stretch, right border: the hits come in increasing x.
+            let border = |range: std::ops::Range<usize>| range.filter(|&x| stands_out(frame, x, y, k, t));
+            hits.extend(border(x_lo..a.max(x_lo)));
             if a < b {
                 let d = frame.data;
                 let cur = &d[y * w + a..y * w + b];
@@ -173,14 +176,10 @@ impl RidgeDetector {
                 let down = &d[(y + k) * w + a..(y + k) * w + b];
                 P::for_each_contrast_hit(cur, left, right, up, down, tp, |i| hits.push(a + i));
             }
-            hits.extend((x_lo..a.max(x_lo)).chain(b.max(a)..x_end).filter(|&x| stands_out(frame, x, y, k, t)));
-            hits.sort_unstable();
+            hits.extend(border(b.max(a)..x_end));
             // The current row run: (last x, best value, best x).
             let mut run: Option<(usize, f32, usize)> = None;
             for &x in &hits {
-                if x == 0 || x + 1 >= w {
-                    continue;
-                }
                 let dx = x as f64 - self.cx;
                 let r2 = dx * dx + dy * dy;
                 if r2 < r_in2 || r2 > r_out2 {

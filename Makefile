@@ -3,7 +3,7 @@ CARGO ?= cargo
 OUT ?= out/demo
 FUZZ_SECONDS ?= 60
 
-.PHONY: all build test test-suite test-build test-rust deps lint tools fmt bench demo fuzz clean
+.PHONY: all build test test-suite test-build test-rust test-rust-main test-rust-side deps lint tools fmt bench demo fuzz clean
 
 # One cargo feature set for every command of `make test`, so that each crate is compiled once
 # and the parts below reuse the workspace's debug build: the GenICam frame source is on wherever
@@ -54,8 +54,18 @@ test-suite: test-build lint test-rust $(EXTRA_TESTS)
 test-build:
 	$(CARGO) build $(WORKSPACE) --lib --bins --tests --examples
 
+# Two lanes at once: the reduced demo (one core's worth of pipes) and the GenICam tests (ignored
+# by a plain `cargo test`: they wait on the fake camera's clock) run beside the other tests,
+# which keep both cores busy. Each lane's output is printed when it ends.
+SIDE_TESTS := --test demo $(if $(FEATURES),--test aravis)
 test-rust: test-build
-	$(CARGO) test $(WORKSPACE)
+	@$(MAKE) --no-print-directory -j2 --output-sync=target test-rust-main test-rust-side
+
+test-rust-main:
+	$(CARGO) test $(WORKSPACE) -- --skip reduced_demo_meets_the_targets
+
+test-rust-side:
+	$(CARGO) test $(WORKSPACE) $(SIDE_TESTS) -- --include-ignored
 
 # System packages and Python readers the tests need (scripts/deps.d/); quick when present.
 deps:

@@ -139,6 +139,7 @@ fn assert_paired_truly(frames: &[Frame], emu: &Emulator, dir: &Path) {
 }
 
 #[test]
+#[ignore = "waits on the fake camera's clock: make test-arv (make test runs it beside the other tests)"]
 fn every_frame_pairs_with_its_own_trigger_across_the_block_id_wrap() {
     let _one = lock();
     let _camera = FakeCamera::start(&[]);
@@ -163,6 +164,7 @@ fn every_frame_pairs_with_its_own_trigger_across_the_block_id_wrap() {
 }
 
 #[test]
+#[ignore = "waits on the fake camera's clock: make test-arv (make test runs it beside the other tests)"]
 fn lost_packets_make_incomplete_frames_that_are_reported_and_never_paired() {
     let _one = lock();
     // 3 % of the packets dropped: with 5 packets per frame, about one frame in seven.
@@ -181,6 +183,7 @@ fn lost_packets_make_incomplete_frames_that_are_reported_and_never_paired() {
 }
 
 #[test]
+#[ignore = "waits on the fake camera's clock: make test-arv (make test runs it beside the other tests)"]
 fn a_camera_killed_mid_scan_ends_it_with_an_error_and_nothing_mispaired() {
     let _one = lock();
     let mut camera = FakeCamera::start(&[]);
@@ -203,6 +206,7 @@ fn a_camera_killed_mid_scan_ends_it_with_an_error_and_nothing_mispaired() {
 }
 
 #[test]
+#[ignore = "waits on the fake camera's clock: make test-arv (make test runs it beside the other tests)"]
 fn bad_camera_settings_and_absent_cameras_fail_before_the_controller_is_armed() {
     let _one = lock();
     let emu = Emulator::start(&EMULATOR);
@@ -242,6 +246,7 @@ fn bad_camera_settings_and_absent_cameras_fail_before_the_controller_is_armed() 
 /// `cameras` finds the fake camera by GigE Vision discovery. The discovery broadcasts on every
 /// interface, so it runs in a network namespace of its own that has only `lo`.
 #[test]
+#[ignore = "waits on the fake camera's clock: make test-arv (make test runs it beside the other tests)"]
 fn cameras_lists_the_fake_camera_found_by_discovery() {
     let script = format!(
         "ip link set lo up && {{ {FAKE_CAMERA} -i 127.0.0.1 -s OMNI9 >/dev/null 2>&1 & pid=$!; sleep 0.5; \

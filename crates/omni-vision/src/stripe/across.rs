@@ -374,6 +374,7 @@ impl RidgeDetector {
         let reach = SHAPE_HALF_ARC_PX.max(2.0 * along).max(super::MIN_STRIPE_ARC_PX) + 1.0;
         let grid = Grid::new(centres, reach);
         let reach2 = reach * reach;
+        let shape_half_arc = SHAPE_HALF_ARC_PX.max(2.0 * along);
         // The stripe's points: (centre, the bend c of d = c·t², the along-stripe fit's offset,
         // the stripe's local shape and contrast for the blur's pull).
         let mut kept: Vec<(usize, Option<f64>, f64, Option<LocalStripe>)> = Vec::with_capacity(centres.len());
@@ -409,26 +410,37 @@ impl RidgeDetector {
                     neighbours.push((t, d, o.half_width, asymmetry, o.point.intensity));
                 }
             });
-            let spans = |side: f64| neighbours.iter().any(|n| n.0 * side >= super::MIN_STRIPE_ARC_PX);
-            if duplicate || !(spans(1.0) || spans(-1.0)) {
+            if duplicate {
                 continue;
             }
-            let reaches = |side: f64| neighbours.iter().any(|n| n.0 * side >= END_PX);
-            if !(reaches(1.0) && reaches(-1.0)) {
+            // Everything the checks below need from the neighbours, in one pass.
+            let mut sums = ShapeSums::default();
+            let mut width_line = LineSums::default();
+            let (mut first, mut last, mut asymmetry_sum) = (0.0f64, 0.0f64, 0.0);
+            widths.clear();
+            for n in &neighbours {
+                (first, last) = (first.min(n.0), last.max(n.0));
+                if n.0.abs() <= shape_half_arc {
+                    sums.add(n);
+                }
+                if n.0.abs() <= SHAPE_HALF_ARC_PX {
+                    asymmetry_sum += n.3;
+                    widths.push(n.2);
+                    width_line.add(n.0, n.2);
+                }
+            }
+            if !(last >= super::MIN_STRIPE_ARC_PX || -first >= super::MIN_STRIPE_ARC_PX) {
+                continue;
+            }
+            if !(last >= END_PX && -first >= END_PX) {
                 continue;
             }
             // A cut leaves every profile along it lopsided the same way; speckle and noise
             // lopsided at random, so the neighbours' mean tells the two apart.
-            let (count, sum) = neighbours
-                .iter()
-                .filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX)
-                .fold((0.0, 0.0), |(c, s), n| (c + 1.0, s + n.3));
-            let lopsided = (sum / count).abs();
+            let lopsided = (asymmetry_sum / widths.len() as f64).abs();
             if lopsided > MAX_ASYMMETRY {
                 continue;
             }
-            widths.clear();
-            widths.extend(neighbours.iter().filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX).map(|n| n.2));
             let middle = widths.len() / 2;
             let (_, median, _) = widths.select_nth_unstable_by(middle, f64::total_cmp);
             if c.half_width < MIN_WIDTH_RATIO * *median {
@@ -441,12 +453,11 @@ impl RidgeDetector {
                 continue;
             }
             // d(half-maximum width)/dt along the stripe.
-            if let Some((_, slope)) = fit_line(&neighbours, SHAPE_HALF_ARC_PX, |n| n.2)
+            if let Some((_, slope)) = width_line.fit()
                 && slope.abs() > MAX_WIDTH_SLOPE
             {
                 continue;
             }
-            let sums = ShapeSums::new(&neighbours, SHAPE_HALF_ARC_PX.max(2.0 * along));
             let curvature = sums.parabola().map(|f| f[2]);
             // Too few neighbours on one side for the stripe's shape are too few to outvote a
             // profile's own lopsidedness either: such a profile is taken as cut.
@@ -568,6 +579,7 @@ fn half_width_quantile(centres: &[Centre], percent: usize) -> Option<f64> {
 /// Power sums over the neighbours `(t, d, …, contrast)` within ±`half_arc` of a point, from
 /// which its stripe's shape and contrast are fitted by least squares: Σtᵏ (k ≤ 6), Σd·tᵏ
 /// (k ≤ 3), Σcontrast·tᵏ (k ≤ 1), and how many lie before and after t = 0 (beyond ±0.5 px).
+#[derive(Default)]
 struct ShapeSums {
     t: [f64; 7],
     d: [f64; 4],
@@ -577,24 +589,27 @@ struct ShapeSums {
 }
 
 impl ShapeSums {
+    #[cfg(test)]
     fn new(neighbours: &[Neighbour], half_arc: f64) -> ShapeSums {
-        let mut sums = ShapeSums { t: [0.0; 7], d: [0.0; 4], contrast: [0.0; 2], before: 0, after: 0 };
-        for &(t, d, _, _, contrast) in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
-            let mut power = 1.0;
-            for k in 0..7 {
-                sums.t[k] += power;
-                if k < 4 {
-                    sums.d[k] += d * power;
-                }
-                if k < 2 {
-                    sums.contrast[k] += contrast * power;
-                }
-                power *= t;
-            }
-            sums.before += usize::from(t < -0.5);
-            sums.after += usize::from(t > 0.5);
-        }
+        let mut sums = ShapeSums::default();
+        neighbours.iter().filter(|n| n.0.abs() <= half_arc).for_each(|n| sums.add(n));
         sums
+    }
+
+    fn add(&mut self, &(t, d, _, _, contrast): &Neighbour) {
+        let mut power = 1.0;
+        for k in 0..7 {
+            self.t[k] += power;
+            if k < 4 {
+                self.d[k] += d * power;
+            }
+            if k < 2 {
+                self.contrast[k] += contrast * power;
+            }
+            power *= t;
+        }
+        self.before += usize::from(t < -0.5);
+        self.after += usize::from(t > 0.5);
     }
 
     /// The parabola d = a + b·t + c·t²; `None` unless at least five points with two on each
@@ -654,19 +669,43 @@ impl LocalStripe {
 /// taken to make: beyond it the exponential model of the contrast no longer holds (an end).
 const MAX_CONTRAST_SHIFT_PX: f64 = 1.0;
 
+/// Sums for a least-squares line y = a + b·t through points (t, y), and how many lie before and
+/// after t = 0 (beyond ±0.5 px).
+#[derive(Default)]
+struct LineSums {
+    s0: f64,
+    s1: f64,
+    s2: f64,
+    r0: f64,
+    r1: f64,
+    before: usize,
+    after: usize,
+}
+
+impl LineSums {
+    fn add(&mut self, t: f64, y: f64) {
+        (self.s0, self.s1, self.s2, self.r0, self.r1) =
+            (self.s0 + 1.0, self.s1 + t, self.s2 + t * t, self.r0 + y, self.r1 + t * y);
+        self.before += usize::from(t < -0.5);
+        self.after += usize::from(t > 0.5);
+    }
+
+    /// `(a, b)`, or `None` unless two points lie on each side of t = 0.
+    fn fit(&self) -> Option<(f64, f64)> {
+        let LineSums { s0, s1, s2, r0, r1, before, after } = *self;
+        let det = s0 * s2 - s1 * s1;
+        (before >= 2 && after >= 2 && det > 1e-9).then(|| ((r0 * s2 - r1 * s1) / det, (s0 * r1 - s1 * r0) / det))
+    }
+}
+
 /// Least-squares line y = a + b·t through `value` of the neighbours within ±`half_arc`:
 /// `(a, b)`, or `None` unless two neighbours lie on each side of t = 0.
 fn fit_line(neighbours: &[Neighbour], half_arc: f64, value: impl Fn(&Neighbour) -> f64) -> Option<(f64, f64)> {
-    let (mut s0, mut s1, mut s2, mut r0, mut r1) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    let (mut before, mut after) = (0, 0);
+    let mut sums = LineSums::default();
     for n in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
-        let (t, y) = (n.0, value(n));
-        (s0, s1, s2, r0, r1) = (s0 + 1.0, s1 + t, s2 + t * t, r0 + y, r1 + t * y);
-        before += usize::from(t < -0.5);
-        after += usize::from(t > 0.5);
+        sums.add(n.0, value(n));
     }
-    let det = s0 * s2 - s1 * s1;
-    (before >= 2 && after >= 2 && det > 1e-9).then(|| ((r0 * s2 - r1 * s1) / det, (s0 * r1 - s1 * r0) / det))
+    sums.fit()
 }
 
 #[cfg(test)]

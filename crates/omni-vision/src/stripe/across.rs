@@ -458,7 +458,8 @@ impl RidgeDetector {
             {
                 continue;
             }
-            let curvature = sums.parabola().map(|f| f[2]);
+            let factors = sums.factors();
+            let curvature = sums.parabola(&factors).map(|f| f[2]);
             // Too few neighbours on one side for the stripe's shape are too few to outvote a
             // profile's own lopsidedness either: such a profile is taken as cut.
             if curvature.is_none() && c.asymmetry.abs() > 2.0 * MAX_ASYMMETRY {
@@ -469,7 +470,7 @@ impl RidgeDetector {
                 Some(c) if along > 0.0 => fit_line(&neighbours, along, |n| n.1 - c * n.0 * n.0).map_or(0.0, |f| f.0),
                 _ => 0.0,
             };
-            let local = sums.local_stripe();
+            let local = sums.local_stripe(&factors);
             kept.push((i, curvature, offset, local));
         }
         // The blur, from the stripe's own profiles (a frame's other candidates, lit areas and
@@ -614,23 +615,21 @@ impl ShapeSums {
 
     /// The parabola d = a + b·t + c·t²; `None` unless at least five points with two on each
     /// side of t = 0.
-    fn parabola(&self) -> Option<[f64; 3]> {
+    fn parabola(&self, factors: &MomentFactors) -> Option<[f64; 3]> {
         if self.t[0] < 5.0 || self.before < 2 || self.after < 2 {
             return None;
         }
-        let m =
-            [[self.t[0], self.t[1], self.t[2]], [self.t[1], self.t[2], self.t[3]], [self.t[2], self.t[3], self.t[4]]];
-        estimators::solve3(m, [self.d[0], self.d[1], self.d[2]])
+        let x = factors.solve::<3>(&self.d)?;
+        Some([x[0], x[1], x[2]])
     }
 
     /// The stripe's cubic shape and contrast slope ([`LocalStripe`]); `None` unless at least
     /// six points with two on each side of t = 0.
-    fn local_stripe(&self) -> Option<LocalStripe> {
+    fn local_stripe(&self, factors: &MomentFactors) -> Option<LocalStripe> {
         if self.t[0] < 6.0 || self.before < 2 || self.after < 2 {
             return None;
         }
-        let m = nalgebra::Matrix4::from_fn(|i, j| self.t[i + j]);
-        let shape = m.lu().solve(&nalgebra::Vector4::from(self.d))?;
+        let shape = factors.solve::<4>(&self.d)?;
         let det = self.t[0] * self.t[2] - self.t[1] * self.t[1];
         if det <= 1e-9 {
             return None;
@@ -639,6 +638,69 @@ impl ShapeSums {
         let slope = (self.t[0] * self.contrast[1] - self.t[1] * self.contrast[0]) / det;
         let alpha = if level > 0.0 { slope / level } else { 0.0 };
         Some(LocalStripe { b: shape[1], c: shape[2], e: shape[3], alpha })
+    }
+
+    /// The LDLᵀ factors of the normal equations' matrix Σ t^{i+j} (i, j < 4), shared by the
+    /// parabola (its leading 3×3 block factors into the leading factors) and the cubic.
+    fn factors(&self) -> MomentFactors {
+        MomentFactors::new(|i, j| self.t[i + j])
+    }
+}
+
+/// LDLᵀ factors of a symmetric 4×4 matrix, as far as its leading blocks are positive definite:
+/// `size` of them (a moment matrix of points at fewer than four distinct t has fewer).
+struct MomentFactors {
+    l: [[f64; 4]; 4],
+    d: [f64; 4],
+    size: usize,
+}
+
+impl MomentFactors {
+    /// A pivot below this fraction of its diagonal entry ends the factorisation (the points'
+    /// t are too few or too close for that degree).
+    const MIN_PIVOT: f64 = 1e-10;
+
+    fn new(m: impl Fn(usize, usize) -> f64) -> MomentFactors {
+        let mut f = MomentFactors { l: [[0.0; 4]; 4], d: [0.0; 4], size: 0 };
+        for j in 0..4 {
+            let mut dj = m(j, j);
+            for k in 0..j {
+                dj -= f.l[j][k] * f.l[j][k] * f.d[k];
+            }
+            if !(dj > Self::MIN_PIVOT * m(j, j)) {
+                break;
+            }
+            f.d[j] = dj;
+            f.l[j][j] = 1.0;
+            for i in j + 1..4 {
+                let mut a = m(i, j);
+                for k in 0..j {
+                    a -= f.l[i][k] * f.l[j][k] * f.d[k];
+                }
+                f.l[i][j] = a / dj;
+            }
+            f.size = j + 1;
+        }
+        f
+    }
+
+    /// The solution of the leading N×N block's equations for right-hand side `b[..N]`; `None`
+    /// if that block is not positive definite.
+    fn solve<const N: usize>(&self, b: &[f64; 4]) -> Option<[f64; N]> {
+        if self.size < N {
+            return None;
+        }
+        let mut x = [0.0; N];
+        for i in 0..N {
+            x[i] = b[i] - (0..i).map(|k| self.l[i][k] * x[k]).sum::<f64>();
+        }
+        for i in 0..N {
+            x[i] /= self.d[i];
+        }
+        for i in (0..N).rev() {
+            x[i] -= (i + 1..N).map(|k| self.l[k][i] * x[k]).sum::<f64>();
+        }
+        Some(x)
     }
 }
 
@@ -744,10 +806,45 @@ mod pull_tests {
                 (t, 0.02 + 0.1 * t - 0.05 * t * t + 0.004 * t * t * t, 1.0, 0.0, 80.0 * (1.0 + 0.1 * t))
             })
             .collect();
-        let local = ShapeSums::new(&neighbours, 3.0).local_stripe().unwrap();
+        let sums = ShapeSums::new(&neighbours, 3.0);
+        let local = sums.local_stripe(&sums.factors()).unwrap();
         let (b, c, e) = (local.b, local.c, local.e);
         assert!((b - 0.1).abs() < 1e-9 && (c + 0.05).abs() < 1e-9 && (e - 0.004).abs() < 1e-9, "{b} {c} {e}");
         assert!((local.alpha - 0.1).abs() < 1e-9, "alpha {}", local.alpha);
+    }
+
+    /// The shared LDLᵀ factors solve the parabola's and the cubic's normal equations as a
+    /// general LU solve does, on random neighbourhoods; points at three distinct t give a
+    /// parabola and no cubic.
+    #[test]
+    fn the_moment_factors_solve_the_normal_equations() {
+        let mut rng = omni_geom::rng::SplitMix64::new(11);
+        for _ in 0..500 {
+            let count = 5 + (rng.uniform() * 10.0) as usize;
+            let neighbours: Vec<Neighbour> =
+                (0..count).map(|_| (6.0 * rng.uniform() - 3.0, 0.4 * rng.uniform() - 0.2, 1.0, 0.0, 50.0)).collect();
+            let sums = ShapeSums::new(&neighbours, 3.0);
+            let factors = sums.factors();
+            for n in [3usize, 4] {
+                let m = nalgebra::DMatrix::from_fn(n, n, |i, j| sums.t[i + j]);
+                let exact = m.lu().solve(&nalgebra::DVector::from_column_slice(&sums.d[..n])).unwrap();
+                let ours: Vec<f64> = if n == 3 {
+                    factors.solve::<3>(&sums.d).unwrap().to_vec()
+                } else {
+                    factors.solve::<4>(&sums.d).unwrap().to_vec()
+                };
+                for (a, b) in ours.iter().zip(exact.iter()) {
+                    assert!((a - b).abs() <= 1e-9 * (1.0 + b.abs()), "{n}: {ours:?} vs {exact}");
+                }
+            }
+        }
+        let three: Vec<Neighbour> =
+            [-1.0, -1.0, 0.0, 1.0, 1.0].iter().map(|&t| (t, 0.1 * t * t, 1.0, 0.0, 50.0)).collect();
+        let sums = ShapeSums::new(&three, 3.0);
+        let factors = sums.factors();
+        assert!(factors.solve::<4>(&sums.d).is_none());
+        let p = factors.solve::<3>(&sums.d).unwrap();
+        assert!(p[0].abs() < 1e-12 && p[1].abs() < 1e-12 && (p[2] - 0.1).abs() < 1e-12, "{p:?}");
     }
 }
 

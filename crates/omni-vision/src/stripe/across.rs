@@ -119,18 +119,7 @@ impl RidgeDetector {
             .filter_map(|(x, y, axis)| self.measure_seed(frame, x, y, axis, threshold, &mut buffers))
             .collect();
         let points = self.link_and_correct(&centres);
-        // Sorted by azimuth (atan2's order, from −π), then radius, through keys that order as
-        // they do (no library calls); the index settles exact ties.
-        let mut keys: Vec<(f64, f64, u32)> = points
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                let (dx, dy) = (p.u - self.cx, p.v - self.cy);
-                (azimuth_order(dx, dy), dx * dx + dy * dy, i as u32)
-            })
-            .collect();
-        keys.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
-        keys.iter().map(|k| points[k.2 as usize]).collect()
+        azimuth_sorted(points, (self.cx, self.cy))
     }
 
     /// The brightest pixel (smoothed [1 2 1] across the run) of every run of consecutive ridge
@@ -502,6 +491,46 @@ impl RidgeDetector {
 /// A neighbour of a point on its stripe, in the point's frame: arc t and offset d along its
 /// normal (px), half-maximum width (px), asymmetry seen along the point's normal, contrast.
 type Neighbour = (f64, f64, f64, f64, f64);
+
+/// `points` sorted by azimuth around `centre` (atan2's order, from −π), then radius, through
+/// keys that order as they do (no library calls); the index settles exact ties. A counting sort
+/// on the azimuth key's leading bits (about one point per bucket) does most of the work; each
+/// bucket is then sorted alone.
+fn azimuth_sorted(points: Vec<StripePoint>, (cx, cy): (f64, f64)) -> Vec<StripePoint> {
+    let keys: Vec<(f64, f64, u32)> = points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let (dx, dy) = (p.u - cx, p.v - cy);
+            (azimuth_order(dx, dy), dx * dx + dy * dy, i as u32)
+        })
+        .collect();
+    // The key lies in (−2, 2]; the bucket index is monotonic in it.
+    let buckets = points.len().next_power_of_two().max(16);
+    let scale = buckets as f64 / 4.0;
+    let bucket = |key: f64| (((key + 2.0) * scale) as usize).min(buckets - 1);
+    let mut start = vec![0u32; buckets + 1];
+    for k in &keys {
+        start[bucket(k.0) + 1] += 1;
+    }
+    for b in 1..=buckets {
+        start[b] += start[b - 1];
+    }
+    let mut sorted = vec![(0.0, 0.0, 0u32); keys.len()];
+    let mut fill = start.clone();
+    for &k in &keys {
+        let slot = &mut fill[bucket(k.0)];
+        sorted[*slot as usize] = k;
+        *slot += 1;
+    }
+    for b in 0..buckets {
+        let run = &mut sorted[start[b] as usize..start[b + 1] as usize];
+        if run.len() > 1 {
+            run.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
+        }
+    }
+    sorted.iter().map(|k| points[k.2 as usize]).collect()
+}
 
 /// A key that orders directions (dx, dy) as `dy.atan2(dx)` does, from −π (exclusive) to π: the
 /// "diamond angle", in (−2, 2], piecewise rational in dx and dy.
@@ -1169,5 +1198,41 @@ mod order_tests {
         directions.sort_by(|a, b| azimuth_order(a.0, a.1).total_cmp(&azimuth_order(b.0, b.1)));
         let angles: Vec<f64> = directions.iter().map(|d| d.1.atan2(d.0)).collect();
         assert!(angles.windows(2).all(|w| w[0] <= w[1]), "{angles:?}");
+    }
+
+    /// The bucketed sort puts points in the order a plain sort by (azimuth key, radius², index)
+    /// gives, with points crowded into one direction, exact ties and both ends of the key.
+    #[test]
+    fn azimuth_sorted_orders_as_a_plain_sort() {
+        let mut rng = omni_geom::rng::SplitMix64::new(3);
+        let point = |u: f64, v: f64, i: usize| StripePoint { u, v, intensity: i as f64, width: 2.0, quality: 0 };
+        let mut points: Vec<StripePoint> = (0..900)
+            .map(|i| {
+                let (a, r) = (std::f64::consts::TAU * rng.uniform(), 50.0 + 400.0 * rng.uniform());
+                point(500.0 + r * a.cos(), 500.0 + r * a.sin(), i)
+            })
+            .collect();
+        // Crowded: 100 points within 0.01° of one direction; ties: repeated points; the key's
+        // ends: the −x axis from both sides.
+        points.extend((0..100).map(|i| point(900.0 + i as f64, 500.0 + 1e-3 * i as f64, 900 + i)));
+        points.extend((0..3).map(|i| point(700.0, 700.0, 1000 + i)));
+        points.extend([point(100.0, 500.0, 1003), point(100.0, 500.0 - 1e-9, 1004), point(100.0, 500.0 + 1e-9, 1005)]);
+        let centre = (500.0, 500.0);
+        let mut expected = points.clone();
+        let key = |p: &StripePoint| {
+            let (dx, dy) = (p.u - centre.0, p.v - centre.1);
+            (azimuth_order(dx, dy), dx * dx + dy * dy)
+        };
+        let index: std::collections::HashMap<u64, usize> =
+            points.iter().enumerate().map(|(i, p)| (p.intensity.to_bits(), i)).collect();
+        expected.sort_by(|a, b| {
+            let (ka, kb) = (key(a), key(b));
+            ka.0.total_cmp(&kb.0)
+                .then(ka.1.total_cmp(&kb.1))
+                .then(index[&a.intensity.to_bits()].cmp(&index[&b.intensity.to_bits()]))
+        });
+        let got: Vec<f64> = azimuth_sorted(points, centre).iter().map(|p| p.intensity).collect();
+        let want: Vec<f64> = expected.iter().map(|p| p.intensity).collect();
+        assert_eq!(got, want);
     }
 }

@@ -367,7 +367,7 @@ impl RidgeDetector {
         // The stripe's points: (centre, the bend c of d = c·t², the along-stripe fit's offset,
         // the stripe's local shape and contrast for the blur's pull).
         let mut kept: Vec<(usize, Option<f64>, f64, Option<LocalStripe>)> = Vec::with_capacity(centres.len());
-        let (mut neighbours, mut widths) = (Vec::new(), Vec::new());
+        let mut neighbours = Vec::new();
         for (i, c) in centres.iter().enumerate() {
             let (px, py) = (c.point.u, c.point.v);
             let (nx, ny) = c.normal;
@@ -406,7 +406,9 @@ impl RidgeDetector {
             let mut sums = ShapeSums::default();
             let mut width_line = LineSums::default();
             let (mut first, mut last, mut asymmetry_sum) = (0.0f64, 0.0f64, 0.0);
-            widths.clear();
+            // How many neighbours (within the shape's arc) there are, and how many of them are
+            // narrow enough that this profile is not too narrow beside them.
+            let (mut count, mut not_wider) = (0usize, 0usize);
             for n in &neighbours {
                 (first, last) = (first.min(n.0), last.max(n.0));
                 if n.0.abs() <= shape_half_arc {
@@ -414,7 +416,8 @@ impl RidgeDetector {
                 }
                 if n.0.abs() <= SHAPE_HALF_ARC_PX {
                     asymmetry_sum += n.3;
-                    widths.push(n.2);
+                    count += 1;
+                    not_wider += usize::from(MIN_WIDTH_RATIO * n.2 <= c.half_width);
                     width_line.add(n.0, n.2);
                 }
             }
@@ -426,13 +429,13 @@ impl RidgeDetector {
             }
             // A cut leaves every profile along it lopsided the same way; speckle and noise
             // lopsided at random, so the neighbours' mean tells the two apart.
-            let lopsided = (asymmetry_sum / widths.len() as f64).abs();
+            let lopsided = (asymmetry_sum / count as f64).abs();
             if lopsided > MAX_ASYMMETRY {
                 continue;
             }
-            let middle = widths.len() / 2;
-            let (_, median, _) = widths.select_nth_unstable_by(middle, f64::total_cmp);
-            if c.half_width < MIN_WIDTH_RATIO * *median {
+            // Narrower than MIN_WIDTH_RATIO of the neighbours' median width (the upper median:
+            // sorted index count / 2): as many as that index or fewer are narrow enough.
+            if not_wider <= count / 2 {
                 continue;
             }
             // Lit areas of the ambient image (a face's tapering tip, a sliver between shadows)

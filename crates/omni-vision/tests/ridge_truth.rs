@@ -520,7 +520,8 @@ fn patterned_ambient_light_is_removed_by_the_static_ambient_estimate() {
     assert!(raw.false_points > raw.errors.len(), "the pattern should fool the detector: {}", raw.line("raw"));
     // The estimate does as well as a laser-off frame: what the texture itself costs (dim stripes
     // on the dark cells) is the same for both.
-    assert!(cleaned.false_points * 100 <= cleaned.errors.len(), "{}", cleaned.line("static ambient"));
+    // The target: false points (> 2 px from the stripe) at most 0.1 % of the points.
+    assert!(cleaned.false_points * 1000 <= cleaned.errors.len(), "{}", cleaned.line("static ambient"));
     assert!(covered(&cleaned) >= covered(&laser_off) - 0.03, "coverage {:.3}", covered(&cleaned));
     let ((rms, bias), (off_rms, _)) = (cleaned.rms_bias(), laser_off.rms_bias());
     assert!(rms <= off_rms + 0.015 && bias.abs() <= 0.02, "rms {rms:.4} (laser-off {off_rms:.4}) bias {bias:+.4}");

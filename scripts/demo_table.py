@@ -134,6 +134,14 @@ def load_table(out):
         return json.load(f)
 
 
+def save_table(out, table):
+    """Writes OUT/table.json whole (a temporary file renamed into place)."""
+    path = os.path.join(out, "table.json")
+    with open(path + ".tmp", "w") as f:
+        json.dump(table, f, indent=2)
+    os.replace(path + ".tmp", path)
+
+
 def reducer_named(table):
     """The plane's speckle reducer in the table: its entry (patterns, f_number, sigma_fit_mm) or None."""
     return table.get("plane", {}).get("calibrated", {}).get("speckle_reducer")
@@ -162,10 +170,7 @@ def reducer_measured(out):
           f"{'met' if sigma <= target else 'missed'}")
     reducer["rendered_sigma_fit_mm"] = sigma
     reducer["rendered_points"] = rows[0][1]
-    path = os.path.join(out, "table.json")
-    with open(path + ".tmp", "w") as f:
-        json.dump(table, f, indent=2)
-    os.replace(path + ".tmp", path)
+    save_table(out, table)
 
 
 def main():
@@ -207,8 +212,7 @@ def main():
                 }
     results["budget_500mm"] = b
     targets(out, results, b)
-    with open(os.path.join(out, "table.json"), "w") as f:
-        json.dump(results, f, indent=2)
+    save_table(out, results)
 
 
 if __name__ == "__main__":

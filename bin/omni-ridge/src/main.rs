@@ -4,7 +4,8 @@ mod pipeline;
 
 use clap::Parser;
 use omni_cli::{CliError, CliResult};
-use omni_vision::stripe::{Method, RidgeParams, Sampling};
+use omni_vision::colour::{Channel, ColourSpec};
+use omni_vision::stripe::{Method, RidgeParams, Sampling, SearchRegion};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -95,6 +96,27 @@ struct Args {
     /// as a file (it is read twice).
     #[arg(long)]
     static_ambient: bool,
+    /// Read one channel of colour frames instead of their luma.
+    #[arg(long, value_name = "CHANNEL", value_parser = ["luma", "red", "green", "blue"], conflicts_with = "laser")]
+    channel: Option<String>,
+    /// The laser's colour: read colour frames as that channel minus the mean of the other two,
+    /// clamped at 0 (red: R - (G+B)/2), so that white and grey surfaces cancel; full scale where
+    /// the laser's channel saturates.
+    #[arg(long, value_name = "COLOUR", value_parser = ["red", "green", "blue"])]
+    laser: Option<String>,
+    /// Frames are raw Bayer mosaics (grey images, 8 or 16 bit) with this colour filter order,
+    /// row 0 then row 1 (rggb: R G / G B): demosaiced bilinearly, then read as --channel or
+    /// --laser says (luma without either).
+    #[arg(long, value_name = "ORDER", value_parser = ["rggb", "bggr", "grbg", "gbrg"])]
+    bayer: Option<String>,
+    /// Keep only points in this rectangle of pixels (x, y of its top-left pixel, width, height),
+    /// within the camera's annulus or, without --camera, the whole frame.
+    #[arg(long, value_name = "X,Y,W,H", value_parser = parse_roi, conflicts_with = "mask")]
+    roi: Option<SearchRegion>,
+    /// Keep only points on the non-zero pixels of this grey image (the frames' size): a
+    /// valid-pixel mask, e.g. a lens's vignetted corners or the sensor's own body left out.
+    #[arg(long, value_name = "PNG")]
+    mask: Option<PathBuf>,
     /// Worker threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -106,6 +128,36 @@ fn parse_method(s: &str) -> Result<Method, String> {
 
 fn parse_sampling(s: &str) -> Result<Sampling, String> {
     s.parse()
+}
+
+fn parse_roi(s: &str) -> Result<SearchRegion, String> {
+    let v: Vec<u32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<u32>().map_err(|_| format!("\"{x}\" is not a whole number of pixels")))
+        .collect::<Result<_, _>>()?;
+    let [x, y, w, h] = v[..] else {
+        return Err(format!("expected X,Y,W,H (4 numbers), got {}", v.len()));
+    };
+    if w == 0 || h == 0 {
+        return Err("the width and height must be at least 1 px".into());
+    }
+    Ok(SearchRegion::Rect { x0: x, y0: y, x1: x.saturating_add(w), y1: y.saturating_add(h) })
+}
+
+/// The colour reading the options ask for.
+fn colour_spec(args: &Args) -> ColourSpec {
+    let channel = match (&args.laser, args.channel.as_deref()) {
+        (Some(c), _) => Channel::Laser(c.parse().expect("clap checked the colour")),
+        (None, None | Some("luma")) => Channel::Luma,
+        (None, Some(c)) => Channel::Single(c.parse().expect("clap checked the colour")),
+    };
+    ColourSpec { channel, bayer: args.bayer.as_deref().map(|b| b.parse().expect("clap checked the order")) }
+}
+
+/// The mask image as one flag per pixel (non-zero: valid).
+fn load_mask(path: &std::path::Path) -> CliResult<SearchRegion> {
+    let img = omni_vision::image_io::load_gray(path)?;
+    Ok(SearchRegion::Mask(std::sync::Arc::new(img.data.iter().map(|&v| v != 0).collect())))
 }
 
 fn main() -> ExitCode {
@@ -134,11 +186,12 @@ fn main() -> ExitCode {
         } else {
             args.threads
         };
+        let colour = colour_spec(&args);
         let static_ambient = if args.static_ambient {
             if args.input == std::path::Path::new("-") {
                 return Err(CliError::usage("--static-ambient reads the stream twice: give it as a file, not stdin"));
             }
-            Some(pipeline::estimate_static_ambient(&args.input)?)
+            Some(pipeline::estimate_static_ambient(&args.input, &colour)?)
         } else {
             None
         };
@@ -151,6 +204,11 @@ fn main() -> ExitCode {
             producer: format!("omni-ridge {}", env!("CARGO_PKG_VERSION")),
             strict: args.strict,
             static_ambient,
+            colour,
+            region: match &args.mask {
+                Some(path) => Some(load_mask(path)?),
+                None => args.roi.clone(),
+            },
         };
         run(&args.input, &args.output, config)
     })

@@ -8,8 +8,9 @@
 use omni_cli::{CliError, CliResult};
 use omni_formats::stream::{FrameError, Record, StreamReader, StreamWriter};
 use omni_model::CameraModel;
+use omni_vision::colour::ColourSpec;
 use omni_vision::image_io::{GrayImage, write_rgb_png};
-use omni_vision::stripe::{self, RidgeDetector, RidgeParams};
+use omni_vision::stripe::{self, RidgeDetector, RidgeParams, SearchRegion};
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
@@ -30,6 +31,10 @@ pub struct Config {
     pub strict: bool,
     /// Subtracted from every laser frame that has no laser-off frame of its own.
     pub static_ambient: Option<GrayImage>,
+    /// How colour and Bayer frames become the detector's grey image.
+    pub colour: ColourSpec,
+    /// The user's ROI or mask, within the camera's annulus (or the whole frame).
+    pub region: Option<SearchRegion>,
 }
 
 /// The prefix of the error returned after a `--keep-going` run with failed frames.
@@ -51,11 +56,12 @@ struct Job {
 type Outcome = (usize, Result<Record, FrameError>);
 
 /// Frames are checked against the camera's size; without a camera the first frame fixes the
-/// size and the detector samples from the image centre.
+/// size and the whole frame is searched.
 struct Detectors {
     params: RidgeParams,
     camera: Option<RidgeDetector>,
-    from_first_frame: OnceLock<RidgeDetector>,
+    region: Option<SearchRegion>,
+    from_first_frame: OnceLock<Result<RidgeDetector, String>>,
     /// Laser-off frames, decoded once for all the frames that share them.
     laser_off: stripe::LaserOffCache,
     static_ambient: Option<GrayImage>,
@@ -103,11 +109,16 @@ impl Detectors {
     fn for_image(&self, img: &GrayImage) -> Result<(&RidgeDetector, &'static str), String> {
         match &self.camera {
             Some(d) => Ok((d, "the camera's image")),
-            None => Ok((
-                self.from_first_frame
-                    .get_or_init(|| RidgeDetector::for_image_centre(img.width, img.height, self.params)),
-                "the first frame",
-            )),
+            None => {
+                let detector = self.from_first_frame.get_or_init(|| {
+                    let whole = RidgeDetector::whole_frame(img.width, img.height, self.params);
+                    match &self.region {
+                        Some(region) => whole.with_region(region.clone()),
+                        None => Ok(whole),
+                    }
+                });
+                Ok((detector.as_ref().map_err(|m| format!("--mask: {m}"))?, "the first frame"))
+            }
         }
     }
 }
@@ -118,15 +129,25 @@ pub type Input = StreamReader<Box<dyn BufRead + Send>>;
 
 /// Runs the whole stream from `input` to `writer`.
 pub fn run(input: Input, writer: impl Write, output_name: &str, config: Config) -> CliResult {
-    let camera_detector = config.camera.as_ref().map(|cam| {
-        let (w, h) = cam.image_size();
-        RidgeDetector::new(w, h, cam.mirror_circle(), config.params)
-    });
+    let camera_detector = match config.camera.as_ref() {
+        Some(cam) => {
+            let (w, h) = cam.image_size();
+            let detector = RidgeDetector::new(w, h, cam.mirror_circle(), config.params);
+            Some(match &config.region {
+                Some(region) => {
+                    detector.with_region(region.clone()).map_err(|m| CliError::new(format!("--mask: {m}")))?
+                }
+                None => detector,
+            })
+        }
+        None => None,
+    };
     let detectors = Arc::new(Detectors {
         params: config.params,
         camera: camera_detector,
+        region: config.region,
         from_first_frame: OnceLock::new(),
-        laser_off: stripe::LaserOffCache::default(),
+        laser_off: stripe::LaserOffCache::new(config.colour),
         static_ambient: config.static_ambient,
         along: AlongStripeTally::default(),
     });
@@ -348,7 +369,7 @@ fn write_in_order(
 
 /// The static-ambient estimate of the stream in `input` (a file: it is read twice), from the
 /// frames [`stripe::static_ambient_frames`] picks.
-pub fn estimate_static_ambient(input: &Path) -> CliResult<GrayImage> {
+pub fn estimate_static_ambient(input: &Path, colour: &ColourSpec) -> CliResult<GrayImage> {
     let mut stream = StreamReader::open(input)?;
     let (mut frames, mut dirs) = (Vec::new(), Vec::new());
     let mut frames_dir: Option<String> = None;
@@ -367,7 +388,8 @@ pub fn estimate_static_ambient(input: &Path) -> CliResult<GrayImage> {
     let mut images = Vec::with_capacity(picked.len());
     for i in picked {
         let path = frames[i].resolve_path(dirs[i].as_deref(), &frames[i].path);
-        images.push(omni_vision::image_io::load_gray(&path).map_err(|e| CliError::new(e.to_string()))?);
+        images
+            .push(omni_vision::image_io::load_frame_channel(&path, colour).map_err(|e| CliError::new(e.to_string()))?);
     }
     stripe::static_ambient(&images).map_err(|m| CliError::new(format!("{name}: static ambient: {m}")))
 }

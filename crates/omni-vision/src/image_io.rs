@@ -9,6 +9,7 @@
 //! println!("{}x{} px, {}-bit, max {}", img.width, img.height, img.bit_depth, img.max_value());
 //! ```
 
+use crate::colour::{ColourSpec, RgbImage};
 use omni_formats::Error;
 use std::path::{Path, PathBuf};
 
@@ -113,6 +114,68 @@ pub fn load_gray(path: &Path) -> Result<GrayImage, Error> {
 /// Decodes an in-memory PNG/JPEG/PGM file; `name` is used in error messages.
 pub fn decode_gray(bytes: &[u8], name: &str) -> Result<GrayImage, Error> {
     Ok(from_dynamic(decode_checked(bytes, name)?))
+}
+
+/// Loads a frame as the stripe detector reads it: [`load_gray`] for [`ColourSpec::default`];
+/// otherwise the channel or laser contrast of a colour frame, or of a raw Bayer mosaic
+/// demosaiced first (`crate::colour`). A grey frame given a colour reading, a colour frame given
+/// a Bayer order, and a mosaic with odd sides are errors naming the file and the option.
+pub fn load_frame_channel(path: &Path, spec: &ColourSpec) -> Result<GrayImage, Error> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path.display().to_string(), &e))?;
+    decode_frame_channel(&bytes, &path.display().to_string(), spec)
+}
+
+/// [`load_frame_channel`] of an in-memory PNG/JPEG/PGM file; `name` is used in error messages.
+pub fn decode_frame_channel(bytes: &[u8], name: &str, spec: &ColourSpec) -> Result<GrayImage, Error> {
+    if *spec == ColourSpec::default() {
+        return decode_gray(bytes, name);
+    }
+    let dynamic = decode_checked(bytes, name)?;
+    let grey = !dynamic.color().has_color();
+    let rgb = match spec.bayer {
+        Some(order) => {
+            if !grey {
+                return Err(Error::new(
+                    name,
+                    "",
+                    format!("{}: the frame is a colour image, not a raw Bayer mosaic (drop --bayer)", spec.describe()),
+                ));
+            }
+            crate::colour::demosaic(&from_dynamic(dynamic), order)
+                .map_err(|m| Error::new(name, "", format!("--bayer {}: {m}", order.name())))?
+        }
+        None => {
+            if grey {
+                return Err(Error::new(
+                    name,
+                    "",
+                    format!(
+                        "{}: the frame is grey, with no colour to read (a raw Bayer mosaic needs --bayer ORDER)",
+                        spec.describe()
+                    ),
+                ));
+            }
+            rgb_of(dynamic)
+        }
+    };
+    Ok(rgb.channel(spec.channel))
+}
+
+/// A colour frame's samples as RGB in its own depth (8 or 16 bit; alpha dropped).
+fn rgb_of(dynamic: image::DynamicImage) -> RgbImage {
+    use image::DynamicImage as D;
+    let (width, height) = (dynamic.width(), dynamic.height());
+    match dynamic {
+        D::ImageRgb16(_) | D::ImageRgba16(_) | D::ImageLumaA16(_) | D::ImageLuma16(_) => {
+            let data = dynamic.to_rgb16().into_raw().chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+            RgbImage { width, height, bit_depth: 16, data }
+        }
+        other => {
+            let data =
+                other.to_rgb8().into_raw().chunks_exact(3).map(|c| [c[0] as u16, c[1] as u16, c[2] as u16]).collect();
+            RgbImage { width, height, bit_depth: 8, data }
+        }
+    }
 }
 
 /// Loads a PNG or JPEG file as it is (colour kept), with the checks of [`load_gray`].

@@ -474,6 +474,37 @@ pub struct RidgeDetector {
     steger: steger::Kernels,
     /// Gaussian derivatives that give each seed its stripe normal ([`Sampling::Normal`]).
     seed_normal: steger::Kernels,
+    /// Where points are kept besides the annulus (a user's ROI or valid-pixel mask).
+    region: Option<SearchRegion>,
+}
+
+/// A part of the frame the user restricts the search to, on top of the camera's annulus.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SearchRegion {
+    /// Pixels `x0 ≤ x < x1`, `y0 ≤ y < y1` (px; a point at (u, v) is inside when its nearest
+    /// pixel is).
+    Rect { x0: u32, y0: u32, x1: u32, y1: u32 },
+    /// One flag per pixel, row-major, of the detector's image size: true where valid.
+    Mask(std::sync::Arc<Vec<bool>>),
+}
+
+impl SearchRegion {
+    /// Whether the pixel nearest (u, v) px is in the region (`width`: the image's).
+    fn contains(&self, u: f64, v: f64, width: u32) -> bool {
+        let (x, y) = (floor_i64(u + 0.5), floor_i64(v + 0.5));
+        if x < 0 || y < 0 {
+            return false;
+        }
+        let (x, y) = (x as u64, y as u64);
+        match self {
+            SearchRegion::Rect { x0, y0, x1, y1 } => {
+                x >= *x0 as u64 && x < *x1 as u64 && y >= *y0 as u64 && y < *y1 as u64
+            }
+            SearchRegion::Mask(m) => {
+                x < width as u64 && m.get((y * width as u64 + x) as usize).copied().unwrap_or(false)
+            }
+        }
+    }
 }
 
 /// Per-call working memory (reuse it across frames on one thread to avoid allocations).
@@ -521,7 +552,12 @@ impl RidgeDetector {
     /// (clipped to the image).
     pub fn new(width: u32, height: u32, circle: MirrorCircle, params: RidgeParams) -> Self {
         let (cx, cy) = (circle.centre.x, circle.centre.y);
-        let r_in = circle.inner_radius.max(2.0);
+        // Rays need a start off the centre; profiles across the stripe do not.
+        let r_in = if params.sampling == Sampling::Normal {
+            circle.inner_radius.max(0.0)
+        } else {
+            circle.inner_radius.max(2.0)
+        };
         // The rays never need to go past the farthest image corner.
         let corner = [(0.0, 0.0), (width as f64, 0.0), (0.0, height as f64), (width as f64, height as f64)]
             .iter()
@@ -534,7 +570,47 @@ impl RidgeDetector {
         let steger = steger::Kernels::new(params.hessian_sigma);
         let seed_normal = steger::Kernels::with_half(3, across::SEED_NORMAL_SIGMA_PX);
         let sampler = sampling::GaussSampler::default();
-        RidgeDetector { params, width, height, cx, cy, r_in, r_out, dirs, words_per_ray, sampler, steger, seed_normal }
+        RidgeDetector {
+            params,
+            width,
+            height,
+            cx,
+            cy,
+            r_in,
+            r_out,
+            dirs,
+            words_per_ray,
+            sampler,
+            steger,
+            seed_normal,
+            region: None,
+        }
+    }
+
+    /// A detector for an ordinary lens: the whole `width`×`height` frame is searched (points
+    /// are still ordered by azimuth about the image centre).
+    pub fn whole_frame(width: u32, height: u32, params: RidgeParams) -> Self {
+        let centre = omni_geom::Vector2::new((width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0);
+        let outer_radius = (width as f64).hypot(height as f64);
+        Self::new(width, height, MirrorCircle { centre, inner_radius: 0.0, outer_radius }, params)
+    }
+
+    /// The same detector keeping only points inside `region` (a mask must have the detector's
+    /// image size: checked, the message says both sizes).
+    pub fn with_region(mut self, region: SearchRegion) -> Result<Self, String> {
+        if let SearchRegion::Mask(m) = &region
+            && m.len() != self.width as usize * self.height as usize
+        {
+            return Err(format!(
+                "the mask has {} pixels, the frame {}x{} = {}",
+                m.len(),
+                self.width,
+                self.height,
+                self.width as usize * self.height as usize
+            ));
+        }
+        self.region = Some(region);
+        Ok(self)
     }
 
     /// A detector sampling from the image centre, over the largest circle inside the image.
@@ -564,9 +640,18 @@ impl RidgeDetector {
         self.detect_frame(&frame, &mut Scratch::default())
     }
 
-    /// Stripe centres of a frame, in ray order (azimuth from +x towards +y), then by radius.
+    /// Stripe centres of a frame, in ray order (azimuth from +x towards +y), then by radius;
+    /// only those in the [`SearchRegion`] if the detector has one.
     /// Panics if the frame's size is not the detector's (check [`Self::image_size`] first).
     pub fn detect_frame<P: Pixel>(&self, frame: &Frame<'_, P>, scratch: &mut Scratch) -> Vec<StripePoint> {
+        let mut points = self.detect_in_annulus(frame, scratch);
+        if let Some(region) = &self.region {
+            points.retain(|p| region.contains(p.u, p.v, self.width));
+        }
+        points
+    }
+
+    fn detect_in_annulus<P: Pixel>(&self, frame: &Frame<'_, P>, scratch: &mut Scratch) -> Vec<StripePoint> {
         assert_eq!((frame.width, frame.height), (self.width, self.height), "frame size differs from the detector's");
         assert_eq!(frame.data.len(), self.width as usize * self.height as usize, "frame buffer has the wrong length");
         let threshold = self.params.threshold_for(frame.max_value);

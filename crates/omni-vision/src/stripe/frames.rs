@@ -1,21 +1,29 @@
 //! Stream frames to stripe points: image loading, laser-off subtraction, size checks.
 
 use super::{RidgeDetector, StripePoint};
-use crate::image_io::{GrayImage, load_gray};
+use crate::colour::ColourSpec;
+use crate::image_io::{GrayImage, load_frame_channel};
 use omni_formats::stream::Frame;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 /// Laser-off frames decoded once and shared: a scan's frames usually share one laser-off frame
-/// per facet or revolution. Holds the most recently used [`LaserOffCache::CAPACITY`] of them.
+/// per facet or revolution. Holds the most recently used [`LaserOffCache::CAPACITY`] of them,
+/// read as `spec` says (the same reading as the laser frames they are subtracted from).
 #[derive(Debug, Default)]
 pub struct LaserOffCache {
     entries: Mutex<Vec<(PathBuf, Arc<GrayImage>)>>,
+    spec: ColourSpec,
 }
 
 impl LaserOffCache {
     /// Distinct laser-off frames kept (a 1024² 16-bit frame is 2 MB).
     pub const CAPACITY: usize = 16;
+
+    /// An empty cache whose frames are read as `spec` says.
+    pub fn new(spec: ColourSpec) -> Self {
+        LaserOffCache { entries: Mutex::default(), spec }
+    }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Vec<(PathBuf, Arc<GrayImage>)>> {
         self.entries.lock().unwrap_or_else(|e| e.into_inner())
@@ -27,7 +35,7 @@ impl LaserOffCache {
             return Ok(hit);
         }
         // Decoded outside the lock; two threads may both decode a new frame once.
-        let img = Arc::new(load_gray(path).map_err(|e| format!("laser-off frame {e}"))?);
+        let img = Arc::new(load_frame_channel(path, &self.spec).map_err(|e| format!("laser-off frame {e}"))?);
         let mut entries = self.lock();
         if entries.len() == Self::CAPACITY {
             entries.remove(0);
@@ -43,14 +51,15 @@ pub fn load_frame_image(frame: &Frame, frames_dir: Option<&str>) -> Result<GrayI
     load_frame_image_cached(frame, frames_dir, &LaserOffCache::default())
 }
 
-/// [`load_frame_image`] with the laser-off frames taken from (and added to) `cache`.
+/// [`load_frame_image`] with the laser-off frames taken from (and added to) `cache`, and the
+/// frame (like them) read as the cache's [`ColourSpec`] says.
 pub fn load_frame_image_cached(
     frame: &Frame,
     frames_dir: Option<&str>,
     cache: &LaserOffCache,
 ) -> Result<GrayImage, String> {
     let path = frame.resolve_path(frames_dir, &frame.path);
-    let mut img = load_gray(&path).map_err(|e| e.to_string())?;
+    let mut img = load_frame_channel(&path, &cache.spec).map_err(|e| e.to_string())?;
     if let Some(ambient) = &frame.ambient_path {
         let apath = frame.resolve_path(frames_dir, ambient);
         let off = cache.get(&apath)?;

@@ -1,0 +1,320 @@
+//! What the stripe detector reads from a colour or raw Bayer frame: one channel, or the laser's
+//! colour contrast.
+//!
+//! A red laser on lit white paper is darker than the paper in luma (the paper reflects green
+//! and blue too), but clearly brighter in the red channel and brighter still in red minus the
+//! mean of green and blue, where white and grey surfaces cancel. [`Channel::Laser`] is that
+//! contrast: `L − (A + B)/2` for the laser's colour `L` and the other two `A`, `B`, clamped at 0.
+//! Where `L` itself is at full scale the pixel is saturated and reads full scale: a close
+//! laser's core saturates all three channels (white), where the difference alone would be 0.
+//!
+//! Raw Bayer frames ([`BayerOrder`]) are demosaiced bilinearly (each missing sample the mean of
+//! its nearest neighbours of that colour) before the channel is taken, so that points stay in
+//! full-resolution pixel coordinates.
+
+use crate::image_io::GrayImage;
+use std::fmt;
+use std::str::FromStr;
+
+/// A colour channel of an RGB frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Colour {
+    Red,
+    Green,
+    Blue,
+}
+
+impl Colour {
+    /// Index in an RGB triple.
+    fn index(self) -> usize {
+        match self {
+            Colour::Red => 0,
+            Colour::Green => 1,
+            Colour::Blue => 2,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Colour::Red => "red",
+            Colour::Green => "green",
+            Colour::Blue => "blue",
+        }
+    }
+}
+
+impl FromStr for Colour {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "red" => Ok(Colour::Red),
+            "green" => Ok(Colour::Green),
+            "blue" => Ok(Colour::Blue),
+            _ => Err(format!("unknown colour \"{s}\" (known: red, green, blue)")),
+        }
+    }
+}
+
+/// What one sample of the detector's grey image is, per pixel of a colour frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Channel {
+    /// Luma as the `image` crate computes it (sRGB weights); grey frames as they are.
+    #[default]
+    Luma,
+    /// One channel as it is.
+    Single(Colour),
+    /// The laser colour's contrast over the other two channels (module docs).
+    Laser(Colour),
+}
+
+impl Channel {
+    /// Whether this reading needs a colour (or Bayer) frame.
+    pub fn needs_colour(self) -> bool {
+        self != Channel::Luma
+    }
+}
+
+impl fmt::Display for Channel {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Channel::Luma => f.write_str("luma"),
+            Channel::Single(c) => f.write_str(c.name()),
+            Channel::Laser(c) => write!(f, "laser {}", c.name()),
+        }
+    }
+}
+
+/// The colour filter array of a raw Bayer frame: the colours of the 2×2 cell's row 0, then
+/// row 1 (`Rggb`: R G / G B), pixel (0, 0) top left.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum BayerOrder {
+    Rggb,
+    Bggr,
+    Grbg,
+    Gbrg,
+}
+
+impl BayerOrder {
+    pub const ALL: [BayerOrder; 4] = [BayerOrder::Rggb, BayerOrder::Bggr, BayerOrder::Grbg, BayerOrder::Gbrg];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            BayerOrder::Rggb => "rggb",
+            BayerOrder::Bggr => "bggr",
+            BayerOrder::Grbg => "grbg",
+            BayerOrder::Gbrg => "gbrg",
+        }
+    }
+
+    /// The colour index (0 R, 1 G, 2 B) of pixel (x, y).
+    pub fn colour_at(self, x: usize, y: usize) -> usize {
+        let cell = match self {
+            BayerOrder::Rggb => [0, 1, 1, 2],
+            BayerOrder::Bggr => [2, 1, 1, 0],
+            BayerOrder::Grbg => [1, 0, 2, 1],
+            BayerOrder::Gbrg => [1, 2, 0, 1],
+        };
+        cell[(y & 1) * 2 + (x & 1)]
+    }
+}
+
+impl FromStr for BayerOrder {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        BayerOrder::ALL
+            .into_iter()
+            .find(|b| b.name() == s)
+            .ok_or_else(|| format!("unknown Bayer order \"{s}\" (known: rggb, bggr, grbg, gbrg)"))
+    }
+}
+
+/// How a frame file becomes the detector's grey image: the channel, and whether the file is a
+/// raw Bayer mosaic.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct ColourSpec {
+    pub channel: Channel,
+    pub bayer: Option<BayerOrder>,
+}
+
+impl ColourSpec {
+    /// The options as a user wrote them, for error messages.
+    pub fn describe(&self) -> String {
+        let channel = match self.channel {
+            Channel::Luma => None,
+            Channel::Single(c) => Some(format!("--channel {}", c.name())),
+            Channel::Laser(c) => Some(format!("--laser {}", c.name())),
+        };
+        let bayer = self.bayer.map(|b| format!("--bayer {}", b.name()));
+        [bayer, channel].into_iter().flatten().collect::<Vec<_>>().join(" ")
+    }
+}
+
+/// An RGB frame, samples in the file's own units (`bit_depth` 8 or 16).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RgbImage {
+    pub width: u32,
+    pub height: u32,
+    pub bit_depth: u8,
+    /// `[r, g, b]` per pixel, row-major.
+    pub data: Vec<[u16; 3]>,
+}
+
+impl RgbImage {
+    fn max_value(&self) -> u16 {
+        if self.bit_depth <= 8 { 255 } else { u16::MAX }
+    }
+
+    /// The grey image `channel` makes of this frame.
+    pub fn channel(&self, channel: Channel) -> GrayImage {
+        let max = self.max_value();
+        let data = match channel {
+            // As the `image` crate converts colour frames (sRGB luminance weights, truncated).
+            Channel::Luma => self
+                .data
+                .iter()
+                .map(|&[r, g, b]| ((2126 * r as u32 + 7152 * g as u32 + 722 * b as u32) / 10000) as u16)
+                .collect(),
+            Channel::Single(c) => self.data.iter().map(|px| px[c.index()]).collect(),
+            Channel::Laser(c) => {
+                let (l, a, b) = match c {
+                    Colour::Red => (0, 1, 2),
+                    Colour::Green => (1, 0, 2),
+                    Colour::Blue => (2, 0, 1),
+                };
+                self.data.iter().map(|px| laser_contrast(px[l], px[a], px[b], max)).collect()
+            }
+        };
+        GrayImage { width: self.width, height: self.height, bit_depth: self.bit_depth, data }
+    }
+}
+
+/// `l − (a + b)/2` rounded, clamped at 0; full scale where `l` is (module docs).
+#[inline]
+fn laser_contrast(l: u16, a: u16, b: u16, max: u16) -> u16 {
+    if l >= max {
+        return max;
+    }
+    let twice = 2 * l as i32 - a as i32 - b as i32;
+    ((twice + 1) / 2).max(0) as u16
+}
+
+/// Demosaics a raw Bayer frame bilinearly: each pixel keeps its own sample and takes each missing
+/// colour as the mean of the nearest pixels of that colour (2 or 4 of them; at the border the
+/// ones inside). The frame's sides must be even: a mosaic is whole 2×2 cells.
+pub fn demosaic(raw: &GrayImage, order: BayerOrder) -> Result<RgbImage, String> {
+    let (w, h) = (raw.width as usize, raw.height as usize);
+    if w % 2 != 0 || h % 2 != 0 || w < 2 || h < 2 {
+        return Err(format!(
+            "a {}x{} px frame is not a Bayer mosaic of whole 2x2 cells ({} needs even sides)",
+            w,
+            h,
+            order.name()
+        ));
+    }
+    let at = |x: usize, y: usize| raw.data[y * w + x] as u32;
+    let mut data = vec![[0u16; 3]; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let own = order.colour_at(x, y);
+            let mut px = [0u16; 3];
+            px[own] = at(x, y) as u16;
+            for (c, out) in px.iter_mut().enumerate() {
+                if c == own {
+                    continue;
+                }
+                let (mut sum, mut n) = (0u32, 0u32);
+                for dy in -1i64..=1 {
+                    for dx in -1i64..=1 {
+                        let (xx, yy) = (x as i64 + dx, y as i64 + dy);
+                        if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 || (dx == 0 && dy == 0) {
+                            continue;
+                        }
+                        let (xx, yy) = (xx as usize, yy as usize);
+                        // The nearest of that colour: the 4-neighbours if any has it, else the
+                        // diagonals (R at a B site and B at an R site).
+                        if order.colour_at(xx, yy) == c && (dx == 0 || dy == 0 || !has_cross(order, x, y, c)) {
+                            sum += at(xx, yy);
+                            n += 1;
+                        }
+                    }
+                }
+                *out = ((sum + n / 2) / n.max(1)) as u16;
+            }
+            data[y * w + x] = px;
+        }
+    }
+    Ok(RgbImage { width: raw.width, height: raw.height, bit_depth: raw.bit_depth, data })
+}
+
+/// Whether colour `c` is among the row and column neighbours of (x, y) in the mosaic.
+fn has_cross(order: BayerOrder, x: usize, y: usize, c: usize) -> bool {
+    order.colour_at(x + 1, y) == c || order.colour_at(x, y + 1) == c
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rgb(w: u32, h: u32, f: impl Fn(usize, usize) -> [u16; 3]) -> RgbImage {
+        let data = (0..h as usize).flat_map(|y| (0..w as usize).map(move |x| (x, y))).map(|(x, y)| f(x, y)).collect();
+        RgbImage { width: w, height: h, bit_depth: 8, data }
+    }
+
+    #[test]
+    fn laser_contrast_cancels_grey_and_saturates_with_its_channel() {
+        let img = rgb(4, 1, |x, _| [[200, 200, 200], [200, 60, 40], [255, 255, 255], [10, 100, 100]][x]);
+        assert_eq!(img.channel(Channel::Laser(Colour::Red)).data, vec![0, 150, 255, 0]);
+        assert_eq!(img.channel(Channel::Single(Colour::Green)).data, vec![200, 60, 255, 100]);
+        assert_eq!(img.channel(Channel::Laser(Colour::Green)).data, vec![0, 0, 255, 45]);
+        // 2·60 − 200 − 40 < 0 for blue; a half level rounds up.
+        let odd = rgb(1, 1, |_, _| [101, 40, 40]);
+        assert_eq!(odd.channel(Channel::Laser(Colour::Red)).data, vec![61]);
+    }
+
+    #[test]
+    fn each_bayer_order_demosaics_a_flat_colour_to_itself() {
+        let colour = [180u16, 90, 30];
+        for order in BayerOrder::ALL {
+            let (w, h) = (8, 6);
+            let mut raw = GrayImage::new(w, h, 8);
+            for y in 0..h as usize {
+                for x in 0..w as usize {
+                    raw.data[y * w as usize + x] = colour[order.colour_at(x, y)];
+                }
+            }
+            let out = demosaic(&raw, order).unwrap();
+            assert!(out.data.iter().all(|&px| px == colour), "{order:?}");
+        }
+    }
+
+    #[test]
+    fn bilinear_demosaicing_interpolates_a_ramp_exactly_inside() {
+        // A horizontal ramp in every channel: the interpolated samples are exact away from the
+        // border, whatever the order.
+        for order in BayerOrder::ALL {
+            let (w, h) = (10usize, 8usize);
+            let mut raw = GrayImage::new(w as u32, h as u32, 16);
+            for y in 0..h {
+                for x in 0..w {
+                    raw.data[y * w + x] = (1000 + 100 * x + 1000 * order.colour_at(x, y)) as u16;
+                }
+            }
+            let out = demosaic(&raw, order).unwrap();
+            for y in 1..h - 1 {
+                for x in 1..w - 1 {
+                    for c in 0..3 {
+                        assert_eq!(out.data[y * w + x][c], (1000 + 100 * x + 1000 * c) as u16, "{order:?} {x} {y} {c}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn odd_sized_mosaics_and_unknown_names_are_refused() {
+        let e = demosaic(&GrayImage::new(5, 4, 8), BayerOrder::Rggb).unwrap_err();
+        assert!(e.contains("5x4") && e.contains("rggb"), "{e}");
+        assert!("rgbg".parse::<BayerOrder>().unwrap_err().contains("rggb, bggr"));
+        assert!("violet".parse::<Colour>().is_err());
+    }
+}

@@ -50,6 +50,9 @@ COVERAGE_PX = 1.0
 # The board's outline beyond the inner corners (squares): the printed pattern ends 1 square out,
 # the paper about 2 more; the stripe often runs on that margin.
 MARGIN_SQUARES = 2.5
+# Gaps (px along the line) the stripe on the board may have (black squares, speckle).
+SPAN_GAP_PX = 40.0
+SCALE = float(os.environ.get("REAL_LASER_SCALE", "1"))
 FALSE_PX = 3.0
 
 
@@ -285,6 +288,22 @@ def curve_coordinates(curve: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, n
     return dist, where
 
 
+def stripe_span(cam: Camera, curve: np.ndarray, pts: np.ndarray) -> tuple[float, float]:
+    """The stretch of the line (arc length along its image, px) where the stripe lies on the
+    board: the longest run of points of either estimator within 3 px of the line, with gaps of
+    at most SPAN_GAP_PX. Where the stripe leaves the paper (the outline's margin is only nominal)
+    it leaves the line, and neither estimator is judged beyond."""
+    dist, where = curve_coordinates(curve, pts)
+    on = np.sort(where[np.abs(dist) <= FALSE_PX])
+    if len(on) == 0:
+        return 0.0, 0.0
+    breaks = np.flatnonzero(np.diff(on) > SPAN_GAP_PX)
+    starts = np.concatenate([[0], breaks + 1])
+    ends = np.concatenate([breaks, [len(on) - 1]])
+    k = int(np.argmax(on[ends] - on[starts]))
+    return float(on[starts[k]]), float(on[ends[k]]) + 1.0
+
+
 @dataclass
 class Score:
     points: int = 0
@@ -294,9 +313,10 @@ class Score:
     median: float = float("nan")
 
 
-def score(cam: Camera, pts: np.ndarray, line, outline_u: np.ndarray) -> Score:
+def score(cam: Camera, pts: np.ndarray, line, outline_u: np.ndarray, span: tuple[float, float]) -> Score:
     """Coverage, false points, RMS and median |distance| (px, in the frame) of one estimator's
-    points on the board about the common line refitted to its own inliers."""
+    points on the board about the common line refitted to its own inliers, over the stretch
+    `span` (arc length along the line's image, px) where the stripe lies on the board."""
     s = Score(points=len(pts))
     if line is None:
         return s
@@ -313,8 +333,11 @@ def score(cam: Camera, pts: np.ndarray, line, outline_u: np.ndarray) -> Score:
         return s
     curve = image_curve(cam, *seg)
     dist, where = curve_coordinates(curve, pts)
-    arc_len = float(np.hypot(*np.diff(curve, axis=0).T).sum())
-    bins = np.zeros(max(1, int(np.ceil(arc_len))), bool)
+    lo, hi = span
+    keep = (where >= lo) & (where <= hi)
+    dist, where = dist[keep], where[keep] - lo
+    s.points = int(keep.sum())
+    bins = np.zeros(max(1, int(np.ceil(hi - lo))), bool)
     near = np.abs(dist) <= COVERAGE_PX
     idx = np.clip(np.floor(where[near]).astype(int), 0, len(bins) - 1)
     bins[idx] = True
@@ -328,11 +351,11 @@ def score(cam: Camera, pts: np.ndarray, line, outline_u: np.ndarray) -> Score:
     return s
 
 
-def ridge_points(binary: Path, names: list[str], extra: list[str]) -> dict[str, np.ndarray]:
+def ridge_points(binary: Path, names: list[str], extra: list[str], frames: Path = DATA) -> dict[str, np.ndarray]:
     """omni-ridge's points (u, v) for each frame, run once over a stream of all of them."""
     with tempfile.TemporaryDirectory() as tmp:
         stream = Path(tmp) / "frames.jsonl"
-        lines = [{"type": "header", "format": "omniscan.stream", "version": 1, "producers": ["real_laser.py"], "frames_dir": str(DATA)}]
+        lines = [{"type": "header", "format": "omniscan.stream", "version": 1, "producers": ["real_laser.py"], "frames_dir": str(frames)}]
         for k, name in enumerate(names):
             lines.append(
                 {"type": "frame", "seq": k, "path": name, "alpha_deg": 0.0, "facet": 0, "revolution": 0,
@@ -349,6 +372,7 @@ def ridge_points(binary: Path, names: list[str], extra: list[str]) -> dict[str, 
         rec = json.loads(line)
         if rec.get("type") == "frame":
             pts = np.array([[p[0], p[1]] for p in rec.get("stripe", [])], np.float64).reshape(-1, 2)
+            pts = pts * SCALE + 0.5 * (SCALE - 1)
             result[names[rec["seq"]]] = pts
     return result
 
@@ -362,9 +386,15 @@ class FrameResult:
     reference: Score = field(default_factory=Score)
 
 
-def evaluate(binary: Path, extra: list[str], names: list[str] = STRIPE_FRAMES, margin_squares: float = MARGIN_SQUARES) -> tuple[Camera, list[FrameResult]]:
+def evaluate(
+    binary: Path,
+    extra: list[str],
+    names: list[str] = STRIPE_FRAMES,
+    margin_squares: float = MARGIN_SQUARES,
+    frames: Path = DATA,
+) -> tuple[Camera, list[FrameResult]]:
     cam = calibrate()
-    ridge = ridge_points(binary, names, extra)
+    ridge = ridge_points(binary, names, extra, frames)
     results = []
     for name in names:
         bgr = load(name)
@@ -382,10 +412,13 @@ def evaluate(binary: Path, extra: list[str], names: list[str] = STRIPE_FRAMES, m
         line = robust_line(balanced_union(ref_u, rid_u))
         seg = segment_on_board(line, outline_u) if line is not None else None
         fr = FrameResult(name, True)
-        if seg is not None:
-            fr.length_px = float(np.hypot(*np.diff(image_curve(cam, *seg), axis=0).T).sum())
-        fr.reference = score(cam, ref_on, line, outline_u)
-        fr.ridge = score(cam, rid_on, line, outline_u)
+        if seg is None:
+            results.append(fr)
+            continue
+        span = stripe_span(cam, image_curve(cam, *seg), np.vstack([ref_on, rid_on]))
+        fr.length_px = span[1] - span[0]
+        fr.reference = score(cam, ref_on, line, outline_u, span)
+        fr.ridge = score(cam, rid_on, line, outline_u, span)
         results.append(fr)
     return cam, results
 
@@ -417,10 +450,11 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--ridge", default=os.environ.get("OMNI_RIDGE", str(ROOT / "target" / "release" / "omni-ridge")))
     ap.add_argument("--margin", type=float, default=MARGIN_SQUARES, help="board outline margin beyond the inner corners (squares)")
+    ap.add_argument("--frames", type=Path, default=DATA, help="where omni-ridge reads the stripe frames (default: the photographs)")
     ap.add_argument("extra", nargs=argparse.REMAINDER, help="omni-ridge options after --")
     args = ap.parse_args()
     extra = [a for a in args.extra if a != "--"]
-    cam, results = evaluate(Path(args.ridge), extra, margin_squares=args.margin)
+    cam, results = evaluate(Path(args.ridge), extra, margin_squares=args.margin, frames=args.frames)
     print(table(cam, results))
     return 0
 

@@ -80,6 +80,12 @@ struct Args {
     /// the normal sampling always does].
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     optics_blur: Option<f64>,
+    /// Coarsest scale at which stripes wider than --max-width are searched: 1 (off), 2, 4, 8 or
+    /// 16, frames binned that many pixels square. A stripe is found at the scale where it is a
+    /// few pixels wide and re-measured on the frame's own pixels (a 20 px stripe at 4, a
+    /// saturated 60 px core at 8).
+    #[arg(long, default_value_t = 8, value_name = "N")]
+    max_scale: u32,
     /// Write each frame with its detected centres drawn as DIR/<seq>.png.
     #[arg(long, value_name = "DIR")]
     overlay: Option<PathBuf>,
@@ -172,6 +178,7 @@ fn main() -> ExitCode {
             hessian_sigma: args.hessian_sigma,
             along_stripe_px: args.along_stripe,
             optics_blur_px: args.optics_blur,
+            max_scale: args.max_scale,
         };
         params.validate().map_err(CliError::usage)?;
         let camera = match &args.camera {

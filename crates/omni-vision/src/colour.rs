@@ -4,9 +4,13 @@
 //! A red laser on lit white paper is darker than the paper in luma (the paper reflects green
 //! and blue too), but clearly brighter in the red channel and brighter still in red minus the
 //! mean of green and blue, where white and grey surfaces cancel. [`Channel::Laser`] is that
-//! contrast: `L − (A + B)/2` for the laser's colour `L` and the other two `A`, `B`, clamped at 0.
-//! Where `L` itself is at full scale the pixel is saturated and reads full scale: a close
-//! laser's core saturates all three channels (white), where the difference alone would be 0.
+//! contrast, `L − w·(A + B)/2` for the laser's colour `L` and the other two `A`, `B`, clamped at
+//! 0, with `w` = 1 while `L` is below half scale, falling linearly to 0 at full scale. A close
+//! laser's core saturates all three channels (white) and its rim leaks into the other two
+//! (sensor cross-talk, JPEG's half-resolution colour), where the plain difference would fall to
+//! 0 at the stripe's centre and leave two humps; as `L` nears full scale its own level is the
+//! better evidence, so the contrast rises monotonically into a saturated core, which reads full
+//! scale and is located at its plateau's centre like any saturated stripe.
 //!
 //! Raw Bayer frames ([`BayerOrder`]) are demosaiced bilinearly (each missing sample the mean of
 //! its nearest neighbours of that colour) before the channel is taken, so that points stay in
@@ -188,14 +192,14 @@ impl RgbImage {
     }
 }
 
-/// `l − (a + b)/2` rounded, clamped at 0; full scale where `l` is (module docs).
+/// `l − w·(a + b)/2` rounded, clamped at 0, `w` = min(1, 2·(max − l)/max) (module docs).
 #[inline]
 fn laser_contrast(l: u16, a: u16, b: u16, max: u16) -> u16 {
-    if l >= max {
-        return max;
-    }
-    let twice = 2 * l as i32 - a as i32 - b as i32;
-    ((twice + 1) / 2).max(0) as u16
+    let (l, others, max) = (l as i64, a as i64 + b as i64, max as i64);
+    // w = num / max with num = min(max, 2·(max − l)); the contrast is l − num·others / (2·max).
+    let num = (2 * (max - l)).clamp(0, max);
+    let twice = 2 * l * max - num * others;
+    ((twice + max) / (2 * max)).clamp(0, max) as u16
 }
 
 /// Demosaics a raw Bayer frame bilinearly: each pixel keeps its own sample and takes each missing
@@ -262,13 +266,25 @@ mod tests {
 
     #[test]
     fn laser_contrast_cancels_grey_and_saturates_with_its_channel() {
-        let img = rgb(4, 1, |x, _| [[200, 200, 200], [200, 60, 40], [255, 255, 255], [10, 100, 100]][x]);
-        assert_eq!(img.channel(Channel::Laser(Colour::Red)).data, vec![0, 150, 255, 0]);
-        assert_eq!(img.channel(Channel::Single(Colour::Green)).data, vec![200, 60, 255, 100]);
-        assert_eq!(img.channel(Channel::Laser(Colour::Green)).data, vec![0, 0, 255, 45]);
-        // 2·60 − 200 − 40 < 0 for blue; a half level rounds up.
-        let odd = rgb(1, 1, |_, _| [101, 40, 40]);
-        assert_eq!(odd.channel(Channel::Laser(Colour::Red)).data, vec![61]);
+        // Below half scale: the plain difference (grey cancels; a half level rounds up).
+        let img = rgb(4, 1, |x, _| [[100, 100, 100], [101, 40, 40], [120, 30, 50], [10, 100, 100]][x]);
+        assert_eq!(img.channel(Channel::Laser(Colour::Red)).data, vec![0, 61, 80, 0]);
+        assert_eq!(img.channel(Channel::Laser(Colour::Green)).data, vec![0, 0, 0, 45]);
+        assert_eq!(img.channel(Channel::Single(Colour::Green)).data, vec![100, 40, 30, 100]);
+        // Towards full scale the laser's own level takes over: at 3/4 scale (w = 1/2)
+        // 191.25 − 0.5·(G + B)/2; white and a saturated red read full scale.
+        let bright = rgb(4, 1, |x, _| [[191, 100, 100], [255, 255, 255], [255, 0, 0], [200, 200, 200]][x]);
+        let want_191 = (191.0 - (2.0 * (255.0 - 191.0) / 255.0) * (100.0 + 100.0) / 2.0f64).round() as u16;
+        let want_200 = (200.0 - (2.0 * (255.0 - 200.0) / 255.0) * (200.0 + 200.0) / 2.0f64).round() as u16;
+        assert_eq!(img_red(&bright), vec![want_191, 255, 255, want_200]);
+        // Monotonic in the laser's level for a fixed leak into the other channels.
+        let ramp = rgb(256, 1, |x, _| [x as u16, (x as u16) / 2, (x as u16) / 2]);
+        let c = img_red(&ramp);
+        assert!(c.windows(2).all(|w| w[1] >= w[0]), "{c:?}");
+    }
+
+    fn img_red(img: &RgbImage) -> Vec<u16> {
+        img.channel(Channel::Laser(Colour::Red)).data
     }
 
     #[test]

@@ -51,6 +51,7 @@ mod normal;
 mod overlay;
 mod rowscan;
 mod sampling;
+mod scales;
 mod steger;
 
 pub use along::{ShortStripes, refuse_short_stripes};
@@ -170,6 +171,9 @@ pub struct RidgeParams {
     /// integration not included, whose pull on curved stripes the `normal` post-pass removes;
     /// `None` (the default) measures the blur on each frame, as the normal sampling always does.
     pub optics_blur_px: Option<f64>,
+    /// With [`Sampling::Normal`]: the coarsest scale (1, 2, 4, 8 or 16: frames binned that many
+    /// pixels square) at which stripes too wide for `max_width` are searched (`scales`).
+    pub max_scale: u32,
 }
 
 impl Default for RidgeParams {
@@ -183,6 +187,7 @@ impl Default for RidgeParams {
             hessian_sigma: 1.0,
             along_stripe_px: 0.0,
             optics_blur_px: None,
+            max_scale: 8,
         }
     }
 }
@@ -216,6 +221,9 @@ impl RidgeParams {
             && !(blur.is_finite() && (0.0..=5.0).contains(&blur))
         {
             return Err(format!("optics blur must be in [0, 5] px, got {blur}"));
+        }
+        if !(self.max_scale.is_power_of_two() && self.max_scale <= 16) {
+            return Err(format!("max scale must be 1, 2, 4, 8 or 16, got {}", self.max_scale));
         }
         Ok(())
     }
@@ -476,6 +484,8 @@ pub struct RidgeDetector {
     seed_normal: steger::Kernels,
     /// Where points are kept besides the annulus (a user's ROI or valid-pixel mask).
     region: Option<SearchRegion>,
+    /// The detector for frames binned 2 × 2 (`scales`), built when first needed.
+    coarser: std::sync::OnceLock<Box<RidgeDetector>>,
 }
 
 /// A part of the frame the user restricts the search to, on top of the camera's annulus.
@@ -584,6 +594,7 @@ impl RidgeDetector {
             steger,
             seed_normal,
             region: None,
+            coarser: std::sync::OnceLock::new(),
         }
     }
 
@@ -1041,18 +1052,18 @@ impl RidgeDetector {
         if self.params.method == Method::Hessian && quality & quality::SATURATED == 0 {
             r = self.steger.refine_along_ray(frame, (self.cx, self.cy), (dx, dy), r)?;
         }
-        quality |= self.contrast_and_width_flags(peak, width, t);
+        quality |= self.contrast_and_width_flags(peak, width, t, self.params.max_width);
         Some(StripePoint { u: self.cx + r * dx, v: self.cy + r * dy, intensity: peak as f64, width, quality })
     }
 
     /// [`quality::WEAK`] and [`quality::WIDTH_MARGINAL`] for a segment of contrast `peak` and
     /// `width` (px) at threshold `t`.
-    fn contrast_and_width_flags(&self, peak: f32, width: f64, t: f32) -> u32 {
+    fn contrast_and_width_flags(&self, peak: f32, width: f64, t: f32, max_width: f64) -> u32 {
         let mut flags = 0;
         if peak < 3.0 * t {
             flags |= quality::WEAK;
         }
-        if width < 1.2 * self.params.min_width || width > 0.8 * self.params.max_width {
+        if width < 1.2 * self.params.min_width || width > 0.8 * max_width {
             flags |= quality::WIDTH_MARGINAL;
         }
         flags

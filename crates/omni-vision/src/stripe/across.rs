@@ -73,6 +73,50 @@ const MAX_MOVE_PX: f64 = 0.5;
 /// FWHM / σ of a Gaussian.
 const FWHM_PER_SIGMA: f64 = 2.354_820_045;
 
+pub static DBG: [std::sync::atomic::AtomicUsize; 32] = [const { std::sync::atomic::AtomicUsize::new(0) }; 32];
+pub const DBG_NAMES: [&str; 32] = [
+    "seeds",
+    "other_axis",
+    "no_normal",
+    "axis",
+    "leaves",
+    "walk",
+    "no_seg",
+    "width",
+    "centre",
+    "half_cross",
+    "low_cross",
+    "far",
+    "not_flat",
+    "measured",
+    "dup",
+    "arc",
+    "end",
+    "lopsided",
+    "narrow",
+    "widest",
+    "slope",
+    "cut_nocurv",
+    "shift",
+    "kept",
+    "",
+    "",
+    "",
+    "",
+    "",
+    "",
+    "",
+    "",
+];
+fn dbg(i: usize) {
+    DBG[i].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+}
+pub fn dbg_print() {
+    let v: Vec<String> =
+        (0..24).map(|i| format!("{}={}", DBG_NAMES[i], DBG[i].swap(0, std::sync::atomic::Ordering::Relaxed))).collect();
+    eprintln!("DBG {}", v.join(" "));
+}
+
 /// Which way a seed's run ran.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Axis {
@@ -80,9 +124,26 @@ enum Axis {
     Column,
 }
 
+/// How wide a stripe a profile measures (px between its threshold crossings) and how far from
+/// its start the centre may lie (px).
+#[derive(Debug, Clone, Copy)]
+struct Reach {
+    max_width: f64,
+    far_px: f64,
+}
+
+impl Reach {
+    /// A seed pixel's reach: the brightest pixel of a run lies within 2 px of a stripe's centre.
+    fn of(max_width: f64) -> Reach {
+        Reach { max_width, far_px: 2.0 }
+    }
+}
+
 /// Profile buffers reused from seed to seed.
 #[derive(Debug, Default)]
 struct Buffers {
+    /// Profiles refused as wider than the reach: stripes for a coarser scale.
+    too_wide: usize,
     /// Bilinear samples 1 px apart across the stripe, for the background.
     coarse: Vec<f32>,
     /// Fine samples on the −n side, outwards.
@@ -91,6 +152,16 @@ struct Buffers {
     raw: Vec<f32>,
     /// The profile above the background.
     contrast: Vec<f32>,
+}
+
+/// A point that passed the linking checks, with what a finer scale needs to re-measure it.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Linked {
+    pub point: StripePoint,
+    /// Unit normal of the stripe.
+    pub normal: (f64, f64),
+    /// Half-maximum width (px).
+    pub half_width: f64,
 }
 
 /// A measured centre before linking.
@@ -112,14 +183,65 @@ impl RidgeDetector {
     /// Stripe centres of a frame measured across the stripes' normals (module docs), sorted by
     /// azimuth around the mirror centre, then radius.
     pub(super) fn detect_across<P: Pixel>(&self, frame: &Frame<'_, P>, threshold: f64) -> Vec<StripePoint> {
+        let points = self.detect_at_scales(frame, threshold, 1).into_iter().map(|l| l.point).collect();
+        if std::env::var_os("OMNI_DBG").is_some() {
+            dbg_print();
+        }
+        azimuth_sorted(points, (self.cx, self.cy))
+    }
+
+    /// The stripes of `frame` (this detector's scale, `scale` × the original pixel) that this
+    /// scale measures, and those wider ones that coarser scales find, re-measured here
+    /// (`super::scales`).
+    pub(super) fn detect_at_scales<P: Pixel>(&self, frame: &Frame<'_, P>, threshold: f64, scale: u32) -> Vec<Linked> {
         let mut buffers = Buffers::default();
         let centres: Vec<Centre> = self
             .seeds(frame, threshold)
             .into_iter()
             .filter_map(|(x, y, axis)| self.measure_seed(frame, x, y, axis, threshold, &mut buffers))
             .collect();
-        let points = self.link_and_correct(&centres);
-        azimuth_sorted(points, (self.cx, self.cy))
+        let mut kept = self.link_and_correct(&centres);
+        let wide =
+            buffers.too_wide + centres.iter().filter(|c| c.half_width > super::scales::NARROW_HALF_WIDTH_PX).count();
+        if let Some(coarse) = self.coarser_stripes(frame, threshold, scale, wide) {
+            let refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
+            kept.extend(refined);
+        }
+        kept
+    }
+
+    /// Re-measures on this scale's `frame` the stripes a coarser scale found (in its pixels),
+    /// where this scale kept none: two profiles per coarse point (½ px either side of it along
+    /// the stripe), along its normal, each kept if its centre lies near the coarse one.
+    fn refine_coarse<P: Pixel>(
+        &self,
+        frame: &Frame<'_, P>,
+        threshold: f64,
+        coarse: &[Linked],
+        kept: &[Linked],
+        buffers: &mut Buffers,
+    ) -> Vec<Linked> {
+        let taken = super::scales::Occupancy::new(kept.iter().map(|l| (l.point.u, l.point.v)), self.image_size());
+        let mut out = Vec::with_capacity(2 * coarse.len());
+        for c in coarse {
+            if c.half_width < super::scales::WIDE_HALF_WIDTH_PX {
+                continue; // narrow at the coarse scale: this scale's to measure (or refuse)
+            }
+            let (u, v) = (2.0 * c.point.u + 0.5, 2.0 * c.point.v + 0.5);
+            let half_width = 2.0 * c.half_width;
+            if taken.near(u, v, (0.5 * half_width).max(2.0)) {
+                continue;
+            }
+            let (nx, ny) = c.normal;
+            let reach = Reach { max_width: 3.0 * c.point.width + 4.0, far_px: (0.3 * half_width).max(1.5) };
+            for side in [-0.5, 0.5] {
+                let start = (u - side * ny, v + side * nx);
+                if let Some(m) = self.measure_profile(frame, start, c.normal, threshold, reach, buffers) {
+                    out.push(Linked { point: m.point, normal: m.normal, half_width: m.half_width });
+                }
+            }
+        }
+        out
     }
 
     /// The brightest pixel (smoothed [1 2 1] across the run) of every run of consecutive ridge
@@ -228,25 +350,53 @@ impl RidgeDetector {
         buffers: &mut Buffers,
     ) -> Option<Centre> {
         let (x0, y0) = (x as f64, y as f64);
+        dbg(0);
         if clearly_other_axis(frame, x as usize, y as usize, axis) {
+            dbg(1);
             return None;
         }
-        let derivatives = self.seed_normal.derivatives_at_pixel(frame, x as usize, y as usize)?;
-        let ((nx, ny), _) = super::steger::Kernels::normal(&derivatives)?;
+        let Some(derivatives) = self.seed_normal.derivatives_at_pixel(frame, x as usize, y as usize) else {
+            dbg(2);
+            return None;
+        };
+        let Some(((nx, ny), _)) = super::steger::Kernels::normal(&derivatives) else {
+            dbg(2);
+            return None;
+        };
         let fits_axis = match axis {
             Axis::Row => ny.abs() <= AXIS_OVERLAP_TAN * nx.abs(),
             Axis::Column => nx.abs() <= AXIS_OVERLAP_TAN * ny.abs(),
         };
         if !fits_axis {
+            dbg(3);
             return None;
         }
+        self.measure_profile(frame, (x0, y0), (nx, ny), threshold, Reach::of(self.params.max_width), buffers)
+    }
+
+    /// The centre of the stripe near (`x0`, `y0`) px, on a profile along the unit normal `n`;
+    /// `None` if the profile fails a check. `reach` sets the widest stripe measured and how far
+    /// the centre may lie from (`x0`, `y0`).
+    fn measure_profile<P: Pixel>(
+        &self,
+        frame: &Frame<'_, P>,
+        (x0, y0): (f64, f64),
+        (nx, ny): (f64, f64),
+        threshold: f64,
+        reach: Reach,
+        buffers: &mut Buffers,
+    ) -> Option<Centre> {
+        let max_width = reach.max_width;
         // The background: the larger of the minima of a coarse profile (bilinear, 1 px steps) on
         // either side, past the flank of the widest accepted stripe.
-        let reach = (0.5 * self.params.max_width + 2.0).ceil() as i64;
+        let reach_px = (0.5 * max_width + 2.0).ceil() as i64;
+        let reach_far = reach.far_px;
+        let reach = reach_px;
         let n = 2 * reach as usize + 1;
         let coarse = &mut buffers.coarse;
         coarse.clear();
         if !frame.bilinear_line(x0, y0, -reach as f64, (nx, ny), n, coarse) {
+            dbg(4);
             return None; // the profile leaves the image
         }
         let min = |v: &[f32]| v.iter().fold(f32::INFINITY, |m, &x| m.min(x));
@@ -286,38 +436,73 @@ impl RidgeDetector {
         };
         let Buffers { left: before, raw, contrast: q, .. } = buffers;
         before.clear();
-        walk(-1, before)?;
+        if walk(-1, before).is_none() {
+            dbg(5);
+            return None;
+        }
         let half = before.len();
         raw.clear();
         raw.extend(before.iter().rev());
         raw.push(centre);
-        walk(1, raw)?;
+        if walk(1, raw).is_none() {
+            dbg(5);
+            return None;
+        }
         q.clear();
         q.extend(raw.iter().map(|v| v - background));
         let (raw, q) = (&raw[..], &q[..]);
-        let seg = segment_near(q, half, t)?;
-        let (a, b) = self.crossings_within_width(q, &seg, t)?;
+        let Some(seg) = segment_near(q, half, t) else {
+            dbg(6);
+            return None;
+        };
+        let Some((a, b)) = estimators::crossings(q, &seg, t) else {
+            dbg(7);
+            return None;
+        };
         let width = (b - a) * SAMPLE_STEP_PX;
+        if width > max_width {
+            buffers.too_wide += 1;
+            dbg(7);
+            return None;
+        }
+        if width < self.params.min_width {
+            dbg(7);
+            return None;
+        }
         let peak = q[seg.peak];
         let saturated = frame.saturated_near(x0, y0);
         let index =
-            if saturated { estimators::plateau_centre(q, &seg, t, peak)? } else { self.centre_index(raw, q, &seg, t)? };
-        let (ha, hb) = estimators::crossings(q, &seg, 0.5 * peak)?;
+            if saturated { estimators::plateau_centre(q, &seg, t, peak) } else { self.centre_index(raw, q, &seg, t) };
+        let Some(index) = index else {
+            dbg(8);
+            return None;
+        };
+        let Some((ha, hb)) = estimators::crossings(q, &seg, 0.5 * peak) else {
+            dbg(9);
+            return None;
+        };
         let half_width = (hb - ha) * SAMPLE_STEP_PX;
         // A cut flank falls faster than the whole one: compare the flanks' spans between the
         // half maximum and ASYMMETRY_LEVEL of the peak.
-        let (la, lb) = estimators::crossings(q, &seg, ASYMMETRY_LEVEL * peak)?;
+        let Some((la, lb)) = estimators::crossings(q, &seg, ASYMMETRY_LEVEL * peak) else {
+            dbg(10);
+            return None;
+        };
         let (left, right) = (ha - la, lb - hb);
         let asymmetry = (left - right) / (left + right).max(1e-9);
         let s = (index - half as f64) * SAMPLE_STEP_PX;
-        if s.abs() > 2.0 {
+        if s.abs() > reach_far {
+            dbg(11);
             return None;
         }
         let (u, v) = (x0 + s * nx, y0 + s * ny);
         if !flat_across(frame, u, v, (nx, ny), peak) {
+            dbg(12);
             return None;
         }
-        let flags = if saturated { quality::SATURATED } else { 0 } | self.contrast_and_width_flags(peak, width, t);
+        dbg(13);
+        let flags =
+            if saturated { quality::SATURATED } else { 0 } | self.contrast_and_width_flags(peak, width, t, max_width);
         let point = StripePoint { u, v, intensity: peak as f64, width, quality: flags };
         let pull_variance = (!saturated).then(|| self.pull_variance(raw, q, &seg, t, index)).flatten();
         Some(Centre { point, normal: (nx, ny), half_width, asymmetry, pull_variance })
@@ -356,7 +541,7 @@ impl RidgeDetector {
 
     /// Links each centre to its neighbours on the same stripe and returns the points that
     /// survive the checks, corrected for the blur's pull and fitted along the stripe (module docs).
-    fn link_and_correct(&self, centres: &[Centre]) -> Vec<StripePoint> {
+    fn link_and_correct(&self, centres: &[Centre]) -> Vec<Linked> {
         let widest =
             half_width_quantile(centres, NARROW_PERCENTILE).map_or(f64::INFINITY, |w| MAX_HALF_WIDTH_RATIO * w);
         let along = self.params.along_stripe_px;
@@ -400,6 +585,7 @@ impl RidgeDetector {
                 }
             });
             if duplicate {
+                dbg(14);
                 continue;
             }
             // Everything the checks below need from the neighbours, in one pass.
@@ -422,32 +608,38 @@ impl RidgeDetector {
                 }
             }
             if !(last >= super::MIN_STRIPE_ARC_PX || -first >= super::MIN_STRIPE_ARC_PX) {
+                dbg(15);
                 continue;
             }
             if !(last >= END_PX && -first >= END_PX) {
+                dbg(16);
                 continue;
             }
             // A cut leaves every profile along it lopsided the same way; speckle and noise
             // lopsided at random, so the neighbours' mean tells the two apart.
             let lopsided = (asymmetry_sum / count as f64).abs();
             if lopsided > MAX_ASYMMETRY {
+                dbg(17);
                 continue;
             }
             // Narrower than MIN_WIDTH_RATIO of the neighbours' median width (the upper median:
             // sorted index count / 2): as many as that index or fewer are narrow enough.
             if not_wider <= count / 2 {
+                dbg(18);
                 continue;
             }
             // Lit areas of the ambient image (a face's tapering tip, a sliver between shadows)
             // are wider than the laser's line, whose width the lens sets, and their width
             // changes along them.
             if c.half_width > widest && c.point.quality & quality::SATURATED == 0 {
+                dbg(19);
                 continue;
             }
             // d(half-maximum width)/dt along the stripe.
             if let Some((_, slope)) = width_line.fit()
                 && slope.abs() > MAX_WIDTH_SLOPE
             {
+                dbg(20);
                 continue;
             }
             let factors = sums.factors();
@@ -455,6 +647,7 @@ impl RidgeDetector {
             // Too few neighbours on one side for the stripe's shape are too few to outvote a
             // profile's own lopsidedness either: such a profile is taken as cut.
             if curvature.is_none() && c.asymmetry.abs() > 2.0 * MAX_ASYMMETRY {
+                dbg(21);
                 continue;
             }
             // The offset at t = 0 once the wider parabola's curvature is taken out.
@@ -480,12 +673,14 @@ impl RidgeDetector {
             };
             let shift = offset - pull;
             if shift.abs() > MAX_MOVE_PX {
+                dbg(22);
                 continue;
             }
+            dbg(23);
             let mut p = c.point;
             p.u += shift * c.normal.0;
             p.v += shift * c.normal.1;
-            out.push(p);
+            out.push(Linked { point: p, normal: c.normal, half_width: c.half_width });
         }
         out
     }

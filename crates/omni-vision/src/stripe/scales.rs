@@ -1,0 +1,155 @@
+//! Stripes wider than the detector's reach, found where they are narrow.
+//!
+//! Rule: a stripe is found at the scale where it is a few pixels wide. The profiles' reach,
+//! the seeds' neighbours, the linking distances and the speckle they average all scale with the
+//! stripe, so the checks that suit a 2–4 px stripe suit a 20 px one in a frame binned 4 × 4
+//! and a saturated 60 px core binned 8 × 8. When a scale measures enough profiles wider than
+//! [`NARROW_HALF_WIDTH_PX`] (or refuses them as wider than its reach), or the frame saturates,
+//! the frame is binned 2 × 2 and searched again; each coarse point is then re-measured on the
+//! finer frame, two profiles per coarse point along its normal, down to the original pixels.
+//! A finer scale's own points win where both have one, and coarse points that are narrow at
+//! their scale ([`WIDE_HALF_WIDTH_PX`]) are left to the finer scale, which measured (or
+//! refused) them itself.
+
+use super::across::Linked;
+use super::{Frame, Pixel, RidgeDetector};
+use omni_model::MirrorCircle;
+
+/// Half-maximum width (px) above which a profile is better measured one scale coarser.
+pub const NARROW_HALF_WIDTH_PX: f64 = 4.5;
+/// Half-maximum width (px, at its own scale) a coarse point needs to be re-measured on the
+/// finer frame; narrower ones are the finer scale's (overlap with [`NARROW_HALF_WIDTH_PX`] / 2,
+/// so that no width falls between two scales).
+pub const WIDE_HALF_WIDTH_PX: f64 = 1.75;
+/// Profiles too wide for a scale that make the next scale worth searching.
+pub const MIN_WIDE_PROFILES: usize = 20;
+/// Smallest binned frame side (px) worth searching.
+const MIN_SIDE_PX: u32 = 32;
+
+impl RidgeDetector {
+    /// The points of the next coarser scale (in its pixels), if this one warrants it: `wide`
+    /// profiles were too wide here, or the frame saturates somewhere.
+    pub(super) fn coarser_stripes<P: Pixel>(
+        &self,
+        frame: &Frame<'_, P>,
+        threshold: f64,
+        scale: u32,
+        wide: usize,
+    ) -> Option<Vec<Linked>> {
+        if 2 * scale > self.params.max_scale || frame.width / 2 < MIN_SIDE_PX || frame.height / 2 < MIN_SIDE_PX {
+            return None;
+        }
+        if wide < MIN_WIDE_PROFILES && !saturates(frame) {
+            return None;
+        }
+        let binned = Binned::of(frame);
+        let coarse_frame = binned.frame();
+        let coarse_threshold = threshold * coarse_frame.max_value / frame.max_value;
+        Some(self.coarser().detect_at_scales(&coarse_frame, coarse_threshold, 2 * scale))
+    }
+
+    /// The detector for this one's frames binned 2 × 2 (built once).
+    fn coarser(&self) -> &RidgeDetector {
+        self.coarser.get_or_init(|| {
+            // Coarse pixel i covers fine pixels 2i and 2i + 1: its centre is at 2i + 0.5.
+            let circle = MirrorCircle {
+                centre: omni_geom::Vector2::new((self.cx - 0.5) / 2.0, (self.cy - 0.5) / 2.0),
+                inner_radius: self.r_in / 2.0,
+                outer_radius: self.r_out / 2.0,
+            };
+            let mut coarse = RidgeDetector::new(self.width / 2, self.height / 2, circle, self.params);
+            // The annulus as this detector clipped it, not widened again by `new`'s corner rule.
+            coarse.r_in = self.r_in / 2.0;
+            Box::new(coarse)
+        })
+    }
+}
+
+/// Whether any sample of the frame is at its saturation level.
+fn saturates<P: Pixel>(frame: &Frame<'_, P>) -> bool {
+    let full = frame.max_value as u32;
+    // A maximum per block (vectorised), then one comparison.
+    frame.data.chunks(4096).any(|block| block.iter().fold(0u32, |m, v| m.max(v.to_u32())) >= full)
+}
+
+/// A frame binned 2 × 2: sums while they fit 16 bits (exact, and a sum saturates only where
+/// its four samples do), means otherwise.
+struct Binned {
+    width: u32,
+    height: u32,
+    data: Vec<u16>,
+    max_value: f64,
+}
+
+impl Binned {
+    fn of<P: Pixel>(frame: &Frame<'_, P>) -> Binned {
+        let (w, h) = (frame.width as usize / 2, frame.height as usize / 2);
+        let fw = frame.width as usize;
+        let sums = 4.0 * frame.max_value <= u16::MAX as f64;
+        let mut data = Vec::with_capacity(w * h);
+        for y in 0..h {
+            let top = &frame.data[2 * y * fw..2 * y * fw + 2 * w];
+            let bottom = &frame.data[(2 * y + 1) * fw..(2 * y + 1) * fw + 2 * w];
+            data.extend(top.chunks_exact(2).zip(bottom.chunks_exact(2)).map(|(a, b)| {
+                let sum = a[0].to_u32() + a[1].to_u32() + b[0].to_u32() + b[1].to_u32();
+                if sums { sum as u16 } else { sum.div_ceil(4).min(u16::MAX as u32) as u16 }
+            }));
+        }
+        let max_value = if sums { 4.0 * frame.max_value } else { frame.max_value };
+        Binned { width: w as u32, height: h as u32, data, max_value }
+    }
+
+    fn frame(&self) -> Frame<'_, u16> {
+        Frame { width: self.width, height: self.height, data: &self.data, max_value: self.max_value }
+    }
+}
+
+/// Which cells of a frame hold a point: answers "is there a point within r px" for r up to a
+/// few cells, by scanning the cells around.
+pub(super) struct Occupancy {
+    cell: f64,
+    columns: usize,
+    rows: usize,
+    points: Vec<Vec<(f64, f64)>>,
+}
+
+impl Occupancy {
+    const CELL_PX: f64 = 4.0;
+
+    pub(super) fn new(points: impl Iterator<Item = (f64, f64)>, (width, height): (u32, u32)) -> Occupancy {
+        let cell = Self::CELL_PX;
+        let columns = (width as f64 / cell).ceil() as usize + 1;
+        let rows = (height as f64 / cell).ceil() as usize + 1;
+        let mut grid = Occupancy { cell, columns, rows, points: vec![Vec::new(); columns * rows] };
+        for (u, v) in points {
+            if let Some(k) = grid.index(u, v) {
+                grid.points[k].push((u, v));
+            }
+        }
+        grid
+    }
+
+    fn index(&self, u: f64, v: f64) -> Option<usize> {
+        let (c, r) = ((u / self.cell).floor(), (v / self.cell).floor());
+        (c >= 0.0 && r >= 0.0 && (c as usize) < self.columns && (r as usize) < self.rows)
+            .then(|| r as usize * self.columns + c as usize)
+    }
+
+    /// Whether a point lies within `radius` px of (u, v).
+    pub(super) fn near(&self, u: f64, v: f64, radius: f64) -> bool {
+        let span = (radius / self.cell).ceil() as i64;
+        let (c0, r0) = ((u / self.cell).floor() as i64, (v / self.cell).floor() as i64);
+        for r in r0 - span..=r0 + span {
+            for c in c0 - span..=c0 + span {
+                if r < 0 || c < 0 || r as usize >= self.rows || c as usize >= self.columns {
+                    continue;
+                }
+                let cell = &self.points[r as usize * self.columns + c as usize];
+                if cell.iter().any(|&(pu, pv)| (pu - u).powi(2) + (pv - v).powi(2) <= radius * radius) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}

@@ -52,6 +52,15 @@ COVERAGE_PX = 1.0
 MARGIN_SQUARES = 2.5
 # Gaps (px along the line) the stripe on the board may have (black squares, speckle).
 SPAN_GAP_PX = 40.0
+# The stripe's model in the undistorted image: a line bent by a parabola (2), since the paper,
+# held by hand, is not quite flat at its edges and OpenCV's undistortion extrapolates there.
+BEND_DEGREE = 2
+# Red excess (levels) that marks a false point as lying on laser light: a reflection of the
+# stripe elsewhere on the board (multipath), a stripe in the image like any other.
+GHOST_EXCESS = 4.0
+# ... and at least this far (px) off the line: nearer, the laser light is the stripe's own glow,
+# and a point there is a wrong centre.
+GHOST_MIN_PX = 15.0
 SCALE = float(os.environ.get("REAL_LASER_SCALE", "1"))
 FALSE_PX = 3.0
 
@@ -228,6 +237,59 @@ def robust_line(pts: np.ndarray, tol: float = 2.0, seed: int = 0) -> tuple[np.nd
     return best
 
 
+@dataclass
+class Curve:
+    """A gently bent line in the undistorted image: offset(t) = c0 + c1 t + c2 t^2 along the
+    unit normal `n` from the point `p0` + t * tangent (px)."""
+
+    p0: np.ndarray
+    n: np.ndarray
+    coeffs: np.ndarray
+
+    @property
+    def tangent(self) -> np.ndarray:
+        return np.array([-self.n[1], self.n[0]])
+
+    def coordinates(self, pts_u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(t, offset from the curve) of undistorted points."""
+        rel = pts_u - self.p0
+        t = rel @ self.tangent
+        return t, rel @ self.n - np.polyval(self.coeffs[::-1], t)
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        return self.p0 + t[:, None] * self.tangent + np.polyval(self.coeffs[::-1], t)[:, None] * self.n
+
+    def refit(self, pts_u: np.ndarray, tol: float, iterations: int = 3) -> "Curve":
+        """Least squares (degree BEND_DEGREE) on the points within `tol` px, repeated."""
+        curve = self
+        for _ in range(iterations):
+            t, off = curve.coordinates(pts_u)
+            inl = np.abs(off) < tol
+            if inl.sum() < 10:
+                return curve
+            rel = pts_u[inl] - self.p0
+            c = np.polyfit(rel @ self.tangent, rel @ self.n, BEND_DEGREE)[::-1]
+            curve = Curve(self.p0, self.n, np.pad(c, (0, 3 - len(c))))
+        return curve
+
+    def sagitta(self, t0: float, t1: float) -> float:
+        """Largest distance (px) of the curve from its chord between t0 and t1."""
+        t = np.linspace(t0, t1, 50)
+        off = np.polyval(self.coeffs[::-1], t)
+        chord = off[0] + (off[-1] - off[0]) * (t - t0) / max(t1 - t0, 1e-9)
+        return float(np.abs(off - chord).max())
+
+
+def robust_curve(pts_u: np.ndarray, tol: float = 2.0) -> Curve | None:
+    line = robust_line(pts_u, tol)
+    if line is None:
+        return None
+    n, d = line
+    t = pts_u @ np.array([-n[1], n[0]])
+    p0 = n * d + np.median(t) * np.array([-n[1], n[0]])
+    return Curve(p0, n, np.zeros(3)).refit(pts_u, tol)
+
+
 def segment_on_board(line: tuple[np.ndarray, float], outline_u: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The part of the line inside the (undistorted) outline polygon: its two ends."""
     n, d = line
@@ -259,12 +321,11 @@ def balanced_union(a: np.ndarray, b: np.ndarray, seed: int = 0) -> np.ndarray:
     return np.vstack([small, large])
 
 
-def image_curve(cam: Camera, a: np.ndarray, b: np.ndarray, step: float = 0.25) -> np.ndarray:
-    """The undistorted segment a-b as a polyline in the frame itself (distorted px), sampled
-    densely enough that consecutive vertices are about `step` px apart there."""
-    n = max(2, int(np.ceil(np.hypot(*(b - a)) / step)))
-    pts_u = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
-    return cam.distort(pts_u)
+def image_curve(cam: Camera, curve: Curve, t0: float, t1: float, step: float = 0.25) -> np.ndarray:
+    """The undistorted curve between t0 and t1 as a polyline in the frame itself (distorted
+    px), sampled densely enough that consecutive vertices are about `step` px apart there."""
+    n = max(2, int(np.ceil(abs(t1 - t0) / step)))
+    return cam.distort(curve.at(np.linspace(t0, t1, n)))
 
 
 def curve_coordinates(curve: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -288,7 +349,7 @@ def curve_coordinates(curve: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, n
     return dist, where
 
 
-def stripe_span(cam: Camera, curve: np.ndarray, pts: np.ndarray) -> tuple[float, float]:
+def stripe_span(curve: np.ndarray, pts: np.ndarray) -> tuple[float, float]:
     """The stretch of the line (arc length along its image, px) where the stripe lies on the
     board: the longest run of points of either estimator within 3 px of the line, with gaps of
     at most SPAN_GAP_PX. Where the stripe leaves the paper (the outline's margin is only nominal)
@@ -304,6 +365,23 @@ def stripe_span(cam: Camera, curve: np.ndarray, pts: np.ndarray) -> tuple[float,
     return float(on[starts[k]]), float(on[ends[k]]) + 1.0
 
 
+def laser_excess(bgr: np.ndarray) -> np.ndarray:
+    """R - (G+B)/2 (3 x 3 mean) above its median over 21 x 21 px, the largest within 2 px: where
+    laser light falls."""
+    b, g, r = (bgr[:, :, k].astype(np.float32) for k in range(3))
+    c = cv2.blur(r - 0.5 * (g + b), (3, 3))
+    excess = c - cv2.medianBlur(np.clip(c, 0, 255).astype(np.uint8), 21).astype(np.float32)
+    return cv2.dilate(excess, np.ones((5, 5), np.uint8))
+
+
+def laser_light(excess: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Which points lie on laser light (an excess of at least GHOST_EXCESS levels)."""
+    h, w = excess.shape
+    x = np.clip(np.round(pts[:, 0]).astype(int), 0, w - 1)
+    y = np.clip(np.round(pts[:, 1]).astype(int), 0, h - 1)
+    return excess[y, x] >= GHOST_EXCESS
+
+
 @dataclass
 class Score:
     points: int = 0
@@ -311,28 +389,27 @@ class Score:
     false_share: float = float("nan")
     rms: float = float("nan")
     median: float = float("nan")
+    # False points on laser light elsewhere (reflections of the stripe): a share of all points.
+    ghost_share: float = 0.0
 
 
-def score(cam: Camera, pts: np.ndarray, line, outline_u: np.ndarray, span: tuple[float, float]) -> Score:
+def score(
+    cam: Camera,
+    pts: np.ndarray,
+    curve: Curve | None,
+    ends: tuple[float, float],
+    span: tuple[float, float],
+    laser: np.ndarray | None = None,
+) -> Score:
     """Coverage, false points, RMS and median |distance| (px, in the frame) of one estimator's
-    points on the board about the common line refitted to its own inliers, over the stretch
-    `span` (arc length along the line's image, px) where the stripe lies on the board."""
+    points on the board about the common curve refitted to its own inliers, over the stretch
+    `span` (arc length along the curve's image, px) where the stripe lies on the board."""
     s = Score(points=len(pts))
-    if line is None:
+    if curve is None:
         return s
-    pts_u = cam.undistort(pts)
-    n, d = line
-    inl = pts_u[np.abs(pts_u @ n - d) < FALSE_PX]
-    own = fit_line(inl) if len(inl) >= 10 else None
-    if own is not None:
-        if own[0] @ n < 0:
-            own = (-own[0], -own[1])
-        line = own
-    seg = segment_on_board(line, outline_u)
-    if seg is None:
-        return s
-    curve = image_curve(cam, *seg)
-    dist, where = curve_coordinates(curve, pts)
+    own = curve.refit(cam.undistort(pts), FALSE_PX) if len(pts) >= 10 else curve
+    image = image_curve(cam, own, *ends)
+    dist, where = curve_coordinates(image, pts)
     lo, hi = span
     keep = (where >= lo) & (where <= hi)
     dist, where = dist[keep], where[keep] - lo
@@ -342,8 +419,12 @@ def score(cam: Camera, pts: np.ndarray, line, outline_u: np.ndarray, span: tuple
     idx = np.clip(np.floor(where[near]).astype(int), 0, len(bins) - 1)
     bins[idx] = True
     s.coverage = float(bins.mean())
-    if len(pts):
-        s.false_share = float((np.abs(dist) > FALSE_PX).mean())
+    if s.points:
+        off = np.abs(dist) > FALSE_PX
+        s.false_share = float(off.mean())
+        far = np.abs(dist) > GHOST_MIN_PX
+        if laser is not None and far.any():
+            s.ghost_share = float(laser_light(laser, pts[keep][far]).sum() / s.points)
         good = np.abs(dist[np.abs(dist) <= FALSE_PX])
         if len(good):
             s.rms = float(np.sqrt((good**2).mean()))
@@ -382,6 +463,7 @@ class FrameResult:
     name: str
     board: bool
     length_px: float = 0.0
+    sagitta_px: float = 0.0
     ridge: Score = field(default_factory=Score)
     reference: Score = field(default_factory=Score)
 
@@ -409,40 +491,64 @@ def evaluate(
         rid = ridge.get(name, np.zeros((0, 2)))
         rid_on = rid[inside(outline, rid)]
         ref_u, rid_u = cam.undistort(ref_on), cam.undistort(rid_on)
-        line = robust_line(balanced_union(ref_u, rid_u))
-        seg = segment_on_board(line, outline_u) if line is not None else None
+        curve = robust_curve(balanced_union(ref_u, rid_u))
+        seg = segment_on_board((curve.n, float(curve.n @ curve.p0)), outline_u) if curve is not None else None
         fr = FrameResult(name, True)
         if seg is None:
             results.append(fr)
             continue
-        span = stripe_span(cam, image_curve(cam, *seg), np.vstack([ref_on, rid_on]))
+        ends = tuple(sorted(float((e - curve.p0) @ curve.tangent) for e in seg))
+        span = stripe_span(image_curve(cam, curve, *ends), np.vstack([ref_on, rid_on]))
         fr.length_px = span[1] - span[0]
-        fr.reference = score(cam, ref_on, line, outline_u, span)
-        fr.ridge = score(cam, rid_on, line, outline_u, span)
+        fr.sagitta_px = curve.sagitta(*ends)
+        excess = laser_excess(bgr)
+        fr.reference = score(cam, ref_on, curve, ends, span, excess)
+        fr.ridge = score(cam, rid_on, curve, ends, span, excess)
         results.append(fr)
     return cam, results
 
 
-def table(cam: Camera, results: list[FrameResult]) -> str:
-    rows = [f"camera: OpenCV {cam.model}, RMS {cam.rms:.3f} px on the board frames (undistortion for the line check)",
-            f"{'frame':<8} {'len px':>7} | {'omni-ridge: cover':>17} {'false':>6} {'rms':>6} {'med':>6} {'pts':>5} | {'reference: cover':>16} {'false':>6} {'rms':>6} {'med':>6} {'pts':>5}"]
+def totals(results: list[FrameResult], which: str) -> Score:
+    """One estimator over all frames: coverage weighted by length, false share and RMS over the
+    points (RMS pooled, median of the frames' medians)."""
+    used = [r for r in results if r.board and r.length_px > 0]
+    scores = [getattr(r, which) for r in used]
+    out = Score(points=sum(x.points for x in scores))
+    length = sum(r.length_px for r in used)
+    if length > 0:
+        out.coverage = sum(getattr(r, which).coverage * r.length_px for r in used) / length
+    if out.points:
+        out.false_share = sum(x.false_share * x.points for x in scores if x.points) / out.points
+        out.ghost_share = sum(x.ghost_share * x.points for x in scores if x.points) / out.points
+        good = [(x.rms, x.points * (1 - x.false_share)) for x in scores if x.points and np.isfinite(x.rms)]
+        weight = sum(w for _, w in good)
+        out.rms = float(np.sqrt(sum(r * r * w for r, w in good) / weight)) if weight else float("nan")
+        out.median = float(np.median([x.median for x in scores if np.isfinite(x.median)]))
+    return out
+
+
+def table(cam: Camera, results: list[FrameResult], label: str = "omni-ridge") -> str:
+    def cells(x: Score) -> str:
+        return f"{100*x.coverage:6.1f}% {100*x.false_share:5.1f}% {100*x.ghost_share:5.1f}% {x.rms:6.3f} {x.median:6.3f} {x.points:5d}"
+
+    head = f"{'cover':>7} {'false':>6} {'ghost':>6} {'rms':>6} {'med':>6} {'pts':>5}"
+    rows = [
+        f"camera: OpenCV {cam.model}, RMS {cam.rms:.3f} px on the board frames (the undistortion behind the lines)",
+        f"{'':8} {'':7} {'':6} | {label:<41} | reference (column centroid of R-(G+B)/2)",
+        f"{'frame':<8} {'len px':>7} {'bend':>6} | {head} | {head}",
+    ]
     for r in results:
         if not r.board:
             rows.append(f"{r.name:<8} board not found: skipped")
-            continue
-        a, b = r.ridge, r.reference
-        rows.append(
-            f"{r.name:<8} {r.length_px:7.0f} | {100*a.coverage:16.1f}% {100*a.false_share:5.1f}% {a.rms:6.3f} {a.median:6.3f} {a.points:5d}"
-            f" | {100*b.coverage:15.1f}% {100*b.false_share:5.1f}% {b.rms:6.3f} {b.median:6.3f} {b.points:5d}"
-        )
-    used = [r for r in results if r.board and r.length_px > 0]
-    if used:
-        def total(get):
-            return sum(get(r) * r.length_px for r in used) / sum(r.length_px for r in used)
-        rows.append(
-            f"{'total':<8} {sum(r.length_px for r in used):7.0f} | {100*total(lambda r: r.ridge.coverage):16.1f}%"
-            f" {'':6} {'':6} {'':6} {'':5} | {100*total(lambda r: r.reference.coverage):15.1f}%"
-        )
+        elif r.length_px <= 0:
+            rows.append(f"{r.name:<8} no stripe on the board")
+        else:
+            rows.append(f"{r.name:<8} {r.length_px:7.0f} {r.sagitta_px:6.2f} | {cells(r.ridge)} | {cells(r.reference)}")
+    length = sum(r.length_px for r in results if r.board)
+    rows.append(f"{'total':<8} {length:7.0f} {'':6} | {cells(totals(results, 'ridge'))} | {cells(totals(results, 'reference'))}")
+    rows.append("len: the stripe on the board (px along it); bend: its sagitta in the undistorted image (px);")
+    rows.append("cover: share of len with a point within 1 px; false: points > 3 px off, of which ghost: > 15 px off")
+    rows.append("on laser light (reflections of the stripe: stripes too); rms, med: of the points within 3 px (px)")
     return "\n".join(rows)
 
 

@@ -221,7 +221,7 @@ impl RidgeDetector {
         kept: &[Linked],
         buffers: &mut Buffers,
     ) -> Vec<Linked> {
-        let taken = super::scales::Occupancy::new(kept.iter().map(|l| (l.point.u, l.point.v)), self.image_size());
+        let mut taken = super::scales::Occupancy::new(kept.iter().map(|l| (l.point.u, l.point.v)), self.image_size());
         let mut out = Vec::with_capacity(2 * coarse.len());
         for c in coarse {
             if c.half_width < super::scales::WIDE_HALF_WIDTH_PX {
@@ -237,6 +237,45 @@ impl RidgeDetector {
             for side in [-0.5, 0.5] {
                 let start = (u - side * ny, v + side * nx);
                 if let Some(m) = self.measure_profile(frame, start, c.normal, threshold, reach, buffers) {
+                    out.push((Linked { point: m.point, normal: m.normal, half_width: m.half_width }, reach));
+                }
+            }
+        }
+        for (l, _) in &out {
+            taken.insert(l.point.u, l.point.v);
+        }
+        let tracked = self.track_gaps(frame, threshold, &out, &mut taken, buffers);
+        out.into_iter().map(|(l, _)| l).chain(tracked).collect()
+    }
+
+    /// Follows re-measured stripes across the gaps the coarse scale left (speckle, a dark
+    /// square): from each point, a profile 1 px further along the stripe where no point is, on
+    /// the same normal, up to [`super::scales::TRACK_PX`] px, as long as the profile finds the
+    /// stripe within its reach.
+    fn track_gaps<P: Pixel>(
+        &self,
+        frame: &Frame<'_, P>,
+        threshold: f64,
+        start: &[(Linked, Reach)],
+        taken: &mut super::scales::Occupancy,
+        buffers: &mut Buffers,
+    ) -> Vec<Linked> {
+        let mut out = Vec::new();
+        for (first, reach) in start {
+            let (nx, ny) = first.normal;
+            for dir in [-1.0, 1.0] {
+                let mut at = first.point;
+                for _ in 0..super::scales::TRACK_PX {
+                    let next = (at.u - dir * ny, at.v + dir * nx);
+                    if taken.near(next.0, next.1, 0.7) {
+                        break;
+                    }
+                    let step = Reach { far_px: 1.0, ..*reach };
+                    let Some(m) = self.measure_profile(frame, next, first.normal, threshold, step, buffers) else {
+                        break;
+                    };
+                    taken.insert(m.point.u, m.point.v);
+                    at = m.point;
                     out.push(Linked { point: m.point, normal: m.normal, half_width: m.half_width });
                 }
             }

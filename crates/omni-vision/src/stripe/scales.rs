@@ -23,6 +23,8 @@ pub const NARROW_HALF_WIDTH_PX: f64 = 4.5;
 pub const WIDE_HALF_WIDTH_PX: f64 = 1.75;
 /// Profiles too wide for a scale that make the next scale worth searching.
 pub const MIN_WIDE_PROFILES: usize = 20;
+/// How far (px) a re-measured stripe is followed across a gap the coarse scale left.
+pub const TRACK_PX: usize = 8;
 /// Smallest binned frame side (px) worth searching.
 const MIN_SIDE_PX: u32 = 32;
 
@@ -127,6 +129,12 @@ impl Occupancy {
             }
         }
         grid
+    }
+
+    pub(super) fn insert(&mut self, u: f64, v: f64) {
+        if let Some(k) = self.index(u, v) {
+            self.points[k].push((u, v));
+        }
     }
 
     fn index(&self, u: f64, v: f64) -> Option<usize> {

@@ -73,50 +73,6 @@ const MAX_MOVE_PX: f64 = 0.5;
 /// FWHM / σ of a Gaussian.
 const FWHM_PER_SIGMA: f64 = 2.354_820_045;
 
-pub static DBG: [std::sync::atomic::AtomicUsize; 32] = [const { std::sync::atomic::AtomicUsize::new(0) }; 32];
-pub const DBG_NAMES: [&str; 32] = [
-    "seeds",
-    "other_axis",
-    "no_normal",
-    "axis",
-    "leaves",
-    "walk",
-    "no_seg",
-    "width",
-    "centre",
-    "half_cross",
-    "low_cross",
-    "far",
-    "not_flat",
-    "measured",
-    "dup",
-    "arc",
-    "end",
-    "lopsided",
-    "narrow",
-    "widest",
-    "slope",
-    "cut_nocurv",
-    "shift",
-    "kept",
-    "",
-    "",
-    "",
-    "",
-    "",
-    "",
-    "",
-    "",
-];
-fn dbg(i: usize) {
-    DBG[i].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-}
-pub fn dbg_print() {
-    let v: Vec<String> =
-        (0..24).map(|i| format!("{}={}", DBG_NAMES[i], DBG[i].swap(0, std::sync::atomic::Ordering::Relaxed))).collect();
-    eprintln!("DBG {}", v.join(" "));
-}
-
 /// Which way a seed's run ran.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Axis {
@@ -184,9 +140,6 @@ impl RidgeDetector {
     /// azimuth around the mirror centre, then radius.
     pub(super) fn detect_across<P: Pixel>(&self, frame: &Frame<'_, P>, threshold: f64) -> Vec<StripePoint> {
         let points = self.detect_at_scales(frame, threshold, 1).into_iter().map(|l| l.point).collect();
-        if std::env::var_os("OMNI_DBG").is_some() {
-            dbg_print();
-        }
         azimuth_sorted(points, (self.cx, self.cy))
     }
 
@@ -389,25 +342,16 @@ impl RidgeDetector {
         buffers: &mut Buffers,
     ) -> Option<Centre> {
         let (x0, y0) = (x as f64, y as f64);
-        dbg(0);
         if clearly_other_axis(frame, x as usize, y as usize, axis) {
-            dbg(1);
             return None;
         }
-        let Some(derivatives) = self.seed_normal.derivatives_at_pixel(frame, x as usize, y as usize) else {
-            dbg(2);
-            return None;
-        };
-        let Some(((nx, ny), _)) = super::steger::Kernels::normal(&derivatives) else {
-            dbg(2);
-            return None;
-        };
+        let derivatives = self.seed_normal.derivatives_at_pixel(frame, x as usize, y as usize)?;
+        let ((nx, ny), _) = super::steger::Kernels::normal(&derivatives)?;
         let fits_axis = match axis {
             Axis::Row => ny.abs() <= AXIS_OVERLAP_TAN * nx.abs(),
             Axis::Column => nx.abs() <= AXIS_OVERLAP_TAN * ny.abs(),
         };
         if !fits_axis {
-            dbg(3);
             return None;
         }
         self.measure_profile(frame, (x0, y0), (nx, ny), threshold, Reach::of(self.params.max_width), buffers)
@@ -428,14 +372,12 @@ impl RidgeDetector {
         let max_width = reach.max_width;
         // The background: the larger of the minima of a coarse profile (bilinear, 1 px steps) on
         // either side, past the flank of the widest accepted stripe.
-        let reach_px = (0.5 * max_width + 2.0).ceil() as i64;
-        let reach_far = reach.far_px;
-        let reach = reach_px;
+        let far_px = reach.far_px;
+        let reach = (0.5 * max_width + 2.0).ceil() as i64;
         let n = 2 * reach as usize + 1;
         let coarse = &mut buffers.coarse;
         coarse.clear();
         if !frame.bilinear_line(x0, y0, -reach as f64, (nx, ny), n, coarse) {
-            dbg(4);
             return None; // the profile leaves the image
         }
         let min = |v: &[f32]| v.iter().fold(f32::INFINITY, |m, &x| m.min(x));
@@ -475,71 +417,44 @@ impl RidgeDetector {
         };
         let Buffers { left: before, raw, contrast: q, .. } = buffers;
         before.clear();
-        if walk(-1, before).is_none() {
-            dbg(5);
-            return None;
-        }
+        walk(-1, before)?;
         let half = before.len();
         raw.clear();
         raw.extend(before.iter().rev());
         raw.push(centre);
-        if walk(1, raw).is_none() {
-            dbg(5);
-            return None;
-        }
+        walk(1, raw)?;
         q.clear();
         q.extend(raw.iter().map(|v| v - background));
         let (raw, q) = (&raw[..], &q[..]);
-        let Some(seg) = segment_near(q, half, t) else {
-            dbg(6);
-            return None;
-        };
-        let Some((a, b)) = estimators::crossings(q, &seg, t) else {
-            dbg(7);
-            return None;
-        };
+        let seg = segment_near(q, half, t)?;
+        let (a, b) = estimators::crossings(q, &seg, t)?;
         let width = (b - a) * SAMPLE_STEP_PX;
         if width > max_width {
             buffers.too_wide += 1;
-            dbg(7);
             return None;
         }
         if width < self.params.min_width {
-            dbg(7);
             return None;
         }
         let peak = q[seg.peak];
         let saturated = frame.saturated_near(x0, y0);
         let index =
-            if saturated { estimators::plateau_centre(q, &seg, t, peak) } else { self.centre_index(raw, q, &seg, t) };
-        let Some(index) = index else {
-            dbg(8);
-            return None;
-        };
-        let Some((ha, hb)) = estimators::crossings(q, &seg, 0.5 * peak) else {
-            dbg(9);
-            return None;
-        };
+            if saturated { estimators::plateau_centre(q, &seg, t, peak)? } else { self.centre_index(raw, q, &seg, t)? };
+        let (ha, hb) = estimators::crossings(q, &seg, 0.5 * peak)?;
         let half_width = (hb - ha) * SAMPLE_STEP_PX;
         // A cut flank falls faster than the whole one: compare the flanks' spans between the
         // half maximum and ASYMMETRY_LEVEL of the peak.
-        let Some((la, lb)) = estimators::crossings(q, &seg, ASYMMETRY_LEVEL * peak) else {
-            dbg(10);
-            return None;
-        };
+        let (la, lb) = estimators::crossings(q, &seg, ASYMMETRY_LEVEL * peak)?;
         let (left, right) = (ha - la, lb - hb);
         let asymmetry = (left - right) / (left + right).max(1e-9);
         let s = (index - half as f64) * SAMPLE_STEP_PX;
-        if s.abs() > reach_far {
-            dbg(11);
+        if s.abs() > far_px {
             return None;
         }
         let (u, v) = (x0 + s * nx, y0 + s * ny);
         if !flat_across(frame, u, v, (nx, ny), peak) {
-            dbg(12);
             return None;
         }
-        dbg(13);
         let flags =
             if saturated { quality::SATURATED } else { 0 } | self.contrast_and_width_flags(peak, width, t, max_width);
         let point = StripePoint { u, v, intensity: peak as f64, width, quality: flags };
@@ -624,7 +539,6 @@ impl RidgeDetector {
                 }
             });
             if duplicate {
-                dbg(14);
                 continue;
             }
             // Everything the checks below need from the neighbours, in one pass.
@@ -647,38 +561,32 @@ impl RidgeDetector {
                 }
             }
             if !(last >= super::MIN_STRIPE_ARC_PX || -first >= super::MIN_STRIPE_ARC_PX) {
-                dbg(15);
                 continue;
             }
             if !(last >= END_PX && -first >= END_PX) {
-                dbg(16);
                 continue;
             }
             // A cut leaves every profile along it lopsided the same way; speckle and noise
             // lopsided at random, so the neighbours' mean tells the two apart.
             let lopsided = (asymmetry_sum / count as f64).abs();
             if lopsided > MAX_ASYMMETRY {
-                dbg(17);
                 continue;
             }
             // Narrower than MIN_WIDTH_RATIO of the neighbours' median width (the upper median:
             // sorted index count / 2): as many as that index or fewer are narrow enough.
             if not_wider <= count / 2 {
-                dbg(18);
                 continue;
             }
             // Lit areas of the ambient image (a face's tapering tip, a sliver between shadows)
             // are wider than the laser's line, whose width the lens sets, and their width
             // changes along them.
             if c.half_width > widest && c.point.quality & quality::SATURATED == 0 {
-                dbg(19);
                 continue;
             }
             // d(half-maximum width)/dt along the stripe.
             if let Some((_, slope)) = width_line.fit()
                 && slope.abs() > MAX_WIDTH_SLOPE
             {
-                dbg(20);
                 continue;
             }
             let factors = sums.factors();
@@ -686,7 +594,6 @@ impl RidgeDetector {
             // Too few neighbours on one side for the stripe's shape are too few to outvote a
             // profile's own lopsidedness either: such a profile is taken as cut.
             if curvature.is_none() && c.asymmetry.abs() > 2.0 * MAX_ASYMMETRY {
-                dbg(21);
                 continue;
             }
             // The offset at t = 0 once the wider parabola's curvature is taken out.
@@ -712,10 +619,8 @@ impl RidgeDetector {
             };
             let shift = offset - pull;
             if shift.abs() > MAX_MOVE_PX {
-                dbg(22);
                 continue;
             }
-            dbg(23);
             let mut p = c.point;
             p.u += shift * c.normal.0;
             p.v += shift * c.normal.1;

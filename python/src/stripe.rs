@@ -2,7 +2,8 @@
 
 use crate::arrays::rows;
 use crate::camera::Camera;
-use numpy::{PyArray2, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::{PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
+use omni_vision::colour::{Channel, ColourSpec, RgbImage};
 use omni_vision::image_io::GrayImage;
 use omni_vision::stripe::{self, RidgeDetector, RidgeParams};
 use pyo3::prelude::*;
@@ -25,6 +26,75 @@ fn gray_image(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<GrayImage> {
     )))
 }
 
+/// The detector's grey image of `obj` read as `spec` says: a 2-D array as it is (or, with a Bayer
+/// order, demosaiced and then read), an (h, w, 3) RGB array through its channel or laser contrast.
+fn frame_image(obj: &Bound<'_, PyAny>, what: &str, spec: &ColourSpec) -> PyResult<GrayImage> {
+    let arr = obj.py().import("numpy")?.call_method1("ascontiguousarray", (obj,))?;
+    let ndim = arr.getattr("ndim")?.extract::<usize>()?;
+    if ndim != 3 {
+        let grey = gray_image(&arr, what)?;
+        return match spec.bayer {
+            Some(order) => {
+                let rgb = omni_vision::colour::demosaic(&grey, order)
+                    .map_err(|m| crate::value_error(format!("{what}: bayer {}: {m}", order.name())))?;
+                Ok(rgb.channel(spec.channel))
+            }
+            None if spec.channel.needs_colour() => Err(crate::value_error(format!(
+                "{what}: a 2-D (grey) array has no colour to read for {}: give an (h, w, 3) RGB array, or bayer= for a raw mosaic",
+                spec.describe()
+            ))),
+            None => Ok(grey),
+        };
+    }
+    if spec.bayer.is_some() {
+        return Err(crate::value_error(format!(
+            "{what}: bayer= reads a raw 2-D mosaic, but the array is 3-D (already colour): drop bayer="
+        )));
+    }
+    let rgb = rgb_image(&arr, what)?;
+    Ok(rgb.channel(spec.channel))
+}
+
+/// An (h, w, 3) uint8 or uint16 RGB array.
+fn rgb_image(arr: &Bound<'_, PyAny>, what: &str) -> PyResult<RgbImage> {
+    let wrong = |arr: &Bound<'_, PyAny>| -> PyResult<PyErr> {
+        let (dtype, shape) = (arr.getattr("dtype")?.str()?.to_string(), arr.getattr("shape")?.str()?.to_string());
+        Ok(pyo3::exceptions::PyTypeError::new_err(format!(
+            "{what}: expected an (height, width, 3) uint8 or uint16 RGB array, got shape {shape} of {dtype}"
+        )))
+    };
+    let (shape, data, bit_depth): (Vec<usize>, Vec<[u16; 3]>, u8) = if let Ok(a) = arr.cast::<PyArray3<u8>>() {
+        let px = a.readonly().as_slice()?.chunks_exact(3).map(|c| [c[0] as u16, c[1] as u16, c[2] as u16]).collect();
+        (a.shape().to_vec(), px, 8)
+    } else if let Ok(a) = arr.cast::<PyArray3<u16>>() {
+        let px = a.readonly().as_slice()?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        (a.shape().to_vec(), px, 16)
+    } else {
+        return Err(wrong(arr)?);
+    };
+    if shape[2] != 3 {
+        return Err(wrong(arr)?);
+    }
+    // The grey image's size checks (its samples are not needed for them).
+    let size = image_of(shape[1], shape[0], bit_depth, Vec::new(), what)?;
+    Ok(RgbImage { width: size.width, height: size.height, bit_depth, data })
+}
+
+/// The colour reading of `detect_stripe`'s keywords.
+fn colour_spec(channel: Option<&str>, laser: Option<&str>, bayer: Option<&str>) -> PyResult<ColourSpec> {
+    let channel = match (channel, laser) {
+        (Some(_), Some(_)) => return Err(crate::value_error("give channel= or laser=, not both")),
+        (None, Some(c)) => Channel::Laser(c.parse().map_err(|m| crate::value_error(format!("laser: {m}")))?),
+        (None | Some("luma"), None) => Channel::Luma,
+        (Some(c), None) => Channel::Single(
+            c.parse()
+                .map_err(|_| crate::value_error(format!("channel: unknown \"{c}\" (known: luma, red, green, blue)")))?,
+        ),
+    };
+    let bayer = bayer.map(|b| b.parse().map_err(|m| crate::value_error(format!("bayer: {m}")))).transpose()?;
+    Ok(ColourSpec { channel, bayer })
+}
+
 fn image_of(w: usize, h: usize, bit_depth: u8, data: Vec<u16>, what: &str) -> PyResult<GrayImage> {
     let (width, height) = (u32::try_from(w), u32::try_from(h));
     let (Ok(width), Ok(height)) = (width, height) else {
@@ -35,17 +105,23 @@ fn image_of(w: usize, h: usize, bit_depth: u8, data: Vec<u16>, what: &str) -> Py
 }
 
 /// Stripe centres in a laser frame, exactly as omni-ridge finds them: `image` is a 2-D uint8
-/// (0–255) or uint16 (0–65535) array (height, width). With `camera`, the frame must have the
-/// camera's size and is sampled within its mirror annulus; without, from the image centre over
-/// the largest circle inside the image (omni-ridge without --camera). `ambient`, a laser-off
-/// frame of the same size and depth, is subtracted first. Settings left as None keep
+/// (0–255) or uint16 (0–65535) array (height, width), or an (height, width, 3) RGB array of
+/// either type (OpenCV's BGR images reversed: `img[..., ::-1]`). Colour is read as `channel`
+/// ("luma", the default, "red", "green", "blue") or as a laser's colour contrast (`laser`="red":
+/// R − (G+B)/2, rising into saturated cores, as omni-ridge --laser); a 2-D raw Bayer mosaic is
+/// demosaiced first with `bayer` ("rggb", "bggr", "grbg", "gbrg"). With `camera`, the frame must
+/// have the camera's size and is searched within its mirror annulus; without, over the whole
+/// image (omni-ridge without --camera). `ambient`, a laser-off frame of the same size, depth and
+/// kind, read the same way, is subtracted first. `max_scale` (1–16) is the coarsest scale at
+/// which stripes too wide for `max_width` are searched. Settings left as None keep
 /// omni-ridge's defaults (method windowed, sampling normal, threshold 4 % of full scale; widths
 /// in px; `threshold` in the image's units). Returns an (n, 5) float64 array of
 /// (u, v, intensity, width, quality) rows: u, v in px, quality a bit set (1 saturated, 2 weak,
 /// 4 width marginal).
 #[pyfunction]
 #[pyo3(signature = (image, camera = None, *, ambient = None, method = None, sampling = None, threshold = None,
-    min_width = None, max_width = None, hessian_sigma = None, along_stripe_px = None, optics_blur_px = None))]
+    min_width = None, max_width = None, hessian_sigma = None, along_stripe_px = None, optics_blur_px = None,
+    channel = None, laser = None, bayer = None, max_scale = None))]
 pub fn detect_stripe<'py>(
     py: Python<'py>,
     image: &Bound<'py, PyAny>,
@@ -59,6 +135,10 @@ pub fn detect_stripe<'py>(
     hessian_sigma: Option<f64>,
     along_stripe_px: Option<f64>,
     optics_blur_px: Option<f64>,
+    channel: Option<&str>,
+    laser: Option<&str>,
+    bayer: Option<&str>,
+    max_scale: Option<u32>,
 ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let mut params = RidgeParams::default();
     if let Some(m) = method {
@@ -73,11 +153,13 @@ pub fn detect_stripe<'py>(
     params.hessian_sigma = hessian_sigma.unwrap_or(params.hessian_sigma);
     params.along_stripe_px = along_stripe_px.unwrap_or(params.along_stripe_px);
     params.optics_blur_px = optics_blur_px.or(params.optics_blur_px);
+    params.max_scale = max_scale.unwrap_or(params.max_scale);
     params.validate().map_err(crate::value_error)?;
+    let spec = colour_spec(channel, laser, bayer)?;
 
-    let mut img = gray_image(image, "image")?;
+    let mut img = frame_image(image, "image", &spec)?;
     if let Some(off) = ambient {
-        let off = gray_image(off, "ambient")?;
+        let off = frame_image(off, "ambient", &spec)?;
         if off.bit_depth != img.bit_depth {
             return Err(crate::value_error(format!(
                 "ambient: {}-bit, but the image is {}-bit",
@@ -91,7 +173,7 @@ pub fn detect_stripe<'py>(
             let (w, h) = cam.model.image_size();
             (RidgeDetector::new(w, h, cam.model.mirror_circle(), params), "the camera's image")
         }
-        None => (RidgeDetector::for_image_centre(img.width, img.height, params), "the image"),
+        None => (RidgeDetector::whole_frame(img.width, img.height, params), "the image"),
     };
     let points = py.detach(|| stripe::frame_points(&img, &detector, what)).map_err(crate::value_error)?;
     let table: Vec<[f64; 5]> = points.into_iter().map(<[f64; 5]>::from).collect();

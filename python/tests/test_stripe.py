@@ -57,11 +57,52 @@ def test_bad_images_and_settings_are_refused(sim):
     cam = omniscan.Camera.load(sim["camera"])
     with pytest.raises(TypeError, match="uint8 or uint16"):
         omniscan.detect_stripe(np.zeros((8, 8), dtype=np.float32))
-    with pytest.raises(TypeError, match="3-D"):
-        omniscan.detect_stripe(np.zeros((8, 8, 3), dtype=np.uint8))
+    with pytest.raises(TypeError, match="RGB array"):
+        omniscan.detect_stripe(np.zeros((8, 8, 4), dtype=np.uint8))
+    with pytest.raises(TypeError, match="RGB array"):
+        omniscan.detect_stripe(np.zeros((8, 8, 3), dtype=np.float32))
+    with pytest.raises(ValueError, match="no colour"):
+        omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), laser="red")
+    with pytest.raises(ValueError, match="drop bayer"):
+        omniscan.detect_stripe(np.zeros((20, 30, 3), dtype=np.uint8), bayer="rggb")
+    with pytest.raises(ValueError, match="not both"):
+        omniscan.detect_stripe(np.zeros((20, 30, 3), dtype=np.uint8), laser="red", channel="red")
+    with pytest.raises(ValueError, match="unknown Bayer order"):
+        omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), bayer="rgbg")
+    with pytest.raises(ValueError, match="even sides"):
+        omniscan.detect_stripe(np.zeros((21, 30), dtype=np.uint8), bayer="rggb")
     with pytest.raises(ValueError, match="camera's image"):
         omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), cam)
     with pytest.raises(ValueError, match="unknown method"):
         omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), method="magic")
     with pytest.raises(ValueError, match="ambient"):
         omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), ambient=np.zeros((20, 31), dtype=np.uint8))
+
+
+def red_stripe_on_checks(size=128, centre=56.3, sigma=1.6):
+    """A red Gaussian stripe (x = centre px, vertical) on lit grey paper with dark 16 px checks,
+    blurred by the lens: in R - (G+B)/2 only the stripe is there."""
+    y, x = np.mgrid[0:size, 0:size].astype(float)
+    paper = np.where(((x // 16) + (y // 16)) % 2 == 0, 110.0, 25.0)
+    laser = 100.0 * np.exp(-0.5 * ((x - centre) / sigma) ** 2)
+    rgb = np.stack([paper + laser, paper + 0.1 * laser, paper + 0.1 * laser], axis=2)
+    # The lens's blur, before the colour filters sample the image.
+    rgb = cv2.GaussianBlur(rgb, (0, 0), 0.7)
+    return np.clip(np.round(rgb), 0, 255).astype(np.uint8)
+
+
+def test_colour_frames_by_laser_contrast_and_bayer_mosaic():
+    rgb = red_stripe_on_checks()
+    found = omniscan.detect_stripe(rgb, laser="red", method="gauss")
+    assert len(found) > 100
+    # Every point on the stripe (none on the checks' edges), within 0.05 px of it.
+    np.testing.assert_allclose(found[:, 0], 56.3, atol=0.05)
+    # A raw RGGB mosaic of the same frame, demosaiced: the same stripe within 0.1 px.
+    mosaic = np.empty(rgb.shape[:2], np.uint8)
+    mosaic[0::2, 0::2] = rgb[0::2, 0::2, 0]
+    mosaic[0::2, 1::2] = rgb[0::2, 1::2, 1]
+    mosaic[1::2, 0::2] = rgb[1::2, 0::2, 1]
+    mosaic[1::2, 1::2] = rgb[1::2, 1::2, 2]
+    demosaiced = omniscan.detect_stripe(mosaic, bayer="rggb", laser="red", method="gauss")
+    assert len(demosaiced) > 100
+    np.testing.assert_allclose(demosaiced[:, 0], 56.3, atol=0.1)

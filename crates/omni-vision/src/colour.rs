@@ -5,16 +5,17 @@
 //! and blue too), but clearly brighter in the red channel and brighter still in red minus the
 //! mean of green and blue, where white and grey surfaces cancel. [`Channel::Laser`] is that
 //! contrast, `L − w·(A + B)/2` for the laser's colour `L` and the other two `A`, `B`, clamped at
-//! 0, with `w` = 1 while `L` is below half scale, falling linearly to 0 at full scale. A close
+//! 0, with `w` = 1 while `L` is below ¾ of full scale, falling linearly to 0 at full scale. A close
 //! laser's core saturates all three channels (white) and its rim leaks into the other two
 //! (sensor cross-talk, JPEG's half-resolution colour), where the plain difference would fall to
 //! 0 at the stripe's centre and leave two humps; as `L` nears full scale its own level is the
 //! better evidence, so the contrast rises monotonically into a saturated core, which reads full
-//! scale and is located at its plateau's centre like any saturated stripe.
+//! scale and is located at its plateau's centre like any saturated stripe. The price: a grey
+//! surface above ¾ of full scale reads as a plateau in this contrast too (a step at its edge,
+//! not a stripe).
 //!
-//! Raw Bayer frames ([`BayerOrder`]) are demosaiced bilinearly (each missing sample the mean of
-//! its nearest neighbours of that colour) before the channel is taken, so that points stay in
-//! full-resolution pixel coordinates.
+//! Raw Bayer frames ([`BayerOrder`]) are demosaiced ([`demosaic`]) before the channel is taken,
+//! so that points stay in full-resolution pixel coordinates.
 
 use crate::image_io::GrayImage;
 use std::fmt;
@@ -192,19 +193,22 @@ impl RgbImage {
     }
 }
 
-/// `l − w·(a + b)/2` rounded, clamped at 0, `w` = min(1, 2·(max − l)/max) (module docs).
+/// `l − w·(a + b)/2` rounded, clamped at 0, `w` = min(1, 4·(max − l)/max) (module docs).
 #[inline]
 fn laser_contrast(l: u16, a: u16, b: u16, max: u16) -> u16 {
     let (l, others, max) = (l as i64, a as i64 + b as i64, max as i64);
-    // w = num / max with num = min(max, 2·(max − l)); the contrast is l − num·others / (2·max).
-    let num = (2 * (max - l)).clamp(0, max);
+    // w = num / max with num = min(max, 4·(max − l)); the contrast is l − num·others / (2·max).
+    let num = (4 * (max - l)).clamp(0, max);
     let twice = 2 * l * max - num * others;
     ((twice + max) / (2 * max)).clamp(0, max) as u16
 }
 
-/// Demosaics a raw Bayer frame bilinearly: each pixel keeps its own sample and takes each missing
-/// colour as the mean of the nearest pixels of that colour (2 or 4 of them; at the border the
-/// ones inside). The frame's sides must be even: a mosaic is whole 2×2 cells.
+/// Demosaics a raw Bayer frame with Malvar, He and Cutler's gradient-corrected linear filters
+/// (ICASSP 2004): each missing colour is the bilinear estimate corrected by the Laplacian of the
+/// pixel's own colour, which keeps the false colour along edges (zippers) that plain bilinear
+/// interpolation leaves small, since a zipper in R − (G+B)/2 is a thin bright line: a false
+/// stripe. Borders are mirrored about the edge pixel, which keeps the mosaic's pattern. The
+/// frame's sides must be even: a mosaic is whole 2×2 cells.
 pub fn demosaic(raw: &GrayImage, order: BayerOrder) -> Result<RgbImage, String> {
     let (w, h) = (raw.width as usize, raw.height as usize);
     if w % 2 != 0 || h % 2 != 0 || w < 2 || h < 2 {
@@ -215,44 +219,49 @@ pub fn demosaic(raw: &GrayImage, order: BayerOrder) -> Result<RgbImage, String> 
             order.name()
         ));
     }
-    let at = |x: usize, y: usize| raw.data[y * w + x] as u32;
+    let max = raw.max_value() as i64;
+    let mirror = |i: i64, n: usize| -> usize {
+        let n = n as i64;
+        let i = if i < 0 { -i } else { i };
+        (if i >= n { 2 * (n - 1) - i } else { i }).clamp(0, n - 1) as usize
+    };
+    let at = |x: i64, y: i64| raw.data[mirror(y, h) * w + mirror(x, w)] as i64;
     let mut data = vec![[0u16; 3]; w * h];
     for y in 0..h {
         for x in 0..w {
+            let (xi, yi) = (x as i64, y as i64);
             let own = order.colour_at(x, y);
-            let mut px = [0u16; 3];
-            px[own] = at(x, y) as u16;
-            for (c, out) in px.iter_mut().enumerate() {
-                if c == own {
-                    continue;
-                }
-                let (mut sum, mut n) = (0u32, 0u32);
-                for dy in -1i64..=1 {
-                    for dx in -1i64..=1 {
-                        let (xx, yy) = (x as i64 + dx, y as i64 + dy);
-                        if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 || (dx == 0 && dy == 0) {
-                            continue;
-                        }
-                        let (xx, yy) = (xx as usize, yy as usize);
-                        // The nearest of that colour: the 4-neighbours if any has it, else the
-                        // diagonals (R at a B site and B at an R site).
-                        if order.colour_at(xx, yy) == c && (dx == 0 || dy == 0 || !has_cross(order, x, y, c)) {
-                            sum += at(xx, yy);
-                            n += 1;
-                        }
-                    }
-                }
-                *out = ((sum + n / 2) / n.max(1)) as u16;
+            // Sums of the 5×5 neighbourhood's rings, by position.
+            let v = |dx: i64, dy: i64| at(xi + dx, yi + dy);
+            let centre = v(0, 0);
+            let cross1 = v(-1, 0) + v(1, 0) + v(0, -1) + v(0, 1);
+            let cross2 = v(-2, 0) + v(2, 0) + v(0, -2) + v(0, 2);
+            let diag1 = v(-1, -1) + v(1, -1) + v(-1, 1) + v(1, 1);
+            let row1 = v(-1, 0) + v(1, 0);
+            let col1 = v(0, -1) + v(0, 1);
+            let row2 = v(-2, 0) + v(2, 0);
+            let col2 = v(0, -2) + v(0, 2);
+            // Eighths, as in the paper's filters.
+            let green_at_rb = 4 * centre + 2 * cross1 - cross2;
+            // The colour found left and right of a green pixel (its row's other colour).
+            let along_row = 5 * centre + 4 * row1 - diag1 - row2 + col2 / 2;
+            let along_column = 5 * centre + 4 * col1 - diag1 - col2 + row2 / 2;
+            let opposite = 6 * centre + 2 * diag1 - 3 * cross2 / 2;
+            let mut px = [0i64; 3];
+            px[own] = 8 * centre;
+            if own == 1 {
+                // Green: the row's neighbours are one of R/B, the column's the other.
+                let row_colour = order.colour_at(x + 1, y);
+                px[row_colour] = along_row;
+                px[2 - row_colour] = along_column;
+            } else {
+                px[1] = green_at_rb;
+                px[2 - own] = opposite;
             }
-            data[y * w + x] = px;
+            data[y * w + x] = px.map(|v| ((v + 4).div_euclid(8)).clamp(0, max) as u16);
         }
     }
     Ok(RgbImage { width: raw.width, height: raw.height, bit_depth: raw.bit_depth, data })
-}
-
-/// Whether colour `c` is among the row and column neighbours of (x, y) in the mosaic.
-fn has_cross(order: BayerOrder, x: usize, y: usize, c: usize) -> bool {
-    order.colour_at(x + 1, y) == c || order.colour_at(x, y + 1) == c
 }
 
 #[cfg(test)]
@@ -271,12 +280,11 @@ mod tests {
         assert_eq!(img.channel(Channel::Laser(Colour::Red)).data, vec![0, 61, 80, 0]);
         assert_eq!(img.channel(Channel::Laser(Colour::Green)).data, vec![0, 0, 0, 45]);
         assert_eq!(img.channel(Channel::Single(Colour::Green)).data, vec![100, 40, 30, 100]);
-        // Towards full scale the laser's own level takes over: at 3/4 scale (w = 1/2)
-        // 191.25 − 0.5·(G + B)/2; white and a saturated red read full scale.
-        let bright = rgb(4, 1, |x, _| [[191, 100, 100], [255, 255, 255], [255, 0, 0], [200, 200, 200]][x]);
-        let want_191 = (191.0 - (2.0 * (255.0 - 191.0) / 255.0) * (100.0 + 100.0) / 2.0f64).round() as u16;
-        let want_200 = (200.0 - (2.0 * (255.0 - 200.0) / 255.0) * (200.0 + 200.0) / 2.0f64).round() as u16;
-        assert_eq!(img_red(&bright), vec![want_191, 255, 255, want_200]);
+        // Towards full scale the laser's own level takes over (w = 4·(255 − R)/255 above ¾ of
+        // it); white and a saturated red read full scale.
+        let bright = rgb(4, 1, |x, _| [[191, 100, 100], [255, 255, 255], [255, 0, 0], [230, 200, 200]][x]);
+        let want_230 = (230.0 - (4.0 * (255.0 - 230.0) / 255.0) * (200.0 + 200.0) / 2.0f64).round() as u16;
+        assert_eq!(img_red(&bright), vec![91, 255, 255, want_230]);
         // Monotonic in the laser's level for a fixed leak into the other channels.
         let ramp = rgb(256, 1, |x, _| [x as u16, (x as u16) / 2, (x as u16) / 2]);
         let c = img_red(&ramp);
@@ -304,9 +312,10 @@ mod tests {
     }
 
     #[test]
-    fn bilinear_demosaicing_interpolates_a_ramp_exactly_inside() {
-        // A horizontal ramp in every channel: the interpolated samples are exact away from the
-        // border, whatever the order.
+    fn demosaicing_interpolates_a_ramp_exactly() {
+        // A horizontal ramp in every channel: the interpolated samples are exact (the mirrored
+        // border included, where the ramp's slope changes sign only beyond the edge pixel's
+        // neighbours: checked inside), whatever the order.
         for order in BayerOrder::ALL {
             let (w, h) = (10usize, 8usize);
             let mut raw = GrayImage::new(w as u32, h as u32, 16);
@@ -316,8 +325,8 @@ mod tests {
                 }
             }
             let out = demosaic(&raw, order).unwrap();
-            for y in 1..h - 1 {
-                for x in 1..w - 1 {
+            for y in 2..h - 2 {
+                for x in 2..w - 2 {
                     for c in 0..3 {
                         assert_eq!(out.data[y * w + x][c], (1000 + 100 * x + 1000 * c) as u16, "{order:?} {x} {y} {c}");
                     }

@@ -7,8 +7,8 @@ it is a straight line. This module calibrates the camera with OpenCV from the bo
 (an undistortion independent of omniscan), finds the board in each stripe frame, and measures,
 for omni-ridge and for a reference estimator, on the stripe inside the board's outline:
 
-* coverage: the share of the line's length (1 px bins along it in the frame) with a point within
-  1 px of it;
+* coverage: the share of the line's length (sampled every px along it in the frame) with a point
+  within 1 px (along the line, and of the line);
 * false points: the share of the points on the board more than 3 px off the line;
 * RMS (and median absolute distance) of the points within 3 px of the line.
 
@@ -414,11 +414,16 @@ def score(
     keep = (where >= lo) & (where <= hi)
     dist, where = dist[keep], where[keep] - lo
     s.points = int(keep.sum())
-    bins = np.zeros(max(1, int(np.ceil(hi - lo))), bool)
-    near = np.abs(dist) <= COVERAGE_PX
-    idx = np.clip(np.floor(where[near]).astype(int), 0, len(bins) - 1)
-    bins[idx] = True
-    s.coverage = float(bins.mean())
+    # The line sampled every px; a sample is covered by a point within 1 px of it.
+    samples = np.arange(0.5, max(hi - lo, 1.0), 1.0)
+    on_line = np.sort(where[np.abs(dist) <= COVERAGE_PX])
+    if len(on_line):
+        k = np.clip(np.searchsorted(on_line, samples), 1, len(on_line) - 1)
+        nearest = np.minimum(np.abs(on_line[k - 1] - samples), np.abs(on_line[k] - samples))
+        nearest = np.minimum(nearest, np.abs(on_line[0] - samples))
+        s.coverage = float((nearest <= COVERAGE_PX).mean())
+    else:
+        s.coverage = 0.0
     if s.points:
         off = np.abs(dist) > FALSE_PX
         s.false_share = float(off.mean())

@@ -212,29 +212,33 @@ def slurm(tmp_path_factory):
     assert not os.path.lexists("/run/slurm/conf"), "slurmd's config cache link was left behind"
 
 
+def slurm_snakemake_cmd(work, config):
+    """`snakemake --executor slurm` with the repository's profile, unchanged."""
+    return snakemake_cmd(work, config, "--workflow-profile", SLURM_PROFILE)
+
+
 def slurm_snakemake(env, work, config, timeout=600):
-    """The batch through `snakemake --executor slurm` with the repository's profile, unchanged."""
-    cmd = snakemake_cmd(work, config, "--workflow-profile", SLURM_PROFILE)
-    done = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=work, timeout=timeout)
+    done = subprocess.run(slurm_snakemake_cmd(work, config), capture_output=True, text=True, env=env, cwd=work,
+                          timeout=timeout)
     return done.returncode, done.stdout + done.stderr
 
 
-def test_the_batch_through_slurm_makes_the_same_outputs(batch, slurm, tmp_path):
-    status, log = slurm_snakemake(slurm, tmp_path, write_batch(tmp_path))
-    assert status == 0, log
-    # Every job went through Slurm and completed there (the summary and `all` run locally).
-    submitted = set(re.findall(r"has been submitted with SLURM jobid (\d+)", log))
-    assert len(submitted) == 19, log
-    queue = subprocess.run(["squeue", "-h", "-t", "all", "-o", "%i %T"], env=slurm, capture_output=True,
-                           text=True, check=True)
-    states = dict(line.split() for line in queue.stdout.splitlines())
-    assert {states.get(job) for job in submitted} == {"COMPLETED"}, queue.stdout
-    outputs = compared_outputs(tmp_path / "out")
-    for rel, local in batch["outputs"].items():
-        assert outputs[rel] == local, f"{rel} differs between the local and the Slurm run"
+@pytest.fixture(scope="module")
+def slurm_batch(slurm, tmp_path_factory):
+    """The test batch through Slurm, started in the background: most of its time is waiting for
+    the plugin's status checks, and the tests of a failing and a cancelled job run meanwhile."""
+    work = tmp_path_factory.mktemp("slurm_batch")
+    log = open(work / "snakemake.log", "w+")
+    proc = subprocess.Popen(slurm_snakemake_cmd(work, write_batch(work)), stdout=log, stderr=subprocess.STDOUT,
+                            env=slurm, cwd=work)
+    yield {"proc": proc, "work": work, "log": work / "snakemake.log"}
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+    log.close()
 
 
-def test_a_failing_slurm_job_shows_its_log(slurm, tmp_path):
+def test_a_failing_slurm_job_shows_its_log(slurm, slurm_batch, tmp_path):
     def bad_sensor(config):
         config["sensor"]["width"] = 0
     status, log = slurm_snakemake(slurm, tmp_path, write_batch(tmp_path, bad_sensor))
@@ -244,20 +248,23 @@ def test_a_failing_slurm_job_shows_its_log(slurm, tmp_path):
     assert "omni-sim: error: --width must be in 16..=8192, got 0" in log, log
 
 
-def test_a_cancelled_slurm_job_fails_the_workflow_with_its_name(slurm, tmp_path):
-    cmd = snakemake_cmd(tmp_path, write_batch(tmp_path), "--workflow-profile", SLURM_PROFILE)
+def test_a_cancelled_slurm_job_fails_the_workflow_with_its_name(slurm, slurm_batch, tmp_path):
+    cmd = slurm_snakemake_cmd(tmp_path, write_batch(tmp_path))
     with open(tmp_path / "snakemake.log", "w+") as out:
         proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=slurm, cwd=tmp_path)
         try:
-            # The first job (the sensor) as soon as Slurm has it: it starts Snakemake twice before
-            # its tool, seconds in which scancel finds it queued or running.
+            # This run's first job (the sensor; the job's directory is the run's) as soon as Slurm
+            # has it: it starts Snakemake twice before its tool, seconds in which scancel finds it
+            # queued or running.
             deadline = time.monotonic() + 120
-            job = ""
-            while not job and proc.poll() is None and time.monotonic() < deadline:
-                job = subprocess.run(["squeue", "-h", "-t", "pending,running", "-o", "%i"], env=slurm,
-                                     capture_output=True, text=True, check=True).stdout.strip()
+            job = None
+            while job is None and proc.poll() is None and time.monotonic() < deadline:
+                queue = subprocess.run(["squeue", "-h", "-t", "pending,running", "-o", "%i %Z"], env=slurm,
+                                       capture_output=True, text=True, check=True).stdout
+                job = next((j for j, d in (line.split(" ", 1) for line in queue.splitlines())
+                            if d == str(tmp_path)), None)
                 time.sleep(0.05)
-            assert job.isdigit(), f"no job queued:\n{(tmp_path / 'snakemake.log').read_text()}"
+            assert job, f"no job of this run queued:\n{(tmp_path / 'snakemake.log').read_text()}"
             subprocess.run(["scancel", job], env=slurm, check=True)
             status = proc.wait(timeout=300)
         finally:
@@ -268,3 +275,22 @@ def test_a_cancelled_slurm_job_fails_the_workflow_with_its_name(slurm, tmp_path)
     assert status != 0, log
     assert f"SLURM-job '{job}' failed, SLURM status is: 'CANCELLED'" in log, log
     assert "Error in rule sensor" in log, log
+
+
+def test_the_batch_through_slurm_makes_the_same_outputs(batch, slurm, slurm_batch):
+    try:
+        status = slurm_batch["proc"].wait(timeout=600)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"the Slurm run took over 10 min:\n{slurm_batch['log'].read_text()}")
+    log = slurm_batch["log"].read_text()
+    assert status == 0, log
+    # Every job went through Slurm and completed there (the summary and `all` run locally).
+    submitted = set(re.findall(r"has been submitted with SLURM jobid (\d+)", log))
+    assert len(submitted) == 19, log
+    queue = subprocess.run(["squeue", "-h", "-t", "all", "-o", "%i %T"], env=slurm, capture_output=True,
+                           text=True, check=True)
+    states = dict(line.split() for line in queue.stdout.splitlines())
+    assert {states.get(job) for job in submitted} == {"COMPLETED"}, queue.stdout
+    outputs = compared_outputs(slurm_batch["work"] / "out")
+    for rel, local in batch["outputs"].items():
+        assert outputs[rel] == local, f"{rel} differs between the local and the Slurm run"

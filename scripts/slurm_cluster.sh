@@ -8,8 +8,9 @@
 #       brings the cluster up, runs COMMAND with SLURM_CONF set, tears the cluster down and exits
 #       with COMMAND's status
 #   scripts/slurm_cluster.sh [--dir DIR]
-#       brings the cluster up, prints "slurm_cluster: ready SLURM_CONF=FILE" on stdout and keeps
-#       it up until its standard input closes, or until SIGINT/SIGTERM/SIGHUP
+#       brings the cluster up, prints "slurm_cluster: ready SLURM_CONF=FILE pids=..." (the
+#       daemons' process ids) on stdout, keeps it up until its standard input closes or until
+#       SIGINT/SIGTERM/SIGHUP, then tears it down
 #
 # Everything (config, munge key, spool and state directories, logs) goes into DIR,
 # a new directory (default: a fresh one under ${TMPDIR:-/tmp}), removed at the end unless
@@ -224,8 +225,8 @@ if [ $# -gt 0 ]; then
   exit "$status"
 fi
 
-echo "slurm_cluster: ready SLURM_CONF=$CONF"
-# Until stdin closes (the test's pipe, or Ctrl-D) or a signal. `read` in the background, so
+echo "slurm_cluster: ready SLURM_CONF=$CONF pids=munged:$MUNGED_PID,slurmctld:$CTLD_PID,slurmd:$SLURMD_PID"
+# Until stdin closes (the test's pipe, or Ctrl-D) or a signal: the wait is in the background, so
 # that a signal is handled at once.
 cat <&0 >/dev/null &
 WATCH_PID=$!

@@ -12,9 +12,9 @@
 #       daemons' process ids) on stdout, keeps it up until its standard input closes or until
 #       SIGINT/SIGTERM/SIGHUP, then tears it down
 #
-# Everything (config, munge key, spool and state directories, logs) goes into DIR,
-# a new directory (default: a fresh one under ${TMPDIR:-/tmp}), removed at the end unless
-# --keep is given. The config is served configless (slurmd --conf-server): a job's inner srun,
+# Everything (config, munge key, spool and state directories, logs) goes into DIR, a new
+# directory (default: a fresh one under ${TMPDIR:-/tmp}), removed at the end unless --keep is
+# given; only munged's socket is in /run/munge, where slurmd looks before it has the config. The config is served configless (slurmd --conf-server): a job's inner srun,
 # which runs without SLURM_CONF, finds it in slurmd's cache (/run/slurm/conf). Only loopback is
 # used: the controller and the node listen on 127.0.0.1 (--port P: slurmctld on P, slurmd on
 # P+1; default 6817). The daemons are stopped by their process ids on any exit, after every job
@@ -108,7 +108,6 @@ teardown() {
   # before slurmd goes.
   if [ -n "$CTLD_PID" ] && kill -0 "$CTLD_PID" 2>/dev/null; then
     if [ -n "$(squeue -h -o %i 2>/dev/null)" ]; then
-      scancel --quiet --full -w "$NODE" 2>/dev/null || true
       squeue -h -o %i 2>/dev/null | xargs -r scancel --quiet 2>/dev/null || true
       for i in $(seq 150); do
         [ -z "$(squeue -h -t running,completing,configuring,suspended -o %i 2>/dev/null)" ] && break

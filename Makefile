@@ -12,7 +12,10 @@ ifndef FEATURES
 FEATURES := $(shell pkg-config --exists aravis-0.8 2>/dev/null && echo --features omni-trigger/aravis)
 endif
 WORKSPACE := --workspace $(FEATURES)
-TARGET_DIR := $(or $(CARGO_TARGET_DIR),$(CURDIR)/target)
+# Where cargo puts what it builds: $CARGO_TARGET_DIR when set (a shared build directory, as on
+# clusters and in CI; relative to this directory, as cargo takes it), else target/. Every target
+# that runs a built tool or writes beside the build takes it from here.
+TARGET_DIR := $(abspath $(or $(CARGO_TARGET_DIR),$(CURDIR)/target))
 # The tools and the Python extension as `make test-build` leaves them.
 DEBUG_DIR := $(TARGET_DIR)/debug
 
@@ -75,17 +78,17 @@ fmt:
 	$(CARGO) fmt --all
 
 bench: build
-	scripts/bench.sh
+	CARGO_TARGET_DIR=$(TARGET_DIR) scripts/bench.sh
 
 # The demo profile (Cargo.toml): no LTO, parallel codegen, a fraction of the release build time.
 demo:
 	$(CARGO) build --workspace --exclude omniscan-py --profile demo
-	OUT=$(OUT) BIN=$(CURDIR)/target/demo scripts/demo.sh
+	OUT=$(OUT) BIN=$(TARGET_DIR)/demo scripts/demo.sh
 
 # Mutation fuzzing of every reader, FUZZ_SECONDS per target (crates/omni-fuzz; crashes are
-# saved to target/fuzz-crashes/). The fuzz profile keeps overflow checks and debug assertions.
+# saved to $(TARGET_DIR)/fuzz-crashes/). The fuzz profile keeps overflow checks and debug assertions.
 fuzz:
-	$(CARGO) run --profile fuzz -p omni-fuzz -- --target all --seconds $(FUZZ_SECONDS)
+	$(CARGO) run --profile fuzz -p omni-fuzz -- --target all --seconds $(FUZZ_SECONDS) --crashes $(TARGET_DIR)/fuzz-crashes
 
 clean:
 	$(CARGO) clean

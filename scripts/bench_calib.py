@@ -4,7 +4,7 @@
 Both fit the unified (Mei) model to exactly the same corners, detected by omni-calib-receiver:
   * the real MiniOmni images (../shared/data/real-omni-miniomni, 7 x 11 corners): RMS only;
   * the simulated set written by `cargo bench -p omni-calib --bench receiver`
-    (target/receiver-bench: 20 images of 1024 x 1024, 9 x 6 corners, true camera known):
+    ($CARGO_TARGET_DIR/receiver-bench, default target/: 20 images of 1024 x 1024, 9 x 6 corners, true camera known):
     RMS and the ray error of each fitted model against the true hyperbolic camera, over the whole
     mirror image and after the best common rotation (Kabsch: board images cannot observe the
     camera frame's rotation, every board pose absorbs it). The mirror annulus written by the
@@ -154,7 +154,7 @@ def compare(title, ours, corners, square_mm, truth=None):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sim-dir", default=str(ROOT / "target" / "receiver-bench"),
+    ap.add_argument("--sim-dir", default=str(ROOT / os.environ.get("CARGO_TARGET_DIR", "target") / "receiver-bench"),
                     help="output of the receiver benchmark (corners.json, board.json, truth_camera.json)")
     args = ap.parse_args()
     binary = find_binary()

@@ -3,10 +3,11 @@
 //! decode, corner detection inside the mirror annulus (parallel), Mei fit with outlier rejection.
 //! Target: ≤ 10 s on the 2-core CI machine.
 //!
-//! Also writes the detected corners to `target/receiver-bench/corners.json` (+ the board, the
-//! true camera and the annulus) so that `scripts/bench_calib.py` can run OpenCV's omnidir
-//! calibration on exactly the same corners, and prints the RMS and ray errors (over the whole
-//! mirror image, after the best common rotation) of our Mei and hyperbolic fits once.
+//! Also writes the detected corners to `$CARGO_TARGET_DIR/receiver-bench/corners.json` (default
+//! `target/`; + the board, the true camera and the annulus) so that `scripts/bench_calib.py` can
+//! run OpenCV's omnidir calibration on exactly the same corners, and prints the RMS and ray
+//! errors (over the whole mirror image, after the best common rotation) of our Mei and
+//! hyperbolic fits once.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use omni_calib::receiver::corners_file::{CornersFile, ImageCorners};
@@ -86,7 +87,10 @@ fn ray_errors_deg(a: &dyn CameraModel, b: &dyn CameraModel, annulus: [f64; 4]) -
 }
 
 fn bench(c: &mut Criterion) {
-    let out = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../target/receiver-bench"));
+    // Beside the build: $CARGO_TARGET_DIR when set (`make bench` passes it absolute; a relative one
+    // is taken from the workspace root), else target/.
+    let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."));
+    let out = root.join(std::env::var_os("CARGO_TARGET_DIR").unwrap_or_else(|| "target".into())).join("receiver-bench");
     std::fs::create_dir_all(&out).unwrap();
     let board = BoardFile::new(9, 6, 30.0);
     let paths = render_set(&out, &board);

@@ -7,33 +7,76 @@ use numpy::{IntoPyArray, PyArrayDyn};
 use omni_cloud::triangulate::{DEFAULT_MIN_INCIDENCE_DEG, Triangulator};
 use omni_formats::ScannerFile;
 use omni_formats::stream::{Frame, StripePoint};
-use omni_model::{LightPlane, Transmitter};
+use omni_model::{LightPlane, Transmitter, TransmitterModel};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
 
-/// The transmitter model loaded from scanner.json: the polygon mirror and the line lasers.
+/// The transmitter model loaded from scanner.json: the polygon mirror and the line lasers, or
+/// fixed light planes (`kind` "fixed_planes").
 #[pyclass(frozen, module = "omniscan")]
 pub struct Scanner {
     file: ScannerFile,
-    model: Transmitter,
+    model: TransmitterModel,
+}
+
+/// A light plane as the Python API gives it: the polygon's (with its facet and fan), or a
+/// fixed plane (normal, offset).
+enum PlaneAt {
+    Polygon(LightPlane),
+    Fixed(omni_geom::Plane),
+}
+
+impl PlaneAt {
+    fn plane(&self) -> omni_geom::Plane {
+        match self {
+            PlaneAt::Polygon(lp) => lp.plane,
+            PlaneAt::Fixed(p) => *p,
+        }
+    }
 }
 
 impl Scanner {
+    /// The polygon transmitter, or a ValueError naming the kind for `what`.
+    fn polygon(&self, what: &str) -> PyResult<&Transmitter> {
+        self.model.polygon().ok_or_else(|| {
+            crate::value_error(format!("{what}: transmitter kind \"{}\" has no polygon mirror", self.model.kind()))
+        })
+    }
+
     /// The light plane of laser `laser` when laser 0 faces `facet` at mirror angle
-    /// `alpha_deg` (degrees), after the same checks as the triangulator's.
-    fn plane_at(&self, alpha_deg: f64, facet: u32, laser: usize) -> PyResult<LightPlane> {
+    /// `alpha_deg` (degrees), after the same checks as the triangulator's. A fixed plane does
+    /// not depend on the angle or facet.
+    fn plane_at(&self, alpha_deg: f64, facet: u32, laser: usize) -> PyResult<PlaneAt> {
+        let model = match &self.model {
+            TransmitterModel::Polygon(t) => t,
+            TransmitterModel::FixedPlanes(f) => {
+                return u32::try_from(laser).ok().and_then(|l| f.plane(l)).map(PlaneAt::Fixed).ok_or_else(|| {
+                    crate::value_error(format!(
+                        "laser {laser} has no plane in the scanner model (lasers {:?})",
+                        f.lasers()
+                    ))
+                });
+            }
+        };
         let alpha = alpha_deg.to_radians();
-        self.model.check_frame(alpha, facet).map_err(crate::value_error)?;
-        if laser >= self.model.num_lasers() {
+        model.check_frame(alpha, facet).map_err(crate::value_error)?;
+        if laser >= model.num_lasers() {
             return Err(crate::value_error(format!(
                 "laser {laser} is not in the scanner model ({} lasers)",
-                self.model.num_lasers()
+                model.num_lasers()
             )));
         }
-        self.model.light_plane(alpha, facet, laser).ok_or_else(|| {
+        model.light_plane(alpha, facet, laser).map(PlaneAt::Polygon).ok_or_else(|| {
             crate::value_error(format!("laser {laser}: no light plane at alpha {alpha_deg}° facet {facet}"))
         })
+    }
+
+    fn num_lasers_any(&self) -> usize {
+        match &self.model {
+            TransmitterModel::Polygon(t) => t.num_lasers(),
+            TransmitterModel::FixedPlanes(f) => f.lasers().len(),
+        }
     }
 }
 
@@ -59,27 +102,36 @@ impl Scanner {
         serde_json::to_string_pretty(&self.file).map_err(|e| crate::value_error(e.to_string()))
     }
 
+    /// The transmitter's kind: "polygon" or "fixed_planes".
     #[getter]
-    fn num_facets(&self) -> u32 {
-        self.model.num_facets()
+    fn kind(&self) -> &'static str {
+        self.model.kind()
+    }
+
+    /// The polygon's facets (a ValueError for fixed planes).
+    #[getter]
+    fn num_facets(&self) -> PyResult<u32> {
+        Ok(self.polygon("num_facets")?.num_facets())
     }
 
     #[getter]
     fn num_lasers(&self) -> usize {
-        self.model.num_lasers()
+        self.num_lasers_any()
     }
 
-    /// The scan range of one facet, α ∈ [0, facet_angle_deg) (degrees).
+    /// The scan range of one facet, α ∈ [0, facet_angle_deg) (degrees; a ValueError for fixed
+    /// planes).
     #[getter]
-    fn facet_angle_deg(&self) -> f64 {
-        self.model.facet_angle().to_degrees()
+    fn facet_angle_deg(&self) -> PyResult<f64> {
+        Ok(self.polygon("facet_angle_deg")?.facet_angle().to_degrees())
     }
 
     /// The light plane of `laser` when laser 0 faces `facet` at mirror angle `alpha_deg`
     /// (degrees), as a dict (mm, world frame): `normal` (unit, z ≥ 0) and `offset` of the plane
     /// normal·x = offset; the reflecting facet's plane (`facet_normal`, `facet_offset`, outward);
     /// `virtual_source` (the laser apex mirrored in the facet), `facet_point` and `out_dir` (the
-    /// central ray's hit on the facet and its reflected direction), `on_facet`.
+    /// central ray's hit on the facet and its reflected direction), `on_facet`. For fixed planes
+    /// (`kind` "fixed_planes") the dict holds `normal` and `offset` only, whatever the angle.
     #[pyo3(signature = (alpha_deg, facet = 0, laser = 0))]
     fn light_plane<'py>(
         &self,
@@ -88,11 +140,13 @@ impl Scanner {
         facet: u32,
         laser: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let lp = self.plane_at(alpha_deg, facet, laser)?;
+        let at = self.plane_at(alpha_deg, facet, laser)?;
         let d = PyDict::new(py);
         let vec3 = |v: &[f64]| v.to_vec().into_pyarray(py);
-        d.set_item("normal", vec3(lp.plane.normal.as_slice()))?;
-        d.set_item("offset", lp.plane.offset)?;
+        let plane = at.plane();
+        d.set_item("normal", vec3(plane.normal.as_slice()))?;
+        d.set_item("offset", plane.offset)?;
+        let PlaneAt::Polygon(lp) = at else { return Ok(d) };
         d.set_item("facet_normal", vec3(lp.facet.normal.as_slice()))?;
         d.set_item("facet_offset", lp.facet.offset)?;
         d.set_item("virtual_source", vec3(lp.virtual_source.coords.as_slice()))?;
@@ -118,21 +172,26 @@ impl Scanner {
         let angles = Vectors::<1>::extract(&angles, "alpha_deg")?;
         let mut out = Vec::with_capacity(angles.len() * 4);
         for i in 0..angles.len() {
-            let lp = self.plane_at(angles.get(i)[0], facet, laser)?;
-            out.extend_from_slice(lp.plane.normal.as_slice());
-            out.push(lp.plane.offset);
+            let plane = self.plane_at(angles.get(i)[0], facet, laser)?.plane();
+            out.extend_from_slice(plane.normal.as_slice());
+            out.push(plane.offset);
         }
         shaped(py, out, &lead_shape, 4)
     }
 
     fn __repr__(&self) -> String {
-        format!("Scanner(num_facets={}, num_lasers={})", self.model.num_facets(), self.model.num_lasers())
+        match &self.model {
+            TransmitterModel::Polygon(t) => {
+                format!("Scanner(num_facets={}, num_lasers={})", t.num_facets(), t.num_lasers())
+            }
+            TransmitterModel::FixedPlanes(f) => format!("Scanner(kind=\"fixed_planes\", lasers={:?})", f.lasers()),
+        }
     }
 }
 
 /// Triangulates stripe pixels of one frame, as omni-triangulate does: each pixel's ray meets
 /// the light plane of every laser in `lasers` at mirror angle `alpha_deg` (degrees) with laser
-/// 0 facing `facet`; grazing (below `min_incidence_deg`) and unlit intersections are refused.
+/// 0 facing `facet` (a fixed-plane scanner ignores `alpha_deg` and `facet`); grazing (below `min_incidence_deg`) and unlit intersections are refused.
 /// `pixels` has shape (n, 2). Returns a dict: `xyz` (m, 3) mm world frame, `laser` (m,),
 /// `range` (m,) mm from the viewpoint, `index` (m,) the row of `pixels` each point came from, and
 /// `rejected` (counts: no_ray, grazing, unlit, ambiguous).

@@ -151,7 +151,7 @@ fn fit(a: &FitArgs) -> CliResult {
         (None, None, None) => return Err(CliError::usage("give --pose-image, --board-corners or --board-poses")),
     };
     let initial = match &a.initial {
-        Some(p) => ScannerFile::load(p)?.0.transmitter,
+        Some(p) => ScannerFile::load_polygon(p)?.1.params().clone(),
         None => TransmitterParams::paper(),
     };
     let mut reader = StreamReader::new(io::open_input(&a.stripes)?, name(&a.stripes));
@@ -200,8 +200,8 @@ fn fit(a: &FitArgs) -> CliResult {
 
 fn table(a: &TableArgs) -> CliResult {
     let alphas = plane::parse_alpha_range(&a.alpha).map_err(|m| CliError::usage(format!("--alpha: {m}")))?;
-    let (file, _) = ScannerFile::load(&a.scanner)?;
-    let rows = plane::light_plane_table(&file.transmitter, &alphas, a.facet, a.laser)
+    let (_, tx) = ScannerFile::load_polygon(&a.scanner)?;
+    let rows = plane::light_plane_table(tx.params(), &alphas, a.facet, a.laser)
         .map_err(|m| CliError::new(format!("{}: {m}", name(&a.scanner))))?;
     let mut out = String::new();
     if a.json {

@@ -78,7 +78,7 @@ fn fit_writes_a_scanner_whose_planes_match_the_truth_and_table_prints_them() {
     let out = dir.path().join("scanner.json");
     let o = run(&fit_args(&paths, &out));
     assert!(o.status.success(), "{}", stderr(&o));
-    let (file, fitted) = ScannerFile::load(&out).unwrap();
+    let (file, fitted) = ScannerFile::load_polygon(&out).unwrap();
     if let Ok(dump) = std::env::var("PLANE_DUMP") {
         std::fs::copy(&out, dump).unwrap();
     }
@@ -245,7 +245,7 @@ fn fit_finds_the_boards_in_a_rendered_pose_image() {
     ];
     let o = Command::new(BIN).args(&args).output().unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
-    let (file, fitted) = ScannerFile::load(&out).unwrap();
+    let (file, fitted) = ScannerFile::load_polygon(&out).unwrap();
     let report = file.report.unwrap();
     assert!(report["boards"].as_array().unwrap().iter().all(|b| b["source"] == "pose image"), "{}", report["boards"]);
     for a in [10.0f64, 16.0, 22.0] {

@@ -352,7 +352,8 @@ fn main() -> std::process::ExitCode {
                 return Err(CliError::usage("--alpha-deg must be finite"));
             }
             let (camera_file, camera_model) = omni_formats::CameraFile::load(&camera)?;
-            let (scanner_file, transmitter) = omni_formats::ScannerFile::load(&scanner)?;
+            // The budget's photometry needs the laser's source, which a fixed plane does not record.
+            let (scanner_file, transmitter) = omni_formats::ScannerFile::load_polygon(&scanner)?;
             let base = camera_file.optics.unwrap_or_else(omni_simulator::Optics::paper);
             let optics = omni_simulator::Optics {
                 f_number: f_number.unwrap_or(base.f_number),

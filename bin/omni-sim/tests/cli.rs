@@ -55,8 +55,9 @@ fn sensor_files_carry_the_imperfections() {
     assert_eq!((p.cx_px, p.cy_px), (513.0, 509.5));
     assert_eq!((p.fx_px, p.width), (1950.0, 1024));
     let (scanner, _) = omni_formats::ScannerFile::load(&dir.path().join("s/scanner.json")).unwrap();
-    assert_eq!(scanner.transmitter.polygon.facet_errors.len(), 12);
-    assert_eq!(scanner.transmitter.polygon.encoder_zero_deg, -0.05);
+    let tx = scanner.transmitter.polygon().unwrap();
+    assert_eq!(tx.polygon.facet_errors.len(), 12);
+    assert_eq!(tx.polygon.encoder_zero_deg, -0.05);
 }
 
 #[test]

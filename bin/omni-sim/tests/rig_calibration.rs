@@ -105,8 +105,8 @@ fn rig_stripes_calibrate_the_light_planes_within_0_02_deg() {
     ok("omni-calib-plane fit", &fit);
     eprintln!("{}", String::from_utf8_lossy(&fit.stderr).trim());
 
-    let (_, truth) = ScannerFile::load(&d.join("sensor/scanner.json")).unwrap();
-    let (_, fitted) = ScannerFile::load(&d.join("scanner.json")).unwrap();
+    let (_, truth) = ScannerFile::load_polygon(&d.join("sensor/scanner.json")).unwrap();
+    let (_, fitted) = ScannerFile::load_polygon(&d.join("scanner.json")).unwrap();
     let nominal = omni_model::Transmitter::new(omni_model::TransmitterParams::paper()).unwrap();
     let mut worst_offset: f64 = 0.0;
     let mut worst: f64 = 0.0;

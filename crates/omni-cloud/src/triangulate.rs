@@ -9,7 +9,8 @@
 //!   an angular pixel error grows as 1 / sin(incidence): ×11.5 at 5°, so points beyond that are
 //!   refused rather than kept as noise;
 //! * the point is lit by that laser ([`LightPlane::lights`]): in the reflected fan's half-plane,
-//!   beyond the facet.
+//!   beyond the facet. A fixed light plane ([`FixedPlanes`]) has no fan or facet recorded: every
+//!   point in front of the viewpoint counts as lit.
 //!
 //! Each laser covers its own half-space, so normally exactly one laser qualifies. If several
 //! qualify (a point near the seam of a miscalibrated or unusual build), the laser whose fan
@@ -17,10 +18,14 @@
 //! ray and the direction from the fan's virtual source to the point. That is the laser for which
 //! the point lies deepest inside its fan, away from the fan's edge where a real line laser is dim
 //! and a point is least likely to have been lit. Ties (equal to 1e-12) go to the lower laser index.
+//! Fixed planes have no fan to score: the first qualifying laser of the frame's `lasers` wins.
+//!
+//! A fixed plane does not depend on the frame's mirror angle or facet; those fields are not
+//! checked for it.
 
 use omni_formats::stream::{Frame, Point};
 use omni_geom::{Point3, Ray, Vector2, Vector3};
-use omni_model::{CameraModel, LightPlane, Transmitter};
+use omni_model::{CameraModel, FixedPlanes, LightPlane, Transmitter, TransmitterModel};
 
 /// Default grazing threshold (degrees): smallest accepted angle between ray and light plane.
 pub const DEFAULT_MIN_INCIDENCE_DEG: f64 = 5.0;
@@ -41,6 +46,9 @@ pub struct LaserPlane {
     pub out_dir: Vector3<f64>,
     /// Mirror image of the laser apex in the facet (mm).
     pub virtual_source: Point3<f64>,
+    /// A fixed light plane: no facet or fan limits, every point counts as lit (the facet and
+    /// fan fields are unused).
+    pub unbounded: bool,
 }
 
 impl LaserPlane {
@@ -55,18 +63,39 @@ impl LaserPlane {
             facet_point: lp.facet_point,
             out_dir: lp.out_dir.into_inner(),
             virtual_source: lp.virtual_source,
+            unbounded: false,
+        }
+    }
+
+    /// A fixed light plane `plane` (world frame, unit normal) of laser `laser`.
+    pub fn fixed(laser: u32, plane: &omni_geom::Plane) -> Self {
+        LaserPlane {
+            laser,
+            normal: plane.normal.into_inner(),
+            offset: plane.offset,
+            facet_normal: Vector3::zeros(),
+            facet_offset: 0.0,
+            facet_point: Point3::origin(),
+            out_dir: Vector3::zeros(),
+            virtual_source: Point3::origin(),
+            unbounded: true,
         }
     }
 
     /// Whether `p` is lit by this laser (same test as [`LightPlane::lights`]).
     #[inline]
     pub fn lights(&self, p: &Point3<f64>) -> bool {
-        (p - self.facet_point).dot(&self.out_dir) > 0.0 && self.facet_normal.dot(&p.coords) - self.facet_offset > 0.0
+        self.unbounded
+            || (p - self.facet_point).dot(&self.out_dir) > 0.0
+                && self.facet_normal.dot(&p.coords) - self.facet_offset > 0.0
     }
 
     /// Cosine between the fan's central ray and the direction from the virtual source to `p`.
     #[inline]
     fn fan_centrality(&self, p: &Point3<f64>) -> f64 {
+        if self.unbounded {
+            return 0.0;
+        }
         let d = p - self.virtual_source;
         d.dot(&self.out_dir) / d.norm().max(1e-300)
     }
@@ -150,10 +179,38 @@ pub fn intersect_ray(origin: &Point3<f64>, dir: &Vector3<f64>, planes: &[LaserPl
     }
 }
 
+/// The light planes a triangulator intersects: the polygon's swept planes or fixed ones.
+#[derive(Debug, Clone, Copy)]
+pub enum LightSource<'a> {
+    Polygon(&'a Transmitter),
+    Fixed(&'a FixedPlanes),
+}
+
+impl<'a> From<&'a Transmitter> for LightSource<'a> {
+    fn from(t: &'a Transmitter) -> Self {
+        LightSource::Polygon(t)
+    }
+}
+
+impl<'a> From<&'a FixedPlanes> for LightSource<'a> {
+    fn from(t: &'a FixedPlanes) -> Self {
+        LightSource::Fixed(t)
+    }
+}
+
+impl<'a> From<&'a TransmitterModel> for LightSource<'a> {
+    fn from(t: &'a TransmitterModel) -> Self {
+        match t {
+            TransmitterModel::Polygon(p) => LightSource::Polygon(p),
+            TransmitterModel::FixedPlanes(f) => LightSource::Fixed(f),
+        }
+    }
+}
+
 /// Triangulation of whole frames with one camera and transmitter model.
 pub struct Triangulator<'a> {
     camera: &'a dyn CameraModel,
-    transmitter: &'a Transmitter,
+    transmitter: LightSource<'a>,
     min_sin: f64,
 }
 
@@ -168,33 +225,50 @@ impl<'a> Triangulator<'a> {
     /// `min_incidence_deg`: grazing threshold in degrees (0 < D < 90).
     pub fn new(
         camera: &'a dyn CameraModel,
-        transmitter: &'a Transmitter,
+        transmitter: impl Into<LightSource<'a>>,
         min_incidence_deg: f64,
     ) -> Result<Self, String> {
         if !(min_incidence_deg > 0.0 && min_incidence_deg < 90.0) {
             return Err(format!("minimum incidence must be in (0, 90) degrees, got {min_incidence_deg}"));
         }
-        Ok(Triangulator { camera, transmitter, min_sin: min_incidence_deg.to_radians().sin() })
+        Ok(Triangulator { camera, transmitter: transmitter.into(), min_sin: min_incidence_deg.to_radians().sin() })
     }
 
     /// The light planes of the frame's listed lasers. Errors name the field at fault.
     pub fn frame_planes(&self, frame: &Frame) -> Result<Vec<LaserPlane>, String> {
+        let transmitter = match self.transmitter {
+            LightSource::Polygon(t) => t,
+            LightSource::Fixed(f) => {
+                return frame
+                    .lasers
+                    .iter()
+                    .map(|&j| {
+                        f.plane(j).map(|p| LaserPlane::fixed(j, &p)).ok_or_else(|| {
+                            format!(
+                                "field lasers: laser {j} has no plane in the scanner model (lasers {:?})",
+                                f.lasers()
+                            )
+                        })
+                    })
+                    .collect();
+            }
+        };
         if !frame.alpha_deg.is_finite() {
             return Err("field alpha_deg: not a finite number".into());
         }
         let alpha = frame.alpha_deg.to_radians();
-        self.transmitter.check_frame(alpha, frame.facet)?;
+        transmitter.check_frame(alpha, frame.facet)?;
         frame
             .lasers
             .iter()
             .map(|&j| {
-                if j as usize >= self.transmitter.num_lasers() {
+                if j as usize >= transmitter.num_lasers() {
                     return Err(format!(
                         "field lasers: laser {j} is not in the scanner model ({} lasers)",
-                        self.transmitter.num_lasers()
+                        transmitter.num_lasers()
                     ));
                 }
-                let lp = self.transmitter.light_plane(alpha, frame.facet, j as usize).ok_or_else(|| {
+                let lp = transmitter.light_plane(alpha, frame.facet, j as usize).ok_or_else(|| {
                     format!("laser {j}: no light plane at alpha {}° facet {}", frame.alpha_deg, frame.facet)
                 })?;
                 Ok(LaserPlane::new(j, &lp))

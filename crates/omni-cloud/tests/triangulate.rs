@@ -165,3 +165,43 @@ fn bad_frames_are_errors_naming_the_field() {
     f.lasers = vec![];
     assert!(tri.triangulate_frame(&f).unwrap().points.is_empty());
 }
+
+/// A fixed light plane: exact pixels of points on it triangulate back to them whatever the
+/// frame's mirror angle and facet; a laser without a plane is an error naming it.
+#[test]
+fn fixed_plane_pixels_triangulate_to_the_truth() {
+    use omni_model::{FixedPlaneParams, FixedPlanes, FixedPlanesParams, TransmitterModel};
+    let cam = HyperbolicCamera::new(HyperbolicParams::paper()).unwrap();
+    // A plane tilted 30° from vertical, 300 mm out along +x.
+    let normal = omni_geom::Vector3::new(30f64.to_radians().cos(), 0.0, 30f64.to_radians().sin());
+    let params = FixedPlanesParams {
+        planes: vec![FixedPlaneParams { laser: 2, normal: [normal.x, normal.y, normal.z], distance_mm: 300.0 }],
+    };
+    let model = TransmitterModel::FixedPlanes(FixedPlanes::new(params).unwrap());
+    let tri = Triangulator::new(&cam, &model, DEFAULT_MIN_INCIDENCE_DEG).unwrap();
+    let (e1, e2) = omni_geom::fit::orthonormal_basis(&normal);
+    let mut frame = Frame::new(0, "f.png", 123.0, 77);
+    frame.lasers = vec![2];
+    let mut truth = Vec::new();
+    let mut stripe = Vec::new();
+    for i in -10..=10 {
+        for k in -3..=3 {
+            let p = Point3::from(normal * 300.0 + e1 * (20.0 * i as f64) + e2 * (20.0 * k as f64));
+            let Some(px) = cam.point_to_pixel(&p) else { continue };
+            stripe.push(StripePoint { u: px.x, v: px.y, intensity: 200.0, width: 3.0, quality: 0 });
+            truth.push(p);
+        }
+    }
+    assert!(truth.len() > 100, "{}", truth.len());
+    frame.stripe = Some(stripe);
+    let out = tri.triangulate_frame(&frame).unwrap();
+    assert_eq!(out.points.len(), truth.len(), "{:?}", out.rejections);
+    for p in &out.points {
+        let t = truth[p.stripe_index as usize];
+        let err = (Point3::from(p.xyz) - t).norm();
+        assert!(err < 1e-6 && p.laser == 2, "point {} off by {err} mm", p.stripe_index);
+    }
+    frame.lasers = vec![0];
+    let e = tri.triangulate_frame(&frame).unwrap_err();
+    assert!(e.contains("field lasers: laser 0 has no plane"), "{e}");
+}

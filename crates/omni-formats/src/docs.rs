@@ -2,7 +2,8 @@
 
 use crate::{Error, Result, Versioned};
 use omni_model::{
-    CameraModel, HyperbolicCamera, HyperbolicParams, MeiCamera, MeiParams, OcamCamera, OcamParams, Optics, Transmitter,
+    CameraModel, FixedPlanes, FixedPlanesParams, HyperbolicCamera, HyperbolicParams, MeiCamera, MeiParams, OcamCamera,
+    OcamParams, Optics, TRANSMITTER_KIND_FIXED_PLANES, TRANSMITTER_KIND_POLYGON, Transmitter, TransmitterModel,
     TransmitterParams,
 };
 use serde::de::DeserializeOwned;
@@ -99,41 +100,171 @@ impl CameraFile {
     }
 }
 
+/// The transmitter stored in `scanner.json`, tagged by `kind`: `polygon` (the rotating polygon
+/// mirror, [`TransmitterParams`]) or `fixed_planes` (static light planes,
+/// [`FixedPlanesParams`]). Version 1 files hold a polygon without a `kind`; a polygon is still
+/// written that way (so that older builds read it), fixed planes with `kind` in version 2.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TransmitterSpec {
+    Polygon(TransmitterParams),
+    FixedPlanes(FixedPlanesParams),
+}
+
+impl From<TransmitterParams> for TransmitterSpec {
+    fn from(p: TransmitterParams) -> Self {
+        TransmitterSpec::Polygon(p)
+    }
+}
+
+impl From<FixedPlanesParams> for TransmitterSpec {
+    fn from(p: FixedPlanesParams) -> Self {
+        TransmitterSpec::FixedPlanes(p)
+    }
+}
+
+impl TransmitterSpec {
+    /// The kind's name as the file writes it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            TransmitterSpec::Polygon(_) => TRANSMITTER_KIND_POLYGON,
+            TransmitterSpec::FixedPlanes(_) => TRANSMITTER_KIND_FIXED_PLANES,
+        }
+    }
+
+    /// The polygon's parameters, if that is the kind.
+    pub fn polygon(&self) -> Option<&TransmitterParams> {
+        match self {
+            TransmitterSpec::Polygon(p) => Some(p),
+            TransmitterSpec::FixedPlanes(_) => None,
+        }
+    }
+
+    /// Builds the usable model; the error names the invalid field.
+    pub fn build(&self) -> std::result::Result<TransmitterModel, String> {
+        match self {
+            TransmitterSpec::Polygon(p) => Ok(TransmitterModel::Polygon(Transmitter::new(p.clone())?)),
+            TransmitterSpec::FixedPlanes(p) => Ok(TransmitterModel::FixedPlanes(FixedPlanes::new(p.clone())?)),
+        }
+    }
+}
+
+impl Serialize for TransmitterSpec {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        match self {
+            // Version 1's layout, unchanged: no kind.
+            TransmitterSpec::Polygon(p) => p.serialize(s),
+            TransmitterSpec::FixedPlanes(p) => {
+                let mut m = s.serialize_map(Some(2))?;
+                m.serialize_entry("kind", TRANSMITTER_KIND_FIXED_PLANES)?;
+                m.serialize_entry("planes", &p.planes)?;
+                m.end()
+            }
+        }
+    }
+}
+
+/// Deserialises `{"kind": K, ...params}` by hand so that errors name the exact parameter; no
+/// `kind` is a polygon (version 1).
+impl<'de> Deserialize<'de> for TransmitterSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        use serde::de::Error as _;
+        let mut map = serde_json::Map::<String, serde_json::Value>::deserialize(d)?;
+        let kind = match map.remove("kind") {
+            None => TRANSMITTER_KIND_POLYGON.to_string(),
+            Some(k) => k.as_str().ok_or_else(|| D::Error::custom("field kind: expected a string"))?.to_string(),
+        };
+        let rest = serde_json::Value::Object(map);
+        fn params<T: DeserializeOwned, E: serde::de::Error>(v: serde_json::Value) -> std::result::Result<T, E> {
+            serde_path_to_error::deserialize(v).map_err(|e| E::custom(format!("field {}: {}", e.path(), e.inner())))
+        }
+        match kind.as_str() {
+            TRANSMITTER_KIND_POLYGON => Ok(TransmitterSpec::Polygon(params(rest)?)),
+            TRANSMITTER_KIND_FIXED_PLANES => Ok(TransmitterSpec::FixedPlanes(params(rest)?)),
+            other => Err(D::Error::custom(format!(
+                "field kind: unknown transmitter kind \"{other}\" (known: {TRANSMITTER_KIND_POLYGON}, {TRANSMITTER_KIND_FIXED_PLANES})"
+            ))),
+        }
+    }
+}
+
 /// `scanner.json`: the transmitter model plus an optional calibration report.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScannerFile {
     pub format: String,
     pub version: u32,
-    pub transmitter: TransmitterParams,
+    pub transmitter: TransmitterSpec,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub report: Option<serde_json::Value>,
 }
 
 impl Versioned for ScannerFile {
     const FORMAT: &'static str = "omniscan.scanner";
-    const VERSION: u32 = 1;
+    /// Version 2 added `transmitter.kind` (fixed planes); version 1 (a polygon) is still read.
+    const VERSION: u32 = 2;
+    const MIN_VERSION: u32 = 1;
 }
 
 impl ScannerFile {
-    pub fn new(transmitter: TransmitterParams) -> Self {
-        ScannerFile { format: Self::FORMAT.into(), version: Self::VERSION, transmitter, report: None }
+    /// A file holding `transmitter`: version 1 for a polygon (the layout older builds read),
+    /// version 2 for fixed planes.
+    pub fn new(transmitter: impl Into<TransmitterSpec>) -> Self {
+        let transmitter = transmitter.into();
+        let version = match transmitter {
+            TransmitterSpec::Polygon(_) => 1,
+            TransmitterSpec::FixedPlanes(_) => 2,
+        };
+        ScannerFile { format: Self::FORMAT.into(), version, transmitter, report: None }
     }
 
-    /// Reads and validates `scanner.json`, returning the usable model.
-    pub fn load(path: &Path) -> Result<(ScannerFile, Transmitter)> {
+    /// Reads and validates `scanner.json`, returning the usable model (either kind).
+    pub fn load(path: &Path) -> Result<(ScannerFile, TransmitterModel)> {
         let bytes = crate::io::read_all(path)?;
         Self::parse(&bytes, &crate::io::display_name(path, "stdin"))
     }
 
     /// Parses and validates `scanner.json` from its bytes ([`load`](Self::load) without the
     /// file; the fuzzers use it); errors name `source_name`.
-    pub fn parse(bytes: &[u8], source_name: &str) -> Result<(ScannerFile, Transmitter)> {
+    pub fn parse(bytes: &[u8], source_name: &str) -> Result<(ScannerFile, TransmitterModel)> {
         let file: ScannerFile = parse_doc(bytes, source_name)?;
-        let model =
-            Transmitter::new(file.transmitter.clone()).map_err(|m| Error::new(source_name, "field transmitter", m))?;
+        if file.version == 1 && !matches!(file.transmitter, TransmitterSpec::Polygon(_)) {
+            return Err(Error::new(
+                source_name,
+                "field transmitter.kind",
+                format!("\"{}\" needs version 2 (version 1 holds a polygon)", file.transmitter.kind()),
+            ));
+        }
+        let model = file.transmitter.build().map_err(|m| Error::new(source_name, "field transmitter", m))?;
         Ok((file, model))
     }
+
+    /// [`load`](Self::load) for a tool that needs the rotating polygon: another kind is a
+    /// one-line error naming it.
+    pub fn load_polygon(path: &Path) -> Result<(ScannerFile, Transmitter)> {
+        let bytes = crate::io::read_all(path)?;
+        Self::parse_polygon(&bytes, &crate::io::display_name(path, "stdin"))
+    }
+
+    /// [`parse`](Self::parse) for a tool that needs the rotating polygon.
+    pub fn parse_polygon(bytes: &[u8], source_name: &str) -> Result<(ScannerFile, Transmitter)> {
+        let (file, model) = Self::parse(bytes, source_name)?;
+        match model {
+            TransmitterModel::Polygon(t) => Ok((file, t)),
+            other => Err(not_polygon(source_name, other.kind())),
+        }
+    }
+}
+
+/// The error of a tool that needs a polygon transmitter and got another kind.
+pub fn not_polygon(source_name: &str, kind: &str) -> Error {
+    Error::new(
+        source_name,
+        "field transmitter.kind",
+        format!(
+            "transmitter kind \"{kind}\" cannot be used here: this needs kind \"{TRANSMITTER_KIND_POLYGON}\" (the rotating polygon mirror)"
+        ),
+    )
 }
 
 /// `board.json`: a planar checkerboard.
@@ -206,7 +337,7 @@ pub fn parse_doc<T: DeserializeOwned + Versioned>(text: &[u8], source_name: &str
     let value: serde_json::Value = serde_json::from_slice(text).map_err(|e| {
         Error::new(source_name, format!("line {} column {}", e.line(), e.column()), format!("invalid JSON: {e}"))
     })?;
-    check_header(&value, T::FORMAT, T::VERSION, source_name)?;
+    check_header_versions(&value, T::FORMAT, T::MIN_VERSION, T::VERSION, source_name)?;
     let doc: T = serde_path_to_error::deserialize(value).map_err(|e| {
         let path = e.path().to_string();
         Error::new(
@@ -221,6 +352,17 @@ pub fn parse_doc<T: DeserializeOwned + Versioned>(text: &[u8], source_name: &str
 
 /// Checks a JSON object's `format` and `version` fields.
 pub(crate) fn check_header(value: &serde_json::Value, format: &str, version: u32, source_name: &str) -> Result<()> {
+    check_header_versions(value, format, version, version, source_name)
+}
+
+/// Checks a JSON object's `format` and that its `version` is within `min_version..=version`.
+pub(crate) fn check_header_versions(
+    value: &serde_json::Value,
+    format: &str,
+    min_version: u32,
+    version: u32,
+    source_name: &str,
+) -> Result<()> {
     let obj = value.as_object().ok_or_else(|| Error::new(source_name, "", "expected a JSON object"))?;
     match obj.get("format").and_then(|f| f.as_str()) {
         None => return Err(Error::new(source_name, "field format", format!("missing (expected \"{format}\")"))),
@@ -231,10 +373,14 @@ pub(crate) fn check_header(value: &serde_json::Value, format: &str, version: u32
     }
     match obj.get("version").and_then(|v| v.as_u64()) {
         None => Err(Error::new(source_name, "field version", "missing or not an integer")),
-        Some(v) if v != version as u64 => Err(Error::new(
+        Some(v) if !(min_version as u64..=version as u64).contains(&v) => Err(Error::new(
             source_name,
             "field version",
-            format!("unsupported version {v} (this build reads version {version})"),
+            if min_version == version {
+                format!("unsupported version {v} (this build reads version {version})")
+            } else {
+                format!("unsupported version {v} (this build reads versions {min_version} to {version})")
+            },
         )),
         _ => Ok(()),
     }
@@ -326,5 +472,68 @@ mod tests {
         std::fs::write(&path, serde_json::to_vec(&v).unwrap()).unwrap();
         let e = CameraFile::load(&path).err().unwrap().to_string();
         assert!(e.contains("camera.json") && e.contains("field model") && e.contains("16384"), "{e}");
+    }
+
+    fn scanner_parse(v: &serde_json::Value) -> Result<(ScannerFile, TransmitterModel)> {
+        ScannerFile::parse(&serde_json::to_vec(v).unwrap(), "scanner.json")
+    }
+
+    fn fixed_json() -> serde_json::Value {
+        serde_json::json!({"format": "omniscan.scanner", "version": 2,
+            "transmitter": {"kind": "fixed_planes",
+                "planes": [{"laser": 0, "normal": [0.0, 0.6, 0.8], "distance_mm": 120.0}]}})
+    }
+
+    #[test]
+    fn scanner_kinds_and_versions() {
+        // A version 1 file (no kind) is a polygon, written back unchanged.
+        let v1 = serde_json::to_value(ScannerFile::new(TransmitterParams::paper())).unwrap();
+        assert_eq!(v1["version"], 1);
+        assert!(v1["transmitter"].get("kind").is_none());
+        let (f, m) = scanner_parse(&v1).unwrap();
+        assert_eq!(m.kind(), "polygon");
+        assert_eq!(serde_json::to_value(&f).unwrap(), v1);
+        // Version 2 with kind polygon reads too.
+        let mut v2 = v1.clone();
+        v2["version"] = 2.into();
+        v2["transmitter"]["kind"] = "polygon".into();
+        assert_eq!(scanner_parse(&v2).unwrap().1.kind(), "polygon");
+        // Fixed planes: round trip, the plane as written.
+        let (f, m) = scanner_parse(&fixed_json()).unwrap();
+        assert_eq!(serde_json::to_value(&f).unwrap(), fixed_json());
+        let TransmitterModel::FixedPlanes(fp) = m else { panic!("not fixed") };
+        let p = fp.plane(0).unwrap();
+        assert!((p.normal.y - 0.6).abs() < 1e-15 && (p.offset - 120.0).abs() < 1e-12);
+        // Unknown kind, unknown version, fixed planes in version 1, bad plane: one line naming it.
+        let mut v = fixed_json();
+        v["transmitter"]["kind"] = "galvo".into();
+        let e = scanner_parse(&v).unwrap_err().to_string();
+        assert!(
+            e.starts_with("scanner.json: field transmitter") && e.contains("unknown transmitter kind \"galvo\""),
+            "{e}"
+        );
+        assert!(!e.contains('\n'));
+        let mut v = fixed_json();
+        v["version"] = 3.into();
+        let e = scanner_parse(&v).unwrap_err().to_string();
+        assert!(e.contains("unsupported version 3 (this build reads versions 1 to 2)"), "{e}");
+        let mut v = fixed_json();
+        v["version"] = 1.into();
+        let e = scanner_parse(&v).unwrap_err().to_string();
+        assert!(e.contains("field transmitter.kind") && e.contains("needs version 2"), "{e}");
+        let mut v = fixed_json();
+        v["transmitter"]["planes"][0]["normal"] = serde_json::json!([0, 0, 0]);
+        let e = scanner_parse(&v).unwrap_err().to_string();
+        assert!(e.contains("planes[0].normal"), "{e}");
+        let mut v = fixed_json();
+        v["transmitter"]["planes"][0]["offset"] = 1.into();
+        let e = scanner_parse(&v).unwrap_err().to_string();
+        assert!(e.contains("offset"), "{e}");
+        // A tool that needs the polygon names the kind.
+        let e = ScannerFile::parse_polygon(&serde_json::to_vec(&fixed_json()).unwrap(), "s.json").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "s.json: field transmitter.kind: transmitter kind \"fixed_planes\" cannot be used here: this needs kind \"polygon\" (the rotating polygon mirror)"
+        );
     }
 }

@@ -28,15 +28,19 @@ pub mod scene;
 pub mod stream;
 pub mod transform;
 
-pub use docs::{BoardFile, CameraFile, CameraSpec, ScannerFile, parse_doc, read_doc, write_doc};
+pub use docs::{
+    BoardFile, CameraFile, CameraSpec, ScannerFile, TransmitterSpec, not_polygon, parse_doc, read_doc, write_doc,
+};
 pub use error::{Error, Result};
 
 /// A versioned document type: its `format` name and the versions this build reads.
 pub trait Versioned {
     /// The `format` field's value, e.g. `omniscan.camera`.
     const FORMAT: &'static str;
-    /// The version this build writes (and the only one it reads).
+    /// The newest version this build reads (and writes).
     const VERSION: u32;
+    /// The oldest version this build still reads.
+    const MIN_VERSION: u32 = Self::VERSION;
 
     /// Checks values a reader must never accept (sizes beyond the limits, negative lengths), run
     /// by [`read_doc`]/[`docs::parse_doc`] after parsing; the message names the field.

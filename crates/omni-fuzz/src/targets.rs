@@ -119,7 +119,16 @@ fn camera(data: &[u8]) -> Result<(), String> {
 
 /// scanner.json: a transmitter that loads must give light planes for valid frames.
 fn scanner(data: &[u8]) -> Result<(), String> {
-    let (_, tx) = ScannerFile::parse(data, "scanner.json").map_err(|e| e.to_string())?;
+    let (_, model) = ScannerFile::parse(data, "scanner.json").map_err(|e| e.to_string())?;
+    let tx = match model {
+        omni_model::TransmitterModel::Polygon(tx) => tx,
+        omni_model::TransmitterModel::FixedPlanes(f) => {
+            for laser in f.lasers() {
+                let _ = f.plane(laser);
+            }
+            return Ok(());
+        }
+    };
     let _ = tx.split_angle(123.456);
     for facet in 0..tx.num_facets().min(4) {
         for alpha in [0.0, tx.facet_angle() / 3.0] {

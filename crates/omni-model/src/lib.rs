@@ -6,7 +6,8 @@
 //!   models [`MeiCamera`] (Mei/unified + radial-tangential) and [`OcamCamera`] (Scaramuzza
 //!   polynomial, OCamCalib), fitted by `omni_calib::receiver`.
 //! * [`Transmitter`]: the rotating polygon mirror and its line lasers, giving the world light
-//!   plane of any (mirror angle, facet, laser).
+//!   plane of any (mirror angle, facet, laser); [`FixedPlanes`]: static light planes (a line
+//!   laser rigid with the camera, or the polygon stopped), one per laser.
 //!
 //! Frames and units (SENSOR.md): world = receiver frame, origin at the camera's optical centre O
 //! (the mirror's lower focus), +z up along the optical axis towards the mirror; lengths in mm;
@@ -14,6 +15,7 @@
 //! Pixel coordinates: x to the right, y down, (0, 0) at the centre of the top-left pixel.
 
 mod camera;
+mod fixed;
 mod hyperbolic;
 pub mod limits;
 pub mod mei;
@@ -21,9 +23,16 @@ pub mod ocam;
 mod optics;
 mod transmitter;
 
+pub use fixed::{FixedPlaneParams, FixedPlanes, FixedPlanesParams, TransmitterModel};
+
 pub use camera::{CameraModel, CentralCamera, CentralParams, MirrorCircle};
 pub use hyperbolic::{HyperbolicCamera, HyperbolicParams};
 pub use mei::{MeiCamera, MeiParams};
 pub use ocam::{OcamCamera, OcamParams};
 pub use optics::Optics;
 pub use transmitter::{FacetError, LaserParams, LightPlane, PolygonParams, Transmitter, TransmitterParams};
+
+/// `scanner.json`'s name of the rotating polygon transmitter ([`Transmitter`]).
+pub const TRANSMITTER_KIND_POLYGON: &str = "polygon";
+/// `scanner.json`'s name of the fixed-plane transmitter ([`FixedPlanes`]).
+pub const TRANSMITTER_KIND_FIXED_PLANES: &str = "fixed_planes";

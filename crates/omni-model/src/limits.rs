@@ -8,6 +8,8 @@ pub const MAX_IMAGE_SIDE_PX: u32 = 16384;
 pub const MAX_FACETS: u32 = 360;
 /// Largest number of inner corners along one side of a checkerboard.
 pub const MAX_BOARD_CORNERS: u32 = 1000;
+/// Largest number of planes of a fixed-plane transmitter.
+pub const MAX_FIXED_PLANES: usize = 256;
 
 /// Checks an image size `width` × `height` against [`MAX_IMAGE_SIDE_PX`] (and for zero); the
 /// message names the fields.

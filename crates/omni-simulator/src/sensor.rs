@@ -38,7 +38,7 @@ impl Sensor {
     /// Reads `camera.json` and `scanner.json`, with the optics camera.json states, if any.
     pub fn load_with_optics(camera: &Path, scanner: &Path) -> omni_formats::Result<(Sensor, Option<Optics>)> {
         let (file, camera) = CameraFile::load(camera)?;
-        let (_, transmitter) = ScannerFile::load(scanner)?;
+        let (_, transmitter) = ScannerFile::load_polygon(scanner)?;
         Ok((Sensor { camera, transmitter }, file.optics))
     }
 }

@@ -1,5 +1,6 @@
 //! omni-calib-plane: calibrate the swept light planes (the transmitter) from laser stripes on
-//! posed checkerboards, and print the light-plane table of a calibrated scanner.
+//! posed checkerboards, and print the light-plane table of a calibrated scanner; `fixed` fits the
+//! fixed light plane of a sensor without a scanning mirror.
 
 use clap::{ArgGroup, Args, Parser, Subcommand};
 use omni_calib::plane::{self, PlaneCalibOptions, inputs};
@@ -21,14 +22,18 @@ use std::path::{Path, PathBuf};
         `fit` back-projects each laser frame's stripe onto the rig boards (posed with the calibrated \
         camera), fits one plane per frame as a check, then fits the physical transmitter (polygon \
         axis, encoder zero, per-facet tilt/pitch/radius errors, each laser's fan plane) to all frames \
-        at once and writes scanner.json. `table` prints the light plane of any mirror angle.",
+        at once and writes scanner.json. `table` prints the light plane of any mirror angle. \
+        `fixed` fits one fixed light plane (a line laser rigid with the camera, or the polygon \
+        stopped) from stripe frames with a checkerboard in view and writes scanner.json of kind \
+        fixed_planes.",
     after_help = "Examples:\n  \
         omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose.png --stripes stripes.jsonl -o scanner.json\n  \
         omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose*.png --stripes stripes.jsonl -o scanner.json   # several pose images, averaged\n  \
         omni-calib-plane fit --camera camera.json --rig rig.json --board-corners corners.json --stripes stripes.jsonl -o scanner.json\n  \
         omni-calib-plane fit --camera camera.json --rig rig.json --board-poses poses.json --stripes - --initial nominal.json -o scanner.json\n  \
         omni-calib-plane table --scanner scanner.json --alpha 0:30:1\n  \
-        omni-calib-plane table --scanner scanner.json --alpha 0:30:0.5 --laser 0 --facet 3 --json"
+        omni-calib-plane table --scanner scanner.json --alpha 0:30:0.5 --laser 0 --facet 3 --json\n  \
+        omni-calib-plane fixed --camera camera.json --board board.json --report plane.json -o scanner.json stripes/*.png"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -41,6 +46,80 @@ enum Command {
     Fit(FitArgs),
     /// Print the light-plane table (normal, offset, slope, intercept per angle and laser).
     Table(TableArgs),
+    /// Fit one fixed light plane to stripe frames with a checkerboard in view; writes
+    /// scanner.json of kind fixed_planes.
+    Fixed(FixedArgs),
+}
+
+#[derive(Args)]
+#[command(after_help = "How: in each frame the board's corners give its pose through the camera model (camera.json, \
+any kind, e.g. from omni-calib-receiver --model mei), the stripe detector finds the laser's centres over the whole \
+frame, and each centre's ray meets the board plane. Points inside the board's printed pattern (one square beyond \
+the outer inner corners, widened by --margin-mm) are points of the light plane. One plane is fitted to the points \
+of all frames robustly (least median of squares, Tukey reweighting, least squares on the inliers).
+
+It prints, per frame: corners and their RMS under the pose (px), stripe points on the board, inliers, the residual \
+RMS and mean about the plane (mm), the straightness of the frame's stripe (RMS distance from its own best line in \
+3-D, in mm and as imaged in px), and the leave-one-out RMS (the frame's points against the plane fitted without \
+that frame, mm); then the plane (unit normal, distance from the camera in mm) with its σ from the fit (points \
+taken as independent) and from a jackknife over the frames (the honest one when frames carry their own pose \
+errors). --report writes all of it as JSON; scanner.json's report holds it too.
+
+Frames whose board is not found, or whose board does not carry the stripe (fewer than --min-points points on it), \
+are named and skipped; fewer than two usable frames is an error (exit 1). A board file whose size most frames \
+contradict is an error naming the likely size.
+
+Examples:
+  omni-calib-plane fixed --camera camera.json --board board.json -o scanner.json stripes/im*.png
+  omni-calib-plane fixed --camera camera.json --board board.json --laser green --margin-mm 2 --report plane.json --points points.jsonl -o scanner.json frames/
+  omni-triangulate --camera camera.json --scanner scanner.json < stripes.jsonl   (the fixed plane, whatever the frames' alpha_deg)")]
+struct FixedArgs {
+    /// Calibrated receiver (camera.json, any model kind).
+    #[arg(long)]
+    camera: PathBuf,
+    /// The checkerboard (board.json: inner corners and square size in mm).
+    #[arg(long)]
+    board: PathBuf,
+    /// Stripe frames (colour images with the board in view; files or directories of png/jpg).
+    #[arg(required = true)]
+    frames: Vec<PathBuf>,
+    /// The laser's colour: frames are read as that channel minus the mean of the other two
+    /// (red: R - (G+B)/2) [default: red].
+    #[arg(long, value_name = "COLOUR", value_parser = ["red", "green", "blue"], conflicts_with = "channel")]
+    laser: Option<String>,
+    /// Read one channel (or luma) instead of the laser's colour contrast.
+    #[arg(long, value_name = "CHANNEL", value_parser = ["luma", "red", "green", "blue"])]
+    channel: Option<String>,
+    /// Stripe detector: intensity threshold in the read channel's units [default: 4 % of full scale].
+    #[arg(long, allow_negative_numbers = true)]
+    threshold: Option<f64>,
+    /// Stripe detector: widest stripe (px) at full resolution.
+    #[arg(long, default_value_t = 12.0, allow_negative_numbers = true)]
+    max_width: f64,
+    /// Stripe detector: coarsest scale (1, 2, 4, 8, 16) at which wider stripes are searched.
+    #[arg(long, default_value_t = 8, value_name = "N")]
+    max_scale: u32,
+    /// Keep stripe points up to this far outside the printed pattern (mm; negative: inside).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    margin_mm: f64,
+    /// Fewest stripe points on the board for a frame to be used.
+    #[arg(long, default_value_t = 30)]
+    min_points: usize,
+    /// Fewest corners of a (partial) board.
+    #[arg(long, default_value_t = 12)]
+    min_corners: usize,
+    /// The laser's id in scanner.json (frames list it in `lasers`).
+    #[arg(long, default_value_t = 0)]
+    laser_id: u32,
+    /// Write the report (JSON, format omniscan.fixed_plane_report) here as well.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Write every board point here (JSON Lines: frame, x y z mm, u v px, residual mm, inlier).
+    #[arg(long)]
+    points: Option<PathBuf>,
+    /// Output scanner.json (`-` = stdout), written atomically.
+    #[arg(short, long, default_value = "scanner.json")]
+    output: PathBuf,
 }
 
 #[derive(Args)]
@@ -116,6 +195,7 @@ fn main() -> std::process::ExitCode {
     omni_cli::main("omni-calib-plane", || match Cli::parse().command {
         Command::Fit(a) => fit(&a),
         Command::Table(a) => table(&a),
+        Command::Fixed(a) => fixed(&a),
     })
 }
 
@@ -232,4 +312,187 @@ fn table(a: &TableArgs) -> CliResult {
     stdout.write_all(out.as_bytes())?;
     stdout.flush()?;
     Ok(())
+}
+
+/// The frames given: files as they are, directories' images in name order.
+fn expand_frames(paths: &[PathBuf]) -> CliResult<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| CliError::new(format!("{}: {e}", p.display())))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| {
+                    f.extension()
+                        .and_then(|x| x.to_str())
+                        .is_some_and(|x| ["png", "jpg", "jpeg", "pgm"].contains(&x.to_ascii_lowercase().as_str()))
+                })
+                .collect();
+            found.sort();
+            out.extend(found);
+        } else {
+            out.push(p.clone());
+        }
+    }
+    Ok(out)
+}
+
+fn fixed(a: &FixedArgs) -> CliResult {
+    use omni_calib::fixed_plane::{self, DetectOptions, FixedPlaneOptions};
+    use omni_vision::colour::{Channel, ColourSpec};
+    let ridge = omni_vision::stripe::RidgeParams {
+        threshold: a.threshold,
+        max_width: a.max_width,
+        max_scale: a.max_scale,
+        ..Default::default()
+    };
+    ridge.validate().map_err(CliError::usage)?;
+    if !a.margin_mm.is_finite() {
+        return Err(CliError::usage("--margin-mm must be a finite number"));
+    }
+    if a.min_points < 3 {
+        return Err(CliError::usage("--min-points must be at least 3"));
+    }
+    if a.min_corners < 4 {
+        return Err(CliError::usage("--min-corners must be at least 4"));
+    }
+    let channel = match (a.laser.as_deref(), a.channel.as_deref()) {
+        (Some(c), _) => Channel::Laser(c.parse().map_err(CliError::usage)?),
+        (None, None) => Channel::Laser(omni_vision::colour::Colour::Red),
+        (None, Some("luma")) => Channel::Luma,
+        (None, Some(c)) => Channel::Single(c.parse().map_err(CliError::usage)?),
+    };
+    let (_, camera) = CameraFile::load(&a.camera)?;
+    let board: omni_formats::BoardFile = read_doc(&a.board)?;
+    let paths = expand_frames(&a.frames)?;
+    if paths.is_empty() {
+        return Err(CliError::new("no frames given (the directories hold no png/jpg/pgm)"));
+    }
+    let detect = DetectOptions {
+        inner_cols: board.inner_cols,
+        inner_rows: board.inner_rows,
+        square_mm: board.square_mm,
+        min_corners: a.min_corners,
+        colour: ColourSpec { channel, bayer: None },
+        ridge,
+    };
+    let frames = fixed_plane::detect_frames(&paths, &detect).map_err(|m| {
+        if m.starts_with("the board file says") {
+            CliError::new(format!("{}: {m}", name(&a.board)))
+        } else {
+            CliError::new(m)
+        }
+    })?;
+    let opts =
+        FixedPlaneOptions { square_mm: board.square_mm, margin_mm: a.margin_mm, min_points: a.min_points, seed: 1 };
+    let fit = fixed_plane::fit_fixed_plane(camera.as_ref(), &frames, &opts).map_err(CliError::new)?;
+    let mut report = serde_json::to_value(&fit.report)?;
+    report["inputs"] = serde_json::json!({
+        "camera": name(&a.camera),
+        "board": name(&a.board),
+        "frames": paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+        "channel": detect.colour.channel.to_string(),
+        "margin_mm": a.margin_mm,
+        "min_points": a.min_points,
+    });
+    let mut params = omni_model::FixedPlanesParams::single(&fit.plane);
+    params.planes[0].laser = a.laser_id;
+    if let Some(path) = &a.report {
+        let mut doc = serde_json::json!({"format": "omniscan.fixed_plane_report", "version": 1});
+        doc["report"] = report.clone();
+        write_doc(path, &doc)?;
+    }
+    if let Some(path) = &a.points {
+        io::write_atomic(path, |w| {
+            for f in &fit.frames {
+                for ((p, px), inl) in f.points.iter().zip(&f.pixels).zip(&f.inliers) {
+                    let line = serde_json::json!({"frame": f.name, "xyz_mm": [p.x, p.y, p.z], "px": px,
+                        "residual_mm": fit.plane.signed_distance(p), "inlier": inl});
+                    writeln!(w, "{line}")?;
+                }
+            }
+            Ok(())
+        })?;
+    }
+    let mut out = ScannerFile::new(params);
+    out.report = Some(report);
+    write_doc(&a.output, &out)?;
+    let table = fixed_table(&fit.report);
+    use std::io::Write;
+    if a.output == Path::new("-") {
+        eprint!("{table}");
+    } else {
+        let mut stdout = std::io::stdout().lock();
+        stdout.write_all(table.as_bytes())?;
+        stdout.flush()?;
+    }
+    Ok(())
+}
+
+/// The human table of a fixed-plane fit.
+fn fixed_table(r: &omni_calib::fixed_plane::FixedPlaneReport) -> String {
+    let mut t = String::new();
+    t.push_str(&format!(
+        "{:<24} {:>7} {:>9} {:>8} {:>8} {:>8} {:>9} {:>9} {:>9} {:>9} {:>9}\n",
+        "frame",
+        "corners",
+        "corner_px",
+        "dist_mm",
+        "points",
+        "inliers",
+        "rms_mm",
+        "mean_mm",
+        "line_mm",
+        "line_px",
+        "loo_mm"
+    ));
+    for f in &r.frames {
+        let short = Path::new(&f.name).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or(f.name.clone());
+        t.push_str(&format!(
+            "{:<24} {:>7} {:>9.3} {:>8.1} {:>8} {:>8} {:>9.4} {:>9.4} {:>9.4} {:>9.3} {:>9.4}\n",
+            short,
+            f.corners,
+            f.corner_rms_px,
+            f.board_distance_mm,
+            f.board_points,
+            f.inliers,
+            f.residual_rms_mm,
+            f.residual_mean_mm,
+            f.straightness_mm,
+            f.straightness_px,
+            f.leave_one_out_rms_mm
+        ));
+    }
+    for s in &r.skipped {
+        t.push_str(&format!("skipped {}: {}\n", s.name, s.reason));
+    }
+    let p = &r.plane;
+    t.push_str(&format!(
+        "plane: normal ({:.6}, {:.6}, {:.6}), distance {:.3} mm; {} of {} frames, {} of {} points inliers\n",
+        p.normal[0],
+        p.normal[1],
+        p.normal[2],
+        p.distance_mm,
+        r.frames.len(),
+        r.frames_total,
+        r.inliers,
+        r.points
+    ));
+    t.push_str(&format!(
+        "residual RMS {:.4} mm (robust sigma {:.4} mm), leave-one-frame-out RMS {:.4} mm ({:.2} x)\n",
+        r.rms_mm,
+        r.robust_sigma_mm,
+        r.leave_one_out_rms_mm,
+        r.leave_one_out_rms_mm / r.rms_mm
+    ));
+    t.push_str(&format!(
+        "uncertainty: normal {:.4} deg, distance {:.4} mm, at the centroid {:.4} mm (fit); {:.4} deg, {:.4} mm, {:.4} mm (jackknife over frames)\n",
+        p.normal_sigma_deg,
+        p.distance_sigma_mm,
+        p.centroid_sigma_mm,
+        p.jackknife_normal_sigma_deg,
+        p.jackknife_distance_sigma_mm,
+        p.jackknife_centroid_sigma_mm
+    ));
+    t
 }

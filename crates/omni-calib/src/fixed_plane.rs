@@ -1,0 +1,448 @@
+//! A fixed light plane (a line laser rigid with the camera) from stripe frames with a
+//! checkerboard in view.
+//!
+//! Per frame: the board's corners give its pose through the calibrated camera
+//! ([`crate::pose::estimate_board_pose`]); each stripe pixel's ray meets the board plane, and the
+//! points inside the board's printed outline (the outer squares' edges, widened by
+//! [`FixedPlaneOptions::margin_mm`]) are points of the light plane (mm, world frame). One plane
+//! is fitted to the points of all frames robustly ([`omni_geom::robust_plane`]: least median of
+//! squares, Tukey reweighting, least squares on the inliers). The report gives per frame the
+//! residual RMS (mm) and the stripe's straightness (px and mm: the RMS distance of its points
+//! from their own best line in 3-D, the px being that distance as imaged), the plane with its
+//! uncertainty (from the fit, and from a jackknife over frames), and a leave-one-frame-out check
+//! (each frame's inliers against the plane fitted to the other frames).
+//!
+//! [`detect_frames`] reads the frames: corners by [`omni_vision::corners::detect_board`], stripe
+//! centres by [`omni_vision::stripe::RidgeDetector::whole_frame`] on the colour reading given.
+
+use crate::pose::estimate_board_pose;
+use crate::receiver::Observation;
+use crate::receiver::corners_file::{CornersFile, ImageCorners};
+use omni_geom::robust_plane::{RobustPlaneFit, fit_plane_robust};
+use omni_geom::{Isometry3, Plane, Point3, Vector2, Vector3};
+use omni_model::CameraModel;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// Settings of the fit.
+#[derive(Debug, Clone, Copy)]
+pub struct FixedPlaneOptions {
+    /// Square side of the board (mm).
+    pub square_mm: f64,
+    /// Stripe points are kept up to this far outside the printed pattern's outline (mm;
+    /// negative keeps them this far inside it).
+    pub margin_mm: f64,
+    /// Fewest stripe points on the board for a frame to be used.
+    pub min_points: usize,
+    /// Seed of the robust fit's random triples.
+    pub seed: u64,
+}
+
+impl Default for FixedPlaneOptions {
+    fn default() -> Self {
+        FixedPlaneOptions { square_mm: 1.0, margin_mm: 0.0, min_points: 30, seed: 1 }
+    }
+}
+
+/// One stripe frame's input.
+#[derive(Debug, Clone)]
+pub struct FrameInput {
+    pub name: String,
+    /// The board's corners, or why none were found.
+    pub corners: Result<Observation, String>,
+    /// Stripe centres (px).
+    pub stripe: Vec<[f64; 2]>,
+}
+
+/// A frame left out, and why.
+#[derive(Debug, Clone, Serialize)]
+pub struct Skipped {
+    pub name: String,
+    pub reason: String,
+}
+
+/// One used frame.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameReport {
+    pub name: String,
+    pub corners: usize,
+    /// RMS reprojection error of the corners under the board pose (px).
+    pub corner_rms_px: f64,
+    /// Distance of the board's centre from the world origin (mm).
+    pub board_distance_mm: f64,
+    /// Stripe points found in the frame, and those on the board.
+    pub stripe_points: usize,
+    pub board_points: usize,
+    /// Board points within the robust fit's inlier band.
+    pub inliers: usize,
+    /// RMS and mean signed distance of the inliers from the plane (mm).
+    pub residual_rms_mm: f64,
+    pub residual_mean_mm: f64,
+    /// RMS distance of the inliers from their own best 3-D line (mm) and that distance as
+    /// imaged (px).
+    pub straightness_mm: f64,
+    pub straightness_px: f64,
+    /// RMS distance of the inliers from the plane fitted without this frame (mm).
+    pub leave_one_out_rms_mm: f64,
+}
+
+/// The fitted plane and its uncertainty.
+#[derive(Debug, Clone, Serialize)]
+pub struct PlaneReport {
+    /// Unit normal (world frame) and distance from the world origin along it (mm), oriented so
+    /// that the distance is ≥ 0.
+    pub normal: [f64; 3],
+    pub distance_mm: f64,
+    /// σ of the normal's direction (degrees) and of the distance (mm) from the fit, the points
+    /// taken as independent.
+    pub normal_sigma_deg: f64,
+    pub distance_sigma_mm: f64,
+    /// σ along the normal at the points' centroid (mm), from the fit.
+    pub centroid_sigma_mm: f64,
+    /// The same from a jackknife over the frames (the leave-one-out planes' spread).
+    pub jackknife_normal_sigma_deg: f64,
+    pub jackknife_distance_sigma_mm: f64,
+    pub jackknife_centroid_sigma_mm: f64,
+    /// The points' centroid (mm).
+    pub centroid_mm: [f64; 3],
+}
+
+/// The whole report (`report` of scanner.json).
+#[derive(Debug, Clone, Serialize)]
+pub struct FixedPlaneReport {
+    pub plane: PlaneReport,
+    /// Points on the boards, and inliers of the fit.
+    pub points: usize,
+    pub inliers: usize,
+    /// RMS of the inliers' distances from the plane (mm), and the robust σ (mm).
+    pub rms_mm: f64,
+    pub robust_sigma_mm: f64,
+    /// RMS over all frames of the leave-one-frame-out distances (mm).
+    pub leave_one_out_rms_mm: f64,
+    pub frames_total: usize,
+    pub frames: Vec<FrameReport>,
+    pub skipped: Vec<Skipped>,
+}
+
+/// One used frame's 3-D points (mm, world frame), their pixels and whether each is an inlier.
+#[derive(Debug, Clone)]
+pub struct FramePoints {
+    pub name: String,
+    pub points: Vec<Point3<f64>>,
+    pub pixels: Vec<[f64; 2]>,
+    pub inliers: Vec<bool>,
+}
+
+/// The fit's result.
+#[derive(Debug, Clone)]
+pub struct FixedPlaneFit {
+    /// The plane (unit normal, offset ≥ 0; mm, world frame).
+    pub plane: Plane,
+    pub report: FixedPlaneReport,
+    pub frames: Vec<FramePoints>,
+}
+
+/// A frame's board points: the pose and the stripe points on the board.
+struct OnBoard {
+    name: String,
+    corners: usize,
+    corner_rms_px: f64,
+    pose: Isometry3<f64>,
+    stripe_points: usize,
+    points: Vec<Point3<f64>>,
+    pixels: Vec<[f64; 2]>,
+}
+
+fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptions) -> Result<OnBoard, String> {
+    let obs = f.corners.as_ref().map_err(|r| r.clone())?;
+    let pose = estimate_board_pose(camera, &obs.board_mm, &obs.pixels)
+        .ok_or_else(|| format!("board pose failed ({} corners)", obs.pixels.len()))?;
+    let mut ss = 0.0;
+    let mut n = 0usize;
+    for (xy, px) in obs.board_mm.iter().zip(&obs.pixels) {
+        if let Some(q) = camera.point_to_pixel(&(pose * Point3::new(xy[0], xy[1], 0.0))) {
+            ss += (q.x - px[0]).powi(2) + (q.y - px[1]).powi(2);
+            n += 1;
+        }
+    }
+    let corner_rms_px = (ss / n.max(1) as f64).sqrt();
+    // The printed pattern's outline: one square beyond the outer inner corners.
+    let pad = opts.square_mm + opts.margin_mm;
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for xy in &obs.board_mm {
+        x0 = x0.min(xy[0]);
+        x1 = x1.max(xy[0]);
+        y0 = y0.min(xy[1]);
+        y1 = y1.max(xy[1]);
+    }
+    let (x0, x1, y0, y1) = (x0 - pad, x1 + pad, y0 - pad, y1 + pad);
+    let normal = pose.rotation * Vector3::z();
+    let offset = normal.dot(&pose.translation.vector);
+    let inverse = pose.inverse();
+    let mut points = Vec::new();
+    let mut pixels = Vec::new();
+    for px in &f.stripe {
+        let Some(ray) = camera.pixel_to_ray(&Vector2::new(px[0], px[1])) else { continue };
+        let denom = normal.dot(&ray.dir);
+        if denom.abs() < 1e-9 {
+            continue;
+        }
+        let t = (offset - normal.dot(&ray.origin.coords)) / denom;
+        if !(t > 0.0) {
+            continue;
+        }
+        let p = ray.origin + ray.dir.into_inner() * t;
+        let local = inverse * p;
+        if local.x >= x0 && local.x <= x1 && local.y >= y0 && local.y <= y1 {
+            points.push(p);
+            pixels.push(*px);
+        }
+    }
+    if points.len() < opts.min_points {
+        return Err(format!(
+            "the board does not carry the stripe: {} of {} stripe points on the board, fewer than {}",
+            points.len(),
+            f.stripe.len(),
+            opts.min_points
+        ));
+    }
+    Ok(OnBoard {
+        name: f.name.clone(),
+        corners: obs.pixels.len(),
+        corner_rms_px,
+        pose,
+        stripe_points: f.stripe.len(),
+        points,
+        pixels,
+    })
+}
+
+/// The robust plane of `frames`' points, oriented with offset ≥ 0.
+fn fit_frames(frames: &[&OnBoard], seed: u64) -> Option<RobustPlaneFit> {
+    let pts: Vec<Point3<f64>> = frames.iter().flat_map(|f| f.points.iter().copied()).collect();
+    let mut fit = fit_plane_robust(&pts, seed)?;
+    if fit.plane.offset < 0.0 {
+        fit.plane = fit.plane.flipped();
+        fit.basis = (-fit.basis.0, -fit.basis.1);
+        // (a, b) change sign with the basis and c with the offset: the covariance is unchanged.
+    }
+    Some(fit)
+}
+
+/// RMS distance of `points` from their own best 3-D line (mm), and that distance as imaged
+/// (px; each point against its foot on the line, both projected).
+fn straightness(camera: &dyn CameraModel, points: &[Point3<f64>]) -> (f64, f64) {
+    if points.len() < 3 {
+        return (f64::NAN, f64::NAN);
+    }
+    let c = omni_geom::fit::centroid(points);
+    let mut s = omni_geom::Matrix3::zeros();
+    for p in points {
+        let d = p - c;
+        s += d * d.transpose();
+    }
+    let eig = s.symmetric_eigen();
+    let i = (0..3).max_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b])).unwrap_or(0);
+    let u = eig.eigenvectors.column(i).into_owned();
+    let (mut ss_mm, mut ss_px, mut n_px) = (0.0, 0.0, 0usize);
+    for p in points {
+        let foot = c + u * (p - c).dot(&u);
+        ss_mm += (p - foot).norm_squared();
+        if let (Some(a), Some(b)) = (camera.point_to_pixel(p), camera.point_to_pixel(&foot)) {
+            ss_px += (a - b).norm_squared();
+            n_px += 1;
+        }
+    }
+    ((ss_mm / points.len() as f64).sqrt(), (ss_px / n_px.max(1) as f64).sqrt())
+}
+
+/// Parameters (a, b, c) of `plane` relative to `fit`'s plane and basis (rad, rad, mm).
+fn relative(fit: &RobustPlaneFit, plane: &Plane) -> Vector3<f64> {
+    let (n0, d0) = (fit.plane.normal.into_inner(), fit.plane.offset);
+    let sign = plane.normal.dot(&n0).signum();
+    let (n, d) = (plane.normal.into_inner() * sign, plane.offset * sign);
+    Vector3::new((n - n0).dot(&fit.basis.0), (n - n0).dot(&fit.basis.1), d - d0)
+}
+
+/// Fits the fixed plane to the frames (module docs). Frames without a usable board or without
+/// enough stripe points on it are skipped and named in the report; fewer than two usable
+/// frames is an error naming why the others were skipped.
+pub fn fit_fixed_plane(
+    camera: &dyn CameraModel,
+    frames: &[FrameInput],
+    opts: &FixedPlaneOptions,
+) -> Result<FixedPlaneFit, String> {
+    let mut used = Vec::new();
+    let mut skipped = Vec::new();
+    for f in frames {
+        match board_points(camera, f, opts) {
+            Ok(b) => used.push(b),
+            Err(reason) => skipped.push(Skipped { name: f.name.clone(), reason }),
+        }
+    }
+    if used.len() < 2 {
+        let why: Vec<String> = skipped.iter().map(|s| format!("{}: {}", s.name, s.reason)).collect();
+        return Err(format!(
+            "{} usable frame{} of {}, at least 2 needed{}{}",
+            used.len(),
+            if used.len() == 1 { "" } else { "s" },
+            frames.len(),
+            if why.is_empty() { "" } else { "; skipped: " },
+            why.join("; ")
+        ));
+    }
+    let all: Vec<&OnBoard> = used.iter().collect();
+    let fit = fit_frames(&all, opts.seed).ok_or("no plane fits the stripe points (collinear?)")?;
+    // Leave one frame out: the plane of the others, each frame's inliers against it.
+    let loo: Vec<Option<RobustPlaneFit>> = (0..used.len())
+        .into_par_iter()
+        .map(|k| {
+            let others: Vec<&OnBoard> = used.iter().enumerate().filter(|(i, _)| *i != k).map(|(_, f)| f).collect();
+            fit_frames(&others, opts.seed)
+        })
+        .collect();
+    let mut reports = Vec::new();
+    let mut frame_points = Vec::new();
+    let mut offset = 0;
+    let (mut ss_in, mut n_in, mut ss_loo) = (0.0, 0usize, 0.0);
+    for (k, f) in used.iter().enumerate() {
+        let inl = fit.inliers[offset..offset + f.points.len()].to_vec();
+        offset += f.points.len();
+        let kept: Vec<Point3<f64>> = f.points.iter().zip(&inl).filter(|(_, k)| **k).map(|(p, _)| *p).collect();
+        let r: Vec<f64> = kept.iter().map(|p| fit.plane.signed_distance(p)).collect();
+        let n = r.len().max(1) as f64;
+        let ss: f64 = r.iter().map(|x| x * x).sum();
+        let loo_plane = loo[k].as_ref().map(|l| l.plane);
+        let ss_k: f64 = match loo_plane {
+            Some(pl) => kept.iter().map(|p| pl.signed_distance(p).powi(2)).sum(),
+            None => f64::NAN,
+        };
+        ss_in += ss;
+        ss_loo += ss_k;
+        n_in += r.len();
+        let (straight_mm, straight_px) = straightness(camera, &kept);
+        reports.push(FrameReport {
+            name: f.name.clone(),
+            corners: f.corners,
+            corner_rms_px: f.corner_rms_px,
+            board_distance_mm: (f.pose * Point3::origin()).coords.norm(),
+            stripe_points: f.stripe_points,
+            board_points: f.points.len(),
+            inliers: r.len(),
+            residual_rms_mm: (ss / n).sqrt(),
+            residual_mean_mm: r.iter().sum::<f64>() / n,
+            straightness_mm: straight_mm,
+            straightness_px: straight_px,
+            leave_one_out_rms_mm: (ss_k / n).sqrt(),
+        });
+        frame_points.push(FramePoints {
+            name: f.name.clone(),
+            points: f.points.clone(),
+            pixels: f.pixels.clone(),
+            inliers: inl,
+        });
+    }
+    // Jackknife over frames: (k − 1)/k Σ (θ_i − θ̄)² of the leave-one-out planes' parameters.
+    let thetas: Vec<Vector3<f64>> = loo.iter().flatten().map(|l| relative(&fit, &l.plane)).collect();
+    let k = thetas.len() as f64;
+    let mean = thetas.iter().fold(Vector3::zeros(), |a, t| a + t) / k.max(1.0);
+    let mut jack = omni_geom::Matrix3::zeros();
+    for t in &thetas {
+        let d = t - mean;
+        jack += d * d.transpose();
+    }
+    jack *= (k - 1.0) / k.max(1.0);
+    let inlier_points: Vec<Point3<f64>> = frame_points
+        .iter()
+        .flat_map(|f| f.points.iter().zip(&f.inliers).filter(|(_, k)| **k).map(|(p, _)| *p))
+        .collect();
+    let centroid = omni_geom::fit::centroid(&inlier_points);
+    let at = |cov: &omni_geom::Matrix3<f64>, p: &Point3<f64>| {
+        let j = Vector3::new(fit.basis.0.dot(&p.coords), fit.basis.1.dot(&p.coords), -1.0);
+        (j.transpose() * cov * j)[(0, 0)].max(0.0).sqrt()
+    };
+    let n = fit.plane.normal;
+    let plane_report = PlaneReport {
+        normal: [n.x, n.y, n.z],
+        distance_mm: fit.plane.offset,
+        normal_sigma_deg: fit.normal_sigma().to_degrees(),
+        distance_sigma_mm: fit.covariance[(2, 2)].max(0.0).sqrt(),
+        centroid_sigma_mm: fit.sigma_at(&centroid),
+        jackknife_normal_sigma_deg: (jack[(0, 0)] + jack[(1, 1)]).max(0.0).sqrt().to_degrees(),
+        jackknife_distance_sigma_mm: jack[(2, 2)].max(0.0).sqrt(),
+        jackknife_centroid_sigma_mm: at(&jack, &centroid),
+        centroid_mm: [centroid.x, centroid.y, centroid.z],
+    };
+    let points_total: usize = used.iter().map(|f| f.points.len()).sum();
+    let report = FixedPlaneReport {
+        plane: plane_report,
+        points: points_total,
+        inliers: n_in,
+        rms_mm: (ss_in / n_in.max(1) as f64).sqrt(),
+        robust_sigma_mm: fit.robust_sigma,
+        leave_one_out_rms_mm: (ss_loo / n_in.max(1) as f64).sqrt(),
+        frames_total: frames.len(),
+        frames: reports,
+        skipped,
+    };
+    Ok(FixedPlaneFit { plane: fit.plane, report, frames: frame_points })
+}
+
+/// How [`detect_frames`] finds the board and the stripe.
+#[derive(Debug, Clone)]
+pub struct DetectOptions {
+    pub inner_cols: u32,
+    pub inner_rows: u32,
+    pub square_mm: f64,
+    /// Fewest corners for a (partial) board.
+    pub min_corners: usize,
+    /// What the stripe detector reads from the frame (a colour's laser contrast, a channel).
+    pub colour: omni_vision::colour::ColourSpec,
+    pub ridge: omni_vision::stripe::RidgeParams,
+}
+
+/// Detects the board's corners and the stripe in each frame (in parallel). A frame that cannot
+/// be read is an error naming it; a frame without a board is kept with the reason (skipped by
+/// [`fit_fixed_plane`]). When most frames that show the whole board show another size than
+/// the board file's, that is an error naming the likely size.
+pub fn detect_frames(paths: &[PathBuf], opts: &DetectOptions) -> Result<Vec<FrameInput>, String> {
+    let detector = omni_vision::corners::DetectorOptions { min_corners: opts.min_corners, ..Default::default() };
+    let results: Vec<Result<(FrameInput, ImageCorners), String>> = paths
+        .par_iter()
+        .map(|path| {
+            let name = path.display().to_string();
+            let grey = omni_vision::corners::load_gray(path).map_err(|e| e.to_string())?;
+            let found = omni_vision::corners::detect_board(&grey, opts.inner_cols, opts.inner_rows, &detector);
+            let entry = ImageCorners::from_detection(name.clone(), found.clone());
+            let corners = match found {
+                Ok(b) => Ok(Observation::from_corners(&name, &b, opts.square_mm)),
+                Err(why) => Err(format!("board not found: {why}")),
+            };
+            let stripe = detect_stripe(path, &opts.colour, &opts.ridge)?;
+            Ok((FrameInput { name, corners, stripe }, entry))
+        })
+        .collect();
+    let mut frames = Vec::new();
+    let mut corners = CornersFile::new(1, 1, opts.inner_cols, opts.inner_rows);
+    for r in results {
+        let (f, entry) = r?;
+        frames.push(f);
+        corners.images.push(entry);
+    }
+    if let Some(w) = corners.board_size_warning() {
+        return Err(w);
+    }
+    Ok(frames)
+}
+
+/// The stripe centres of one frame (px), the whole frame searched.
+pub fn detect_stripe(
+    path: &Path,
+    colour: &omni_vision::colour::ColourSpec,
+    ridge: &omni_vision::stripe::RidgeParams,
+) -> Result<Vec<[f64; 2]>, String> {
+    let img = omni_vision::image_io::load_frame_channel(path, colour).map_err(|e| e.to_string())?;
+    let detector = omni_vision::stripe::RidgeDetector::whole_frame(img.width, img.height, *ridge);
+    Ok(detector.detect(&img).iter().map(|p| [p.u, p.v]).collect())
+}

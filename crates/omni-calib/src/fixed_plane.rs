@@ -405,33 +405,55 @@ pub struct DetectOptions {
 /// Detects the board's corners and the stripe in each frame (in parallel). A frame that cannot
 /// be read is an error naming it; a frame without a board is kept with the reason (skipped by
 /// [`fit_fixed_plane`]). When most frames that show the whole board show another size than
-/// the board file's, that is an error naming the likely size.
+/// the board file's, or most frames hold a corner grid larger than it, that is an error naming
+/// the likely size.
 pub fn detect_frames(paths: &[PathBuf], opts: &DetectOptions) -> Result<Vec<FrameInput>, String> {
     let detector = omni_vision::corners::DetectorOptions { min_corners: opts.min_corners, ..Default::default() };
-    let results: Vec<Result<(FrameInput, ImageCorners), String>> = paths
+    type Detected = (FrameInput, ImageCorners, Option<(u32, u32)>);
+    let results: Vec<Result<Detected, String>> = paths
         .par_iter()
         .map(|path| {
             let name = path.display().to_string();
             let grey = omni_vision::corners::load_gray(path).map_err(|e| e.to_string())?;
             let found = omni_vision::corners::detect_board(&grey, opts.inner_cols, opts.inner_rows, &detector);
             let entry = ImageCorners::from_detection(name.clone(), found.clone());
+            let larger = match &found {
+                Err(omni_vision::corners::Rejection::LargerThanBoard { found }) => Some(*found),
+                _ => None,
+            };
             let corners = match found {
                 Ok(b) => Ok(Observation::from_corners(&name, &b, opts.square_mm)),
                 Err(why) => Err(format!("board not found: {why}")),
             };
             let stripe = detect_stripe(path, &opts.colour, &opts.ridge)?;
-            Ok((FrameInput { name, corners, stripe }, entry))
+            Ok((FrameInput { name, corners, stripe }, entry, larger))
         })
         .collect();
     let mut frames = Vec::new();
     let mut corners = CornersFile::new(1, 1, opts.inner_cols, opts.inner_rows);
+    let mut larger = Vec::new();
     for r in results {
-        let (f, entry) = r?;
+        let (f, entry, l) = r?;
         frames.push(f);
         corners.images.push(entry);
+        larger.extend(l.map(|(a, b)| (a.max(b), a.min(b))));
     }
     if let Some(w) = corners.board_size_warning() {
         return Err(w);
+    }
+    if 2 * larger.len() > frames.len() {
+        let (long, short) = *larger.iter().max_by_key(|s| larger.iter().filter(|t| t == s).count()).expect("not empty");
+        let (cols, rows) = (opts.inner_cols, opts.inner_rows);
+        let likely = if cols >= rows { (long, short) } else { (short, long) };
+        return Err(format!(
+            "the board file says {cols} × {rows} inner corners, but {} of the {} frames hold a larger corner grid (up to {} × {}): the board is probably at least {} × {}; fix inner_cols / inner_rows of the board file",
+            larger.len(),
+            frames.len(),
+            likely.0,
+            likely.1,
+            likely.0,
+            likely.1
+        ));
     }
     Ok(frames)
 }

@@ -1,0 +1,90 @@
+//! `omni-calib-plane fixed` on the real hand-held laser frames (../shared/data/real-laser-handheld,
+//! README there) and on bad input: a board file that does not match, frames without a board,
+//! too few usable frames, a scanner file of a kind a tool cannot use.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_omni-calib-plane");
+
+/// The receiver calibration of the hand-held camera (omni-calib-receiver --model mei on
+/// im18-im36, 0.304 px RMS), as numbers so that these tests need no receiver fit.
+const CAMERA: &str = r#"{"format": "omniscan.camera", "version": 1, "model": {"kind": "mei",
+  "xi": 1.9124743513073124, "fx_px": 2117.3173110827324, "fy_px": 2118.3693609729116,
+  "cx_px": 673.046087049862, "cy_px": 313.01701346572486, "k1": -0.3827004133878569,
+  "k2": 0.479775246825181, "p1": -0.002875096947052103, "p2": 0.00020702947400256963,
+  "width": 1280, "height": 720}}"#;
+
+fn board(cols: u32, rows: u32) -> String {
+    format!(
+        r#"{{"format": "omniscan.board", "version": 1, "inner_cols": {cols}, "inner_rows": {rows}, "square_mm": 5, "margin_mm": 0}}"#
+    )
+}
+
+fn frame(k: u32) -> String {
+    let dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/real-laser-handheld"));
+    dir.join(format!("im{k}.png")).display().to_string()
+}
+
+fn run(dir: &Path, board_text: &str, frames: &[u32]) -> Output {
+    std::fs::write(dir.join("camera.json"), CAMERA).unwrap();
+    std::fs::write(dir.join("board.json"), board_text).unwrap();
+    let mut args: Vec<String> =
+        ["fixed", "--camera", "camera.json", "--board", "board.json", "--report", "report.json"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+    args.extend(["-o".into(), "scanner.json".into()]);
+    args.extend(frames.iter().map(|k| frame(*k)));
+    Command::new(BIN).current_dir(dir).args(&args).output().unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn frames_without_a_board_are_named_and_skipped_and_scanner_json_is_fixed_planes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(dir.path(), &board(9, 6), &[3, 4, 6, 12]);
+    let (so, se) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{se}");
+    assert!(so.contains("skipped") && so.contains("im6.png: board not found"), "{so}");
+    assert!(so.contains("leave-one-frame-out RMS"), "{so}");
+    let (file, model) = omni_formats::ScannerFile::load(&dir.path().join("scanner.json")).unwrap();
+    assert_eq!((file.version, model.kind()), (2, "fixed_planes"));
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["format"], "omniscan.fixed_plane_report");
+    assert_eq!(report["report"]["frames"].as_array().unwrap().len(), 3);
+    // The table of a polygon tool refuses the fixed plane in one line naming the kind.
+    let t = Command::new(BIN).current_dir(dir.path()).args(["table", "--scanner", "scanner.json"]).output().unwrap();
+    assert_eq!(t.status.code(), Some(1));
+    assert_eq!(
+        text(&t.stderr),
+        "omni-calib-plane: error: scanner.json: field transmitter.kind: transmitter kind \"fixed_planes\" cannot be used here: this needs kind \"polygon\" (the rotating polygon mirror)\n"
+    );
+}
+
+#[test]
+fn fewer_than_two_usable_frames_is_one_line_and_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(dir.path(), &board(9, 6), &[3, 6]);
+    let se = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{se}");
+    assert_eq!(se.lines().count(), 1, "{se}");
+    assert!(se.starts_with("omni-calib-plane: error: 1 usable frame of 2, at least 2 needed; skipped: "), "{se}");
+    assert!(se.contains("im6.png: board not found"), "{se}");
+    assert!(!dir.path().join("scanner.json").exists());
+}
+
+#[test]
+fn a_board_file_that_does_not_match_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(dir.path(), &board(7, 5), &[3, 4, 12]);
+    let se = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{se}");
+    assert_eq!(se.lines().count(), 1, "{se}");
+    assert!(se.contains("9 × 6"), "{se}");
+    assert!(!dir.path().join("scanner.json").exists());
+}

@@ -81,8 +81,14 @@ struct FixedArgs {
     #[arg(long)]
     board: PathBuf,
     /// Stripe frames (colour images with the board in view; files or directories of png/jpg).
-    #[arg(required = true)]
+    #[arg(required_unless_present = "stripes", conflicts_with = "stripes")]
     frames: Vec<PathBuf>,
+    /// Take the stripe centres from this stream (omniscan.stream JSON Lines, e.g. omni-ridge's
+    /// output or another detector's) instead of detecting them: each frame record's image (its
+    /// `path`, resolved against the header's frames_dir) is searched for the board, its
+    /// `stripe` points used. Frames without a `stripe` field are errors.
+    #[arg(long)]
+    stripes: Option<PathBuf>,
     /// The laser's colour: frames are read as that channel minus the mean of the other two
     /// (red: R - (G+B)/2) [default: red].
     #[arg(long, value_name = "COLOUR", value_parser = ["red", "green", "blue"], conflicts_with = "channel")]
@@ -314,6 +320,33 @@ fn table(a: &TableArgs) -> CliResult {
     Ok(())
 }
 
+/// The frames of a stripe stream: each frame record's image path and stripe centres (px).
+fn read_stripe_stream(path: &Path) -> CliResult<(Vec<PathBuf>, Vec<Vec<[f64; 2]>>)> {
+    use omni_formats::stream::Record;
+    let mut reader = StreamReader::open(path)?;
+    let mut frames_dir: Option<String> = None;
+    let (mut paths, mut stripes) = (Vec::new(), Vec::new());
+    while let Some(record) = reader.next_record()? {
+        match record {
+            Record::Header(h) => frames_dir = h.frames_dir,
+            Record::Frame(f) => {
+                let Some(stripe) = &f.stripe else {
+                    return Err(CliError::new(format!(
+                        "{}: line {} (frame {}): no stripe field: run a stripe detector on the frames first",
+                        name(path),
+                        reader.line(),
+                        f.seq
+                    )));
+                };
+                paths.push(f.resolve_path(frames_dir.as_deref(), &f.path));
+                stripes.push(stripe.iter().map(|p| [p.u, p.v]).collect());
+            }
+            _ => {}
+        }
+    }
+    Ok((paths, stripes))
+}
+
 /// The frames given: files as they are, directories' images in name order.
 fn expand_frames(paths: &[PathBuf]) -> CliResult<Vec<PathBuf>> {
     let mut out = Vec::new();
@@ -364,7 +397,13 @@ fn fixed(a: &FixedArgs) -> CliResult {
     };
     let (_, camera) = CameraFile::load(&a.camera)?;
     let board: omni_formats::BoardFile = read_doc(&a.board)?;
-    let paths = expand_frames(&a.frames)?;
+    let (paths, given) = match &a.stripes {
+        Some(path) => {
+            let (paths, stripes) = read_stripe_stream(path)?;
+            (paths, Some(stripes))
+        }
+        None => (expand_frames(&a.frames)?, None),
+    };
     if paths.is_empty() {
         return Err(CliError::new("no frames given (the directories hold no png/jpg/pgm)"));
     }
@@ -376,7 +415,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         colour: ColourSpec { channel, bayer: None },
         ridge,
     };
-    let frames = fixed_plane::detect_frames(&paths, &detect).map_err(|m| {
+    let frames = fixed_plane::detect_frames(&paths, &detect, given.as_deref()).map_err(|m| {
         if m.starts_with("the board file says") {
             CliError::new(format!("{}: {m}", name(&a.board)))
         } else {
@@ -392,6 +431,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         "board": name(&a.board),
         "frames": paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
         "channel": detect.colour.channel.to_string(),
+        "stripes": a.stripes.as_deref().map(name),
         "margin_mm": a.margin_mm,
         "min_points": a.min_points,
     });

@@ -402,17 +402,27 @@ pub struct DetectOptions {
     pub ridge: omni_vision::stripe::RidgeParams,
 }
 
-/// Detects the board's corners and the stripe in each frame (in parallel). A frame that cannot
+/// Detects the board's corners and the stripe in each frame (in parallel); `given` holds each
+/// frame's stripe centres (px) from elsewhere (another detector), in which case the stripe
+/// detector is not run. A frame that cannot
 /// be read is an error naming it; a frame without a board is kept with the reason (skipped by
 /// [`fit_fixed_plane`]). When most frames that show the whole board show another size than
 /// the board file's, or most frames hold a corner grid larger than it, that is an error naming
 /// the likely size.
-pub fn detect_frames(paths: &[PathBuf], opts: &DetectOptions) -> Result<Vec<FrameInput>, String> {
+pub fn detect_frames(
+    paths: &[PathBuf],
+    opts: &DetectOptions,
+    given: Option<&[Vec<[f64; 2]>]>,
+) -> Result<Vec<FrameInput>, String> {
+    if let Some(g) = given {
+        assert_eq!(g.len(), paths.len(), "one stripe per frame");
+    }
     let detector = omni_vision::corners::DetectorOptions { min_corners: opts.min_corners, ..Default::default() };
     type Detected = (FrameInput, ImageCorners, Option<(u32, u32)>);
     let results: Vec<Result<Detected, String>> = paths
         .par_iter()
-        .map(|path| {
+        .enumerate()
+        .map(|(k, path)| {
             let name = path.display().to_string();
             let grey = omni_vision::corners::load_gray(path).map_err(|e| e.to_string())?;
             let found = omni_vision::corners::detect_board(&grey, opts.inner_cols, opts.inner_rows, &detector);
@@ -425,7 +435,10 @@ pub fn detect_frames(paths: &[PathBuf], opts: &DetectOptions) -> Result<Vec<Fram
                 Ok(b) => Ok(Observation::from_corners(&name, &b, opts.square_mm)),
                 Err(why) => Err(format!("board not found: {why}")),
             };
-            let stripe = detect_stripe(path, &opts.colour, &opts.ridge)?;
+            let stripe = match given {
+                Some(g) => g[k].clone(),
+                None => detect_stripe(path, &opts.colour, &opts.ridge)?,
+            };
             Ok((FrameInput { name, corners, stripe }, entry, larger))
         })
         .collect();

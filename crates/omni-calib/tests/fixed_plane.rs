@@ -193,7 +193,7 @@ fn real_frames_give_one_plane_that_no_frame_pulls() {
         },
         ridge: omni_vision::stripe::RidgeParams::default(),
     };
-    let frames = detect_frames(&paths, &detect).unwrap();
+    let frames = detect_frames(&paths, &detect, None).unwrap();
     let fit =
         fit_fixed_plane(cam.as_ref(), &frames, &FixedPlaneOptions { square_mm: 5.0, ..Default::default() }).unwrap();
     let r = &fit.report;

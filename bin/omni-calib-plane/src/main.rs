@@ -320,8 +320,11 @@ fn table(a: &TableArgs) -> CliResult {
     Ok(())
 }
 
+/// Each frame's stripe centres (px).
+type Stripes = Vec<Vec<[f64; 2]>>;
+
 /// The frames of a stripe stream: each frame record's image path and stripe centres (px).
-fn read_stripe_stream(path: &Path) -> CliResult<(Vec<PathBuf>, Vec<Vec<[f64; 2]>>)> {
+fn read_stripe_stream(path: &Path) -> CliResult<(Vec<PathBuf>, Stripes)> {
     use omni_formats::stream::Record;
     let mut reader = StreamReader::open(path)?;
     let mut frames_dir: Option<String> = None;

@@ -82,3 +82,32 @@ def test_grazing_threshold_and_bad_arguments(sim):
         omniscan.triangulate(cam, scanner, pts, rec["alpha_deg"], min_incidence_deg=0.0)
     with pytest.raises(ValueError, match="alpha_deg"):
         omniscan.triangulate(cam, scanner, pts, 400.0)
+
+
+def test_fixed_plane_scanner_triangulates_its_one_plane(sim):
+    """A scanner.json of kind fixed_planes: the plane whatever the angle, true pixels on it
+    triangulate to their points, polygon-only properties raise naming the kind."""
+    cam = omniscan.Camera.load(sim["camera"])
+    polygon = omniscan.Scanner.load(sim["scanner"])
+    rec = sim["truth"][0]
+    plane = polygon.light_plane(rec["alpha_deg"], rec["facet"], 0)
+    doc = {"format": "omniscan.scanner", "version": 2,
+           "transmitter": {"kind": "fixed_planes",
+                           "planes": [{"laser": 0, "normal": plane["normal"].tolist(), "distance_mm": plane["offset"]}]}}
+    scanner = omniscan.Scanner.from_json(json.dumps(doc), "fixed.json")
+    assert (scanner.kind, scanner.num_lasers) == ("fixed_planes", 1)
+    fixed = scanner.light_plane(3.0, facet=5, laser=0)
+    assert set(fixed) == {"normal", "offset"}
+    np.testing.assert_allclose(fixed["normal"], plane["normal"], atol=1e-12)
+    with pytest.raises(ValueError, match="fixed_planes"):
+        scanner.num_facets
+    with pytest.raises(ValueError, match="laser 1"):
+        scanner.light_plane(0.0, laser=1)
+    pts = np.array(rec["points"])
+    lit = pts[pts[:, 5] == 0]
+    out = omniscan.triangulate(cam, scanner, lit[:, 3:5], alpha_deg=99.0, facet=40, lasers=[0])
+    assert len(out["xyz"]) >= 0.95 * len(lit)
+    np.testing.assert_allclose(out["xyz"], lit[out["index"], :3], atol=1e-6, rtol=0)
+    doc["transmitter"]["kind"] = "galvo"
+    with pytest.raises(ValueError, match='unknown transmitter kind "galvo"'):
+        omniscan.Scanner.from_json(json.dumps(doc), "fixed.json")

@@ -310,3 +310,51 @@ fn rosbag_images_need_the_bag_and_every_frame_image() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(fx.path("bag/metadata.yaml").exists());
 }
+
+/// A fixed-plane scanner (kind fixed_planes): every frame's rays meet the one plane, whatever the
+/// frame's mirror angle; a frame naming a laser without a plane is an error naming the field.
+#[test]
+fn triangulates_against_a_fixed_plane() {
+    let fx = fixture();
+    let tx = Transmitter::new(TransmitterParams::paper()).unwrap();
+    let plane = tx.light_plane(15f64.to_radians(), 0, 0).unwrap().plane;
+    write_doc(&fx.path("fixed.json"), &ScannerFile::new(omni_model::FixedPlanesParams::single(&plane))).unwrap();
+    // Frame 1's pixels (taken at α = 15°), stamped with other angles and lasers [0].
+    let text = std::fs::read_to_string(fx.path("ridges.jsonl")).unwrap();
+    let mut out_text = Vec::new();
+    {
+        let mut w = StreamWriter::new(&mut out_text, "mem");
+        for r in StreamReader::new(text.as_bytes(), "in") {
+            match r.unwrap() {
+                Record::Frame(mut f) if f.seq == 1 => {
+                    f.alpha_deg = 77.0;
+                    f.facet = 40;
+                    f.lasers = vec![0];
+                    w.write(&Record::Frame(f)).unwrap();
+                }
+                Record::Frame(_) => {}
+                other => w.write(&other).unwrap(),
+            }
+        }
+    }
+    std::fs::write(fx.path("fixed.jsonl"), &out_text).unwrap();
+    let out = run(fx.dir.path(), &["--camera", "camera.json", "--scanner", "fixed.json", "fixed.jsonl"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let points: Vec<[f64; 3]> = StreamReader::new(out.stdout.as_slice(), "out")
+        .filter_map(|r| match r.unwrap() {
+            Record::Frame(f) => Some(f.points.unwrap().iter().map(|p| p.xyz).collect::<Vec<_>>()),
+            _ => None,
+        })
+        .flatten()
+        .collect();
+    assert_eq!(points.len(), fx.truth[1].len());
+    for (p, t) in points.iter().zip(&fx.truth[1]) {
+        assert!((Point3::from(*p) - t).norm() < 1e-6, "{p:?} vs {t}");
+    }
+    let bad = String::from_utf8(out_text).unwrap().replace("\"lasers\":[0]", "\"lasers\":[0,1]");
+    std::fs::write(fx.path("bad.jsonl"), bad).unwrap();
+    let out = run(fx.dir.path(), &["--camera", "camera.json", "--scanner", "fixed.json", "bad.jsonl"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("field lasers: laser 1 has no plane"), "{err}");
+}

@@ -37,6 +37,9 @@ pub struct Config {
     pub region: Option<SearchRegion>,
 }
 
+/// The status record's count of laser frames in which no stripe was found.
+pub const FRAMES_WITHOUT_STRIPE: &str = "frames_without_stripe";
+
 /// The prefix of the error returned after a `--keep-going` run with failed frames.
 const KEEP_GOING_SUMMARY: &str = "frames failed";
 
@@ -325,15 +328,23 @@ fn write_in_order(
     let mut pending: BTreeMap<usize, Result<Record, FrameError>> = BTreeMap::new();
     let mut next = 0;
     let mut failures: Vec<String> = Vec::new();
+    // Laser frames in which no stripe was found: not errors, but worth a count.
+    let mut without_stripe = 0u64;
     let progress = omni_cli::progress(None, "frames");
     for (index, result) in outcomes {
         pending.insert(index, result);
         while let Some(result) = pending.remove(&next) {
             let record = match result {
-                Ok(Record::Status(mut status)) if !failures.is_empty() => {
+                Ok(Record::Status(mut status)) => {
                     status.frames_failed += failures.len() as u64;
                     status.errors.extend(failures.iter().cloned());
+                    status.extra.insert(FRAMES_WITHOUT_STRIPE.into(), without_stripe.into());
                     Record::Status(status)
+                }
+                Ok(Record::Frame(f)) => {
+                    without_stripe +=
+                        u64::from(!f.lasers.is_empty() && f.stripe.as_ref().is_some_and(|s| s.is_empty()));
+                    Record::Frame(f)
                 }
                 Ok(record) => record,
                 Err(fe) => {

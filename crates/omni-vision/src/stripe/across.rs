@@ -10,8 +10,7 @@
 //! the same stripe (close, with nearly parallel normals), which
 //! * drops isolated specks and the last [`END_PX`] of a stripe;
 //! * drops profiles cut by a silhouette or a crease: lopsided on average along the stripe
-//!   ([`MAX_ASYMMETRY`] beyond the laser's own, steady lopsidedness, the frame's median; one
-//!   profile's lopsidedness is speckle), lopsided by twice that where
+//!   ([`MAX_ASYMMETRY`]; one profile's lopsidedness is speckle), lopsided by twice that where
 //!   the neighbours are too few to fit the stripe's shape, or much narrower than their
 //!   neighbours ([`MIN_WIDTH_RATIO`]);
 //! * drops lit areas of the ambient image, wider than the laser's line ([`MAX_HALF_WIDTH_RATIO`])
@@ -504,7 +503,6 @@ impl RidgeDetector {
         let grid = Grid::new(centres, reach);
         let reach2 = reach * reach;
         let shape_half_arc = SHAPE_HALF_ARC_PX.max(2.0 * along);
-        let steady = steady_asymmetry(centres, (self.cx, self.cy));
         // The stripe's points: (centre, the bend c of d = c·t², the along-stripe fit's offset,
         // the stripe's local shape and contrast for the blur's pull).
         let mut kept: Vec<(usize, Option<f64>, f64, Option<LocalStripe>)> = Vec::with_capacity(centres.len());
@@ -569,11 +567,8 @@ impl RidgeDetector {
                 continue;
             }
             // A cut leaves every profile along it lopsided the same way; speckle and noise
-            // lopsided at random, so the neighbours' mean tells the two apart. The laser's own
-            // shape is lopsided too, the same way all along its stripes: only a departure from
-            // it is a cut.
-            let own_steady = if nx * (px - self.cx) + ny * (py - self.cy) >= 0.0 { steady } else { -steady };
-            let lopsided = (asymmetry_sum / count as f64 - own_steady).abs();
+            // lopsided at random, so the neighbours' mean tells the two apart.
+            let lopsided = (asymmetry_sum / count as f64).abs();
             if lopsided > MAX_ASYMMETRY {
                 continue;
             }
@@ -598,7 +593,7 @@ impl RidgeDetector {
             let curvature = sums.parabola(&factors).map(|f| f[2]);
             // Too few neighbours on one side for the stripe's shape are too few to outvote a
             // profile's own lopsidedness either: such a profile is taken as cut.
-            if curvature.is_none() && (c.asymmetry - own_steady).abs() > 2.0 * MAX_ASYMMETRY {
+            if curvature.is_none() && c.asymmetry.abs() > 2.0 * MAX_ASYMMETRY {
                 continue;
             }
             // The offset at t = 0 once the wider parabola's curvature is taken out.
@@ -739,23 +734,6 @@ fn segment_near(q: &[f32], mid: usize, t: f32) -> Option<Segment> {
 /// if no profile has one.
 fn pull_variance_median<'a>(centres: impl Iterator<Item = &'a Centre>) -> Option<f64> {
     super::lower_median(centres.filter_map(|c| c.pull_variance).collect())
-}
-
-/// The laser's own lopsidedness: the median asymmetry of the frame's unsaturated profiles, each
-/// seen along its normal turned away from `centre` (px), which keeps one orientation along any
-/// stripe that does not pass through `centre` (a mirror's ring, a line across an ordinary
-/// lens's view). A cut lopsides a stripe only where it runs along a silhouette, a small part of
-/// the frame's profiles; 0 if there are none.
-fn steady_asymmetry(centres: &[Centre], (cx, cy): (f64, f64)) -> f64 {
-    let oriented = centres
-        .iter()
-        .filter(|c| c.point.quality & quality::SATURATED == 0)
-        .map(|c| {
-            let outward = c.normal.0 * (c.point.u - cx) + c.normal.1 * (c.point.v - cy) >= 0.0;
-            if outward { c.asymmetry } else { -c.asymmetry }
-        })
-        .collect();
-    super::lower_median(oriented).unwrap_or(0.0)
 }
 
 /// The `percent` quantile of the frame's unsaturated half-maximum widths (px); `None` if there

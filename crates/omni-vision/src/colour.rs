@@ -39,6 +39,15 @@ impl Colour {
         }
     }
 
+    /// Indices of this colour and the other two in an RGB triple.
+    fn laser_and_others(self) -> (usize, usize, usize) {
+        match self {
+            Colour::Red => (0, 1, 2),
+            Colour::Green => (1, 0, 2),
+            Colour::Blue => (2, 0, 1),
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Colour::Red => "red",
@@ -181,11 +190,7 @@ impl RgbImage {
                 .collect(),
             Channel::Single(c) => self.data.iter().map(|px| px[c.index()]).collect(),
             Channel::Laser(c) => {
-                let (l, a, b) = match c {
-                    Colour::Red => (0, 1, 2),
-                    Colour::Green => (1, 0, 2),
-                    Colour::Blue => (2, 0, 1),
-                };
+                let (l, a, b) = c.laser_and_others();
                 self.data.iter().map(|px| laser_contrast(px[l], px[a], px[b], max)).collect()
             }
         };
@@ -193,14 +198,37 @@ impl RgbImage {
     }
 }
 
-/// `l − w·(a + b)/2` rounded, clamped at 0, `w` = min(1, 4·(max − l)/max) (module docs).
-#[inline]
+/// `l − w·(a + b)/2` rounded, clamped at 0, `w` = min(1, 4·(max − l)/max) (module docs); in
+/// `f32`, which is exact for the samples and vectorises.
+#[inline(always)]
 fn laser_contrast(l: u16, a: u16, b: u16, max: u16) -> u16 {
-    let (l, others, max) = (l as i64, a as i64 + b as i64, max as i64);
-    // w = num / max with num = min(max, 4·(max − l)); the contrast is l − num·others / (2·max).
-    let num = (4 * (max - l)).clamp(0, max);
-    let twice = 2 * l * max - num * others;
-    ((twice + max) / (2 * max)).clamp(0, max) as u16
+    laser_contrast_f32(l as f32, a as f32 + b as f32, max as f32, 4.0 / max as f32)
+}
+
+/// [`laser_contrast`] of the laser's level `l` and the sum `others` of the other two, with
+/// `four_over_max` = 4 / `max` precomputed.
+#[inline(always)]
+fn laser_contrast_f32(l: f32, others: f32, max: f32, four_over_max: f32) -> u16 {
+    let w = ((max - l) * four_over_max).min(1.0);
+    // ≤ l ≤ max, so the rounding cannot pass full scale; `as` saturates at 0.
+    ((l - 0.5 * w * others).max(0.0) + 0.5) as u16
+}
+
+/// The grey image `channel` makes of interleaved 8-bit samples, `stride` per pixel (3 for RGB,
+/// 4 for RGBA; red, green, blue first): one pass over the frame, no intermediate image.
+pub fn channel_of_rgb8(samples: &[u8], stride: usize, width: u32, height: u32, channel: Channel) -> GrayImage {
+    let pixels = samples.chunks_exact(stride);
+    let data: Vec<u16> = match channel {
+        Channel::Luma => {
+            pixels.map(|p| ((2126 * p[0] as u32 + 7152 * p[1] as u32 + 722 * p[2] as u32) / 10000) as u16).collect()
+        }
+        Channel::Single(c) => pixels.map(|p| p[c.index()] as u16).collect(),
+        Channel::Laser(c) => {
+            let (l, a, b) = c.laser_and_others();
+            pixels.map(|p| laser_contrast_f32(p[l] as f32, p[a] as f32 + p[b] as f32, 255.0, 4.0 / 255.0)).collect()
+        }
+    };
+    GrayImage { width, height, bit_depth: 8, data }
 }
 
 /// Demosaics a raw Bayer frame with Malvar, He and Cutler's gradient-corrected linear filters
@@ -289,6 +317,33 @@ mod tests {
         let ramp = rgb(256, 1, |x, _| [x as u16, (x as u16) / 2, (x as u16) / 2]);
         let c = img_red(&ramp);
         assert!(c.windows(2).all(|w| w[1] >= w[0]), "{c:?}");
+    }
+
+    #[test]
+    fn the_one_pass_8_bit_reading_equals_the_general_one() {
+        // Every (r, g, b) on a coarse lattice, in RGB and RGBA layout.
+        let values: Vec<u8> = (0..=255).step_by(5).map(|v| v as u8).chain([254, 255]).collect();
+        let mut px: Vec<[u8; 3]> = Vec::new();
+        for &r in &values {
+            for &g in &values {
+                px.extend(values.iter().map(|&b| [r, g, b]));
+            }
+        }
+        let general = RgbImage {
+            width: px.len() as u32,
+            height: 1,
+            bit_depth: 8,
+            data: px.iter().map(|p| p.map(u16::from)).collect(),
+        };
+        let rgb: Vec<u8> = px.iter().flatten().copied().collect();
+        let rgba: Vec<u8> = px.iter().flat_map(|p| [p[0], p[1], p[2], 7]).collect();
+        let channels =
+            [Channel::Luma, Channel::Single(Colour::Blue), Channel::Laser(Colour::Red), Channel::Laser(Colour::Green)];
+        for channel in channels {
+            let want = general.channel(channel);
+            assert_eq!(channel_of_rgb8(&rgb, 3, px.len() as u32, 1, channel), want, "{channel}");
+            assert_eq!(channel_of_rgb8(&rgba, 4, px.len() as u32, 1, channel), want, "{channel}");
+        }
     }
 
     fn img_red(img: &RgbImage) -> Vec<u16> {

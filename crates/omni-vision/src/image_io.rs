@@ -155,7 +155,28 @@ pub fn decode_frame_channel(bytes: &[u8], name: &str, spec: &ColourSpec) -> Resu
                     ),
                 ));
             }
-            rgb_of(dynamic)
+            // 8-bit colour, the common case, in one pass from the decoded samples.
+            match &dynamic {
+                image::DynamicImage::ImageRgb8(buf) => {
+                    return Ok(crate::colour::channel_of_rgb8(
+                        buf.as_raw(),
+                        3,
+                        buf.width(),
+                        buf.height(),
+                        spec.channel,
+                    ));
+                }
+                image::DynamicImage::ImageRgba8(buf) => {
+                    return Ok(crate::colour::channel_of_rgb8(
+                        buf.as_raw(),
+                        4,
+                        buf.width(),
+                        buf.height(),
+                        spec.channel,
+                    ));
+                }
+                _ => rgb_of(dynamic),
+            }
         }
     };
     Ok(rgb.channel(spec.channel))

@@ -3,13 +3,15 @@
 //! Rule: a stripe is found at the scale where it is a few pixels wide. The profiles' reach,
 //! the seeds' neighbours, the linking distances and the speckle they average all scale with the
 //! stripe, so the checks that suit a 2–4 px stripe suit a 20 px one in a frame binned 4 × 4
-//! and a saturated 60 px core binned 8 × 8. When a scale measures enough profiles wider than
-//! [`NARROW_HALF_WIDTH_PX`] (or refuses them as wider than its reach), or the frame saturates,
-//! the frame is binned 2 × 2 and searched again; each coarse point is then re-measured on the
-//! finer frame, two profiles per coarse point along its normal, down to the original pixels.
-//! A finer scale's own points win where both have one, and coarse points that are narrow at
-//! their scale ([`WIDE_HALF_WIDTH_PX`]) are left to the finer scale, which measured (or
-//! refused) them itself.
+//! and a saturated 60 px core binned 8 × 8. When the frame's own scale measures enough profiles
+//! wider than [`NARROW_HALF_WIDTH_PX`] that peak like a laser's line (a lit surface's flat top
+//! does not, and binned it would pass for a stripe), or the frame has more saturated pixels than
+//! its points explain ([`SATURATED_PER_POINT`]), the frame is binned 2 × 2, 4 × 4, … up to the
+//! largest scale allowed and searched at each. Each coarse point is re-measured on the next
+//! finer frame, two profiles along its normal, down to the original pixels, and the re-measured
+//! stripe is followed across the gaps the coarse scale left ([`TRACK_PX`]). A finer scale's own
+//! points win where both have one, and coarse points that are narrow at their scale
+//! ([`WIDE_HALF_WIDTH_PX`]) are left to the finer scale, which measured (or refused) them.
 
 use super::across::Linked;
 use super::{Frame, Pixel, RidgeDetector};

@@ -69,6 +69,9 @@ struct Detectors {
     laser_off: stripe::LaserOffCache,
     static_ambient: Option<GrayImage>,
     along: AlongStripeTally,
+    /// How frames are read, and whether the hint about colour read as luma was given.
+    colour: ColourSpec,
+    luma_hint: std::sync::atomic::AtomicBool,
 }
 
 /// The points `--along-stripe` kept and refused over the run (stripes shorter than its window).
@@ -151,6 +154,8 @@ pub fn run(input: Input, writer: impl Write, output_name: &str, config: Config) 
         region: config.region,
         from_first_frame: OnceLock::new(),
         laser_off: stripe::LaserOffCache::new(config.colour),
+        colour: config.colour,
+        luma_hint: std::sync::atomic::AtomicBool::new(false),
         static_ambient: config.static_ambient,
         along: AlongStripeTally::default(),
     });
@@ -292,6 +297,9 @@ fn process_frame(
     }
     let mut img = stripe::load_frame_image_cached(frame, frames_dir, &detectors.laser_off)?;
     let path = frame.resolve_path(frames_dir, &frame.path);
+    if detectors.colour == ColourSpec::default() && !detectors.luma_hint.swap(true, Ordering::Relaxed) {
+        warn_if_colour_read_as_luma(&path);
+    }
     if let (Some(ambient), None) = (&detectors.static_ambient, &frame.ambient_path) {
         img.subtract_saturating(ambient).map_err(|m| format!("{}: static ambient's {m}", path.display()))?;
     }
@@ -313,6 +321,21 @@ fn process_frame(
     }
     frame.stripe = Some(points);
     Ok(())
+}
+
+/// Colour frames read as luma lose a coloured laser on lit surfaces: says so once, naming the
+/// options that read its colour.
+fn warn_if_colour_read_as_luma(path: &Path) {
+    if omni_vision::image_io::is_colour_file(path) == Some(true) {
+        omni_cli::warn(
+            "omni-ridge",
+            &format!(
+                "{}: colour frames are read as luma, in which a red stripe on lit paper is darker than the paper; \
+                 --laser red|green|blue reads the laser's colour",
+                path.display()
+            ),
+        );
+    }
 }
 
 /// Writes outcomes in input order, returning a token per record written.

@@ -456,6 +456,10 @@ fn colour_frames_are_read_as_the_lasers_colour_and_raw_mosaics_demosaiced() {
         }
     }
     write_gray_png(&dir.path().join("m.png"), &mosaic).unwrap();
+    // Read as luma, a colour frame gets a hint naming the options (once), and stays a success.
+    let out = run(&[], &one_frame_stream(dir.path(), "c.png"));
+    let err = stderr(&out);
+    assert!(out.status.success() && err.contains("read as luma") && err.lines().count() == 1, "{err}");
     // Worst radial error (px) and RMS: the mosaic samples red at one pixel in four, so a ring
     // of σ 1.5 px loses precision there.
     for (file, args, worst_max, rms_max) in

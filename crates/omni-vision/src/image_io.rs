@@ -116,6 +116,14 @@ pub fn decode_gray(bytes: &[u8], name: &str) -> Result<GrayImage, Error> {
     Ok(from_dynamic(decode_checked(bytes, name)?))
 }
 
+/// Whether the image file at `path` holds colour (from its header alone); `None` if it cannot be
+/// read or recognised (the frame's own loading reports that).
+pub fn is_colour_file(path: &Path) -> Option<bool> {
+    use image::ImageDecoder;
+    let reader = image::ImageReader::open(path).ok()?.with_guessed_format().ok()?;
+    Some(reader.into_decoder().ok()?.color_type().has_color())
+}
+
 /// Loads a frame as the stripe detector reads it: [`load_gray`] for [`ColourSpec::default`];
 /// otherwise the channel or laser contrast of a colour frame, or of a raw Bayer mosaic
 /// demosaiced first (`crate::colour`). A grey frame given a colour reading, a colour frame given

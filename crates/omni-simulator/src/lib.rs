@@ -64,6 +64,8 @@ pub use omni_geom::rng;
 mod scene;
 mod sensor;
 mod sequence;
+#[cfg(test)]
+mod stripe_tests;
 mod tools;
 mod truth;
 

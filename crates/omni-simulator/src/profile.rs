@@ -80,12 +80,14 @@ impl SheetProfile {
         self.shape().fwhm
     }
 
-    /// The profile's value (unit area) at `d`, in units of the sheet's FWHM, from the light plane
-    /// (positive towards the plane's normal), after a Gaussian blur of σ `blur` (same unit).
-    pub fn density(&self, d: f64, blur: f64) -> f64 {
+    /// The profile as a function (unit area) of the offset from the light plane's image, for a
+    /// sheet imaged `fwhm` wide, after a Gaussian blur of σ `blur` (same unit as `fwhm`; positive
+    /// offsets towards the plane's normal, the tail's side for `tail_side` 1). Builds the shape
+    /// once: cheap to call many times.
+    pub fn curve(&self, fwhm: f64, blur: f64) -> impl Fn(f64) -> f64 + use<> {
         let shape = self.shape();
-        let sigma = 1.0 / shape.fwhm;
-        shape.density(d, sigma, blur)
+        let sigma = fwhm / shape.fwhm;
+        move |x| shape.density(x, sigma, blur)
     }
 
     /// The FWHM (px) of a stripe whose sheet images `fwhm_px` wide (px, before the optics), after

@@ -332,6 +332,13 @@ struct Shader<'a> {
     slices: &'a [Slice],
     /// The tailed profile's shape; `None`: the Gaussian sheet.
     shape: Option<Shape>,
+    /// Whether the fan's 1/r spreading and the incidence are taken where the sheet's plane
+    /// crosses the surface rather than at each point across the stripe, and smooth wide sheets
+    /// are sampled 2 × 2 (or at the coherent imager's rate) instead of n × n. On for the tailed
+    /// profile and for widths set in px: a sheet many mm wide would otherwise lean its stripe's
+    /// peak off the plane by σ² · ∂ln(1/r)/∂d (0.2 px for a 20 px stripe on a 256 px sensor),
+    /// and the plain Gaussian's default rendering stays as it was, bit for bit.
+    flat_across: bool,
     opts: &'a RenderOptions,
 }
 
@@ -351,17 +358,33 @@ struct CornerKey {
     value: f64,
     /// Its laser part (e⁻).
     laser: f64,
+    /// The slice whose plane is nearest in units of its σ, and the plane distance (mm).
+    nearest: u32,
+    dist: f64,
 }
 
 impl Shader<'_> {
     fn corner(&self, camera: &dyn omni_model::CameraModel, px: Vector2<f64>) -> CornerKey {
-        let none = CornerKey { surface: u32::MAX, class: 0, sides: 0, near: false, value: 0.0, laser: 0.0 };
+        let none = CornerKey {
+            surface: u32::MAX,
+            class: 0,
+            sides: 0,
+            near: false,
+            value: 0.0,
+            laser: 0.0,
+            nearest: u32::MAX,
+            dist: 0.0,
+        };
         let Some(ray) = camera.pixel_to_ray(&px) else { return none };
         let Some(hit) = self.scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY) else { return none };
         let mut sides = 0u64;
         let mut near = false;
+        let (mut nearest, mut dist, mut best) = (u32::MAX, 0.0, f64::INFINITY);
         for (i, s) in self.slices.iter().enumerate().take(64) {
             let d = s.lp.plane.signed_distance(&hit.point);
+            if (d / s.sigma).abs() < best {
+                (nearest, dist, best) = (i as u32, d, (d / s.sigma).abs());
+            }
             sides |= u64::from(d > 0.0) << i;
             near |= match &self.shape {
                 None => d.abs() < 4.0 * s.sigma,
@@ -377,7 +400,16 @@ impl Shader<'_> {
             let signal = self.shade(&hit, &ray.dir, |_| 0.0);
             (signal.total(), signal.laser)
         };
-        CornerKey { surface: hit.object as u32 * 4 + hit.pattern as u32, class: hit.class, sides, near, value, laser }
+        CornerKey {
+            surface: hit.object as u32 * 4 + hit.pattern as u32,
+            class: hit.class,
+            sides,
+            near,
+            value,
+            laser,
+            nearest,
+            dist,
+        }
     }
 
     /// Electrons collected at a hit seen along `view`, ambient and laser apart; `footprint[i]`
@@ -432,6 +464,19 @@ impl Shader<'_> {
         }
         if !self.path_is_clear(lp, p, &u) {
             return 0.0;
+        }
+        if self.flat_across {
+            // The fan's spreading and the incidence where the sheet's plane crosses the surface
+            // (along its tangent plane), not at p: across the stripe the light follows the
+            // sheet's profile alone, however wide the sheet (see `Shader::flat_across`).
+            let normal = lp.plane.normal.into_inner();
+            let t = normal - n * normal.dot(n);
+            let t2 = t.norm_squared();
+            let p0 = if t2 > 0.01 { p - t * (d / t2) } else { *p };
+            let to_p0 = p0 - lp.virtual_source;
+            let r0 = to_p0.norm();
+            let cos0 = (to_p0 / r0).dot(n).abs();
+            return self.opts.laser_strength * cos0 * profile / (std::f64::consts::PI * r0);
         }
         let cos_inc = u.dot(n).abs();
         self.opts.laser_strength * cos_inc * profile / (std::f64::consts::PI * r)
@@ -495,7 +540,8 @@ fn render_light(
         SheetProfile::Gaussian => None,
         tailed => Some(tailed.shape()),
     };
-    let shader = Shader { scene, slices, shape, opts };
+    let flat_across = shape.is_some() || opts.stripe_fwhm_px.is_some();
+    let shader = Shader { scene, slices, shape, flat_across, opts };
     let cw = w + 1;
     let corners: Vec<CornerKey> = (0..=h)
         .into_par_iter()
@@ -508,6 +554,21 @@ fn render_light(
     let psf = PixelPsf::new(opts.imaging.psf_sigma_px(), n);
     let imager = opts.imaging.coherent().filter(|_| !slices.is_empty()).map(coherent_imager);
     let q = imager.as_ref().map(|i| i.q());
+    // A sheet wide against the pixel (its plane distance changing by less than σ/2 across it)
+    // is smooth there: 2 × 2 samples (the coherent imager's q × q) integrate it, each box-filtered.
+    let n_coarse = q.unwrap_or(2).min(n);
+    let psf_coarse = PixelPsf::new(opts.imaging.psf_sigma_px(), n_coarse);
+    let coarse = |c: &[CornerKey; 4]| {
+        if !shader.flat_across
+            || c.iter().any(|k| k.nearest != c[0].nearest || k.surface != c[0].surface || k.class != c[0].class)
+        {
+            return false;
+        }
+        let Some(slice) = slices.get(c[0].nearest as usize) else { return false };
+        let (lo, hi) =
+            c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), k| (lo.min(k.dist), hi.max(k.dist)));
+        hi - lo < 0.5 * slice.sigma
+    };
     // The laser light of uniform pixels is kept apart from the ambient light when it has an image
     // of its own, or when the coherent imager must image it too (the tailed profile's tail lies
     // mostly in uniform pixels; the Gaussian's few uniform pixels 4–6 σ out stay incoherent, as
@@ -555,6 +616,7 @@ fn render_light(
                     }
                     continue;
                 }
+                let (n, psf) = if coarse(&c) { (n_coarse, &psf_coarse) } else { (n, &psf) };
                 let samples = pixel_samples(&shader, camera, x as f64, y as f64, n as u32);
                 match q {
                     Some(q) => {

@@ -81,7 +81,7 @@ pub struct CameraColour {
 /// A reddish room (warm light): white paper reads about (1, 0.8, 0.7) in the output, as in the
 /// real hand-held frames (docs/DECISIONS.md).
 fn default_ambient_rgb() -> [f64; 3] {
-    [0.49, 0.81, 0.46]
+    [0.47, 0.81, 0.46]
 }
 
 /// Daylight-like gains of a typical CMOS sensor (its green pixels are the most sensitive).
@@ -89,9 +89,11 @@ fn default_white_balance() -> [f64; 3] {
     [1.9, 1.0, 1.6]
 }
 
-/// A moderate colour matrix of a CMOS sensor (raw → sRGB primaries), rows summing to 1.
+/// A consumer CMOS sensor's colour matrix (raw → sRGB primaries, its saturation boost
+/// included), rows summing to 1: a clipped red pulls green down, so that a red stripe on lit
+/// paper comes out darker than the paper in luma, as in the real frames.
 fn default_matrix() -> [[f64; 3]; 3] {
-    [[1.45, -0.35, -0.10], [-0.20, 1.35, -0.15], [0.02, -0.40, 1.38]]
+    [[1.80, -0.60, -0.20], [-0.45, 1.65, -0.20], [0.00, -0.55, 1.55]]
 }
 
 impl Default for CameraColour {

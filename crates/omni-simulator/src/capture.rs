@@ -365,6 +365,79 @@ mod tests {
         assert!((out[32 * w + 30] - 70.0 - 30.0 / (2.0 * std::f64::consts::PI * 16.0)).abs() < 0.05);
     }
 
+    /// A flat field of ambient and laser light through a colour camera, noiseless.
+    fn flat(colour: Colour, bit_depth: u8) -> (Frame16, Option<RgbFrame>, [f64; 3]) {
+        let (w, h) = (6, 4);
+        let opts = RenderOptions { noise: false, bit_depth, colour: Some(colour.clone()), ..RenderOptions::ideal() };
+        let (ambient, laser) = (2000.0, 3000.0);
+        let raw =
+            std::array::from_fn(|c| (colour.ambient_rgb[c] * ambient + colour.laser_rgb[c] * laser) / opts.full_well_e);
+        let (grey, rgb) = capture(vec![ambient; w * h], Some(vec![laser; w * h]), w, h, &opts, 1);
+        (grey, rgb, raw)
+    }
+
+    fn camera(bayer: Option<BayerPattern>, output: ColourOutput) -> Colour {
+        let c = CameraColour {
+            bayer,
+            laser_rgb: Some([0.9, 0.3, 0.1]),
+            ambient_rgb: [0.2, 0.5, 0.7],
+            ..Default::default()
+        };
+        Colour::new(&c, 650.0, output)
+    }
+
+    #[test]
+    fn a_bayer_mosaic_holds_each_channel_where_its_order_puts_it() {
+        for bit_depth in [8u8, 16] {
+            let max = if bit_depth == 8 { 255.0 } else { 65535.0 };
+            for p in BayerPattern::ALL {
+                let (mosaic, rgb, raw) = flat(camera(Some(p), ColourOutput::Raw), bit_depth);
+                assert!(rgb.is_none() && mosaic.bit_depth == bit_depth);
+                let value = |c: usize| (raw[c] * max).round() as u16;
+                for y in 0..mosaic.height {
+                    for x in 0..mosaic.width {
+                        assert_eq!(mosaic.get(x, y), value(p.channel(x as usize, y as usize)), "{p:?} ({x}, {y})");
+                    }
+                }
+                // The order's name reads row 0 then row 1.
+                let names = p.name().as_bytes();
+                for (k, (x, y)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+                    let c = match names[k] {
+                        b'r' => 0,
+                        b'g' => 1,
+                        _ => 2,
+                    };
+                    assert_eq!(mosaic.get(x, y), value(c), "{p:?}: pixel ({x}, {y}) is {}", names[k] as char);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn rgb_output_is_the_balanced_raw_through_the_colour_matrix() {
+        let reference = flat(camera(None, ColourOutput::Rgb), 8);
+        let colour = camera(None, ColourOutput::Rgb);
+        let (_, rgb, raw) = &reference;
+        let balanced: [f64; 3] = std::array::from_fn(|c| (raw[c] * colour.white_balance[c]).min(1.0));
+        let want: [u16; 3] = std::array::from_fn(|c| {
+            let m = colour.matrix[c];
+            ((m[0] * balanced[0] + m[1] * balanced[1] + m[2] * balanced[2]).clamp(0.0, 1.0) * 255.0).round() as u16
+        });
+        let rgb = rgb.as_ref().unwrap();
+        assert!(
+            (0..rgb.height).all(|y| (0..rgb.width).all(|x| rgb.get(x, y) == want)),
+            "{:?} vs {want:?}",
+            rgb.get(0, 0)
+        );
+        // A mosaic demosaiced gives a flat colour back exactly.
+        for p in BayerPattern::ALL {
+            let (grey, demosaiced, _) = flat(camera(Some(p), ColourOutput::Rgb), 8);
+            assert_eq!(demosaiced.as_ref(), Some(rgb), "{p:?}");
+            assert_eq!(grey, rgb.luma());
+        }
+        assert!(camera(None, ColourOutput::Raw).validate().unwrap_err().contains("Bayer"));
+    }
+
     #[test]
     fn demosaicing_a_flat_colour_gives_it_back() {
         let (w, h) = (6, 4);

@@ -243,6 +243,59 @@ mod tests {
     use super::*;
 
     #[test]
+    fn jpeg_frames_have_4_2_0_chroma() {
+        // Columns alternating between two colours of different luma: 2 × 2 chroma blocks average
+        // each pair of columns, so the decoded chroma no longer alternates while the luma does.
+        let (w, h) = (32u32, 16u32);
+        let data: Vec<u16> = (0..w * h).flat_map(|i| if i % 2 == 0 { [200, 40, 40] } else { [40, 40, 200] }).collect();
+        let frame = RgbFrame { width: w, height: h, data, bit_depth: 8 };
+        let bytes = frame.encode(FrameFormat::Jpeg { quality: 95 }).unwrap();
+        // The frame header (SOF0): Y sampled 2 × 2, Cb and Cr 1 × 1 — 4:2:0.
+        let sof = bytes.windows(2).position(|m| m == [0xFF, 0xC0]).unwrap();
+        let components = &bytes[sof + 10..sof + 19];
+        assert_eq!(bytes[sof + 9], 3);
+        assert_eq!([components[1], components[4], components[7]], [0x22, 0x11, 0x11], "{components:?}");
+        let back = frame.jpeg_round_trip(95).unwrap();
+        let ycc = |p: [u16; 3]| {
+            let (r, g, b) = (p[0] as f64, p[1] as f64, p[2] as f64);
+            let y = 0.299 * r + 0.587 * g + 0.114 * b;
+            (y, 0.564 * (b - y), 0.713 * (r - y))
+        };
+        let (mut dy, mut dc) = (0.0f64, 0.0f64);
+        for y in 4..h - 4 {
+            for x in (4..w - 4).step_by(2) {
+                let (a, b) = (ycc(back.get(x, y)), ycc(back.get(x + 1, y)));
+                dy = dy.max((a.0 - b.0).abs());
+                dc = dc.max((a.1 - b.1).abs()).max((a.2 - b.2).abs());
+            }
+        }
+        let (a, b) = (ycc(frame.get(0, 0)), ycc(frame.get(1, 0)));
+        assert!(dy > 0.8 * (a.0 - b.0).abs(), "luma keeps its detail: {dy}");
+        assert!(dc < 0.1 * (a.2 - b.2).abs(), "chroma is averaged over 2 × 2: {dc}");
+        // Grey frames are plain 8-bit grey JPEG.
+        let grey = frame.luma().jpeg_round_trip(90).unwrap();
+        assert_eq!((grey.width, grey.height, grey.bit_depth), (w, h, 8));
+        assert!(frame.encode(FrameFormat::Pgm).is_err());
+    }
+
+    #[test]
+    fn pgm_holds_grey_frames_of_8_and_16_bits() {
+        for bit_depth in [8u8, 16] {
+            let max = if bit_depth == 8 { 255u32 } else { 65535 };
+            let data = (0..12u32).map(|i| (i * max / 11) as u16).collect();
+            let f = Frame16 { width: 4, height: 3, data, bit_depth };
+            let bytes = f.encode(FrameFormat::Pgm).unwrap();
+            let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Pnm).unwrap();
+            let back: Vec<u16> = if bit_depth == 8 {
+                img.into_luma8().into_raw().into_iter().map(u16::from).collect()
+            } else {
+                img.into_luma16().into_raw()
+            };
+            assert_eq!(back, f.data);
+        }
+    }
+
+    #[test]
     fn png_round_trips_8_and_16_bit() {
         let dir = tempfile::tempdir().unwrap();
         for bit_depth in [8u8, 16] {

@@ -229,3 +229,111 @@ fn real_and_gaussian_stripes_render_at_the_asked_width_with_their_shape_and_thei
         }
     }
 }
+
+/// The middle truth point of laser 0's stripe where it runs obliquely, and the column through it.
+fn oblique_column(sensor: &Sensor, scene: &Scene, alpha: f64, frame: &LaserFrame) -> u32 {
+    let points: Vec<&TruthPoint> = frame
+        .truth
+        .iter()
+        .filter(|t| t.laser == 0)
+        .filter(|t| {
+            sheet_gradient_at(sensor, scene, alpha, 0, t).is_some_and(|g| {
+                let n = (g[0] * g[0] + g[1] * g[1]).sqrt();
+                g[0].abs() > 0.4 * n && g[1].abs() > 0.4 * n
+            })
+        })
+        .collect();
+    points[points.len() / 2].pixel[0].round() as u32
+}
+
+#[test]
+fn a_saturated_stripe_blooms_into_the_plateau_the_model_predicts() {
+    let (sensor, scene, alpha) = oblique(512);
+    let bright = RenderOptions {
+        profile: SheetProfile::real(),
+        stripe_fwhm_px: Some(10.0),
+        laser_strength: 60.0 * DEFAULT_LASER_STRENGTH,
+        ..quiet()
+    };
+    // The light on the pixels, unclipped: a full well far above it, 16 bits.
+    let open = RenderOptions { full_well_e: 1e6, ..bright.clone() };
+    let light = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &open);
+    let x = oblique_column(&sensor, &scene, alpha, &light);
+    let (w, h) = (light.image.width, light.image.height);
+    let electrons: Vec<f64> = (0..h).map(|y| light.image.get(x, y) as f64 / 65535.0 * 1e6).collect();
+    let peak = electrons.iter().cloned().fold(0.0, f64::max);
+    let full_well = 10_000.0;
+    let saturated = |v: &[f64]| v.iter().filter(|e| **e >= full_well * (1.0 - 1e-9)).count();
+    for (bloom, spill) in
+        [(Some(Bloom::columns()), 1.0), (Some(Bloom { axis: BloomAxis::Columns, spill: 0.5 }), 0.5), (None, 0.0)]
+    {
+        let mut model = electrons.clone();
+        bloom_line(&mut model, full_well, spill);
+        let want = saturated(&model);
+        let opts = RenderOptions { full_well_e: full_well, bit_depth: 8, bloom, ..bright.clone() };
+        let frame = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &opts);
+        let column: Vec<u16> = (0..h).map(|y| frame.image.get(x, y)).collect();
+        let plateau: Vec<usize> = (0..h as usize).filter(|y| column[*y] == 255).collect();
+        let run = plateau.last().unwrap() - plateau[0] + 1;
+        eprintln!(
+            "peak {:.1} full wells, spill {spill}: plateau {run} px down column {x} (model {want} px; {} px over the full well unbloomed)",
+            peak / full_well,
+            saturated(&electrons)
+        );
+        assert_eq!(run, plateau.len(), "one flat run: {plateau:?}");
+        assert!(run.abs_diff(want) <= 1, "plateau {run} px, the model {want} px");
+        if spill == 1.0 {
+            assert!((25..=90).contains(&run), "a real close-range core: {run} px");
+        }
+    }
+    assert!(w > x);
+}
+
+/// The colour frame's value at the middle oblique truth point and `offset` px across the stripe.
+fn across(sensor: &Sensor, scene: &Scene, alpha: f64, frame: &LaserFrame, offset: f64) -> [u16; 3] {
+    let x = oblique_column(sensor, scene, alpha, frame);
+    let t = frame.truth.iter().find(|t| t.laser == 0 && t.pixel[0].round() as u32 == x).unwrap();
+    let g = sheet_gradient_at(sensor, scene, alpha, 0, t).unwrap();
+    let n = (g[0] * g[0] + g[1] * g[1]).sqrt();
+    let (px, py) = (t.pixel[0] + offset * g[0] / n, t.pixel[1] + offset * g[1] / n);
+    frame.colour.as_ref().unwrap().get(px.round() as u32, py.round() as u32)
+}
+
+#[test]
+fn a_red_stripe_on_lit_paper_is_dark_in_luma_bright_in_red_and_a_saturated_one_white_with_a_red_glow() {
+    let (sensor, scene, alpha) = oblique(256);
+    let camera = CameraColour { bayer: Some(BayerPattern::Rggb), ..Default::default() };
+    let luma = |p: [u16; 3]| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64;
+    let contrast = |p: [u16; 3]| p[0] as f64 - 0.5 * (p[1] as f64 + p[2] as f64);
+    let lit = RenderOptions {
+        profile: SheetProfile::real(),
+        stripe_fwhm_px: Some(6.0),
+        ambient_e: CALIBRATION_AMBIENT_E,
+        laser_strength: 5.0 * DEFAULT_LASER_STRENGTH,
+        gamma: 2.2,
+        noise: false,
+        colour: Some(Colour::new(&camera, 650.0, ColourOutput::Rgb)),
+        ..RenderOptions::ideal()
+    };
+    let frame = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &lit);
+    let (stripe, paper) = (across(&sensor, &scene, alpha, &frame, 0.0), across(&sensor, &scene, alpha, &frame, -9.0));
+    eprintln!("lit paper {paper:?}, stripe {stripe:?}");
+    assert!(luma(stripe) < luma(paper), "darker in luma: {stripe:?} on {paper:?}");
+    assert!(contrast(stripe) > contrast(paper) + 60.0, "bright in R − (G+B)/2: {stripe:?} on {paper:?}");
+    // Close and far too bright: every channel saturates in the core (the green and blue filters
+    // pass a tenth of the red light), the charge blooms down the columns (a quarter of it; the
+    // drain takes the rest), and around the core only red is clipped.
+    let close = RenderOptions {
+        laser_strength: 400.0 * DEFAULT_LASER_STRENGTH,
+        ambient_e: 2000.0,
+        bloom: Some(Bloom { axis: BloomAxis::Columns, spill: 0.25 }),
+        halo: Some(Halo { fraction: 0.02, sigma_px: 10.0 }),
+        ..lit
+    };
+    let frame = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &close);
+    let core = across(&sensor, &scene, alpha, &frame, 0.0);
+    let glow: Vec<[u16; 3]> = (4..20).map(|o| across(&sensor, &scene, alpha, &frame, o as f64)).collect();
+    eprintln!("saturated core {core:?}, glow {glow:?}");
+    assert_eq!(core, [255, 255, 255], "a white core");
+    assert!(glow.iter().any(|p| p[0] == 255 && p[1] < 200), "a red glow around it: {glow:?}");
+}

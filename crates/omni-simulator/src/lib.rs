@@ -85,6 +85,6 @@ pub use render::{
 };
 pub use scene::{Hit, Scene, board_corners};
 pub use sensor::{Sensor, paper_camera_scaled};
-pub use sequence::{RenderedFrame, Sweep, render_sweep, write_manifest, write_truth};
+pub use sequence::{RenderedFrame, Sweep, render_sweep, render_sweep_as, write_manifest, write_truth};
 pub use tools::{Imperfections, TruthRecord, check_boards_visible, paper_preset, parse_angles, truth_header};
 pub use truth::{stripe_truth, truth_point, truth_polylines};

@@ -103,7 +103,7 @@ fn write_frame(
         Some(c) => c.encode(format),
         None => grey.encode(format),
     }
-    .map_err(|e| omni_formats::Error::io(&path.display().to_string(), &std::io::Error::other(e)))?;
+    .map_err(|e| omni_formats::Error::io(path.display().to_string(), &std::io::Error::other(e)))?;
     omni_formats::io::write_atomic(path, |w| w.write_all(&bytes))
 }
 

@@ -2,8 +2,8 @@
 
 use crate::{Error, Result, Versioned};
 use omni_model::{
-    CameraModel, HyperbolicCamera, HyperbolicParams, MeiCamera, MeiParams, OcamCamera, OcamParams, Optics, Transmitter,
-    TransmitterParams,
+    CameraColour, CameraModel, HyperbolicCamera, HyperbolicParams, MeiCamera, MeiParams, OcamCamera, OcamParams,
+    Optics, Transmitter, TransmitterParams,
 };
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -66,6 +66,10 @@ pub struct CameraFile {
     /// simulator renders with them and `omni-eval budget` predicts noise from them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub optics: Option<Optics>,
+    /// A colour camera's filters and processing (mosaic, responses, white balance, colour
+    /// matrix); absent: a monochrome camera. The simulator renders colour frames from it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colour: Option<CameraColour>,
     /// Free-form calibration report (residuals, uncertainties, images used).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub report: Option<serde_json::Value>,
@@ -78,7 +82,14 @@ impl Versioned for CameraFile {
 
 impl CameraFile {
     pub fn new(model: CameraSpec) -> Self {
-        CameraFile { format: Self::FORMAT.into(), version: Self::VERSION, model, optics: None, report: None }
+        CameraFile {
+            format: Self::FORMAT.into(),
+            version: Self::VERSION,
+            model,
+            optics: None,
+            colour: None,
+            report: None,
+        }
     }
 
     /// Reads and validates `camera.json`, returning the usable model.
@@ -94,6 +105,9 @@ impl CameraFile {
         let model = file.model.build().map_err(|m| Error::new(source_name, "field model", m))?;
         if let Some(optics) = &file.optics {
             optics.validate().map_err(|m| Error::new(source_name, "field optics", m))?;
+        }
+        if let Some(colour) = &file.colour {
+            colour.validate().map_err(|m| Error::new(source_name, "field colour", m))?;
         }
         Ok((file, model))
     }

@@ -14,6 +14,7 @@
 //! Pixel coordinates: x to the right, y down, (0, 0) at the centre of the top-left pixel.
 
 mod camera;
+mod colour;
 mod hyperbolic;
 pub mod limits;
 pub mod mei;
@@ -22,6 +23,7 @@ mod optics;
 mod transmitter;
 
 pub use camera::{CameraModel, CentralCamera, CentralParams, MirrorCircle};
+pub use colour::{BayerPattern, CameraColour, filter_response};
 pub use hyperbolic::{HyperbolicCamera, HyperbolicParams};
 pub use mei::{MeiCamera, MeiParams};
 pub use ocam::{OcamCamera, OcamParams};

@@ -55,13 +55,17 @@
 mod bench;
 mod boards;
 mod budget;
+mod capture;
 mod coherent;
 mod frame;
+mod profile;
 mod render;
 pub use omni_geom::rng;
 mod scene;
 mod sensor;
 mod sequence;
+#[cfg(test)]
+mod stripe_tests;
 mod tools;
 mod truth;
 
@@ -71,14 +75,16 @@ pub use boards::{
     render_rig_pose_image,
 };
 pub use budget::{BudgetLine, CalibrationUncertainty, calibration_from_reports, error_budget, speckle_sigma_px};
-pub use frame::Frame16;
-pub use omni_model::Optics;
+pub use capture::{Bloom, BloomAxis, Colour, ColourOutput, Halo, bloom_line};
+pub use frame::{Frame16, FrameFormat, RgbFrame};
+pub use omni_model::{BayerPattern, CameraColour, Optics, filter_response};
+pub use profile::{GAUSS_FWHM_PER_SIGMA, SheetProfile};
 pub use render::{
     CALIBRATION_AMBIENT_E, DEFAULT_LASER_STRENGTH, Imaging, LaserFrame, REALISTIC_AMBIENT_E, REALISTIC_LASER_STRENGTH,
-    RenderOptions, TruthPoint, render_ambient_frame, render_laser_frame,
+    RenderOptions, TruthPoint, render_ambient_frame, render_ambient_images, render_laser_frame, sheet_gradient_at,
 };
 pub use scene::{Hit, Scene, board_corners};
 pub use sensor::{Sensor, paper_camera_scaled};
-pub use sequence::{RenderedFrame, Sweep, render_sweep, write_manifest, write_truth};
+pub use sequence::{RenderedFrame, Sweep, render_sweep, render_sweep_as, write_manifest, write_truth};
 pub use tools::{Imperfections, TruthRecord, check_boards_visible, paper_preset, parse_angles, truth_header};
 pub use truth::{stripe_truth, truth_point, truth_polylines};

@@ -275,10 +275,17 @@ fn a_saturated_stripe_blooms_into_the_plateau_the_model_predicts() {
         let column: Vec<u16> = (0..h).map(|y| frame.image.get(x, y)).collect();
         let plateau: Vec<usize> = (0..h as usize).filter(|y| column[*y] == 255).collect();
         let run = plateau.last().unwrap() - plateau[0] + 1;
+        // Where the truth crosses the column (the truth samples nearest to it, interpolated).
+        let near: Vec<&TruthPoint> =
+            frame.truth.iter().filter(|t| t.laser == 0 && (t.pixel[0] - x as f64).abs() < 0.3).collect();
+        let truth_y = near.iter().map(|t| t.pixel[1]).sum::<f64>() / near.len() as f64;
+        let centre = 0.5 * (plateau[0] + plateau.last().unwrap()) as f64;
         eprintln!(
-            "peak {:.1} full wells, spill {spill}: plateau {run} px down column {x} (model {want} px; {} px over the full well unbloomed)",
+            "peak {:.1} full wells, spill {spill}: plateau {run} px down column {x} (model {want} px; {} px over the full well \
+             unbloomed), its centre {:+.2} px from the truth",
             peak / full_well,
-            saturated(&electrons)
+            saturated(&electrons),
+            centre - truth_y
         );
         assert_eq!(run, plateau.len(), "one flat run: {plateau:?}");
         assert!(run.abs_diff(want) <= 1, "plateau {run} px, the model {want} px");

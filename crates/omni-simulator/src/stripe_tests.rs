@@ -344,3 +344,23 @@ fn a_red_stripe_on_lit_paper_is_dark_in_luma_bright_in_red_and_a_saturated_one_w
     assert_eq!(core, [255, 255, 255], "a white core");
     assert!(glow.iter().any(|p| p[0] == 255 && p[1] < 200), "a red glow around it: {glow:?}");
 }
+
+#[test]
+fn the_real_profile_through_the_lens_keeps_its_light_with_and_without_speckle() {
+    // The tail lies mostly in pixels far from the plane, whose laser light the coherent imager
+    // takes as uniform cells: the light must be the same as imaged incoherently.
+    let (sensor, scene, alpha) = oblique(256);
+    let lens = |speckle| RenderOptions {
+        imaging: Imaging::Lens { optics: Optics::paper(), speckle },
+        profile: SheetProfile::real(),
+        stripe_fwhm_px: Some(8.0),
+        ..quiet()
+    };
+    let total = |o: &RenderOptions| {
+        let f = render_laser_frame(&sensor, &scene, alpha, 0, &[0], o);
+        f.image.data.iter().map(|v| *v as f64).sum::<f64>()
+    };
+    let (coherent, incoherent) = (total(&lens(true)), total(&lens(false)));
+    eprintln!("light with speckle {coherent:.0}, without {incoherent:.0}");
+    assert!((coherent / incoherent - 1.0).abs() < 0.03, "{coherent} vs {incoherent}");
+}

@@ -88,7 +88,8 @@ pub use omni_model::{BayerPattern, CameraColour, Optics, filter_response};
 pub use profile::{GAUSS_FWHM_PER_SIGMA, SheetProfile};
 pub use render::{
     CALIBRATION_AMBIENT_E, DEFAULT_LASER_STRENGTH, Imaging, LaserFrame, REALISTIC_AMBIENT_E, REALISTIC_LASER_STRENGTH,
-    RenderOptions, TruthPoint, render_ambient_frame, render_ambient_images, render_laser_frame, sheet_gradient_at,
+    RenderOptions, TruthPoint, blurred_peak_at, render_ambient_frame, render_ambient_images, render_laser_frame,
+    sheet_gradient_at,
 };
 pub use scene::{Hit, Scene, board_corners};
 pub use sensor::{Sensor, paper_camera_scaled};

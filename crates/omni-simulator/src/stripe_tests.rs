@@ -364,3 +364,25 @@ fn the_real_profile_through_the_lens_keeps_its_light_with_and_without_speckle() 
     eprintln!("light with speckle {coherent:.0}, without {incoherent:.0}");
     assert!((coherent / incoherent - 1.0).abs() < 0.03, "{coherent} vs {incoherent}");
 }
+
+#[test]
+fn the_presets_and_the_blurred_peak_for_detector_tests() {
+    let (sensor, scene, alpha) = oblique(256);
+    let opts =
+        RenderOptions::ideal_noiseless().with_real_stripe(6.0).with_colour(Some(BayerPattern::Grbg), ColourOutput::Raw);
+    assert_eq!((opts.profile, opts.stripe_fwhm_px), (SheetProfile::real(), Some(6.0)));
+    let colour = opts.colour.as_ref().unwrap();
+    assert_eq!((colour.bayer, colour.laser_rgb), (Some(BayerPattern::Grbg), filter_response(650.0)));
+    let frame = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &opts);
+    assert!(frame.colour.is_none() && frame.image.width == 256, "the raw mosaic is the grey frame");
+    let t = frame.truth[frame.truth.len() / 2];
+    let g = sheet_gradient_at(&sensor, &scene, alpha, 0, &t).unwrap();
+    let peak = blurred_peak_at(&sensor, &scene, alpha, 0, &t, frame.sheet_fwhm_mm[0], &opts).unwrap();
+    let (dx, dy) = (peak[0] - t.pixel[0], peak[1] - t.pixel[1]);
+    let shift = (dx * dx + dy * dy).sqrt();
+    let sheet_px = frame.sheet_fwhm_mm[0] / (g[0] * g[0] + g[1] * g[1]).sqrt();
+    let pull = SheetProfile::real().blurred_peak_offset_px(sheet_px, pixel_blur_px());
+    assert!((shift - pull).abs() < 1e-9 && dx * g[0] + dy * g[1] > 0.0, "{shift} px towards the tail, pull {pull}");
+    let gaussian = RenderOptions::ideal_noiseless();
+    assert_eq!(blurred_peak_at(&sensor, &scene, alpha, 0, &t, 0.5, &gaussian), Some(t.pixel));
+}

@@ -19,9 +19,7 @@
 //! 4. Photon noise (Poisson), read noise (Gaussian), saturation at the full well, gamma and
 //!    quantisation to the bit depth.
 
-#[cfg(doc)]
-use crate::capture::ColourOutput;
-use crate::capture::{Bloom, Colour, Halo};
+use crate::capture::{Bloom, Colour, ColourOutput, Halo};
 use crate::coherent::{CellLight, CoherentImager, LaserField};
 use crate::frame::{Frame16, RgbFrame};
 use crate::profile::{Shape, SheetProfile};
@@ -206,6 +204,24 @@ impl RenderOptions {
     /// The same options with the lens `optics` (laser speckle on).
     pub fn with_optics(self, optics: Optics) -> Self {
         RenderOptions { imaging: Imaging::Lens { optics, speckle: true }, ..self }
+    }
+
+    /// The same options with the real sheet profile ([`SheetProfile::real`]) at a stripe FWHM of
+    /// `fwhm_px` (px, optics and pixel included) at the middle of each stripe.
+    pub fn with_real_stripe(self, fwhm_px: f64) -> Self {
+        RenderOptions { profile: SheetProfile::real(), stripe_fwhm_px: Some(fwhm_px), ..self }
+    }
+
+    /// The same options through a colour camera: [`CameraColour`]'s defaults with the mosaic
+    /// `bayer`, the laser's response at the optics' wavelength (650 nm for the idealised sensor),
+    /// delivering `output`.
+    pub fn with_colour(self, bayer: Option<omni_model::BayerPattern>, output: ColourOutput) -> Self {
+        let wavelength = match &self.imaging {
+            Imaging::Lens { optics, .. } => optics.wavelength_nm,
+            Imaging::Gaussian { .. } => 650.0,
+        };
+        let camera = omni_model::CameraColour { bayer, ..Default::default() };
+        RenderOptions { colour: Some(Colour::new(&camera, wavelength, output)), ..self }
     }
 
     /// Checks values; the message names the field.
@@ -1050,6 +1066,33 @@ pub fn sheet_gradient_at(
     let gx = (seen(h, 0.0)? - seen(-h, 0.0)?) / (2.0 * h);
     let gy = (seen(0.0, h)? - seen(0.0, -h)?) / (2.0 * h);
     Some([gx, gy])
+}
+
+/// Where the stripe's peak lies in the image near truth point `t` once the optics have blurred
+/// it: the truth pixel moved along the sheet gradient by the blur's pull on an asymmetric profile
+/// ([`SheetProfile::blurred_peak_offset_px`], towards the tail; 0 for the Gaussian), for the
+/// sheet of FWHM `sheet_fwhm_mm` ([`LaserFrame::sheet_fwhm_mm`]) rendered with `opts` (the PSF's
+/// best Gaussian and the pixel's area). `None` where [`sheet_gradient_at`] is.
+pub fn blurred_peak_at(
+    sensor: &Sensor,
+    scene: &Scene,
+    alpha_rad: f64,
+    facet: u32,
+    t: &TruthPoint,
+    sheet_fwhm_mm: f64,
+    opts: &RenderOptions,
+) -> Option<[f64; 2]> {
+    let g = sheet_gradient_at(sensor, scene, alpha_rad, facet, t)?;
+    let mm_per_px = (g[0] * g[0] + g[1] * g[1]).sqrt();
+    let blur = (opts.imaging.psf_sigma_px().powi(2) + 1.0 / 12.0).sqrt();
+    let (pull, side) = match opts.profile {
+        SheetProfile::Gaussian => (0.0, 1.0),
+        p @ SheetProfile::Tailed { tail_side, .. } => {
+            (p.blurred_peak_offset_px(sheet_fwhm_mm / mm_per_px, blur), f64::from(tail_side))
+        }
+    };
+    let k = side * pull / mm_per_px;
+    Some([t.pixel[0] + k * g[0], t.pixel[1] + k * g[1]])
 }
 
 /// The frame a camera delivers from the light of `slices` in `scene`: its grey frame and, for

@@ -275,10 +275,17 @@ fn a_saturated_stripe_blooms_into_the_plateau_the_model_predicts() {
         let column: Vec<u16> = (0..h).map(|y| frame.image.get(x, y)).collect();
         let plateau: Vec<usize> = (0..h as usize).filter(|y| column[*y] == 255).collect();
         let run = plateau.last().unwrap() - plateau[0] + 1;
+        // Where the truth crosses the column (the truth samples nearest to it, interpolated).
+        let near: Vec<&TruthPoint> =
+            frame.truth.iter().filter(|t| t.laser == 0 && (t.pixel[0] - x as f64).abs() < 0.3).collect();
+        let truth_y = near.iter().map(|t| t.pixel[1]).sum::<f64>() / near.len() as f64;
+        let centre = 0.5 * (plateau[0] + plateau.last().unwrap()) as f64;
         eprintln!(
-            "peak {:.1} full wells, spill {spill}: plateau {run} px down column {x} (model {want} px; {} px over the full well unbloomed)",
+            "peak {:.1} full wells, spill {spill}: plateau {run} px down column {x} (model {want} px; {} px over the full well \
+             unbloomed), its centre {:+.2} px from the truth",
             peak / full_well,
-            saturated(&electrons)
+            saturated(&electrons),
+            centre - truth_y
         );
         assert_eq!(run, plateau.len(), "one flat run: {plateau:?}");
         assert!(run.abs_diff(want) <= 1, "plateau {run} px, the model {want} px");
@@ -336,4 +343,46 @@ fn a_red_stripe_on_lit_paper_is_dark_in_luma_bright_in_red_and_a_saturated_one_w
     eprintln!("saturated core {core:?}, glow {glow:?}");
     assert_eq!(core, [255, 255, 255], "a white core");
     assert!(glow.iter().any(|p| p[0] == 255 && p[1] < 200), "a red glow around it: {glow:?}");
+}
+
+#[test]
+fn the_real_profile_through_the_lens_keeps_its_light_with_and_without_speckle() {
+    // The tail lies mostly in pixels far from the plane, whose laser light the coherent imager
+    // takes as uniform cells: the light must be the same as imaged incoherently.
+    let (sensor, scene, alpha) = oblique(256);
+    let lens = |speckle| RenderOptions {
+        imaging: Imaging::Lens { optics: Optics::paper(), speckle },
+        profile: SheetProfile::real(),
+        stripe_fwhm_px: Some(8.0),
+        ..quiet()
+    };
+    let total = |o: &RenderOptions| {
+        let f = render_laser_frame(&sensor, &scene, alpha, 0, &[0], o);
+        f.image.data.iter().map(|v| *v as f64).sum::<f64>()
+    };
+    let (coherent, incoherent) = (total(&lens(true)), total(&lens(false)));
+    eprintln!("light with speckle {coherent:.0}, without {incoherent:.0}");
+    assert!((coherent / incoherent - 1.0).abs() < 0.03, "{coherent} vs {incoherent}");
+}
+
+#[test]
+fn the_presets_and_the_blurred_peak_for_detector_tests() {
+    let (sensor, scene, alpha) = oblique(256);
+    let opts =
+        RenderOptions::ideal_noiseless().with_real_stripe(6.0).with_colour(Some(BayerPattern::Grbg), ColourOutput::Raw);
+    assert_eq!((opts.profile, opts.stripe_fwhm_px), (SheetProfile::real(), Some(6.0)));
+    let colour = opts.colour.as_ref().unwrap();
+    assert_eq!((colour.bayer, colour.laser_rgb), (Some(BayerPattern::Grbg), filter_response(650.0)));
+    let frame = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &opts);
+    assert!(frame.colour.is_none() && frame.image.width == 256, "the raw mosaic is the grey frame");
+    let t = frame.truth[frame.truth.len() / 2];
+    let g = sheet_gradient_at(&sensor, &scene, alpha, 0, &t).unwrap();
+    let peak = blurred_peak_at(&sensor, &scene, alpha, 0, &t, frame.sheet_fwhm_mm[0], &opts).unwrap();
+    let (dx, dy) = (peak[0] - t.pixel[0], peak[1] - t.pixel[1]);
+    let shift = (dx * dx + dy * dy).sqrt();
+    let sheet_px = frame.sheet_fwhm_mm[0] / (g[0] * g[0] + g[1] * g[1]).sqrt();
+    let pull = SheetProfile::real().blurred_peak_offset_px(sheet_px, pixel_blur_px());
+    assert!((shift - pull).abs() < 1e-9 && dx * g[0] + dy * g[1] > 0.0, "{shift} px towards the tail, pull {pull}");
+    let gaussian = RenderOptions::ideal_noiseless();
+    assert_eq!(blurred_peak_at(&sensor, &scene, alpha, 0, &t, 0.5, &gaussian), Some(t.pixel));
 }

@@ -167,7 +167,13 @@ fn colour_spec(args: &Args) -> ColourSpec {
         (None, None | Some("luma")) => Channel::Luma,
         (None, Some(c)) => Channel::Single(c.parse().expect("clap checked the colour")),
     };
-    ColourSpec { channel, bayer: args.bayer.as_deref().map(|b| b.parse().expect("clap checked the order")) }
+    ColourSpec {
+        channel,
+        bayer: args
+            .bayer
+            .as_deref()
+            .map(|b| omni_vision::colour::BayerPattern::parse(b).expect("clap checked the order")),
+    }
 }
 
 /// The mask image as one flag per pixel (non-zero: valid).

@@ -14,7 +14,7 @@
 //! surface above ¾ of full scale reads as a plateau in this contrast too (a step at its edge,
 //! not a stripe).
 //!
-//! Raw Bayer frames ([`BayerOrder`]) are demosaiced ([`demosaic`]) before the channel is taken,
+//! Raw Bayer frames ([`BayerPattern`]) are demosaiced ([`demosaic`]) before the channel is taken,
 //! so that points stay in full-resolution pixel coordinates.
 
 use crate::image_io::GrayImage;
@@ -98,56 +98,15 @@ impl fmt::Display for Channel {
     }
 }
 
-/// The colour filter array of a raw Bayer frame: the colours of the 2×2 cell's row 0, then
-/// row 1 (`Rggb`: R G / G B), pixel (0, 0) top left.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum BayerOrder {
-    Rggb,
-    Bggr,
-    Grbg,
-    Gbrg,
-}
-
-impl BayerOrder {
-    pub const ALL: [BayerOrder; 4] = [BayerOrder::Rggb, BayerOrder::Bggr, BayerOrder::Grbg, BayerOrder::Gbrg];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            BayerOrder::Rggb => "rggb",
-            BayerOrder::Bggr => "bggr",
-            BayerOrder::Grbg => "grbg",
-            BayerOrder::Gbrg => "gbrg",
-        }
-    }
-
-    /// The colour index (0 R, 1 G, 2 B) of pixel (x, y).
-    pub fn colour_at(self, x: usize, y: usize) -> usize {
-        let cell = match self {
-            BayerOrder::Rggb => [0, 1, 1, 2],
-            BayerOrder::Bggr => [2, 1, 1, 0],
-            BayerOrder::Grbg => [1, 0, 2, 1],
-            BayerOrder::Gbrg => [1, 2, 0, 1],
-        };
-        cell[(y & 1) * 2 + (x & 1)]
-    }
-}
-
-impl FromStr for BayerOrder {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        BayerOrder::ALL
-            .into_iter()
-            .find(|b| b.name() == s)
-            .ok_or_else(|| format!("unknown Bayer order \"{s}\" (known: rggb, bggr, grbg, gbrg)"))
-    }
-}
+/// The colour filter array of a raw Bayer frame (the simulator writes the same ones).
+pub use omni_model::BayerPattern;
 
 /// How a frame file becomes the detector's grey image: the channel, and whether the file is a
 /// raw Bayer mosaic.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct ColourSpec {
     pub channel: Channel,
-    pub bayer: Option<BayerOrder>,
+    pub bayer: Option<BayerPattern>,
 }
 
 impl ColourSpec {
@@ -266,7 +225,7 @@ fn laser_contrast_rgb8(samples: &[u8], stride: usize, (l, a, b): (usize, usize, 
 /// interpolation leaves small, since a zipper in R − (G+B)/2 is a thin bright line: a false
 /// stripe. Borders are mirrored about the edge pixel, which keeps the mosaic's pattern. The
 /// frame's sides must be even: a mosaic is whole 2×2 cells.
-pub fn demosaic(raw: &GrayImage, order: BayerOrder) -> Result<RgbImage, String> {
+pub fn demosaic(raw: &GrayImage, order: BayerPattern) -> Result<RgbImage, String> {
     let (w, h) = (raw.width as usize, raw.height as usize);
     if w % 2 != 0 || h % 2 != 0 || w < 2 || h < 2 {
         return Err(format!(
@@ -287,7 +246,7 @@ pub fn demosaic(raw: &GrayImage, order: BayerOrder) -> Result<RgbImage, String> 
     for y in 0..h {
         for x in 0..w {
             let (xi, yi) = (x as i64, y as i64);
-            let own = order.colour_at(x, y);
+            let own = order.channel(x, y);
             // Sums of the 5×5 neighbourhood's rings, by position.
             let v = |dx: i64, dy: i64| at(xi + dx, yi + dy);
             let centre = v(0, 0);
@@ -308,7 +267,7 @@ pub fn demosaic(raw: &GrayImage, order: BayerOrder) -> Result<RgbImage, String> 
             px[own] = 8 * centre;
             if own == 1 {
                 // Green: the row's neighbours are one of R/B, the column's the other.
-                let row_colour = order.colour_at(x + 1, y);
+                let row_colour = order.channel(x + 1, y);
                 px[row_colour] = along_row;
                 px[2 - row_colour] = along_column;
             } else {
@@ -393,12 +352,12 @@ mod tests {
     #[test]
     fn each_bayer_order_demosaics_a_flat_colour_to_itself() {
         let colour = [180u16, 90, 30];
-        for order in BayerOrder::ALL {
+        for order in BayerPattern::ALL {
             let (w, h) = (8, 6);
             let mut raw = GrayImage::new(w, h, 8);
             for y in 0..h as usize {
                 for x in 0..w as usize {
-                    raw.data[y * w as usize + x] = colour[order.colour_at(x, y)];
+                    raw.data[y * w as usize + x] = colour[order.channel(x, y)];
                 }
             }
             let out = demosaic(&raw, order).unwrap();
@@ -411,12 +370,12 @@ mod tests {
         // A horizontal ramp in every channel: the interpolated samples are exact (the mirrored
         // border included, where the ramp's slope changes sign only beyond the edge pixel's
         // neighbours: checked inside), whatever the order.
-        for order in BayerOrder::ALL {
+        for order in BayerPattern::ALL {
             let (w, h) = (10usize, 8usize);
             let mut raw = GrayImage::new(w as u32, h as u32, 16);
             for y in 0..h {
                 for x in 0..w {
-                    raw.data[y * w + x] = (1000 + 100 * x + 1000 * order.colour_at(x, y)) as u16;
+                    raw.data[y * w + x] = (1000 + 100 * x + 1000 * order.channel(x, y)) as u16;
                 }
             }
             let out = demosaic(&raw, order).unwrap();
@@ -432,9 +391,9 @@ mod tests {
 
     #[test]
     fn odd_sized_mosaics_and_unknown_names_are_refused() {
-        let e = demosaic(&GrayImage::new(5, 4, 8), BayerOrder::Rggb).unwrap_err();
+        let e = demosaic(&GrayImage::new(5, 4, 8), BayerPattern::Rggb).unwrap_err();
         assert!(e.contains("5x4") && e.contains("rggb"), "{e}");
-        assert!("rgbg".parse::<BayerOrder>().unwrap_err().contains("rggb, bggr"));
+        assert!(BayerPattern::parse("rgbg").unwrap_err().contains("rggb, bggr"));
         assert!("violet".parse::<Colour>().is_err());
     }
 }

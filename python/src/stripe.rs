@@ -91,7 +91,9 @@ fn colour_spec(channel: Option<&str>, laser: Option<&str>, bayer: Option<&str>) 
                 .map_err(|_| crate::value_error(format!("channel: unknown \"{c}\" (known: luma, red, green, blue)")))?,
         ),
     };
-    let bayer = bayer.map(|b| b.parse().map_err(|m| crate::value_error(format!("bayer: {m}")))).transpose()?;
+    let bayer = bayer
+        .map(|b| omni_vision::colour::BayerPattern::parse(b).map_err(|m| crate::value_error(format!("bayer: {m}"))))
+        .transpose()?;
     Ok(ColourSpec { channel, bayer })
 }
 

@@ -12,10 +12,16 @@ use std::process::ExitCode;
 const AFTER_HELP: &str = "\
 Each frame record's image (path resolved against the header's frames_dir) is loaded, its laser-off
 frame (ambient_path, decoded once however many frames share it) subtracted if present, and searched
-inside the mirror annulus (from --camera; without it: the image centre and the largest inscribed
-circle). The stripe is measured across its own normal, in every direction, about once per pixel of
-its length (--sampling rays: along rays from the mirror centre instead, which misses stripes within
-30 degrees of a ray). Each point [u, v, peak intensity, width px, quality flags] goes into the
+inside the mirror annulus (from --camera; without it: the whole frame, as for an ordinary lens;
+--roi or --mask narrow either). Colour frames are read as luma unless told: --laser red reads
+R - (G+B)/2, in which white and grey surfaces cancel and a red stripe on lit paper stands out (in
+luma it is darker than the paper); above 3/4 of full scale the red level itself takes over, so a
+close laser's white, saturated core reads full scale, not 0. --channel red|green|blue reads one
+channel; --bayer ORDER demosaics raw sensor mosaics first. The stripe is measured across its own
+normal, in every direction, about once per pixel of its length (--sampling rays: along rays from
+the mirror centre instead, which misses stripes within 30 degrees of a ray). Stripes wider than
+--max-width (a close laser's 20 px line, a saturated 60 px core) are found in the frame binned 2x2,
+4x4 or 8x8, where they are a few px wide, and re-measured on the frame's own pixels. Each point [u, v, peak intensity, width px, quality flags] goes into the
 record's `stripe` field; other records and fields pass through untouched. Points closer than 1.5 px
 to a stripe's end, lopsided profiles (a stripe cut by a silhouette or a crease) and isolated specks
 are dropped; the blur's pull on curved stripes is removed with the blur measured on the frame.
@@ -30,6 +36,8 @@ Saturated stripes are always located at the centre of the saturated plateau.
 
 Examples:
   omni-sim scan --scene room.json | omni-ridge --camera camera.json | omni-triangulate ...
+  omni-ridge photos.jsonl --laser red -o ridges.jsonl       # colour photos of a red line laser
+  omni-ridge raw.jsonl --bayer rggb --laser red --roi 0,100,1280,520
   omni-ridge scan.jsonl -o ridges.jsonl --camera camera.json --method gauss --threshold 40
   omni-ridge scan.jsonl -o ridges.jsonl --overlay check/ --keep-going
   omni-ridge scan.jsonl -o ridges.jsonl --camera camera.json --static-ambient";
@@ -60,7 +68,8 @@ struct Args {
     /// Narrowest accepted stripe (px, threshold crossing to crossing along the ray).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     min_width: f64,
-    /// Widest accepted stripe (px); wider segments are glints or ambient light.
+    /// Widest stripe measured at the frame's own scale (px, threshold crossing to crossing);
+    /// wider ones are searched at coarser scales (--max-scale).
     #[arg(long, default_value_t = 12.0, allow_negative_numbers = true)]
     max_width: f64,
     /// Scale (px) of the Gaussian derivatives of the hessian method.
@@ -102,17 +111,18 @@ struct Args {
     /// as a file (it is read twice).
     #[arg(long)]
     static_ambient: bool,
-    /// Read one channel of colour frames instead of their luma.
+    /// Read one channel of colour frames instead of their luma (a grey frame is an error).
     #[arg(long, value_name = "CHANNEL", value_parser = ["luma", "red", "green", "blue"], conflicts_with = "laser")]
     channel: Option<String>,
     /// The laser's colour: read colour frames as that channel minus the mean of the other two,
-    /// clamped at 0 (red: R - (G+B)/2), so that white and grey surfaces cancel; full scale where
-    /// the laser's channel saturates.
+    /// clamped at 0 (red: R - (G+B)/2), so that white and grey surfaces cancel; above 3/4 of
+    /// full scale the channel's own level takes over (w = 4 (1 - R/full) on (G+B)/2), so that a
+    /// saturated white core reads full scale.
     #[arg(long, value_name = "COLOUR", value_parser = ["red", "green", "blue"])]
     laser: Option<String>,
     /// Frames are raw Bayer mosaics (grey images, 8 or 16 bit) with this colour filter order,
-    /// row 0 then row 1 (rggb: R G / G B): demosaiced bilinearly, then read as --channel or
-    /// --laser says (luma without either).
+    /// row 0 then row 1 (rggb: R G / G B): demosaiced (Malvar-He-Cutler), then read as
+    /// --channel or --laser says (luma without either).
     #[arg(long, value_name = "ORDER", value_parser = ["rggb", "bggr", "grbg", "gbrg"])]
     bayer: Option<String>,
     /// Keep only points in this rectangle of pixels (x, y of its top-left pixel, width, height),
@@ -157,7 +167,13 @@ fn colour_spec(args: &Args) -> ColourSpec {
         (None, None | Some("luma")) => Channel::Luma,
         (None, Some(c)) => Channel::Single(c.parse().expect("clap checked the colour")),
     };
-    ColourSpec { channel, bayer: args.bayer.as_deref().map(|b| b.parse().expect("clap checked the order")) }
+    ColourSpec {
+        channel,
+        bayer: args
+            .bayer
+            .as_deref()
+            .map(|b| omni_vision::colour::BayerPattern::parse(b).expect("clap checked the order")),
+    }
 }
 
 /// The mask image as one flag per pixel (non-zero: valid).

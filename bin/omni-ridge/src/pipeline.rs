@@ -37,6 +37,9 @@ pub struct Config {
     pub region: Option<SearchRegion>,
 }
 
+/// The status record's count of laser frames in which no stripe was found.
+pub const FRAMES_WITHOUT_STRIPE: &str = "frames_without_stripe";
+
 /// The prefix of the error returned after a `--keep-going` run with failed frames.
 const KEEP_GOING_SUMMARY: &str = "frames failed";
 
@@ -66,6 +69,9 @@ struct Detectors {
     laser_off: stripe::LaserOffCache,
     static_ambient: Option<GrayImage>,
     along: AlongStripeTally,
+    /// How frames are read, and whether the hint about colour read as luma was given.
+    colour: ColourSpec,
+    luma_hint: std::sync::atomic::AtomicBool,
 }
 
 /// The points `--along-stripe` kept and refused over the run (stripes shorter than its window).
@@ -148,6 +154,8 @@ pub fn run(input: Input, writer: impl Write, output_name: &str, config: Config) 
         region: config.region,
         from_first_frame: OnceLock::new(),
         laser_off: stripe::LaserOffCache::new(config.colour),
+        colour: config.colour,
+        luma_hint: std::sync::atomic::AtomicBool::new(false),
         static_ambient: config.static_ambient,
         along: AlongStripeTally::default(),
     });
@@ -289,6 +297,9 @@ fn process_frame(
     }
     let mut img = stripe::load_frame_image_cached(frame, frames_dir, &detectors.laser_off)?;
     let path = frame.resolve_path(frames_dir, &frame.path);
+    if detectors.colour == ColourSpec::default() && !detectors.luma_hint.swap(true, Ordering::Relaxed) {
+        warn_if_colour_read_as_luma(&path);
+    }
     if let (Some(ambient), None) = (&detectors.static_ambient, &frame.ambient_path) {
         img.subtract_saturating(ambient).map_err(|m| format!("{}: static ambient's {m}", path.display()))?;
     }
@@ -312,6 +323,21 @@ fn process_frame(
     Ok(())
 }
 
+/// Colour frames read as luma lose a coloured laser on lit surfaces: says so once, naming the
+/// options that read its colour.
+fn warn_if_colour_read_as_luma(path: &Path) {
+    if omni_vision::image_io::is_colour_file(path) == Some(true) {
+        omni_cli::warn(
+            "omni-ridge",
+            &format!(
+                "{}: colour frames are read as luma, in which a red stripe on lit paper is darker than the paper; \
+                 --laser red|green|blue reads the laser's colour",
+                path.display()
+            ),
+        );
+    }
+}
+
 /// Writes outcomes in input order, returning a token per record written.
 fn write_in_order(
     outcomes: Receiver<Outcome>,
@@ -325,15 +351,23 @@ fn write_in_order(
     let mut pending: BTreeMap<usize, Result<Record, FrameError>> = BTreeMap::new();
     let mut next = 0;
     let mut failures: Vec<String> = Vec::new();
+    // Laser frames in which no stripe was found: not errors, but worth a count.
+    let mut without_stripe = 0u64;
     let progress = omni_cli::progress(None, "frames");
     for (index, result) in outcomes {
         pending.insert(index, result);
         while let Some(result) = pending.remove(&next) {
             let record = match result {
-                Ok(Record::Status(mut status)) if !failures.is_empty() => {
+                Ok(Record::Status(mut status)) => {
                     status.frames_failed += failures.len() as u64;
                     status.errors.extend(failures.iter().cloned());
+                    status.extra.insert(FRAMES_WITHOUT_STRIPE.into(), without_stripe.into());
                     Record::Status(status)
+                }
+                Ok(Record::Frame(f)) => {
+                    without_stripe +=
+                        u64::from(!f.lasers.is_empty() && f.stripe.as_ref().is_some_and(|s| s.is_empty()));
+                    Record::Frame(f)
                 }
                 Ok(record) => record,
                 Err(fe) => {

@@ -109,7 +109,14 @@ fn stdin_to_stdout_finds_the_rings_and_passes_everything_else_through() {
         let odd = pts.iter().find(|p| (p.intensity - 159.0).abs() > 5.0 || p.width < 6.0 || p.width > 10.0);
         assert!(odd.is_none(), "{odd:?}");
     }
-    assert_eq!(recs[4], status(3));
+    assert_eq!(recs[4], status_without_stripe(3, 0));
+}
+
+/// The status omni-ridge writes: `frames_without_stripe` added.
+fn status_without_stripe(frames: u64, without: u64) -> Record {
+    let mut s = Status::complete(frames);
+    s.extra.insert("frames_without_stripe".into(), without.into());
+    Record::Status(s)
 }
 
 #[test]
@@ -404,4 +411,131 @@ fn an_along_stripe_fit_longer_than_the_stripe_is_refused() {
     let (Record::Frame(ring), Record::Frame(short)) = (&recs[1], &recs[2]) else { panic!("frames") };
     assert!(ring.stripe.as_ref().unwrap().len() > 200);
     assert!(short.stripe.as_ref().unwrap().is_empty());
+}
+
+/// The ring of radius 40 px drawn in red on lit grey paper with dark checks (RGB, 8-bit): dimmer
+/// than the paper in luma where it crosses it, bright in R − (G+B)/2.
+fn red_ring_on_checks() -> Vec<u8> {
+    let laser = ring(40.0, 90.0, |_, _| 0.0);
+    let mut rgb = Vec::with_capacity(3 * (SIZE * SIZE) as usize);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            // The checks as a lens images them: averaged over 2 × 2 px (a camera with a colour
+            // mosaic has an optical low-pass; sharper edges alias into false colour).
+            let offsets = [-0.75, -0.25, 0.25, 0.75];
+            let paper = offsets
+                .iter()
+                .flat_map(|&dy| offsets.iter().map(move |&dx| (x as f64 + dx, y as f64 + dy)))
+                .map(|(sx, sy)| if ((sx / 16.0).floor() + (sy / 16.0).floor()) as i64 % 2 == 0 { 110.0 } else { 25.0 })
+                .sum::<f64>()
+                / 16.0;
+            let l = laser.data[(y * SIZE + x) as usize] as f64;
+            for c in [paper + l, paper + 0.1 * l, paper + 0.1 * l] {
+                rgb.push(c.round().clamp(0.0, 255.0) as u8);
+            }
+        }
+    }
+    rgb
+}
+
+fn one_frame_stream(dir: &Path, file: &str) -> String {
+    stream_text(&[header(dir), frame(0, file), status(1)])
+}
+
+#[test]
+fn colour_frames_are_read_as_the_lasers_colour_and_raw_mosaics_demosaiced() {
+    let dir = tempfile::tempdir().unwrap();
+    let rgb = red_ring_on_checks();
+    omni_vision::image_io::write_rgb_png(&dir.path().join("c.png"), SIZE, SIZE, &rgb).unwrap();
+    // The same frame as a raw RGGB mosaic (grey PNG).
+    let mut mosaic = GrayImage::new(SIZE, SIZE, 8);
+    for y in 0..SIZE as usize {
+        for x in 0..SIZE as usize {
+            let colour = [[0, 1], [1, 2]][y % 2][x % 2];
+            mosaic.data[y * SIZE as usize + x] = rgb[3 * (y * SIZE as usize + x) + colour] as u16;
+        }
+    }
+    write_gray_png(&dir.path().join("m.png"), &mosaic).unwrap();
+    // Read as luma, a colour frame gets a hint naming the options (once), and stays a success.
+    let out = run(&[], &one_frame_stream(dir.path(), "c.png"));
+    let err = stderr(&out);
+    assert!(out.status.success() && err.contains("read as luma") && err.lines().count() == 1, "{err}");
+    // Worst radial error (px) and RMS: the mosaic samples red at one pixel in four, so a ring
+    // of σ 1.5 px loses precision there.
+    for (file, args, worst_max, rms_max) in
+        [("c.png", vec!["--laser", "red"], 0.08, 0.04), ("m.png", vec!["--bayer", "rggb", "--laser", "red"], 0.6, 0.2)]
+    {
+        let out = run(&args, &one_frame_stream(dir.path(), file));
+        assert!(out.status.success(), "{file}: {}", stderr(&out));
+        let recs = records(&out.stdout);
+        let Record::Frame(f) = &recs[1] else { panic!("no frame") };
+        let pts = f.stripe.as_ref().unwrap();
+        assert!(pts.len() as f64 >= 0.85 * std::f64::consts::TAU * 40.0, "{file}: {} points", pts.len());
+        let errors: Vec<f64> = pts.iter().map(|p| (p.u - CENTRE).hypot(p.v - CENTRE) - 40.0).collect();
+        let worst = errors.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+        let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+        eprintln!("{file}: worst {worst:.3} px, rms {rms:.3} px");
+        assert!(worst < worst_max && rms < rms_max, "{file}: worst radial error {worst} px, rms {rms} px");
+    }
+}
+
+#[test]
+fn colour_options_that_do_not_fit_the_frame_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    write_gray_png(&dir.path().join("g.png"), &ring(40.0, 180.0, |_, _| 0.0)).unwrap();
+    write_gray_png(&dir.path().join("odd.png"), &GrayImage::new(SIZE - 1, SIZE, 8)).unwrap();
+    let rgb = red_ring_on_checks();
+    omni_vision::image_io::write_rgb_png(&dir.path().join("c.png"), SIZE, SIZE, &rgb).unwrap();
+    for (file, args, expect) in [
+        ("g.png", vec!["--laser", "red"], "--laser red: the frame is grey"),
+        ("g.png", vec!["--channel", "green"], "--channel green: the frame is grey"),
+        ("c.png", vec!["--bayer", "rggb"], "--bayer rggb: the frame is a colour image"),
+        ("odd.png", vec!["--bayer", "gbrg"], "--bayer gbrg: a 127x128 px frame is not a Bayer mosaic"),
+    ] {
+        let out = run(&args, &one_frame_stream(dir.path(), file));
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{file} {args:?}: {err}");
+        assert!(err.contains(file) && err.contains(expect) && err.lines().count() == 1, "{file} {args:?}: {err}");
+    }
+    for args in [
+        vec!["--channel", "violet"],
+        vec!["--laser", "red", "--channel", "red"],
+        vec!["--bayer", "rgbg"],
+        vec!["--roi", "1,2,3"],
+    ] {
+        let out = run(&args, "");
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", stderr(&out));
+    }
+}
+
+#[test]
+fn the_whole_frame_is_searched_without_a_camera_and_a_roi_narrows_it() {
+    // A straight vertical stripe near the left edge, outside the inscribed circle at its ends.
+    let dir = tempfile::tempdir().unwrap();
+    let mut img = GrayImage::new(SIZE, SIZE, 8);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            let d = x as f64 - 12.3;
+            img.data[(y * SIZE + x) as usize] = (150.0 * (-d * d / 4.5).exp()).round() as u16;
+        }
+    }
+    write_gray_png(&dir.path().join("edge.png"), &img).unwrap();
+    let blank = GrayImage::new(SIZE, SIZE, 8);
+    write_gray_png(&dir.path().join("blank.png"), &blank).unwrap();
+    let text = stream_text(&[header(dir.path()), frame(0, "edge.png"), frame(1, "blank.png"), status(2)]);
+    let points = |args: &[&str]| {
+        let out = run(args, &text);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let recs = records(&out.stdout);
+        let Record::Frame(f) = &recs[1] else { panic!("no frame") };
+        // The blank frame is a frame without a stripe, not an error: counted in the status.
+        assert_eq!(recs[3], status_without_stripe(2, 1));
+        f.stripe.clone().unwrap()
+    };
+    let all = points(&[]);
+    assert!(all.len() > 100 && all.iter().all(|p| (p.u - 12.3).abs() < 0.05), "{} points", all.len());
+    // The corners of the frame beyond the inscribed circle (radius 63.5 px) are searched too.
+    assert!(all.iter().any(|p| p.v < 10.0) && all.iter().any(|p| p.v > 117.0));
+    let top = points(&["--roi", "0,0,128,40"]);
+    assert!(!top.is_empty() && top.iter().all(|p| p.v < 39.5) && top.len() < all.len() / 2, "{} points", top.len());
 }

@@ -4,9 +4,10 @@ use clap::{Parser, Subcommand, ValueEnum};
 use omni_cli::{CliError, CliResult};
 use omni_formats::{BoardFile, CameraFile, CameraSpec, ScannerFile, write_doc};
 use omni_simulator::{
-    BenchObject, BoardPose, Imaging, Imperfections, Optics, RenderOptions, RenderedFrame, Rig, Scene, Sensor, Sweep,
+    BayerPattern, BenchObject, Bloom, BloomAxis, BoardPose, CameraColour, Colour, ColourOutput, FrameFormat, Halo,
+    Imaging, Imperfections, Optics, RenderOptions, RenderedFrame, Rig, Scene, Sensor, SheetProfile, Sweep,
     check_boards_visible, paper_bench, paper_preset, parse_angles, random_board_poses, render_board_image,
-    render_rig_pose_image, render_sweep, write_manifest, write_truth,
+    render_rig_pose_image, render_sweep_as, write_manifest, write_truth,
 };
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -116,7 +117,7 @@ struct SceneArgs {
 /// Rendering options shared by the rendering subcommands.
 #[derive(clap::Args, Debug)]
 struct RenderArgs {
-    /// Output bit depth of the PNG frames.
+    /// Output bit depth of the frames.
     #[arg(long, default_value_t = 8, value_parser = parse_bit_depth, allow_negative_numbers = true)]
     bit_depth: u8,
     /// Noise seed (same seed, same images).
@@ -164,17 +165,220 @@ struct RenderArgs {
     /// Worker threads (0: one per core).
     #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     threads: usize,
+    #[command(flatten)]
+    stripe: StripeArgs,
+}
+
+/// Real-looking stripes: the sheet's profile and width, saturation, colour and the frames' files.
+#[derive(clap::Args, Debug)]
+#[command(next_help_heading = "Real-looking stripes (laser frames: scan, rig)")]
+struct StripeArgs {
+    /// The laser sheet's profile across its plane: `gaussian` (the default), or `real`: the
+    /// cross-section measured on real line-laser photographs, a Gaussian core with a one-sided
+    /// exponential tail (17 % of the light, 4 core σ long) on the plane normal's side. The
+    /// profile's peak lies on the light plane, where the ground truth is.
+    #[arg(long, value_enum, default_value = "gaussian")]
+    profile: ProfileKind,
+    /// A tailed profile of your own: tail weight (0–0.9), tail length (in core σ) and side
+    /// (1: towards the light plane's normal, -1: away); implies the tailed shape.
+    #[arg(long, value_parser = parse_vec::<3>, allow_hyphen_values = true, value_name = "W,LEN,SIDE")]
+    tail: Option<[f64; 3]>,
+    /// The sheet's FWHM across its plane (mm; default 0.5).
+    #[arg(long, value_name = "MM", allow_negative_numbers = true)]
+    beam_fwhm_mm: Option<f64>,
+    /// Make each laser's stripe this wide (FWHM in px, the optics' blur and the pixel included)
+    /// at the middle of its stripe, frame by frame, by setting the sheet's width (2–20 px are
+    /// what real sensors show).
+    #[arg(long, value_name = "PX", allow_negative_numbers = true)]
+    stripe_fwhm_px: Option<f64>,
+    /// Blooming: charge above the full well spills along the `columns` or `rows` into the next
+    /// pixels with room (half each way), so a saturated stripe grows a flat plateau.
+    #[arg(long, value_enum, value_name = "AXIS")]
+    bloom: Option<BloomKind>,
+    /// The share of the excess charge that spills (the anti-blooming drain takes the rest).
+    #[arg(long, default_value_t = 1.0, value_name = "SHARE", allow_negative_numbers = true)]
+    bloom_spill: f64,
+    /// Veiling glare: this share of all light spread into a Gaussian glow of σ px.
+    #[arg(long, value_parser = parse_vec::<2>, allow_hyphen_values = true, value_name = "SHARE,SIGMA_PX")]
+    halo: Option<[f64; 2]>,
+    /// A colour camera (camera.json's `colour` section, else a default one): `rgb` frames
+    /// (demosaiced, white-balanced, through the colour matrix; colour PNG or JPEG), or `raw`: the
+    /// Bayer mosaic as a grey frame (needs a mosaic, --bayer or camera.json's `bayer`).
+    #[arg(long, value_enum, value_name = "OUTPUT")]
+    colour: Option<ColourKind>,
+    /// The colour filter mosaic, row 0 then row 1: rggb, bggr, grbg or gbrg (`rggb`: row 0 R G,
+    /// row 1 G B).
+    #[arg(long, value_parser = BayerPattern::parse, value_name = "ORDER")]
+    bayer: Option<BayerPattern>,
+    /// Raw R,G,B response to the laser (monochrome pixel = 1; default: the filter curves at the
+    /// laser's wavelength, at 650 nm 0.81, 0.08, 0.11).
+    #[arg(long, value_parser = parse_vec::<3>, value_name = "R,G,B")]
+    laser_rgb: Option<[f64; 3]>,
+    /// Raw R,G,B response to the room light (default 0.47,0.81,0.46: a reddish room, white paper
+    /// about 1 : 0.8 : 0.7 in the output).
+    #[arg(long, value_parser = parse_vec::<3>, value_name = "R,G,B")]
+    ambient_rgb: Option<[f64; 3]>,
+    /// Output gamma (1 = linear; 2.2 as cameras encode for display).
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    gamma: f64,
+    /// File format of the laser (and laser-off) frames: png, pgm (grey frames and raw mosaics
+    /// only) or jpeg (8 bits; colour with 4:2:0 chroma, as cameras write it).
+    #[arg(long, value_enum, default_value = "png")]
+    format: FormatKind,
+    /// JPEG quality (1–100).
+    #[arg(long, default_value_t = 90, value_name = "Q", allow_negative_numbers = true)]
+    jpeg_quality: i64,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum ProfileKind {
+    Gaussian,
+    Real,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum BloomKind {
+    Columns,
+    Rows,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum ColourKind {
+    Rgb,
+    Raw,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum FormatKind {
+    Png,
+    Pgm,
+    Jpeg,
+}
+
+impl StripeArgs {
+    /// Whether any option for laser frames only is given.
+    fn any(&self) -> bool {
+        !matches!(self.profile, ProfileKind::Gaussian)
+            || self.tail.is_some()
+            || self.beam_fwhm_mm.is_some()
+            || self.stripe_fwhm_px.is_some()
+            || self.bloom.is_some()
+            || self.halo.is_some()
+            || self.colour.is_some()
+            || self.bayer.is_some()
+            || self.laser_rgb.is_some()
+            || self.ambient_rgb.is_some()
+            || self.gamma != 1.0
+            || !matches!(self.format, FormatKind::Png)
+    }
+
+    /// The options on top of `opts`, with camera.json's colour section and the laser's wavelength.
+    fn apply(
+        &self,
+        opts: RenderOptions,
+        colour: Option<&CameraColour>,
+        wavelength_nm: f64,
+    ) -> CliResult<RenderOptions> {
+        let profile = match (self.tail, self.profile) {
+            (Some([w, len, side]), _) => {
+                if side != 1.0 && side != -1.0 {
+                    return Err(CliError::usage(format!("--tail: the side must be 1 or -1, got {side}")));
+                }
+                SheetProfile::Tailed { tail_weight: w, tail_length: len, tail_side: side as i8 }
+            }
+            (None, ProfileKind::Real) => SheetProfile::real(),
+            (None, ProfileKind::Gaussian) => SheetProfile::Gaussian,
+        };
+        let bloom = self.bloom.map(|axis| Bloom {
+            axis: match axis {
+                BloomKind::Columns => BloomAxis::Columns,
+                BloomKind::Rows => BloomAxis::Rows,
+            },
+            spill: self.bloom_spill,
+        });
+        let colour_flags = self.bayer.is_some() || self.laser_rgb.is_some() || self.ambient_rgb.is_some();
+        if self.colour.is_none() && colour_flags {
+            return Err(CliError::usage("--bayer, --laser-rgb and --ambient-rgb need --colour rgb or --colour raw"));
+        }
+        let colour = match self.colour {
+            None => None,
+            Some(kind) => {
+                let mut camera = colour.cloned().unwrap_or_default();
+                camera.bayer = self.bayer.or(camera.bayer);
+                camera.laser_rgb = self.laser_rgb.or(camera.laser_rgb);
+                camera.ambient_rgb = self.ambient_rgb.unwrap_or(camera.ambient_rgb);
+                let output = match kind {
+                    ColourKind::Rgb => ColourOutput::Rgb,
+                    ColourKind::Raw => ColourOutput::Raw,
+                };
+                if output == ColourOutput::Raw && camera.bayer.is_none() {
+                    return Err(CliError::usage(
+                        "--colour raw writes the Bayer mosaic: give its order with --bayer (or camera.json's colour.bayer)",
+                    ));
+                }
+                Some(Colour::new(&camera, wavelength_nm, output))
+            }
+        };
+        if matches!(self.format, FormatKind::Pgm) && matches!(self.colour, Some(ColourKind::Rgb)) {
+            return Err(CliError::usage("--format pgm holds grey frames: use png or jpeg for --colour rgb"));
+        }
+        Ok(RenderOptions {
+            profile,
+            beam_fwhm_mm: self.beam_fwhm_mm.unwrap_or(opts.beam_fwhm_mm),
+            stripe_fwhm_px: self.stripe_fwhm_px,
+            bloom,
+            halo: self.halo.map(|[fraction, sigma_px]| Halo { fraction, sigma_px }),
+            colour,
+            gamma: self.gamma,
+            ..opts
+        })
+    }
+
+    /// The frames' file format.
+    fn frame_format(&self) -> CliResult<FrameFormat> {
+        Ok(match self.format {
+            FormatKind::Png => FrameFormat::Png,
+            FormatKind::Pgm => FrameFormat::Pgm,
+            FormatKind::Jpeg => {
+                let quality =
+                    u8::try_from(self.jpeg_quality).ok().filter(|q| (1..=100).contains(q)).ok_or_else(|| {
+                        CliError::usage(format!("--jpeg-quality must be within 1–100, got {}", self.jpeg_quality))
+                    })?;
+                FrameFormat::Jpeg { quality }
+            }
+        })
+    }
 }
 
 impl RenderArgs {
-    /// Options for laser frames, with the camera's optics where camera.json has them.
-    fn options(&self, camera_optics: Option<Optics>) -> CliResult<RenderOptions> {
+    /// Options for laser frames, with the camera's optics and colour where camera.json has them.
+    fn options(&self, camera_optics: Option<Optics>, camera_colour: Option<&CameraColour>) -> CliResult<RenderOptions> {
         let base = if self.ideal { RenderOptions::ideal() } else { RenderOptions::default() };
-        self.options_from(base, camera_optics)
+        let opts = self.options_from(base, camera_optics)?;
+        let wavelength = match &opts.imaging {
+            Imaging::Lens { optics, .. } => optics.wavelength_nm,
+            Imaging::Gaussian { .. } => camera_optics.map_or(650.0, |o| o.wavelength_nm),
+        };
+        let opts = self.stripe.apply(opts, camera_colour, wavelength)?;
+        opts.validate().map_err(|e| CliError::usage(format!("rendering options: {e}")))?;
+        Ok(opts)
     }
 
     /// Options for lit board images (no laser): `--ideal` keeps the ideal blur.
     fn lit_options(&self, camera_optics: Option<Optics>) -> CliResult<RenderOptions> {
+        if self.stripe.any() {
+            return Err(CliError::usage(
+                "the stripe options (--profile, --tail, --beam-fwhm-mm, --stripe-fwhm-px, --bloom, --halo, --colour, --bayer, \
+                 --laser-rgb, --ambient-rgb, --gamma, --format) are for laser frames: scan and rig",
+            ));
+        }
+        let base = RenderOptions::calibration();
+        let base = if self.ideal { RenderOptions { imaging: RenderOptions::ideal().imaging, ..base } } else { base };
+        self.options_from(base, camera_optics)
+    }
+
+    /// Options for the rig's lit pose image: grey PNG whatever the stripe options say.
+    fn lit_options_for_rig(&self, camera_optics: Option<Optics>) -> CliResult<RenderOptions> {
         let base = RenderOptions::calibration();
         let base = if self.ideal { RenderOptions { imaging: RenderOptions::ideal().imaging, ..base } } else { base };
         self.options_from(base, camera_optics)
@@ -203,9 +407,7 @@ impl RenderArgs {
 }
 
 #[derive(clap::Args, Debug)]
-#[command(after_help = "Frames are named frame_NNNNNN.png (and ambient_NNNNNN.png with --laser-off) in --frames.\n\
-The manifest is the omniscan stream (header, one frame record per frame, status) that omni-ridge reads.\n\
-The ground truth (--truth) holds per frame the true stripe points [x, y, z, u, v, laser].")]
+#[command(after_help = SCAN_AFTER_HELP)]
 struct ScanArgs {
     /// camera.json (from `omni-sim sensor`): the camera model, its image size and optics.
     #[arg(long)]
@@ -225,7 +427,7 @@ struct ScanArgs {
     /// Lasers switched on, e.g. 0,1.
     #[arg(long, default_value = "0,1", value_delimiter = ',', allow_hyphen_values = true)]
     lasers: Vec<u32>,
-    /// Directory for the PNG frames (created if missing).
+    /// Directory for the frames (created if missing).
     #[arg(long)]
     frames: PathBuf,
     /// Also render a laser-off (ambient) frame for every frame.
@@ -260,6 +462,25 @@ struct BoardsArgs {
     #[command(flatten)]
     render: RenderArgs,
 }
+
+const SCAN_AFTER_HELP: &str = "\
+Frames are named frame_NNNNNN.png (.pgm, .jpg with --format; and ambient_NNNNNN.* with --laser-off)
+in --frames. The manifest is the omniscan stream (header, one frame record per frame, status) that
+omni-ridge reads. The ground truth (--truth) holds per frame the true stripe points
+[x, y, z, u, v, laser]: where the light plane meets the surface, i.e. the peak of the sheet's
+profile (for --profile real not its centroid: the tail does not move it). With --profile, --tail or
+--stripe-fwhm-px a frame's record also names the profile and each laser's sheet FWHM (mm).
+
+Real-looking stripes (see docs/DECISIONS.md, \"Real stripe cross-sections\"):
+  # a lopsided real-profile stripe 12 px wide, on the idealised sensor, noiseless, with truth
+  omni-sim scan --camera sensor/camera.json --scanner sensor/scanner.json --scene plane.json \\
+    --ideal --no-noise --profile real --stripe-fwhm-px 12 --frames f/ -o scan.jsonl --truth truth.jsonl
+  # a close, saturated stripe: a flat white plateau that blooms down the columns, with a glow
+  ... --profile real --stripe-fwhm-px 10 --laser-gain 60 --bloom columns --halo 0.02,10
+  # a colour camera: RGB frames through an RGGB mosaic, saved as JPEG with 4:2:0 chroma
+  ... --colour rgb --bayer rggb --gamma 2.2 --format jpeg --jpeg-quality 90
+  # the raw Bayer mosaic of a BGGR sensor as a 16-bit grey PGM
+  ... --colour raw --bayer bggr --bit-depth 16 --format pgm";
 
 const RIG_AFTER_HELP: &str = "\
 Writes into DIR:
@@ -407,16 +628,17 @@ fn scene(a: SceneArgs) -> CliResult {
     Ok(())
 }
 
-/// Renders the sweep into `frames_dir` with a progress bar.
+/// Renders the sweep into `frames_dir` as `format` with a progress bar.
 fn render_frames(
     sensor: &Sensor,
     scene: &Scene,
     sweep: &Sweep,
     frames_dir: &Path,
     opts: &RenderOptions,
+    format: FrameFormat,
 ) -> CliResult<Vec<RenderedFrame>> {
     let bar = omni_cli::progress(Some(sweep.angles_deg.len() as u64), "rendering");
-    let out = render_sweep(sensor, scene, sweep, frames_dir, opts, &|| bar.inc(1));
+    let out = render_sweep_as(sensor, scene, sweep, frames_dir, opts, format, &|| bar.inc(1));
     bar.finish_and_clear();
     Ok(out?)
 }
@@ -459,7 +681,9 @@ fn check_facet_and_angles(sensor: &Sensor, facet: u32, angles: &[f64]) -> CliRes
 
 fn scan(a: ScanArgs) -> CliResult {
     let (sensor, optics) = Sensor::load_with_optics(&a.camera, &a.scanner)?;
-    let opts = a.render.options(optics)?;
+    let colour = CameraFile::load(&a.camera)?.0.colour;
+    let opts = a.render.options(optics, colour.as_ref())?;
+    let format = a.render.stripe.frame_format()?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
     check_facet_and_angles(&sensor, a.facet, &angles)?;
     check_lasers(&sensor, &a.lasers)?;
@@ -467,7 +691,7 @@ fn scan(a: ScanArgs) -> CliResult {
     check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("{}: {e}", a.scene.display())))?;
     create_dir(&a.frames)?;
     let sweep = Sweep { angles_deg: &angles, facet: a.facet, lasers: &a.lasers, laser_off: a.laser_off };
-    let frames = render_frames(&sensor, &scene, &sweep, &a.frames, &opts)?;
+    let frames = render_frames(&sensor, &scene, &sweep, &a.frames, &opts, format)?;
     if let Some(t) = &a.truth {
         write_truth(t, &a.scene.display().to_string(), &frames)?;
     }
@@ -507,7 +731,9 @@ fn boards(a: BoardsArgs) -> CliResult {
 
 fn rig(a: RigArgs) -> CliResult {
     let (sensor, optics) = Sensor::load_with_optics(&a.camera, &a.scanner)?;
-    let opts = a.render.options(optics)?;
+    let colour = CameraFile::load(&a.camera)?.0.colour;
+    let opts = a.render.options(optics, colour.as_ref())?;
+    let format = a.render.stripe.frame_format()?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
     check_facet_and_angles(&sensor, a.facet, &angles)?;
     let board = load_board(&a.board)?;
@@ -516,11 +742,11 @@ fn rig(a: RigArgs) -> CliResult {
     let scene = Scene::from_file(scene_file.clone()).map_err(CliError::new)?;
     check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("rig: {e}")))?;
     create_dir(&a.out)?;
-    let lit = a.render.lit_options(optics)?;
+    let lit = RenderArgs::lit_options_for_rig(&a.render, optics)?;
     let (pose_image, corners) = render_rig_pose_image(&sensor, &rig, &lit);
     pose_image.to_png(&a.out.join("pose.png"))?;
     let sweep = Sweep { angles_deg: &angles, facet: a.facet, lasers: &[0, 1], laser_off: a.laser_off };
-    let frames = render_frames(&sensor, &scene, &sweep, &a.out, &opts)?;
+    let frames = render_frames(&sensor, &scene, &sweep, &a.out, &opts, format)?;
     write_truth(&a.out.join("truth.jsonl"), "rig", &frames)?;
     write_doc(&a.out.join("scene.json"), &scene_file)?;
     write_doc(&a.out.join("rig.json"), &rig.rig_file())?;

@@ -456,3 +456,99 @@ fn board_counts_and_sensor_widths_out_of_range_are_usage_errors() {
         assert!(!d.join("w").exists());
     }
 }
+
+#[test]
+fn real_stripes_colour_bayer_and_jpeg_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    small_sensor(dir.path());
+    let plane = testdata("scenes/plane.json");
+    let base = ["scan", "--camera", "sensor/camera.json", "--scanner", "sensor/scanner.json", "--scene", &plane];
+    let run = |extra: &[&str]| sim(&[&base[..], extra].concat(), dir.path());
+    // A real-shaped saturated stripe through an RGGB mosaic, saved as JPEG, with laser-off frames.
+    let jpeg = [
+        "--angles",
+        "20",
+        "--lasers",
+        "0",
+        "--ideal",
+        "--profile",
+        "real",
+        "--stripe-fwhm-px",
+        "8",
+        "--laser-gain",
+        "30",
+        "--bloom",
+        "columns",
+        "--halo",
+        "0.02,8",
+        "--colour",
+        "rgb",
+        "--bayer",
+        "rggb",
+        "--gamma",
+        "2.2",
+        "--format",
+        "jpeg",
+        "--laser-off",
+        "--frames",
+        "j",
+        "-o",
+        "j.jsonl",
+        "--truth",
+        "j_truth.jsonl",
+    ];
+    ok(&run(&jpeg));
+    for name in ["j/frame_000000.jpg", "j/ambient_000000.jpg"] {
+        let img = image::open(dir.path().join(name)).unwrap();
+        assert!(matches!(img, image::DynamicImage::ImageRgb8(_)), "{name}: a colour JPEG");
+    }
+    let records: Vec<Record> =
+        StreamReader::open(&dir.path().join("j.jsonl")).unwrap().collect::<Result<_, _>>().unwrap();
+    let Record::Frame(f) = &records[1] else { panic!("{:?}", records[1]) };
+    assert_eq!((f.path.as_str(), f.ambient_path.as_deref()), ("frame_000000.jpg", Some("ambient_000000.jpg")));
+    let truth = std::fs::read_to_string(dir.path().join("j_truth.jsonl")).unwrap();
+    let frame: serde_json::Value = serde_json::from_str(truth.lines().nth(1).unwrap()).unwrap();
+    assert_eq!(frame["profile"]["shape"], "tailed");
+    assert!(frame["sheet_fwhm_mm"][0].as_f64().unwrap() > 1.0, "{}", frame["sheet_fwhm_mm"]);
+    // The raw mosaic of a BGGR sensor, 16-bit PGM.
+    ok(&run(&[
+        "--angles",
+        "20",
+        "--colour",
+        "raw",
+        "--bayer",
+        "bggr",
+        "--bit-depth",
+        "16",
+        "--format",
+        "pgm",
+        "--frames",
+        "r",
+    ]));
+    let pgm = std::fs::read(dir.path().join("r/frame_000000.pgm")).unwrap();
+    assert!(pgm.starts_with(b"P5\n256 256\n65535\n"), "{:?}", &pgm[..20]);
+    // The default Gaussian run keeps its truth records as they were.
+    ok(&run(&["--angles", "20", "--frames", "g", "-o", "g.jsonl", "--truth", "g_truth.jsonl"]));
+    let truth = std::fs::read_to_string(dir.path().join("g_truth.jsonl")).unwrap();
+    assert!(!truth.contains("profile") && !truth.contains("sheet_fwhm_mm"));
+    // Options that do not fit together are usage errors naming the option.
+    for (args, says) in [
+        (&["--colour", "raw", "--frames", "x"][..], "--bayer"),
+        (&["--colour", "rgb", "--format", "pgm", "--frames", "x"][..], "--format pgm"),
+        (&["--bayer", "rggb", "--frames", "x"][..], "--colour"),
+        (&["--format", "jpeg", "--jpeg-quality", "0", "--frames", "x"][..], "--jpeg-quality"),
+        (&["--tail", "0.2,4,2", "--frames", "x"][..], "--tail"),
+        (&["--ideal", "--stripe-fwhm-px", "1", "--frames", "x"][..], "narrower than the optics"),
+        (&["--bloom", "columns", "--bloom-spill", "2", "--frames", "x"][..], "spill"),
+    ] {
+        let out = run(args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(says) && err.lines().count() == 1, "{args:?}: {err}");
+    }
+    let out = sim(
+        &["boards", "--camera", "sensor/camera.json", "--board", "b.json", "--out", "b", "--colour", "rgb"],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(2));
+}

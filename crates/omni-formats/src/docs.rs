@@ -2,9 +2,9 @@
 
 use crate::{Error, Result, Versioned};
 use omni_model::{
-    CameraModel, FixedPlanes, FixedPlanesParams, HyperbolicCamera, HyperbolicParams, MeiCamera, MeiParams, OcamCamera,
-    OcamParams, Optics, TRANSMITTER_KIND_FIXED_PLANES, TRANSMITTER_KIND_POLYGON, Transmitter, TransmitterModel,
-    TransmitterParams,
+    CameraColour, CameraModel, FixedPlanes, FixedPlanesParams, HyperbolicCamera, HyperbolicParams, MeiCamera,
+    MeiParams, OcamCamera, OcamParams, Optics, TRANSMITTER_KIND_FIXED_PLANES, TRANSMITTER_KIND_POLYGON, Transmitter,
+    TransmitterModel, TransmitterParams,
 };
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -67,6 +67,10 @@ pub struct CameraFile {
     /// simulator renders with them and `omni-eval budget` predicts noise from them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub optics: Option<Optics>,
+    /// A colour camera's filters and processing (mosaic, responses, white balance, colour
+    /// matrix); absent: a monochrome camera. The simulator renders colour frames from it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colour: Option<CameraColour>,
     /// Free-form calibration report (residuals, uncertainties, images used).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub report: Option<serde_json::Value>,
@@ -79,7 +83,14 @@ impl Versioned for CameraFile {
 
 impl CameraFile {
     pub fn new(model: CameraSpec) -> Self {
-        CameraFile { format: Self::FORMAT.into(), version: Self::VERSION, model, optics: None, report: None }
+        CameraFile {
+            format: Self::FORMAT.into(),
+            version: Self::VERSION,
+            model,
+            optics: None,
+            colour: None,
+            report: None,
+        }
     }
 
     /// Reads and validates `camera.json`, returning the usable model.
@@ -95,6 +106,9 @@ impl CameraFile {
         let model = file.model.build().map_err(|m| Error::new(source_name, "field model", m))?;
         if let Some(optics) = &file.optics {
             optics.validate().map_err(|m| Error::new(source_name, "field optics", m))?;
+        }
+        if let Some(colour) = &file.colour {
+            colour.validate().map_err(|m| Error::new(source_name, "field colour", m))?;
         }
         Ok((file, model))
     }

@@ -15,6 +15,7 @@
 //! Pixel coordinates: x to the right, y down, (0, 0) at the centre of the top-left pixel.
 
 mod camera;
+mod colour;
 mod fixed;
 mod hyperbolic;
 pub mod limits;
@@ -26,6 +27,7 @@ mod transmitter;
 pub use fixed::{FixedPlaneParams, FixedPlanes, FixedPlanesParams, TransmitterModel};
 
 pub use camera::{CameraModel, CentralCamera, CentralParams, MirrorCircle};
+pub use colour::{BayerPattern, CameraColour, filter_response};
 pub use hyperbolic::{HyperbolicCamera, HyperbolicParams};
 pub use mei::{MeiCamera, MeiParams};
 pub use ocam::{OcamCamera, OcamParams};

@@ -16,7 +16,13 @@
 //!   from the physics; then photon (Poisson) and read noise,
 //!   saturation, gamma and quantisation, deterministic for a seed (a self-contained SplitMix64);
 //! * scene lighting (level, gradients, hard-edged patches) and textured albedo; optional motion
-//!   blur (the polygon turning during the exposure).
+//!   blur (the polygon turning during the exposure);
+//! * off by default, stripes as real sensors show them (issue 33, docs/DECISIONS.md "Real stripe
+//!   cross-sections"): the measured lopsided cross-section ([`SheetProfile::real`], its peak on
+//!   the light plane) at a width set in pixels ([`RenderOptions::stripe_fwhm_px`]), blooming
+//!   ([`Bloom`]) and glare ([`Halo`]), a colour camera ([`Colour`]: Bayer mosaic, filter
+//!   responses, white balance, colour matrix; RGB frames or the raw mosaic) and JPEG frames with
+//!   4:2:0 chroma ([`FrameFormat`], [`render_sweep_as`]).
 //!
 //! [`RenderOptions::default`] is the realistic sensor: a real industrial 8-bit monochrome camera
 //! (full well 10 000 e⁻, read noise 6 e⁻, 8 bits over the full well ≈ 39 e⁻/DN, gamma 1) behind
@@ -33,7 +39,8 @@
 //! circumradius 20 mm whose axis is 120 mm below the camera centre. [`Sensor::paper_scaled`]
 //! gives the same sensor with a smaller image for fast tests; [`paper_preset`] adds build errors.
 //!
-//! Ground truth ([`TruthPoint`], [`stripe_truth`], [`truth_polylines`]): the reflected fan of
+//! Ground truth ([`TruthPoint`], [`stripe_truth`], [`truth_polylines`], [`sheet_gradient_at`]
+//! for the direction across a stripe): the reflected fan of
 //! each laser sampled from its virtual source, first scene hit, kept if lit and seen; exact
 //! pixels by `point_to_pixel`, samples ≤ 0.25 px apart along each curve. Tests check that truth
 //! pixels triangulate onto the surface within 1e-6 mm and that the noiseless rendered stripe's
@@ -55,13 +62,17 @@
 mod bench;
 mod boards;
 mod budget;
+mod capture;
 mod coherent;
 mod frame;
+mod profile;
 mod render;
 pub use omni_geom::rng;
 mod scene;
 mod sensor;
 mod sequence;
+#[cfg(test)]
+mod stripe_tests;
 mod tools;
 mod truth;
 
@@ -71,14 +82,17 @@ pub use boards::{
     render_rig_pose_image,
 };
 pub use budget::{BudgetLine, CalibrationUncertainty, calibration_from_reports, error_budget, speckle_sigma_px};
-pub use frame::Frame16;
-pub use omni_model::Optics;
+pub use capture::{Bloom, BloomAxis, Colour, ColourOutput, Halo, bloom_line};
+pub use frame::{Frame16, FrameFormat, RgbFrame};
+pub use omni_model::{BayerPattern, CameraColour, Optics, filter_response};
+pub use profile::{GAUSS_FWHM_PER_SIGMA, SheetProfile};
 pub use render::{
     CALIBRATION_AMBIENT_E, DEFAULT_LASER_STRENGTH, Imaging, LaserFrame, REALISTIC_AMBIENT_E, REALISTIC_LASER_STRENGTH,
-    RenderOptions, TruthPoint, render_ambient_frame, render_laser_frame,
+    RenderOptions, TruthPoint, blurred_peak_at, render_ambient_frame, render_ambient_images, render_laser_frame,
+    sheet_gradient_at,
 };
 pub use scene::{Hit, Scene, board_corners};
 pub use sensor::{Sensor, paper_camera_scaled};
-pub use sequence::{RenderedFrame, Sweep, render_sweep, write_manifest, write_truth};
+pub use sequence::{RenderedFrame, Sweep, render_sweep, render_sweep_as, write_manifest, write_truth};
 pub use tools::{Imperfections, TruthRecord, check_boards_visible, paper_preset, parse_angles, truth_header};
 pub use truth::{stripe_truth, truth_point, truth_polylines};

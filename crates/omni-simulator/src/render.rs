@@ -19,8 +19,10 @@
 //! 4. Photon noise (Poisson), read noise (Gaussian), saturation at the full well, gamma and
 //!    quantisation to the bit depth.
 
+use crate::capture::{Bloom, Colour, ColourOutput, Halo};
 use crate::coherent::{CellLight, CoherentImager, LaserField};
-use crate::frame::Frame16;
+use crate::frame::{Frame16, RgbFrame};
+use crate::profile::{Shape, SheetProfile};
 use crate::rng::{SplitMix64, mix};
 use crate::scene::{Hit, Scene};
 use crate::sensor::Sensor;
@@ -100,6 +102,22 @@ pub struct RenderOptions {
     /// Polygon turn during the exposure (degrees); the stripe is integrated over
     /// [α − m/2, α + m/2]. 0 = a still mirror.
     pub motion_blur_deg: f64,
+    /// Shape of the laser sheet's profile across the light plane ([`SheetProfile::Gaussian`] by
+    /// default; [`SheetProfile::real`] is the measured real cross-section). Its peak lies on the
+    /// light plane, where the ground truth is.
+    pub profile: SheetProfile,
+    /// Set the sheet's width per frame so that each laser's stripe is this wide (FWHM, px, the
+    /// optics' blur and the pixel included) at the middle truth point of its stripe, instead of
+    /// [`beam_fwhm_mm`](Self::beam_fwhm_mm). `None`: the fixed width.
+    pub stripe_fwhm_px: Option<f64>,
+    /// Veiling glare: a share of all light spread into a wide glow around bright parts.
+    pub halo: Option<Halo>,
+    /// Blooming: charge above the full well spills along the columns or rows instead of being
+    /// clipped (a saturated stripe grows a flat plateau). `None`: clipped.
+    pub bloom: Option<Bloom>,
+    /// A colour camera (filter responses, mosaic, white balance, colour matrix, output).
+    /// `None`: the monochrome camera.
+    pub colour: Option<Colour>,
 }
 
 impl Default for RenderOptions {
@@ -147,6 +165,11 @@ impl RenderOptions {
             noise: true,
             seed: 0,
             motion_blur_deg: 0.0,
+            profile: SheetProfile::Gaussian,
+            stripe_fwhm_px: None,
+            halo: None,
+            bloom: None,
+            colour: None,
         }
     }
 
@@ -183,6 +206,24 @@ impl RenderOptions {
         RenderOptions { imaging: Imaging::Lens { optics, speckle: true }, ..self }
     }
 
+    /// The same options with the real sheet profile ([`SheetProfile::real`]) at a stripe FWHM of
+    /// `fwhm_px` (px, optics and pixel included) at the middle of each stripe.
+    pub fn with_real_stripe(self, fwhm_px: f64) -> Self {
+        RenderOptions { profile: SheetProfile::real(), stripe_fwhm_px: Some(fwhm_px), ..self }
+    }
+
+    /// The same options through a colour camera: [`CameraColour`]'s defaults with the mosaic
+    /// `bayer`, the laser's response at the optics' wavelength (650 nm for the idealised sensor),
+    /// delivering `output`.
+    pub fn with_colour(self, bayer: Option<omni_model::BayerPattern>, output: ColourOutput) -> Self {
+        let wavelength = match &self.imaging {
+            Imaging::Lens { optics, .. } => optics.wavelength_nm,
+            Imaging::Gaussian { .. } => 650.0,
+        };
+        let camera = omni_model::CameraColour { bayer, ..Default::default() };
+        RenderOptions { colour: Some(Colour::new(&camera, wavelength, output)), ..self }
+    }
+
     /// Checks values; the message names the field.
     pub fn validate(&self) -> Result<(), String> {
         let non_negative = [
@@ -207,6 +248,28 @@ impl RenderOptions {
         }
         if self.bit_depth != 8 && self.bit_depth != 16 {
             return Err(format!("bit_depth must be 8 or 16, got {}", self.bit_depth));
+        }
+        self.profile.validate().map_err(|e| format!("profile: {e}"))?;
+        if let Some(w) = self.stripe_fwhm_px {
+            if !(w.is_finite() && w > 0.0 && w <= 200.0) {
+                return Err(format!("stripe_fwhm_px must be within 0–200 px, got {w}"));
+            }
+            let blur = (self.imaging.psf_sigma_px().powi(2) + 1.0 / 12.0).sqrt();
+            if self.profile.sheet_fwhm_for_image_px(w, blur).is_none() {
+                return Err(format!(
+                    "stripe_fwhm_px {w} is narrower than the optics' blur alone ({:.2} px FWHM)",
+                    self.profile.image_fwhm_px(1e-6, blur)
+                ));
+            }
+        }
+        if let Some(h) = &self.halo {
+            h.validate().map_err(|e| format!("halo: {e}"))?;
+        }
+        if let Some(b) = &self.bloom {
+            b.validate().map_err(|e| format!("bloom: {e}"))?;
+        }
+        if let Some(c) = &self.colour {
+            c.validate().map_err(|e| format!("colour: {e}"))?;
         }
         match &self.imaging {
             Imaging::Gaussian { sigma_px } => {
@@ -235,9 +298,12 @@ impl RenderOptions {
         Ok(())
     }
 
-    /// σ of the laser sheet's profile across the light plane (mm).
+    /// σ of the laser sheet's profile (its core's) across the light plane (mm).
     pub(crate) fn beam_sigma(&self) -> f64 {
-        self.beam_fwhm_mm / (8.0 * 2f64.ln()).sqrt()
+        match self.profile {
+            SheetProfile::Gaussian => self.beam_fwhm_mm / (8.0 * 2f64.ln()).sqrt(),
+            tailed => self.beam_fwhm_mm / tailed.fwhm_per_sigma(),
+        }
     }
 }
 
@@ -247,25 +313,29 @@ impl RenderOptions {
 pub(crate) struct Slice {
     pub lp: LightPlane,
     pub weight: f64,
+    /// σ of the sheet's (core) profile (mm).
+    pub sigma: f64,
 }
 
 /// The light planes of the given lasers at mirror angle `alpha` (radians), spread over the
-/// motion-blur range. Lasers whose central ray misses the facet are skipped.
+/// motion-blur range, laser `lasers[i]` with the sheet σ `sigmas[i]` (mm). Lasers whose central
+/// ray misses the facet are skipped.
 pub(crate) fn light_slices(
     sensor: &Sensor,
     alpha: f64,
     facet: u32,
     lasers: &[u32],
+    sigmas: &[f64],
     opts: &RenderOptions,
 ) -> Vec<Slice> {
     let blur = opts.motion_blur_deg.to_radians();
     let steps = if blur > 0.0 { ((opts.motion_blur_deg / 0.02).ceil() as usize).clamp(2, 32) } else { 1 };
     let mut out = Vec::new();
-    for &laser in lasers {
+    for (&laser, &sigma) in lasers.iter().zip(sigmas) {
         for k in 0..steps {
             let a = alpha + blur * ((k as f64 + 0.5) / steps as f64 - 0.5);
             if let Some(lp) = sensor.transmitter.light_plane(a, facet, laser as usize).filter(|lp| lp.on_facet) {
-                out.push(Slice { lp, weight: 1.0 / steps as f64 });
+                out.push(Slice { lp, weight: 1.0 / steps as f64, sigma });
             }
         }
     }
@@ -276,7 +346,15 @@ pub(crate) fn light_slices(
 struct Shader<'a> {
     scene: &'a Scene,
     slices: &'a [Slice],
-    sigma: f64,
+    /// The tailed profile's shape; `None`: the Gaussian sheet.
+    shape: Option<Shape>,
+    /// Whether the fan's 1/r spreading and the incidence are taken where the sheet's plane
+    /// crosses the surface rather than at each point across the stripe, and smooth wide sheets
+    /// are sampled 2 × 2 (or at the coherent imager's rate) instead of n × n. On for the tailed
+    /// profile and for widths set in px: a sheet many mm wide would otherwise lean its stripe's
+    /// peak off the plane by σ² · ∂ln(1/r)/∂d (0.2 px for a 20 px stripe on a 256 px sensor),
+    /// and the plain Gaussian's default rendering stays as it was, bit for bit.
+    flat_across: bool,
     opts: &'a RenderOptions,
 }
 
@@ -289,26 +367,65 @@ struct CornerKey {
     class: u32,
     /// Bit i set if the hit is on the positive side of slice i's plane.
     sides: u64,
-    /// Whether the hit lies within 4 σ of any light plane.
+    /// Whether the hit lies within 4 σ of any light plane (the tailed profile: its core and
+    /// the start of its tail, [`Shape::near`]).
     near: bool,
     /// Signal (e⁻) of a point sample at the corner.
     value: f64,
+    /// Its laser part (e⁻).
+    laser: f64,
+    /// The slice whose plane is nearest in units of its σ, and the plane distance (mm).
+    nearest: u32,
+    dist: f64,
 }
 
 impl Shader<'_> {
     fn corner(&self, camera: &dyn omni_model::CameraModel, px: Vector2<f64>) -> CornerKey {
-        let none = CornerKey { surface: u32::MAX, class: 0, sides: 0, near: false, value: 0.0 };
+        let none = CornerKey {
+            surface: u32::MAX,
+            class: 0,
+            sides: 0,
+            near: false,
+            value: 0.0,
+            laser: 0.0,
+            nearest: u32::MAX,
+            dist: 0.0,
+        };
         let Some(ray) = camera.pixel_to_ray(&px) else { return none };
         let Some(hit) = self.scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY) else { return none };
         let mut sides = 0u64;
         let mut near = false;
+        let (mut nearest, mut dist, mut best) = (u32::MAX, 0.0, f64::INFINITY);
         for (i, s) in self.slices.iter().enumerate().take(64) {
             let d = s.lp.plane.signed_distance(&hit.point);
+            if (d / s.sigma).abs() < best {
+                (nearest, dist, best) = (i as u32, d, (d / s.sigma).abs());
+            }
             sides |= u64::from(d > 0.0) << i;
-            near |= d.abs() < 4.0 * self.sigma;
+            near |= match &self.shape {
+                None => d.abs() < 4.0 * s.sigma,
+                Some(shape) => {
+                    let (lo, hi) = shape.near(s.sigma);
+                    d > lo && d < hi
+                }
+            };
         }
-        let value = if near { 0.0 } else { self.shade(&hit, &ray.dir, |_| 0.0).total() };
-        CornerKey { surface: hit.object as u32 * 4 + hit.pattern as u32, class: hit.class, sides, near, value }
+        let (value, laser) = if near {
+            (0.0, 0.0)
+        } else {
+            let signal = self.shade(&hit, &ray.dir, |_| 0.0);
+            (signal.total(), signal.laser)
+        };
+        CornerKey {
+            surface: hit.object as u32 * 4 + hit.pattern as u32,
+            class: hit.class,
+            sides,
+            near,
+            value,
+            laser,
+            nearest,
+            dist,
+        }
     }
 
     /// Electrons collected at a hit seen along `view`, ambient and laser apart; `footprint[i]`
@@ -317,25 +434,41 @@ impl Shader<'_> {
     fn shade(&self, hit: &Hit, view: &Vector3<f64>, footprint: impl Fn(usize) -> f64) -> Signal {
         let mut laser = 0.0;
         for (i, s) in self.slices.iter().enumerate() {
-            let sigma = (self.sigma * self.sigma + footprint(i).powi(2)).sqrt();
-            laser += s.weight * self.laser_irradiance(&s.lp, &hit.point, &hit.normal, view, sigma);
+            laser += s.weight * self.laser_irradiance(s, &hit.point, &hit.normal, view, footprint(i));
         }
         let ambient = self.opts.ambient_e * self.scene.ambient_factor(&hit.point);
         Signal { ambient: hit.albedo * ambient, laser: hit.albedo * laser }
     }
 
     /// Laser signal (e⁻ for albedo 1) of one light plane at a surface point seen along `view`,
-    /// with the sheet profile's σ widened to `sigma` (mm) by the sample's footprint.
+    /// with the sheet profile widened by the sample's footprint (σ `footprint`, mm).
     fn laser_irradiance(
         &self,
-        lp: &LightPlane,
+        slice: &Slice,
         p: &Point3<f64>,
         n: &Vector3<f64>,
         view: &Vector3<f64>,
-        sigma: f64,
+        footprint: f64,
     ) -> f64 {
+        let lp = &slice.lp;
         let d = lp.plane.signed_distance(p);
-        if d.abs() > 6.0 * sigma || !lp.lights(p) {
+        let profile = match &self.shape {
+            None => {
+                let sigma = (slice.sigma * slice.sigma + footprint.powi(2)).sqrt();
+                if d.abs() > 6.0 * sigma {
+                    return 0.0;
+                }
+                (-0.5 * (d / sigma).powi(2)).exp() / (sigma * (2.0 * std::f64::consts::PI).sqrt())
+            }
+            Some(shape) => {
+                let (lo, hi) = shape.support(slice.sigma, footprint);
+                if d < lo || d > hi {
+                    return 0.0;
+                }
+                shape.density(d, slice.sigma, footprint)
+            }
+        };
+        if !lp.lights(p) {
             return 0.0;
         }
         let to_p = p - lp.virtual_source;
@@ -348,9 +481,21 @@ impl Shader<'_> {
         if !self.path_is_clear(lp, p, &u) {
             return 0.0;
         }
+        if self.flat_across {
+            // The fan's spreading and the incidence where the sheet's plane crosses the surface
+            // (along its tangent plane), not at p: across the stripe the light follows the
+            // sheet's profile alone, however wide the sheet (see `Shader::flat_across`).
+            let normal = lp.plane.normal.into_inner();
+            let t = normal - n * normal.dot(n);
+            let t2 = t.norm_squared();
+            let p0 = if t2 > 0.01 { p - t * (d / t2) } else { *p };
+            let to_p0 = p0 - lp.virtual_source;
+            let r0 = to_p0.norm();
+            let cos0 = (to_p0 / r0).dot(n).abs();
+            return self.opts.laser_strength * cos0 * profile / (std::f64::consts::PI * r0);
+        }
         let cos_inc = u.dot(n).abs();
-        let gauss = (-0.5 * (d / sigma).powi(2)).exp() / (sigma * (2.0 * std::f64::consts::PI).sqrt());
-        self.opts.laser_strength * cos_inc * gauss / (std::f64::consts::PI * r)
+        self.opts.laser_strength * cos_inc * profile / (std::f64::consts::PI * r)
     }
 
     /// Whether the reflected ray from the facet to `p` is unobstructed (laser shadows).
@@ -391,10 +536,28 @@ pub(crate) fn facet_exit(lp: &LightPlane, u: &Vector3<f64>) -> Point3<f64> {
 /// position in the image (blurring the pixel-integrated image instead would snap it to pixel
 /// centres).
 fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &RenderOptions, seed: u64) -> Vec<f64> {
+    render_light(sensor, scene, slices, opts, seed, false).0
+}
+
+/// [`render_electrons`], with the laser light in an image of its own when `split` (the ambient
+/// light alone in the first): `(ambient or all light, laser light if split)`.
+fn render_light(
+    sensor: &Sensor,
+    scene: &Scene,
+    slices: &[Slice],
+    opts: &RenderOptions,
+    seed: u64,
+    split: bool,
+) -> (Vec<f64>, Option<Vec<f64>>) {
     let camera = sensor.camera.as_ref();
     let (w, h) = camera.image_size();
     let (w, h) = (w as usize, h as usize);
-    let shader = Shader { scene, slices, sigma: opts.beam_sigma(), opts };
+    let shape = match opts.profile {
+        SheetProfile::Gaussian => None,
+        tailed => Some(tailed.shape()),
+    };
+    let flat_across = shape.is_some() || opts.stripe_fwhm_px.is_some();
+    let shader = Shader { scene, slices, shape, flat_across, opts };
     let cw = w + 1;
     let corners: Vec<CornerKey> = (0..=h)
         .into_par_iter()
@@ -407,6 +570,26 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
     let psf = PixelPsf::new(opts.imaging.psf_sigma_px(), n);
     let imager = opts.imaging.coherent().filter(|_| !slices.is_empty()).map(coherent_imager);
     let q = imager.as_ref().map(|i| i.q());
+    // A sheet wide against the pixel (its plane distance changing by less than σ/2 across it)
+    // is smooth there: 2 × 2 samples (the coherent imager's q × q) integrate it, each box-filtered.
+    let n_coarse = q.unwrap_or(2).min(n);
+    let psf_coarse = PixelPsf::new(opts.imaging.psf_sigma_px(), n_coarse);
+    let coarse = |c: &[CornerKey; 4]| {
+        if !shader.flat_across
+            || c.iter().any(|k| k.nearest != c[0].nearest || k.surface != c[0].surface || k.class != c[0].class)
+        {
+            return false;
+        }
+        let Some(slice) = slices.get(c[0].nearest as usize) else { return false };
+        let (lo, hi) =
+            c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), k| (lo.min(k.dist), hi.max(k.dist)));
+        hi - lo < 0.5 * slice.sigma
+    };
+    // The laser light of uniform pixels is kept apart from the ambient light when it has an image
+    // of its own, or when the coherent imager must image it too (the tailed profile's tail lies
+    // mostly in uniform pixels; the Gaussian's few uniform pixels 4–6 σ out stay incoherent, as
+    // they always were).
+    let laser_apart = split || (q.is_some() && shader.shape.is_some());
     // Pixels whose corners agree take the mean of their corners (spread later by a discrete
     // convolution); the others get a supersampled patch spread from the exact sample positions,
     // their laser light going to the coherent imager instead where there is one.
@@ -414,6 +597,9 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
         .into_par_iter()
         .map(|y| {
             let mut row = RowResult { centre: vec![0.0; w], ..Default::default() };
+            if split {
+                row.centre_laser = vec![0.0; w];
+            }
             for x in 0..w {
                 let c = [
                     corners[y * cw + x],
@@ -430,9 +616,23 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
                 if uniform {
                     // Same surface and pattern, far from every light plane at all four corners:
                     // the signal is smooth over the pixel and the corners' mean integrates it.
-                    row.centre[x] = 0.25 * c.iter().map(|k| k.value).sum::<f64>();
+                    if !laser_apart {
+                        row.centre[x] = 0.25 * c.iter().map(|k| k.value).sum::<f64>();
+                        continue;
+                    }
+                    let laser = 0.25 * c.iter().map(|k| k.laser).sum::<f64>();
+                    row.centre[x] = 0.25 * c.iter().map(|k| k.value - k.laser).sum::<f64>();
+                    match q {
+                        Some(q) if laser > 0.0 => {
+                            let cell = CellLight { energy: laser / (q * q) as f64, ..Default::default() };
+                            row.laser.push((x, vec![cell; q * q]));
+                        }
+                        Some(_) => {}
+                        None => row.centre_laser[x] = laser,
+                    }
                     continue;
                 }
+                let (n, psf) = if coarse(&c) { (n_coarse, &psf_coarse) } else { (n, &psf) };
                 let samples = pixel_samples(&shader, camera, x as f64, y as f64, n as u32);
                 match q {
                     Some(q) => {
@@ -441,6 +641,14 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
                         let laser: Vec<f64> = samples.iter().map(|s| s.laser).collect();
                         if laser.iter().any(|v| *v > 0.0) {
                             row.laser.push((x, sample_energies(&laser, n, q)));
+                        }
+                    }
+                    None if split => {
+                        let ambient: Vec<f64> = samples.iter().map(|s| s.ambient).collect();
+                        row.patches.push((x, psf.patch(&ambient)));
+                        let laser: Vec<f64> = samples.iter().map(|s| s.laser).collect();
+                        if laser.iter().any(|v| *v > 0.0) {
+                            row.laser_patches.push((x, psf.patch(&laser)));
                         }
                     }
                     None => {
@@ -454,10 +662,37 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
         .collect();
     let centre: Vec<f64> = rows.iter().flat_map(|r| r.centre.iter().copied()).collect();
     let mut out = psf.convolve_centres(&centre, w, h);
+    add_patches(&mut out, rows.iter().map(|r| &r.patches), &psf, w, h);
+    let mut laser_out = split.then(|| {
+        let centre: Vec<f64> = rows.iter().flat_map(|r| r.centre_laser.iter().copied()).collect();
+        let mut img = psf.convolve_centres(&centre, w, h);
+        add_patches(&mut img, rows.iter().map(|r| &r.laser_patches), &psf, w, h);
+        img
+    });
+    if let (Some(imager), Some(q)) = (imager, q) {
+        let mut field = LaserField::new(q);
+        for (y, row) in rows.iter().enumerate() {
+            for (x, energies) in &row.laser {
+                field.add_pixel(*x, y, energies);
+            }
+        }
+        imager.image_into(&field, laser_out.as_mut().unwrap_or(&mut out), w, h, seed);
+    }
+    (out, laser_out)
+}
+
+/// Adds each row's supersampled pixels' PSF patches (row y, column x) into `out`.
+fn add_patches<'a>(
+    out: &mut [f64],
+    rows: impl Iterator<Item = &'a Vec<(usize, Vec<f64>)>>,
+    psf: &PixelPsf,
+    w: usize,
+    h: usize,
+) {
     let r = psf.radius as isize;
     let side = 2 * psf.radius + 1;
-    for (y, row) in rows.iter().enumerate() {
-        for (x, patch) in &row.patches {
+    for (y, row) in rows.enumerate() {
+        for (x, patch) in row {
             for dy in -r..=r {
                 let yy = y as isize + dy;
                 if yy < 0 || yy >= h as isize {
@@ -473,16 +708,6 @@ fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &Ren
             }
         }
     }
-    if let (Some(imager), Some(q)) = (imager, q) {
-        let mut field = LaserField::new(q);
-        for (y, row) in rows.iter().enumerate() {
-            for (x, energies) in &row.laser {
-                field.add_pixel(*x, y, energies);
-            }
-        }
-        imager.image_into(&field, &mut out, w, h, seed);
-    }
-    out
 }
 
 /// The coherent imager of `optics`, built once per process for each set of optics in use.
@@ -524,6 +749,10 @@ struct RowResult {
     centre: Vec<f64>,
     patches: Vec<(usize, Vec<f64>)>,
     laser: Vec<(usize, Vec<CellLight>)>,
+    /// With the laser light apart and no coherent imager: the laser light of uniform pixels
+    /// and the laser patches of supersampled ones.
+    centre_laser: Vec<f64>,
+    laser_patches: Vec<(usize, Vec<f64>)>,
 }
 
 /// The optical PSF (Gaussian, σ in px) integrated over a pixel: K(t) = Φ((t + ½)/σ) − Φ((t − ½)/σ).
@@ -734,11 +963,19 @@ pub struct TruthPoint {
 /// A rendered laser frame with its ground truth.
 #[derive(Debug, Clone)]
 pub struct LaserFrame {
-    /// The image (values in 0..=255 for 8-bit frames).
+    /// The grey frame (values in 0..=255 for 8-bit frames): the monochrome camera's frame, a
+    /// colour camera's raw Bayer mosaic ([`ColourOutput::Raw`]), or the luma of its RGB frame.
     pub image: Frame16,
+    /// A colour camera's RGB frame ([`ColourOutput::Rgb`]).
+    pub colour: Option<RgbFrame>,
     /// Dense samples (≤ 0.25 px apart) along each visible stripe curve, laser by laser, ordered
-    /// along the curve; split into curves with [`crate::truth_polylines`].
+    /// along the curve; split into curves with [`crate::truth_polylines`]. Each lies on its light
+    /// plane: the peak of the sheet's profile.
     pub truth: Vec<TruthPoint>,
+    /// The sheet's FWHM across the light plane (mm) of each laser asked for, in order: the
+    /// options' [`beam_fwhm_mm`](RenderOptions::beam_fwhm_mm), or the width that
+    /// [`stripe_fwhm_px`](RenderOptions::stripe_fwhm_px) chose for this frame.
+    pub sheet_fwhm_mm: Vec<f64>,
 }
 
 /// Renders the frame taken at mirror angle `alpha` (radians, within the facet) with laser 0 on
@@ -759,24 +996,141 @@ pub fn render_laser_frame(
         panic!("invalid RenderOptions: {e}");
     }
     assert!(alpha_rad.is_finite(), "render_laser_frame: mirror angle must be finite, got {alpha_rad}");
-    let slices = light_slices(sensor, alpha_rad, facet, lasers, opts);
-    let seed = frame_seed(opts.seed, alpha_rad, facet, lasers);
-    let electrons = render_electrons(sensor, scene, &slices, opts, seed);
-    let image = finish(sensor, electrons, opts, seed);
     let truth = crate::truth::stripe_truth(sensor, scene, alpha_rad, facet, lasers);
-    LaserFrame { image, truth }
+    let sigmas = sheet_sigmas(sensor, scene, alpha_rad, facet, lasers, &truth, opts);
+    let slices = light_slices(sensor, alpha_rad, facet, lasers, &sigmas, opts);
+    let seed = frame_seed(opts.seed, alpha_rad, facet, lasers);
+    let (image, colour) = capture_frame(sensor, scene, &slices, opts, seed);
+    let per_sigma = opts.beam_fwhm_mm / opts.beam_sigma();
+    let sheet_fwhm_mm = sigmas.iter().map(|s| s * per_sigma).collect();
+    LaserFrame { image, colour, truth, sheet_fwhm_mm }
 }
 
-/// Renders the frame with all lasers off (ambient light only).
+/// The sheet's σ (mm) for each laser: the options' width, or the width that gives each stripe
+/// [`RenderOptions::stripe_fwhm_px`] at the middle truth point of its stripe.
+fn sheet_sigmas(
+    sensor: &Sensor,
+    scene: &Scene,
+    alpha_rad: f64,
+    facet: u32,
+    lasers: &[u32],
+    truth: &[TruthPoint],
+    opts: &RenderOptions,
+) -> Vec<f64> {
+    let Some(target) = opts.stripe_fwhm_px else { return vec![opts.beam_sigma(); lasers.len()] };
+    let blur = (opts.imaging.psf_sigma_px().powi(2) + 1.0 / 12.0).sqrt();
+    let sheet_px = opts.profile.sheet_fwhm_for_image_px(target, blur);
+    let per_sigma = opts.beam_fwhm_mm / opts.beam_sigma();
+    lasers
+        .iter()
+        .map(|&laser| {
+            let points: Vec<&TruthPoint> = truth.iter().filter(|t| t.laser == laser).collect();
+            let mid = points.len() / 2;
+            // The middle point, else the nearest one to it whose neighbourhood is one surface.
+            let scale = (0..points.len()).find_map(|k| {
+                let i = if k % 2 == 0 { mid + k / 2 } else { mid.checked_sub(k / 2 + 1)? };
+                let g = sheet_gradient_at(sensor, scene, alpha_rad, facet, points.get(i)?)?;
+                Some((g[0] * g[0] + g[1] * g[1]).sqrt())
+            });
+            match (scale, sheet_px) {
+                (Some(mm_per_px), Some(px)) => px * mm_per_px / per_sigma,
+                _ => opts.beam_sigma(),
+            }
+        })
+        .collect()
+}
+
+/// How the distance from a truth point's light plane changes across the image at its pixel: the
+/// gradient (mm per px) of the plane distance of the surface each pixel sees, pointing across
+/// the stripe towards the plane's normal side (the side of a [`SheetProfile::Tailed`] tail with
+/// `tail_side` 1); its length is the sheet's mm per px there. `None` where the pixels around it
+/// do not all see the truth point's surface (a silhouette or an edge), or the plane is missing.
+pub fn sheet_gradient_at(
+    sensor: &Sensor,
+    scene: &Scene,
+    alpha_rad: f64,
+    facet: u32,
+    t: &TruthPoint,
+) -> Option<[f64; 2]> {
+    let lp = sensor.transmitter.light_plane(alpha_rad, facet, t.laser as usize)?;
+    let camera = sensor.camera.as_ref();
+    let h = 0.25;
+    let centre = Point3::from(t.xyz);
+    let seen = |dx: f64, dy: f64| -> Option<f64> {
+        let ray = camera.pixel_to_ray(&Vector2::new(t.pixel[0] + dx, t.pixel[1] + dy))?;
+        let hit = scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY)?;
+        // The same surface: the hit's tangent plane holds the truth point.
+        let off = (centre - hit.point).dot(&hit.normal).abs();
+        (off < 1e-3 * (1.0 + (hit.point - centre).norm())).then(|| lp.plane.signed_distance(&hit.point))
+    };
+    let gx = (seen(h, 0.0)? - seen(-h, 0.0)?) / (2.0 * h);
+    let gy = (seen(0.0, h)? - seen(0.0, -h)?) / (2.0 * h);
+    Some([gx, gy])
+}
+
+/// Where the stripe's peak lies in the image near truth point `t` once the optics have blurred
+/// it: the truth pixel moved along the sheet gradient by the blur's pull on an asymmetric profile
+/// ([`SheetProfile::blurred_peak_offset_px`], towards the tail; 0 for the Gaussian), for the
+/// sheet of FWHM `sheet_fwhm_mm` ([`LaserFrame::sheet_fwhm_mm`]) rendered with `opts` (the PSF's
+/// best Gaussian and the pixel's area). `None` where [`sheet_gradient_at`] is.
+pub fn blurred_peak_at(
+    sensor: &Sensor,
+    scene: &Scene,
+    alpha_rad: f64,
+    facet: u32,
+    t: &TruthPoint,
+    sheet_fwhm_mm: f64,
+    opts: &RenderOptions,
+) -> Option<[f64; 2]> {
+    let g = sheet_gradient_at(sensor, scene, alpha_rad, facet, t)?;
+    let mm_per_px = (g[0] * g[0] + g[1] * g[1]).sqrt();
+    let blur = (opts.imaging.psf_sigma_px().powi(2) + 1.0 / 12.0).sqrt();
+    let (pull, side) = match opts.profile {
+        SheetProfile::Gaussian => (0.0, 1.0),
+        p @ SheetProfile::Tailed { tail_side, .. } => {
+            (p.blurred_peak_offset_px(sheet_fwhm_mm / mm_per_px, blur), f64::from(tail_side))
+        }
+    };
+    let k = side * pull / mm_per_px;
+    Some([t.pixel[0] + k * g[0], t.pixel[1] + k * g[1]])
+}
+
+/// The frame a camera delivers from the light of `slices` in `scene`: its grey frame and, for
+/// RGB output, its colour frame.
+fn capture_frame(
+    sensor: &Sensor,
+    scene: &Scene,
+    slices: &[Slice],
+    opts: &RenderOptions,
+    seed: u64,
+) -> (Frame16, Option<RgbFrame>) {
+    if opts.halo.is_none() && opts.bloom.is_none() && opts.colour.is_none() {
+        let electrons = render_electrons(sensor, scene, slices, opts, seed);
+        return (finish(sensor, electrons, opts, seed), None);
+    }
+    let (main, laser) = render_light(sensor, scene, slices, opts, seed, opts.colour.is_some());
+    let (w, h) = sensor.camera.image_size();
+    crate::capture::capture(main, laser, w as usize, h as usize, opts, seed)
+}
+
+/// Renders the frame with all lasers off (ambient light only): the grey frame of
+/// [`render_ambient_images`].
 ///
 /// Panics if `opts` is invalid (see [`RenderOptions::validate`]).
 pub fn render_ambient_frame(sensor: &Sensor, scene: &Scene, opts: &RenderOptions) -> Frame16 {
+    render_ambient_images(sensor, scene, opts).0
+}
+
+/// Renders the frame with all lasers off (ambient light only): the grey frame and, for a colour
+/// camera's RGB output, the colour frame (as [`LaserFrame`]).
+///
+/// Panics if `opts` is invalid (see [`RenderOptions::validate`]).
+pub fn render_ambient_images(sensor: &Sensor, scene: &Scene, opts: &RenderOptions) -> (Frame16, Option<RgbFrame>) {
     if let Err(e) = opts.validate() {
         panic!("invalid RenderOptions: {e}");
     }
     let seed = frame_seed(opts.seed, f64::NAN, u32::MAX, &[]);
-    let electrons = render_electrons(sensor, scene, &[], opts, seed);
-    finish(sensor, electrons, opts, seed)
+    capture_frame(sensor, scene, &[], opts, seed)
 }
 
 #[cfg(test)]

@@ -3,7 +3,9 @@
 //! ground truth of their stripes (`omniscan.sim-truth`, JSON Lines). `omni-sim scan` and
 //! `omni-sim rig` write these.
 
-use crate::render::{RenderOptions, render_ambient_frame, render_laser_frame};
+use crate::frame::{Frame16, FrameFormat, RgbFrame};
+use crate::profile::SheetProfile;
+use crate::render::{RenderOptions, render_ambient_images, render_laser_frame};
 use crate::scene::Scene;
 use crate::sensor::Sensor;
 use crate::tools::{TruthRecord, truth_header};
@@ -42,27 +44,67 @@ pub fn render_sweep(
     opts: &RenderOptions,
     on_frame: &(dyn Fn() + Sync),
 ) -> omni_formats::Result<Vec<RenderedFrame>> {
+    render_sweep_as(sensor, scene, sweep, frames_dir, opts, FrameFormat::Png, on_frame)
+}
+
+/// [`render_sweep`] with the frames stored as `format` (`frame_NNNNNN.png`, `.pgm` or `.jpg`): a
+/// colour camera's RGB frames as colour files, monochrome frames and raw Bayer mosaics as grey
+/// ones. A truth record names the sheet's profile and widths when they are not the default
+/// Gaussian's.
+pub fn render_sweep_as(
+    sensor: &Sensor,
+    scene: &Scene,
+    sweep: &Sweep,
+    frames_dir: &Path,
+    opts: &RenderOptions,
+    format: FrameFormat,
+    on_frame: &(dyn Fn() + Sync),
+) -> omni_formats::Result<Vec<RenderedFrame>> {
+    let ext = format.extension();
     sweep
         .angles_deg
         .par_iter()
         .enumerate()
         .map(|(seq, &alpha_deg)| {
             let frame = render_laser_frame(sensor, scene, alpha_deg.to_radians(), sweep.facet, sweep.lasers, opts);
-            let name = format!("frame_{seq:06}.png");
-            frame.image.to_png(&frames_dir.join(&name))?;
+            let name = format!("frame_{seq:06}.{ext}");
+            write_frame(&frames_dir.join(&name), &frame.image, frame.colour.as_ref(), format)?;
             let mut record = Frame::new(seq as u64, name.clone(), alpha_deg, sweep.facet);
             record.lasers = sweep.lasers.to_vec();
             if sweep.laser_off {
-                let ambient_name = format!("ambient_{seq:06}.png");
+                let ambient_name = format!("ambient_{seq:06}.{ext}");
                 let seeded = RenderOptions { seed: opts.seed ^ (0xA3B1 + seq as u64), ..opts.clone() };
-                render_ambient_frame(sensor, scene, &seeded).to_png(&frames_dir.join(&ambient_name))?;
+                let (grey, colour) = render_ambient_images(sensor, scene, &seeded);
+                write_frame(&frames_dir.join(&ambient_name), &grey, colour.as_ref(), format)?;
                 record.ambient_path = Some(ambient_name);
             }
             on_frame();
-            let truth = TruthRecord::new(seq as u64, &name, alpha_deg, sweep.facet, &frame.truth);
+            let mut truth = TruthRecord::new(seq as u64, &name, alpha_deg, sweep.facet, &frame.truth);
+            if opts.profile != SheetProfile::Gaussian || opts.stripe_fwhm_px.is_some() {
+                truth = truth.with_sheet(opts.profile, &frame.sheet_fwhm_mm);
+            }
             Ok(RenderedFrame { truth, record })
         })
         .collect()
+}
+
+/// Writes a frame as `format`: the colour frame if there is one, else the grey frame (PNG exactly
+/// as [`Frame16::to_png`] writes it).
+fn write_frame(
+    path: &Path,
+    grey: &Frame16,
+    colour: Option<&RgbFrame>,
+    format: FrameFormat,
+) -> omni_formats::Result<()> {
+    if colour.is_none() && format == FrameFormat::Png {
+        return grey.to_png(path);
+    }
+    let bytes = match colour {
+        Some(c) => c.encode(format),
+        None => grey.encode(format),
+    }
+    .map_err(|e| omni_formats::Error::io(path.display().to_string(), &std::io::Error::other(e)))?;
+    omni_formats::io::write_atomic(path, |w| w.write_all(&bytes))
 }
 
 /// Writes the manifest stream of `frames` (header naming `producer`, the frames directory and the

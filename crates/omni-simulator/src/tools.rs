@@ -1,6 +1,7 @@
 //! What the `omni-sim` tool builds on: sensor presets with imperfections, angle lists, scene
 //! checks against a sensor, and the ground-truth record format.
 
+use crate::profile::SheetProfile;
 use crate::render::TruthPoint;
 use crate::rng::SplitMix64;
 use crate::scene::Scene;
@@ -120,7 +121,8 @@ pub fn check_boards_visible(sensor: &Sensor, scene: &Scene) -> Result<(), String
 }
 
 /// One line of a ground-truth file (JSON Lines; format `omniscan.sim-truth`): the true stripe
-/// points of one frame as `[x, y, z, u, v, laser]` (mm, px).
+/// points of one frame as `[x, y, z, u, v, laser]` (mm, px), each on its light plane: the peak
+/// of the sheet's profile.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TruthRecord {
     pub seq: u64,
@@ -128,13 +130,24 @@ pub struct TruthRecord {
     pub alpha_deg: f64,
     pub facet: u32,
     pub points: Vec<[f64; 6]>,
+    /// The sheet's profile, when it is not the default Gaussian or its width was set in px.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub profile: Option<SheetProfile>,
+    /// The sheet's FWHM (mm) of each laser on, in the frame's `lasers` order (with `profile`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sheet_fwhm_mm: Option<Vec<f64>>,
 }
 
 impl TruthRecord {
     pub fn new(seq: u64, path: &str, alpha_deg: f64, facet: u32, truth: &[TruthPoint]) -> Self {
         let points =
             truth.iter().map(|t| [t.xyz[0], t.xyz[1], t.xyz[2], t.pixel[0], t.pixel[1], t.laser as f64]).collect();
-        TruthRecord { seq, path: path.into(), alpha_deg, facet, points }
+        TruthRecord { seq, path: path.into(), alpha_deg, facet, points, profile: None, sheet_fwhm_mm: None }
+    }
+
+    /// The record with the sheet's profile and widths.
+    pub fn with_sheet(self, profile: SheetProfile, sheet_fwhm_mm: &[f64]) -> Self {
+        TruthRecord { profile: Some(profile), sheet_fwhm_mm: Some(sheet_fwhm_mm.to_vec()), ..self }
     }
 }
 

@@ -16,6 +16,7 @@
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use omni_formats::scene::{SceneFile, SceneObject, Shape};
 use omni_simulator::{BenchObject, RenderOptions, Scene, Sensor, paper_bench, render_laser_frame};
+use omni_vision::colour::{Channel, Colour, channel_of_rgb8};
 use omni_vision::image_io::{GrayImage, write_gray_png};
 use omni_vision::stripe::{Frame, Method, RidgeDetector, RidgeParams, Sampling, Scratch};
 use std::path::PathBuf;
@@ -124,6 +125,46 @@ fn ridge(c: &mut Criterion) {
     group.finish();
 }
 
+/// The laser contrast of a 1 MP RGB8 frame (the dense room frame's stripes in red on its
+/// ambient in grey), beside a copy of the same frame: `SUMMARY rgb-laser-contrast` gives both
+/// and their ratio (target: the contrast adds ≤ 0.3 ms/MP to a grey frame's cost).
+fn rgb_contrast(c: &mut Criterion) {
+    let sensor = Sensor::paper();
+    let (w, h) = sensor.camera.image_size();
+    let frames = frames(&sensor);
+    let grey = &frames[0].pixels;
+    // Red on the bright samples (the stripe), grey elsewhere, so both branches of the blend run.
+    let rgb: Vec<u8> = grey.iter().flat_map(|&v| if v > 60 { [v, v / 8, v / 8] } else { [v, v, v] }).collect();
+    let channel = Channel::Laser(Colour::Red);
+    let mut group = c.benchmark_group("rgb_1024_8bit_one_core");
+    group.throughput(Throughput::Elements((w * h) as u64));
+    group.bench_function("laser-contrast", |b| b.iter(|| channel_of_rgb8(&rgb, 3, w, h, channel)));
+    group.bench_function("copy", |b| b.iter(|| std::hint::black_box(rgb.clone())));
+    group.finish();
+    let fastest = |f: &dyn Fn()| {
+        (0..200)
+            .filter_map(|_| {
+                let t0 = thread_cpu_seconds()?;
+                f();
+                Some(thread_cpu_seconds()? - t0)
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mp = (w * h) as f64 / 1e6;
+    let contrast = fastest(&|| {
+        std::hint::black_box(channel_of_rgb8(&rgb, 3, w, h, channel));
+    });
+    let copy = fastest(&|| {
+        std::hint::black_box(rgb.clone());
+    });
+    println!(
+        "SUMMARY rgb-laser-contrast {:.3} ms/MP, copy of the RGB frame {:.3} ms/MP (thread CPU time, fastest of 200), ratio {:.1}",
+        1e3 * contrast / mp,
+        1e3 * copy / mp,
+        contrast / copy
+    );
+}
+
 /// Runs one `<method>/<frame>` case for 10 s (or `$OMNI_RIDGE_PROFILE_SECONDS`) and prints its
 /// point count and mean time per run.
 fn profile_one(case: &str, sensor: &Sensor, frames: &[BenchFrame]) {
@@ -174,5 +215,5 @@ fn thread_cpu_seconds() -> Option<f64> {
     None
 }
 
-criterion_group!(benches, ridge);
+criterion_group!(benches, ridge, rgb_contrast);
 criterion_main!(benches);

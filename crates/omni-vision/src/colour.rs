@@ -14,7 +14,7 @@
 //! surface above ¾ of full scale reads as a plateau in this contrast too (a step at its edge,
 //! not a stripe).
 //!
-//! Raw Bayer frames ([`BayerOrder`]) are demosaiced ([`demosaic`]) before the channel is taken,
+//! Raw Bayer frames ([`BayerPattern`]) are demosaiced ([`demosaic`]) before the channel is taken,
 //! so that points stay in full-resolution pixel coordinates.
 
 use crate::image_io::GrayImage;
@@ -36,6 +36,15 @@ impl Colour {
             Colour::Red => 0,
             Colour::Green => 1,
             Colour::Blue => 2,
+        }
+    }
+
+    /// Indices of this colour and the other two in an RGB triple.
+    fn laser_and_others(self) -> (usize, usize, usize) {
+        match self {
+            Colour::Red => (0, 1, 2),
+            Colour::Green => (1, 0, 2),
+            Colour::Blue => (2, 0, 1),
         }
     }
 
@@ -89,56 +98,15 @@ impl fmt::Display for Channel {
     }
 }
 
-/// The colour filter array of a raw Bayer frame: the colours of the 2×2 cell's row 0, then
-/// row 1 (`Rggb`: R G / G B), pixel (0, 0) top left.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum BayerOrder {
-    Rggb,
-    Bggr,
-    Grbg,
-    Gbrg,
-}
-
-impl BayerOrder {
-    pub const ALL: [BayerOrder; 4] = [BayerOrder::Rggb, BayerOrder::Bggr, BayerOrder::Grbg, BayerOrder::Gbrg];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            BayerOrder::Rggb => "rggb",
-            BayerOrder::Bggr => "bggr",
-            BayerOrder::Grbg => "grbg",
-            BayerOrder::Gbrg => "gbrg",
-        }
-    }
-
-    /// The colour index (0 R, 1 G, 2 B) of pixel (x, y).
-    pub fn colour_at(self, x: usize, y: usize) -> usize {
-        let cell = match self {
-            BayerOrder::Rggb => [0, 1, 1, 2],
-            BayerOrder::Bggr => [2, 1, 1, 0],
-            BayerOrder::Grbg => [1, 0, 2, 1],
-            BayerOrder::Gbrg => [1, 2, 0, 1],
-        };
-        cell[(y & 1) * 2 + (x & 1)]
-    }
-}
-
-impl FromStr for BayerOrder {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        BayerOrder::ALL
-            .into_iter()
-            .find(|b| b.name() == s)
-            .ok_or_else(|| format!("unknown Bayer order \"{s}\" (known: rggb, bggr, grbg, gbrg)"))
-    }
-}
+/// The colour filter array of a raw Bayer frame (the simulator writes the same ones).
+pub use omni_model::BayerPattern;
 
 /// How a frame file becomes the detector's grey image: the channel, and whether the file is a
 /// raw Bayer mosaic.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct ColourSpec {
     pub channel: Channel,
-    pub bayer: Option<BayerOrder>,
+    pub bayer: Option<BayerPattern>,
 }
 
 impl ColourSpec {
@@ -181,11 +149,7 @@ impl RgbImage {
                 .collect(),
             Channel::Single(c) => self.data.iter().map(|px| px[c.index()]).collect(),
             Channel::Laser(c) => {
-                let (l, a, b) = match c {
-                    Colour::Red => (0, 1, 2),
-                    Colour::Green => (1, 0, 2),
-                    Colour::Blue => (2, 0, 1),
-                };
+                let (l, a, b) = c.laser_and_others();
                 self.data.iter().map(|px| laser_contrast(px[l], px[a], px[b], max)).collect()
             }
         };
@@ -193,14 +157,66 @@ impl RgbImage {
     }
 }
 
-/// `l − w·(a + b)/2` rounded, clamped at 0, `w` = min(1, 4·(max − l)/max) (module docs).
-#[inline]
+/// `l − w·(a + b)/2` rounded, clamped at 0, `w` = min(1, 4·(max − l)/max) (module docs): for
+/// 8-bit samples in integers ([`laser_contrast8`]), for 16-bit ones in `f32`.
+#[inline(always)]
 fn laser_contrast(l: u16, a: u16, b: u16, max: u16) -> u16 {
-    let (l, others, max) = (l as i64, a as i64 + b as i64, max as i64);
-    // w = num / max with num = min(max, 4·(max − l)); the contrast is l − num·others / (2·max).
-    let num = (4 * (max - l)).clamp(0, max);
-    let twice = 2 * l * max - num * others;
-    ((twice + max) / (2 * max)).clamp(0, max) as u16
+    if max == 255 {
+        return laser_contrast8(l as u32, a as u32 + b as u32);
+    }
+    laser_contrast_f32(l as f32, a as f32 + b as f32, max as f32, 4.0 / max as f32)
+}
+
+/// [`laser_contrast`] of 8-bit samples, `others` the sum of the two other channels: `w` in
+/// 1/4096 (`(255 − l)·16448/256`, rounded: 4·(255 − l)/255 to 0.002 %), the result rounded;
+/// 32-bit integer lanes and no division, so that a frame's pass vectorises.
+#[inline(always)]
+fn laser_contrast8(l: u32, others: u32) -> u16 {
+    let w4096 = (((255 - l) * 16448 + 128) >> 8).min(4096);
+    let scaled = (8192 * l + 4096) as i32 - (w4096 * others) as i32;
+    (scaled.max(0) >> 13) as u16
+}
+
+/// [`laser_contrast`] of the laser's level `l` and the sum `others` of the other two, with
+/// `four_over_max` = 4 / `max` precomputed.
+#[inline(always)]
+fn laser_contrast_f32(l: f32, others: f32, max: f32, four_over_max: f32) -> u16 {
+    let w = ((max - l) * four_over_max).min(1.0);
+    // ≤ l ≤ max, so the rounding cannot pass full scale; `as` saturates at 0.
+    ((l - 0.5 * w * others).max(0.0) + 0.5) as u16
+}
+
+/// The grey image `channel` makes of interleaved 8-bit samples, `stride` per pixel (3 for RGB,
+/// 4 for RGBA; red, green, blue first): one pass over the frame, no intermediate image.
+pub fn channel_of_rgb8(samples: &[u8], stride: usize, width: u32, height: u32, channel: Channel) -> GrayImage {
+    let pixels = samples.chunks_exact(stride);
+    let data: Vec<u16> = match channel {
+        Channel::Luma => {
+            pixels.map(|p| ((2126 * p[0] as u32 + 7152 * p[1] as u32 + 722 * p[2] as u32) / 10000) as u16).collect()
+        }
+        Channel::Single(c) => pixels.map(|p| p[c.index()] as u16).collect(),
+        Channel::Laser(c) => laser_contrast_rgb8(samples, stride, c.laser_and_others()),
+    };
+    GrayImage { width, height, bit_depth: 8, data }
+}
+
+/// [`laser_contrast8`] of every pixel of interleaved samples, in blocks: the block's laser levels
+/// and other-channel sums gathered first (the only strided reads), then computed in lanes.
+fn laser_contrast_rgb8(samples: &[u8], stride: usize, (l, a, b): (usize, usize, usize)) -> Vec<u16> {
+    const BLOCK: usize = 64;
+    let n = samples.len() / stride;
+    let mut out = vec![0u16; n];
+    let (mut level, mut others) = ([0u32; BLOCK], [0u32; BLOCK]);
+    for (dst, src) in out.chunks_mut(BLOCK).zip(samples.chunks(BLOCK * stride)) {
+        for (i, p) in src.chunks_exact(stride).enumerate() {
+            level[i] = p[l] as u32;
+            others[i] = p[a] as u32 + p[b] as u32;
+        }
+        for (o, (&lv, &s)) in dst.iter_mut().zip(level.iter().zip(&others)) {
+            *o = laser_contrast8(lv, s);
+        }
+    }
+    out
 }
 
 /// Demosaics a raw Bayer frame with Malvar, He and Cutler's gradient-corrected linear filters
@@ -209,7 +225,7 @@ fn laser_contrast(l: u16, a: u16, b: u16, max: u16) -> u16 {
 /// interpolation leaves small, since a zipper in R − (G+B)/2 is a thin bright line: a false
 /// stripe. Borders are mirrored about the edge pixel, which keeps the mosaic's pattern. The
 /// frame's sides must be even: a mosaic is whole 2×2 cells.
-pub fn demosaic(raw: &GrayImage, order: BayerOrder) -> Result<RgbImage, String> {
+pub fn demosaic(raw: &GrayImage, order: BayerPattern) -> Result<RgbImage, String> {
     let (w, h) = (raw.width as usize, raw.height as usize);
     if w % 2 != 0 || h % 2 != 0 || w < 2 || h < 2 {
         return Err(format!(
@@ -230,7 +246,7 @@ pub fn demosaic(raw: &GrayImage, order: BayerOrder) -> Result<RgbImage, String> 
     for y in 0..h {
         for x in 0..w {
             let (xi, yi) = (x as i64, y as i64);
-            let own = order.colour_at(x, y);
+            let own = order.channel(x, y);
             // Sums of the 5×5 neighbourhood's rings, by position.
             let v = |dx: i64, dy: i64| at(xi + dx, yi + dy);
             let centre = v(0, 0);
@@ -251,7 +267,7 @@ pub fn demosaic(raw: &GrayImage, order: BayerOrder) -> Result<RgbImage, String> 
             px[own] = 8 * centre;
             if own == 1 {
                 // Green: the row's neighbours are one of R/B, the column's the other.
-                let row_colour = order.colour_at(x + 1, y);
+                let row_colour = order.channel(x + 1, y);
                 px[row_colour] = along_row;
                 px[2 - row_colour] = along_column;
             } else {
@@ -283,12 +299,50 @@ mod tests {
         // Towards full scale the laser's own level takes over (w = 4·(255 − R)/255 above ¾ of
         // it); white and a saturated red read full scale.
         let bright = rgb(4, 1, |x, _| [[191, 100, 100], [255, 255, 255], [255, 0, 0], [230, 200, 200]][x]);
-        let want_230 = (230.0 - (4.0 * (255.0 - 230.0) / 255.0) * (200.0 + 200.0) / 2.0f64).round() as u16;
-        assert_eq!(img_red(&bright), vec![91, 255, 255, want_230]);
+        let want_230 = 230.0 - (4.0 * (255.0 - 230.0) / 255.0) * (200.0 + 200.0) / 2.0f64;
+        let got = img_red(&bright);
+        assert_eq!(got[..3], [91, 255, 255]);
+        assert!((got[3] as f64 - want_230).abs() <= 0.5 + 1e-9, "{} against {want_230}", got[3]);
+        // The 8-bit integer form is the formula to within its rounding everywhere.
+        for l in 0..=255u32 {
+            for others in (0..=510).step_by(3) {
+                let w = (4.0 * (255.0 - l as f64) / 255.0).min(1.0);
+                let exact = (l as f64 - w * others as f64 / 2.0).max(0.0);
+                let got = laser_contrast8(l, others) as f64;
+                assert!((got - exact).abs() <= 0.55, "l {l} others {others}: {got} against {exact}");
+            }
+        }
         // Monotonic in the laser's level for a fixed leak into the other channels.
         let ramp = rgb(256, 1, |x, _| [x as u16, (x as u16) / 2, (x as u16) / 2]);
         let c = img_red(&ramp);
         assert!(c.windows(2).all(|w| w[1] >= w[0]), "{c:?}");
+    }
+
+    #[test]
+    fn the_one_pass_8_bit_reading_equals_the_general_one() {
+        // Every (r, g, b) on a coarse lattice, in RGB and RGBA layout.
+        let values: Vec<u8> = (0..=255).step_by(5).map(|v| v as u8).chain([254, 255]).collect();
+        let mut px: Vec<[u8; 3]> = Vec::new();
+        for &r in &values {
+            for &g in &values {
+                px.extend(values.iter().map(|&b| [r, g, b]));
+            }
+        }
+        let general = RgbImage {
+            width: px.len() as u32,
+            height: 1,
+            bit_depth: 8,
+            data: px.iter().map(|p| p.map(u16::from)).collect(),
+        };
+        let rgb: Vec<u8> = px.iter().flatten().copied().collect();
+        let rgba: Vec<u8> = px.iter().flat_map(|p| [p[0], p[1], p[2], 7]).collect();
+        let channels =
+            [Channel::Luma, Channel::Single(Colour::Blue), Channel::Laser(Colour::Red), Channel::Laser(Colour::Green)];
+        for channel in channels {
+            let want = general.channel(channel);
+            assert_eq!(channel_of_rgb8(&rgb, 3, px.len() as u32, 1, channel), want, "{channel}");
+            assert_eq!(channel_of_rgb8(&rgba, 4, px.len() as u32, 1, channel), want, "{channel}");
+        }
     }
 
     fn img_red(img: &RgbImage) -> Vec<u16> {
@@ -298,12 +352,12 @@ mod tests {
     #[test]
     fn each_bayer_order_demosaics_a_flat_colour_to_itself() {
         let colour = [180u16, 90, 30];
-        for order in BayerOrder::ALL {
+        for order in BayerPattern::ALL {
             let (w, h) = (8, 6);
             let mut raw = GrayImage::new(w, h, 8);
             for y in 0..h as usize {
                 for x in 0..w as usize {
-                    raw.data[y * w as usize + x] = colour[order.colour_at(x, y)];
+                    raw.data[y * w as usize + x] = colour[order.channel(x, y)];
                 }
             }
             let out = demosaic(&raw, order).unwrap();
@@ -316,12 +370,12 @@ mod tests {
         // A horizontal ramp in every channel: the interpolated samples are exact (the mirrored
         // border included, where the ramp's slope changes sign only beyond the edge pixel's
         // neighbours: checked inside), whatever the order.
-        for order in BayerOrder::ALL {
+        for order in BayerPattern::ALL {
             let (w, h) = (10usize, 8usize);
             let mut raw = GrayImage::new(w as u32, h as u32, 16);
             for y in 0..h {
                 for x in 0..w {
-                    raw.data[y * w + x] = (1000 + 100 * x + 1000 * order.colour_at(x, y)) as u16;
+                    raw.data[y * w + x] = (1000 + 100 * x + 1000 * order.channel(x, y)) as u16;
                 }
             }
             let out = demosaic(&raw, order).unwrap();
@@ -337,9 +391,9 @@ mod tests {
 
     #[test]
     fn odd_sized_mosaics_and_unknown_names_are_refused() {
-        let e = demosaic(&GrayImage::new(5, 4, 8), BayerOrder::Rggb).unwrap_err();
+        let e = demosaic(&GrayImage::new(5, 4, 8), BayerPattern::Rggb).unwrap_err();
         assert!(e.contains("5x4") && e.contains("rggb"), "{e}");
-        assert!("rgbg".parse::<BayerOrder>().unwrap_err().contains("rggb, bggr"));
+        assert!(BayerPattern::parse("rgbg").unwrap_err().contains("rggb, bggr"));
         assert!("violet".parse::<Colour>().is_err());
     }
 }

@@ -116,6 +116,14 @@ pub fn decode_gray(bytes: &[u8], name: &str) -> Result<GrayImage, Error> {
     Ok(from_dynamic(decode_checked(bytes, name)?))
 }
 
+/// Whether the image file at `path` holds colour (from its header alone); `None` if it cannot be
+/// read or recognised (the frame's own loading reports that).
+pub fn is_colour_file(path: &Path) -> Option<bool> {
+    use image::ImageDecoder;
+    let reader = image::ImageReader::open(path).ok()?.with_guessed_format().ok()?;
+    Some(reader.into_decoder().ok()?.color_type().has_color())
+}
+
 /// Loads a frame as the stripe detector reads it: [`load_gray`] for [`ColourSpec::default`];
 /// otherwise the channel or laser contrast of a colour frame, or of a raw Bayer mosaic
 /// demosaiced first (`crate::colour`). A grey frame given a colour reading, a colour frame given
@@ -155,7 +163,28 @@ pub fn decode_frame_channel(bytes: &[u8], name: &str, spec: &ColourSpec) -> Resu
                     ),
                 ));
             }
-            rgb_of(dynamic)
+            // 8-bit colour, the common case, in one pass from the decoded samples.
+            match &dynamic {
+                image::DynamicImage::ImageRgb8(buf) => {
+                    return Ok(crate::colour::channel_of_rgb8(
+                        buf.as_raw(),
+                        3,
+                        buf.width(),
+                        buf.height(),
+                        spec.channel,
+                    ));
+                }
+                image::DynamicImage::ImageRgba8(buf) => {
+                    return Ok(crate::colour::channel_of_rgb8(
+                        buf.as_raw(),
+                        4,
+                        buf.width(),
+                        buf.height(),
+                        spec.channel,
+                    ));
+                }
+                _ => rgb_of(dynamic),
+            }
         }
     };
     Ok(rgb.channel(spec.channel))

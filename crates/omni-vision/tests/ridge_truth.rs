@@ -5,7 +5,7 @@ use omni_simulator::{
     BenchObject, Imaging, RenderOptions, Scene, Sensor, TruthPoint, paper_bench, render_laser_frame, truth_polylines,
 };
 use omni_vision::image_io::GrayImage;
-use omni_vision::stripe::{RidgeDetector, RidgeParams, StripePoint};
+use omni_vision::stripe::{Method, RidgeDetector, RidgeParams, StripePoint};
 
 const SIZE: u32 = 1024;
 
@@ -654,6 +654,38 @@ fn the_room_scene_is_covered_as_captured_and_with_laser_off_frames() {
             if let Some(c) = t.visible_coverage(band) {
                 assert!(c >= 0.9, "laser-off {laser_off}, band {}–{}°: {c:.3}", 10 * band, 10 * band + 10);
             }
+        }
+    }
+}
+
+/// Stripes shaped like real ones (`SheetProfile::real()`: a Gaussian core with 17 % of the
+/// energy in a one-sided tail 4 σ long, measured on real photographs), ideal optics otherwise,
+/// as bright at their peak whatever their width, on the bench plane; the truth is the sheet's
+/// peak. 2 and 5 px wide: covered ≥ 90 %, no false point, a spread about their mean offset
+/// ≤ 0.04 px (0.030 measured); the offset itself is the estimators' pull towards the tail (windowed centroid
+/// +0.11 / +0.14 px, Gaussian fit +0.085 / +0.077 px measured): they locate the profile's
+/// centre, not its peak. 10 and 20 px wide are printed, not asserted (docs/DECISIONS.md: found
+/// 0 % and 13 %; an open gap).
+#[test]
+fn real_shaped_stripes_2_to_20_px_wide() {
+    use omni_simulator::SheetProfile;
+    let gauss = RidgeParams { method: Method::Gauss, ..Default::default() };
+    for fwhm in [2.0, 5.0, 10.0, 20.0] {
+        let ideal = RenderOptions::ideal();
+        let laser_strength = ideal.laser_strength * fwhm / 2.0;
+        let opts = RenderOptions { profile: SheetProfile::real(), stripe_fwhm_px: Some(fwhm), laser_strength, ..ideal };
+        let tallies = bench_at(BenchObject::Plane, &opts, &[RidgeParams::default(), gauss], &positions(8), false);
+        for (t, name) in tallies.iter().zip(["windowed", "gauss"]) {
+            eprintln!("{}", t.line(&format!("real {fwhm} px {name}")));
+            if fwhm > 5.0 {
+                continue;
+            }
+            let (rms, bias) = t.rms_bias();
+            let spread = (rms * rms - bias * bias).max(0.0).sqrt();
+            assert!(t.coverage(8).unwrap() >= 0.9, "{fwhm} px {name}: coverage {:?}", t.coverage(8));
+            assert_eq!(t.false_points, 0, "{fwhm} px {name}: false points");
+            assert!(spread <= 0.04, "{fwhm} px {name}: spread {spread:.4} px");
+            assert!((0.0..=0.2).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
         }
     }
 }

@@ -68,6 +68,10 @@ const NARROW_PERCENTILE: usize = 10;
 /// A stripe whose half-maximum width changes faster than this (px per px along it, over ±3 px)
 /// is a tapering lit area, not the laser's line.
 pub const MAX_WIDTH_SLOPE: f64 = 0.2;
+/// The flattest profile (width at 90 % of the peak over the half-maximum width) counted as a
+/// laser's line wider than its scale: a Gaussian has 0.39, a lit surface's blurred flat top
+/// nearly 1.
+pub const MAX_FLATNESS: f64 = 0.7;
 /// A fit that moves its point farther than this (px) is not trusted (a kink, another stripe).
 const MAX_MOVE_PX: f64 = 0.5;
 /// FWHM / σ of a Gaussian.
@@ -98,8 +102,6 @@ impl Reach {
 /// Profile buffers reused from seed to seed.
 #[derive(Debug, Default)]
 struct Buffers {
-    /// Profiles refused as wider than the reach: stripes for a coarser scale.
-    too_wide: usize,
     /// Bilinear samples 1 px apart across the stripe, for the background.
     coarse: Vec<f32>,
     /// Fine samples on the −n side, outwards.
@@ -133,6 +135,9 @@ struct Centre {
     /// The variance (px²) that scales the blur's pull on this profile's centre if the stripe
     /// curves ([`pull_variance`]); `None` for a saturated profile.
     pull_variance: Option<f64>,
+    /// The profile's width at 90 % of its peak over its half-maximum width: 0.39 for a
+    /// Gaussian, near 1 for a lit surface's flat top.
+    flatness: f64,
 }
 
 impl RidgeDetector {
@@ -154,9 +159,10 @@ impl RidgeDetector {
             .filter_map(|(x, y, axis)| self.measure_seed(frame, x, y, axis, threshold, &mut buffers))
             .collect();
         let mut kept = self.link_and_correct(&centres);
-        let wide =
-            buffers.too_wide + centres.iter().filter(|c| c.half_width > super::scales::NARROW_HALF_WIDTH_PX).count();
-        if let Some(coarse) = self.coarser_stripes(frame, threshold, scale, wide) {
+        // Profiles too wide for this scale that peak like a laser's line (a lit surface's flat
+        // top is wide at every scale).
+        let wide = centres.iter().filter(|c| c.half_width > super::scales::NARROW_HALF_WIDTH_PX && peaks(c)).count();
+        if let Some(coarse) = self.coarser_stripes(frame, threshold, scale, wide, kept.len()) {
             let refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
             kept.extend(refined);
         }
@@ -429,11 +435,7 @@ impl RidgeDetector {
         let seg = segment_near(q, half, t)?;
         let (a, b) = estimators::crossings(q, &seg, t)?;
         let width = (b - a) * SAMPLE_STEP_PX;
-        if width > max_width {
-            buffers.too_wide += 1;
-            return None;
-        }
-        if width < self.params.min_width {
+        if width > max_width || width < self.params.min_width {
             return None;
         }
         let peak = q[seg.peak];
@@ -446,6 +448,8 @@ impl RidgeDetector {
         // half maximum and ASYMMETRY_LEVEL of the peak.
         let (la, lb) = estimators::crossings(q, &seg, ASYMMETRY_LEVEL * peak)?;
         let (left, right) = (ha - la, lb - hb);
+        let (ta, tb) = estimators::crossings(q, &seg, 0.9 * peak)?;
+        let flatness = (tb - ta) / (hb - ha).max(1e-9);
         let asymmetry = (left - right) / (left + right).max(1e-9);
         let s = (index - half as f64) * SAMPLE_STEP_PX;
         if s.abs() > far_px {
@@ -459,7 +463,7 @@ impl RidgeDetector {
             if saturated { quality::SATURATED } else { 0 } | self.contrast_and_width_flags(peak, width, t, max_width);
         let point = StripePoint { u, v, intensity: peak as f64, width, quality: flags };
         let pull_variance = (!saturated).then(|| self.pull_variance(raw, q, &seg, t, index)).flatten();
-        Some(Centre { point, normal: (nx, ny), half_width, asymmetry, pull_variance })
+        Some(Centre { point, normal: (nx, ny), half_width, asymmetry, pull_variance, flatness })
     }
 
     /// The variance σ² (px²) for which the blur moves this profile's centre by σ²κ/2 towards the
@@ -687,6 +691,14 @@ fn azimuth_order(dx: f64, dy: f64) -> f64 {
         (false, true) => 2.0 - s,
         (false, false) => -2.0 - s,
     }
+}
+
+/// Whether a profile peaks like a laser's line rather than lying flat across a lit surface
+/// ([`MAX_FLATNESS`]); a saturated one always does. Only peaked wide profiles send the search to
+/// coarser scales: binned, a lit face's tip is a narrow ridge there, which no coarse check tells
+/// from a stripe.
+fn peaks(c: &Centre) -> bool {
+    c.point.quality & quality::SATURATED != 0 || c.flatness <= MAX_FLATNESS
 }
 
 /// Whether the seed's stripe clearly runs the other way (its normal more than 60° from the

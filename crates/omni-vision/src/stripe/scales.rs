@@ -3,13 +3,15 @@
 //! Rule: a stripe is found at the scale where it is a few pixels wide. The profiles' reach,
 //! the seeds' neighbours, the linking distances and the speckle they average all scale with the
 //! stripe, so the checks that suit a 2–4 px stripe suit a 20 px one in a frame binned 4 × 4
-//! and a saturated 60 px core binned 8 × 8. When a scale measures enough profiles wider than
-//! [`NARROW_HALF_WIDTH_PX`] (or refuses them as wider than its reach), or the frame saturates,
-//! the frame is binned 2 × 2 and searched again; each coarse point is then re-measured on the
-//! finer frame, two profiles per coarse point along its normal, down to the original pixels.
-//! A finer scale's own points win where both have one, and coarse points that are narrow at
-//! their scale ([`WIDE_HALF_WIDTH_PX`]) are left to the finer scale, which measured (or
-//! refused) them itself.
+//! and a saturated 60 px core binned 8 × 8. When the frame's own scale measures enough profiles
+//! wider than [`NARROW_HALF_WIDTH_PX`] that peak like a laser's line (a lit surface's flat top
+//! does not, and binned it would pass for a stripe), or the frame has more saturated pixels than
+//! its points explain ([`SATURATED_PER_POINT`]), the frame is binned 2 × 2, 4 × 4, … up to the
+//! largest scale allowed and searched at each. Each coarse point is re-measured on the next
+//! finer frame, two profiles along its normal, down to the original pixels, and the re-measured
+//! stripe is followed across the gaps the coarse scale left ([`TRACK_PX`]). A finer scale's own
+//! points win where both have one, and coarse points that are narrow at their scale
+//! ([`WIDE_HALF_WIDTH_PX`]) are left to the finer scale, which measured (or refused) them.
 
 use super::across::Linked;
 use super::{Frame, Pixel, RidgeDetector};
@@ -23,25 +25,37 @@ pub const NARROW_HALF_WIDTH_PX: f64 = 4.5;
 pub const WIDE_HALF_WIDTH_PX: f64 = 1.75;
 /// Profiles too wide for a scale that make the next scale worth searching.
 pub const MIN_WIDE_PROFILES: usize = 20;
+/// Saturated pixels per kept point that a saturated stripe narrow enough for this scale leaves
+/// (its plateau is a few px wide); more, and a wider core went unseen.
+pub const SATURATED_PER_POINT: usize = 8;
 /// How far (px) a re-measured stripe is followed across a gap the coarse scale left.
 pub const TRACK_PX: usize = 8;
+/// Rows apart (px) that the saturation count samples.
+const SATURATION_ROW_STEP: usize = 4;
 /// Smallest binned frame side (px) worth searching.
 const MIN_SIDE_PX: u32 = 32;
 
 impl RidgeDetector {
     /// The points of the next coarser scale (in its pixels), if this one warrants it: `wide`
-    /// profiles were too wide here, or the frame saturates somewhere.
+    /// profiles were too wide here, or the frame has more saturated pixels than its `kept`
+    /// points explain (a saturated core wider than the seeds' reach has no seed at all).
     pub(super) fn coarser_stripes<P: Pixel>(
         &self,
         frame: &Frame<'_, P>,
         threshold: f64,
         scale: u32,
         wide: usize,
+        kept: usize,
     ) -> Option<Vec<Linked>> {
         if 2 * scale > self.params.max_scale || frame.width / 2 < MIN_SIDE_PX || frame.height / 2 < MIN_SIDE_PX {
             return None;
         }
-        if wide < MIN_WIDE_PROFILES && !saturates(frame) {
+        // The frame's own scale decides: once it has wide stripes, every coarser scale is
+        // searched (each costs a quarter of the one before), since a stripe too wide for one
+        // scale may be speckled or lopsided at the next and found only at the one after.
+        let wide_stripes =
+            || wide >= MIN_WIDE_PROFILES || saturated_pixels(frame) > SATURATED_PER_POINT * (kept + MIN_WIDE_PROFILES);
+        if scale == 1 && !wide_stripes() {
             return None;
         }
         let binned = Binned::of(frame);
@@ -67,11 +81,14 @@ impl RidgeDetector {
     }
 }
 
-/// Whether any sample of the frame is at its saturation level.
-fn saturates<P: Pixel>(frame: &Frame<'_, P>) -> bool {
-    let full = frame.max_value as u32;
-    // A maximum per block (vectorised), then one comparison.
-    frame.data.chunks(4096).any(|block| block.iter().fold(0u32, |m, v| m.max(v.to_u32())) >= full)
+/// About how many samples of the frame are at its saturation level, from every
+/// [`SATURATION_ROW_STEP`]th row: a core wide enough to matter spans several of them.
+fn saturated_pixels<P: Pixel>(frame: &Frame<'_, P>) -> usize {
+    let (full, w) = (frame.max_value as u32, frame.width as usize);
+    let rows = frame.data.chunks_exact(w).step_by(SATURATION_ROW_STEP);
+    // Compare-and-add without branches into a 32-bit count per row: vectorised.
+    let sampled: usize = rows.map(|row| row.iter().map(|v| u32::from(v.to_u32() >= full)).sum::<u32>() as usize).sum();
+    sampled * SATURATION_ROW_STEP
 }
 
 /// A frame binned 2 × 2: sums while they fit 16 bits (exact, and a sum saturates only where

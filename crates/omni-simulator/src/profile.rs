@@ -1,0 +1,332 @@
+//! The laser sheet's irradiance profile across the light plane.
+//!
+//! [`SheetProfile::Gaussian`] is the physically derived default (a Gaussian beam waist).
+//! [`SheetProfile::Tailed`] is the shape measured on real line-laser photographs
+//! (docs/DECISIONS.md, "Real stripe cross-sections"): a Gaussian core with a one-sided
+//! exponential tail, i.e. `(1 − w)·N(σ) + w·(N(σ) ∗ Exp(τ))`, the tail on one side of the plane
+//! along its whole length. Both components have unit area, so the laser's energy does not depend
+//! on the shape. The family is closed under Gaussian blur (σ² adds, the tail's τ stays), which is
+//! how a sample's footprint and the optics widen it, and how [`SheetProfile::image_fwhm_px`]
+//! predicts the FWHM the rendered stripe shows.
+//!
+//! Placement: the light plane (d = 0, where the ground truth lies) is the **peak** (mode) of the
+//! sheet's irradiance profile; for the Gaussian that is also its centroid.
+
+use serde::{Deserialize, Serialize};
+
+/// FWHM of a Gaussian in units of its σ: √(8 ln 2).
+pub const GAUSS_FWHM_PER_SIGMA: f64 = 2.354_820_045_030_949;
+
+/// Shape of the laser sheet's irradiance across the light plane; its width is
+/// [`crate::RenderOptions::beam_fwhm_mm`] (or set per frame by
+/// [`crate::RenderOptions::stripe_fwhm_px`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "shape", rename_all = "snake_case", deny_unknown_fields)]
+pub enum SheetProfile {
+    /// A Gaussian, centred on the light plane.
+    #[default]
+    Gaussian,
+    /// A Gaussian core of σ with a one-sided exponential tail: a share `tail_weight` of the
+    /// energy in `N(σ) ∗ Exp(τ)`, τ = `tail_length` · σ, on the side `tail_side` (+1: towards the
+    /// light plane's normal, −1: away from it). Its peak lies on the light plane.
+    Tailed { tail_weight: f64, tail_length: f64, tail_side: i8 },
+}
+
+impl SheetProfile {
+    /// The cross-section measured on the real frames (docs/DECISIONS.md): 17 % of the energy in a
+    /// tail 4 σ long, on the plane normal's side.
+    pub fn real() -> Self {
+        SheetProfile::Tailed { tail_weight: 0.17, tail_length: 4.0, tail_side: 1 }
+    }
+
+    /// Checks the parameters; the message names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        match *self {
+            SheetProfile::Gaussian => Ok(()),
+            SheetProfile::Tailed { tail_weight, tail_length, tail_side } => {
+                if !(tail_weight.is_finite() && (0.0..=0.9).contains(&tail_weight)) {
+                    return Err(format!("tail_weight must be within 0–0.9, got {tail_weight}"));
+                }
+                if !(tail_length.is_finite() && (0.05..=50.0).contains(&tail_length)) {
+                    return Err(format!("tail_length must be within 0.05–50 (in core σ), got {tail_length}"));
+                }
+                if tail_side != 1 && tail_side != -1 {
+                    return Err(format!("tail_side must be 1 or -1, got {tail_side}"));
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// The shape's constants (mode and FWHM of the unit-σ profile).
+    pub(crate) fn shape(&self) -> Shape {
+        let (w, r, side) = match *self {
+            SheetProfile::Gaussian => (0.0, 1.0, 1.0),
+            SheetProfile::Tailed { tail_weight, tail_length, tail_side } => {
+                (tail_weight, tail_length, f64::from(tail_side))
+            }
+        };
+        let mut s = Shape { w, r, side, mode: 0.0, fwhm: GAUSS_FWHM_PER_SIGMA };
+        if w > 0.0 {
+            s.mode = s.mode_at(1.0);
+            let (lo, hi) = s.half_points(1.0);
+            s.fwhm = hi - lo;
+        }
+        s
+    }
+
+    /// FWHM of the sheet in units of its core σ.
+    pub fn fwhm_per_sigma(&self) -> f64 {
+        self.shape().fwhm
+    }
+
+    /// The profile as a function (unit area) of the offset from the light plane's image, for a
+    /// sheet imaged `fwhm` wide, after a Gaussian blur of σ `blur` (same unit as `fwhm`; positive
+    /// offsets towards the plane's normal, the tail's side for `tail_side` 1). Builds the shape
+    /// once: cheap to call many times.
+    pub fn curve(&self, fwhm: f64, blur: f64) -> impl Fn(f64) -> f64 + use<> {
+        let shape = self.shape();
+        let sigma = fwhm / shape.fwhm;
+        move |x| shape.density(x, sigma, blur)
+    }
+
+    /// The FWHM (px) of a stripe whose sheet images `fwhm_px` wide (px, before the optics), after
+    /// a Gaussian blur of σ `blur_px` (the lens's PSF and the pixel's area).
+    pub fn image_fwhm_px(&self, fwhm_px: f64, blur_px: f64) -> f64 {
+        let shape = self.shape();
+        let sigma = fwhm_px / shape.fwhm;
+        let s = (1.0 + (blur_px / sigma).powi(2)).sqrt();
+        let (lo, hi) = shape.half_points(s);
+        (hi - lo) * sigma
+    }
+
+    /// The sheet's FWHM (px, before the optics) that gives a stripe of FWHM `target_px` after a
+    /// Gaussian blur of σ `blur_px`; `None` if the blur alone is already that wide.
+    pub fn sheet_fwhm_for_image_px(&self, target_px: f64, blur_px: f64) -> Option<f64> {
+        if !(target_px.is_finite() && target_px > 0.0) || self.image_fwhm_px(1e-6, blur_px) >= target_px {
+            return None;
+        }
+        let (mut lo, mut hi) = (1e-6, target_px);
+        for _ in 0..100 {
+            let mid = 0.5 * (lo + hi);
+            if self.image_fwhm_px(mid, blur_px) < target_px {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        Some(0.5 * (lo + hi))
+    }
+
+    /// Where the peak of the stripe blurred by a Gaussian of σ `blur_px` lies from the light
+    /// plane's image (px, positive towards the tail), for a sheet imaged `fwhm_px` wide: the
+    /// blur's pull on an asymmetric profile's peak (0 for the Gaussian).
+    pub fn blurred_peak_offset_px(&self, fwhm_px: f64, blur_px: f64) -> f64 {
+        let shape = self.shape();
+        let sigma = fwhm_px / shape.fwhm;
+        let s = (1.0 + (blur_px / sigma).powi(2)).sqrt();
+        (shape.mode_at(s) - shape.mode) * sigma
+    }
+
+    /// The profile's centroid from the light plane (in units of its FWHM, positive towards the
+    /// tail): where a centre of mass over the whole profile lands.
+    pub fn centroid_offset(&self) -> f64 {
+        let shape = self.shape();
+        (shape.w * shape.r - shape.mode) / shape.fwhm
+    }
+}
+
+/// A profile's constants for a core σ of 1: tail weight `w`, tail length `r` (in σ), `side`,
+/// the mode's offset from the core's centre towards the tail, and the FWHM.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Shape {
+    pub w: f64,
+    pub r: f64,
+    pub side: f64,
+    pub mode: f64,
+    pub fwhm: f64,
+}
+
+impl Shape {
+    /// Unit-area profile of core σ 1 widened to σ `s` (≥ 1), at `x` from the core's centre
+    /// towards the tail.
+    fn unit(&self, x: f64, s: f64) -> f64 {
+        let core = (-0.5 * (x / s).powi(2)).exp() / (s * (2.0 * std::f64::consts::PI).sqrt());
+        if self.w == 0.0 { core } else { (1.0 - self.w) * core + self.w * emg(x, s, self.r) }
+    }
+
+    /// The mode of the profile widened to σ `s`.
+    fn mode_at(&self, s: f64) -> f64 {
+        if self.w == 0.0 {
+            return 0.0;
+        }
+        // Golden-section search: the mode lies between the core's centre and one core σ towards
+        // the tail for any tail that leaves a single peak, and the profile is unimodal there.
+        let (mut a, mut b) = (-0.5 * s, 2.0 * s);
+        let g = 0.5 * (5f64.sqrt() - 1.0);
+        let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
+        let (mut fc, mut fd) = (self.unit(c, s), self.unit(d, s));
+        for _ in 0..120 {
+            if fc > fd {
+                b = d;
+                d = c;
+                fd = fc;
+                c = b - g * (b - a);
+                fc = self.unit(c, s);
+            } else {
+                a = c;
+                c = d;
+                fc = fd;
+                d = a + g * (b - a);
+                fd = self.unit(d, s);
+            }
+        }
+        0.5 * (a + b)
+    }
+
+    /// The half-maximum points (lower, upper) of the profile widened to σ `s`, from the core's
+    /// centre towards the tail.
+    fn half_points(&self, s: f64) -> (f64, f64) {
+        let m = self.mode_at(s);
+        let half = 0.5 * self.unit(m, s);
+        let solve = |mut inside: f64, mut outside: f64| {
+            for _ in 0..100 {
+                let mid = 0.5 * (inside + outside);
+                if self.unit(mid, s) > half {
+                    inside = mid;
+                } else {
+                    outside = mid;
+                }
+            }
+            0.5 * (inside + outside)
+        };
+        (solve(m, m - 10.0 * s), solve(m, m + 10.0 * s + 20.0 * self.r))
+    }
+
+    /// Profile (unit area) at plane distance `d` (mm) for a core σ `sigma` (mm) widened by a
+    /// Gaussian of σ `extra` (mm), placed with its unwidened mode on the plane.
+    pub fn density(&self, d: f64, sigma: f64, extra: f64) -> f64 {
+        let s = (1.0 + (extra / sigma).powi(2)).sqrt();
+        let x = self.side * d / sigma + self.mode;
+        self.unit(x, s) / sigma
+    }
+
+    /// The plane distances (mm) outside which the profile is taken as 0: 6 σ on the core's side,
+    /// 6 σ + 10 τ on the tail's.
+    pub fn support(&self, sigma: f64, extra: f64) -> (f64, f64) {
+        let s = (sigma * sigma + extra * extra).sqrt();
+        let tail = if self.w > 0.0 { 10.0 * self.r * sigma } else { 0.0 };
+        self.range(-6.0 * s, 6.0 * s + tail, sigma)
+    }
+
+    /// The plane distances (mm) within which pixels are supersampled: 4 σ on the core's side,
+    /// 4 σ + τ on the tail's (the tail further out is smooth at the pixel scale).
+    pub fn near(&self, sigma: f64) -> (f64, f64) {
+        let tail = if self.w > 0.0 { self.r * sigma } else { 0.0 };
+        self.range(-4.0 * sigma, 4.0 * sigma + tail, sigma)
+    }
+
+    /// Plane distances of the offsets `lo`, `hi` (mm) from the core's centre towards the tail.
+    fn range(&self, lo: f64, hi: f64, sigma: f64) -> (f64, f64) {
+        let centre = -self.side * self.mode * sigma;
+        let (a, b) = (centre + self.side * lo, centre + self.side * hi);
+        (a.min(b), a.max(b))
+    }
+}
+
+/// The exponentially modified Gaussian: a unit Gaussian of σ `s` convolved with the exponential
+/// `exp(−x/t)/t` (x > 0), at `x`; evaluated without overflow on both sides.
+fn emg(x: f64, s: f64, t: f64) -> f64 {
+    let z = (s / t - x / s) / std::f64::consts::SQRT_2;
+    let e = if z >= 0.0 {
+        // exp(s²/2t² − x/t)·erfc(z) = exp(−x²/2s²)·erfcx(z)
+        (-0.5 * (x / s).powi(2)).exp() * erfcx(z)
+    } else {
+        (0.5 * (s / t).powi(2) - x / t).exp() * (2.0 - erfcx(-z) * (-z * z).exp())
+    };
+    0.5 / t * e
+}
+
+/// The scaled complementary error function exp(z²)·erfc(z) for z ≥ 0 (Numerical Recipes'
+/// Chebyshev fit of erfc: fractional error below 1.2e-7 everywhere).
+fn erfcx(z: f64) -> f64 {
+    debug_assert!(z >= 0.0);
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let poly = -1.265_512_23
+        + t * (1.000_023_68
+            + t * (0.374_091_96
+                + t * (0.096_784_18
+                    + t * (-0.186_288_06
+                        + t * (0.278_868_07
+                            + t * (-1.135_203_98 + t * (1.488_515_87 + t * (-0.822_152_23 + t * 0.170_872_77))))))));
+    t * poly.exp()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Numerical integral of f over [a, b] (midpoint rule).
+    fn integral(f: impl Fn(f64) -> f64, a: f64, b: f64) -> f64 {
+        let n = 200_000;
+        let h = (b - a) / n as f64;
+        (0..n).map(|i| f(a + (i as f64 + 0.5) * h)).sum::<f64>() * h
+    }
+
+    #[test]
+    fn the_profiles_have_unit_area_and_their_peak_on_the_plane() {
+        for p in [
+            SheetProfile::Gaussian,
+            SheetProfile::real(),
+            SheetProfile::Tailed { tail_weight: 0.4, tail_length: 1.5, tail_side: -1 },
+        ] {
+            let shape = p.shape();
+            for extra in [0.0, 0.7] {
+                let area = integral(|d| shape.density(d, 1.0, extra), -30.0, 80.0);
+                assert!((area - 1.0).abs() < 1e-6, "{p:?}: area {area}");
+                let (lo, hi) = shape.support(1.0, extra);
+                let kept = integral(|d| shape.density(d, 1.0, extra), lo, hi);
+                assert!(kept > 1.0 - 1e-5, "{p:?}: {kept} within the support");
+            }
+            // The unwidened profile peaks at d = 0.
+            let f = |d: f64| shape.density(d, 1.0, 0.0);
+            assert!(f(0.0) > f(1e-3) && f(0.0) > f(-1e-3), "{p:?}: {} {} {}", f(-1e-3), f(0.0), f(1e-3));
+            // FWHM in σ: half the peak at the two half points.
+            let (lo, hi) = shape.half_points(1.0);
+            let at = |x: f64| shape.unit(x, 1.0) / shape.unit(shape.mode, 1.0);
+            assert!((at(lo) - 0.5).abs() < 1e-9 && (at(hi) - 0.5).abs() < 1e-9);
+        }
+        assert!((SheetProfile::Gaussian.fwhm_per_sigma() - GAUSS_FWHM_PER_SIGMA).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_emg_matches_its_convolution_integral() {
+        let (s, t) = (1.3, 2.0);
+        for x in [-8.0, -2.0, 0.0, 0.5, 3.0, 12.0, 40.0] {
+            let direct = integral(
+                |u| {
+                    let g = (-0.5 * ((x - u) / s).powi(2)).exp() / (s * (2.0 * std::f64::consts::PI).sqrt());
+                    g * (-u / t).exp() / t
+                },
+                0.0,
+                200.0,
+            );
+            let v = emg(x, s, t);
+            assert!((v - direct).abs() <= 1e-6 * direct.max(1e-12) + 1e-15, "x {x}: {v} vs {direct}");
+        }
+    }
+
+    #[test]
+    fn the_blurred_width_is_solved_back() {
+        let p = SheetProfile::real();
+        for target in [2.0, 5.0, 20.0] {
+            let sheet = p.sheet_fwhm_for_image_px(target, 0.757).unwrap();
+            assert!((p.image_fwhm_px(sheet, 0.757) - target).abs() < 1e-9);
+        }
+        assert!(p.sheet_fwhm_for_image_px(1.5, 0.757).is_none(), "narrower than the blur");
+        // The blur's pull on the real profile's peak is small and towards the tail.
+        let pull = p.blurred_peak_offset_px(5.0, 0.757);
+        assert!(pull > 0.0 && pull < 0.02, "{pull}");
+        assert_eq!(SheetProfile::Gaussian.blurred_peak_offset_px(5.0, 0.757), 0.0);
+    }
+}

@@ -70,13 +70,24 @@ fn seed(name: &str, bytes: impl Into<Vec<u8>>) -> Seed {
     Seed { name: format!("generated:{name}"), bytes: bytes.into() }
 }
 
+/// A fixed-plane transmitter (scanner.json version 2, kind fixed_planes) with two lasers.
+fn fixed_plane_seed() -> omni_model::FixedPlanesParams {
+    let plane = |laser, normal, distance_mm| omni_model::FixedPlaneParams { laser, normal, distance_mm };
+    omni_model::FixedPlanesParams {
+        planes: vec![plane(0, [0.0518, 0.9122, -0.4064], 6.578), plane(3, [0.6, 0.0, 0.8], 120.0)],
+    }
+}
+
 /// Inputs written by the crates' own writers.
 fn generated(target: &str) -> Vec<Seed> {
     match target {
         "ply" => ply_seeds(),
         "stream" => vec![seed("stream", stream_seed())],
         "camera" => camera_seeds(),
-        "scanner" => vec![seed("paper", pretty(&ScannerFile::new(TransmitterParams::paper())))],
+        "scanner" => vec![
+            seed("paper", pretty(&ScannerFile::new(TransmitterParams::paper()))),
+            seed("fixed", pretty(&ScannerFile::new(fixed_plane_seed()))),
+        ],
         "board" => vec![seed("board", pretty(&BoardFile::new(9, 6, 30.0)))],
         "controller" => vec![seed("session", controller_seed())],
         _ => Vec::new(),

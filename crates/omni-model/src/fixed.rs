@@ -55,7 +55,7 @@ impl FixedPlanesParams {
         }
         for (i, p) in self.planes.iter().enumerate() {
             let n = Vector3::from(p.normal);
-            if !n.iter().all(|x| x.is_finite()) || n.norm() < 1e-9 {
+            if !n.iter().all(|x| x.is_finite()) || !(n.norm() >= 1e-9 && n.norm().is_finite()) {
                 return Err(format!("planes[{i}].normal must be finite and non-zero"));
             }
             if !p.distance_mm.is_finite() {
@@ -82,13 +82,15 @@ impl FixedPlanes {
         let planes = params
             .planes
             .iter()
-            .map(|p| {
+            .enumerate()
+            .map(|(i, p)| {
                 let n = Vector3::from(p.normal);
-                // Normalising n scales the distance with it: distance_mm is along the unit normal.
-                let plane = Plane::from_normal_offset(&n, p.distance_mm * n.norm()).expect("validated normal");
-                (p.laser, plane)
+                // distance_mm is along the unit normal, whatever the length written.
+                Plane::from_normal_offset(&(n / n.norm()), p.distance_mm).map(|plane| (p.laser, plane)).ok_or_else(
+                    || format!("planes[{i}]: not a plane (normal {:?}, distance_mm {})", p.normal, p.distance_mm),
+                )
             })
-            .collect();
+            .collect::<Result<_, _>>()?;
         Ok(FixedPlanes { params, planes })
     }
 

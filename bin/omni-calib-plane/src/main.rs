@@ -72,6 +72,7 @@ contradict is an error naming the likely size.
 Examples:
   omni-calib-plane fixed --camera camera.json --board board.json -o scanner.json stripes/im*.png
   omni-calib-plane fixed --camera camera.json --board board.json --laser green --margin-mm 2 --report plane.json --points points.jsonl -o scanner.json frames/
+  omni-calib-plane fixed --camera camera.json --board board.json --stripes ridges.jsonl -o scanner.json   (centres from another detector's stream)
   omni-triangulate --camera camera.json --scanner scanner.json < stripes.jsonl   (the fixed plane, whatever the frames' alpha_deg)")]
 struct FixedArgs {
     /// Calibrated receiver (camera.json, any model kind).

@@ -55,7 +55,7 @@ impl FixedPlanesParams {
         }
         for (i, p) in self.planes.iter().enumerate() {
             let n = Vector3::from(p.normal);
-            if !n.iter().all(|x| x.is_finite()) || !(n.norm() >= 1e-9 && n.norm().is_finite()) {
+            if !(n.iter().all(|x| x.is_finite()) && n.norm() >= 1e-9 && n.norm().is_finite()) {
                 return Err(format!("planes[{i}].normal must be finite and non-zero"));
             }
             if !p.distance_mm.is_finite() {

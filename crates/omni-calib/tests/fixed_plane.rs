@@ -194,9 +194,15 @@ fn real_frames_give_one_plane_that_no_frame_pulls() {
         ridge: omni_vision::stripe::RidgeParams::default(),
     };
     let frames = detect_frames(&paths, &detect, None).unwrap();
-    let fit =
-        fit_fixed_plane(cam.as_ref(), &frames, &FixedPlaneOptions { square_mm: 5.0, ..Default::default() }).unwrap();
+    let opts = FixedPlaneOptions { square_mm: 5.0, ..Default::default() };
+    let fit = fit_fixed_plane(cam.as_ref(), &frames, &opts).unwrap();
     let r = &fit.report;
+    // The reference estimator's centres through the same fit.
+    let reference: Vec<Vec<[f64; 2]>> = paths.iter().map(|p| column_centroids(p)).collect();
+    let ref_frames = detect_frames(&paths, &detect, Some(&reference)).unwrap();
+    let ref_fit = fit_fixed_plane(cam.as_ref(), &ref_frames, &opts).unwrap();
+    eprintln!("reference: {} frames, rms {:.4} mm", ref_fit.report.frames.len(), ref_fit.report.rms_mm);
+    assert!(r.rms_mm <= ref_fit.report.rms_mm, "omni-ridge {} mm, reference {} mm", r.rms_mm, ref_fit.report.rms_mm);
     eprintln!(
         "real: {} frames, rms {:.4} mm, loo {:.4} mm, straightness {:?} px",
         r.frames.len(),
@@ -213,4 +219,34 @@ fn real_frames_give_one_plane_that_no_frame_pulls() {
     assert!(r.rms_mm <= 1.15 * REAL_RMS_MM, "in-sample RMS {} mm", r.rms_mm);
     assert!(r.leave_one_out_rms_mm <= 1.3 * r.rms_mm, "{} vs {}", r.leave_one_out_rms_mm, r.rms_mm);
     assert!(r.frames.iter().all(|f| f.straightness_px < 1.0), "{:?}", r.frames);
+}
+
+/// The reference estimator: per column, the centroid of R − (G+B)/2 (clamped at 0) within
+/// ±10 px of the column's maximum, if that exceeds 20 levels (scripts/real_plane.py).
+fn column_centroids(path: &std::path::Path) -> Vec<[f64; 2]> {
+    use omni_vision::colour::{Channel, Colour, ColourSpec};
+    let read = |c| {
+        omni_vision::image_io::load_frame_channel(path, &ColourSpec { channel: Channel::Single(c), bayer: None })
+            .unwrap()
+    };
+    let (r, g, b) = (read(Colour::Red), read(Colour::Green), read(Colour::Blue));
+    let (w, h) = (r.width as usize, r.height as usize);
+    let c = |x: usize, y: usize| {
+        let i = y * w + x;
+        (r.data[i] as f64 - 0.5 * (g.data[i] as f64 + b.data[i] as f64)).max(0.0)
+    };
+    let mut out = Vec::new();
+    for x in 0..w {
+        // The first maximum from the top, as numpy's argmax.
+        let y0 = (0..h).fold(0, |best, y| if c(x, y) > c(x, best) { y } else { best });
+        if c(x, y0) < 20.0 {
+            continue;
+        }
+        let (lo, hi) = (y0.saturating_sub(10), (y0 + 11).min(h));
+        let (sw, sy) = (lo..hi).fold((0.0, 0.0), |(sw, sy), y| (sw + c(x, y), sy + c(x, y) * y as f64));
+        if sw > 0.0 {
+            out.push([x as f64, sy / sw]);
+        }
+    }
+    out
 }

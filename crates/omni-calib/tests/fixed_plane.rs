@@ -80,7 +80,12 @@ fn synth_frame(
         };
         stripe.push([px.x + dx, px.y + dy]);
     }
-    FrameInput { name: name.into(), corners: Ok(Observation { name: name.into(), board_mm, pixels }), stripe }
+    FrameInput {
+        name: name.into(),
+        corners: Ok(Observation { name: name.into(), board_mm, pixels }),
+        stripe,
+        size: Some((1280, 720)),
+    }
 }
 
 /// Board poses 200-400 mm in front of the camera (it looks along −z), turned up to ±25°, each
@@ -152,6 +157,11 @@ fn frames_without_board_or_stripe_are_skipped_and_named_and_one_frame_is_an_erro
     frames[1].corners = Err("board not found: no board found (3 corner candidates)".into());
     frames[2].stripe.truncate(5);
     let opts = FixedPlaneOptions { square_mm: SQUARE, ..Default::default() };
+    // A frame of another size than the camera's is an error naming it.
+    let mut other = frames.clone();
+    other[0].size = Some((640, 360));
+    let e = fit_fixed_plane(&cam, &other, &opts).unwrap_err();
+    assert_eq!(e, "v0: the frame is 640 × 360 px but the camera model is 1280 × 720 px");
     let e = fit_fixed_plane(&cam, &frames, &opts).unwrap_err();
     assert!(e.starts_with("1 usable frame of 3, at least 2 needed; skipped: v1: board not found"), "{e}");
     assert!(e.contains("v2: the board does not carry the stripe: 5 of 5 stripe points on the board"), "{e}");

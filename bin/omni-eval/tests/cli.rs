@@ -220,3 +220,22 @@ fn a_scene_rectangle_of_negative_width_is_refused() {
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("neg.json") && err.contains("\"wall\"") && err.contains("width_mm"), "{err}");
 }
+
+/// `budget` needs the polygon's laser source for its photometry: a fixed-plane scanner.json is
+/// refused in one line naming the kind.
+#[test]
+fn budget_refuses_a_fixed_plane_scanner_naming_the_kind() {
+    let dir = tempfile::tempdir().unwrap();
+    let camera = r#"{"format": "omniscan.camera", "version": 1, "model": {"kind": "mei", "xi": 1.0,
+        "fx_px": 300, "fy_px": 300, "cx_px": 255.5, "cy_px": 255.5, "width": 512, "height": 512}}"#;
+    std::fs::write(dir.path().join("camera.json"), camera).unwrap();
+    let scanner = r#"{"format": "omniscan.scanner", "version": 2, "transmitter": {"kind": "fixed_planes",
+        "planes": [{"laser": 0, "normal": [1, 0, 0], "distance_mm": 300}]}}"#;
+    std::fs::write(dir.path().join("scanner.json"), scanner).unwrap();
+    let out = run(dir.path(), &["budget", "--camera", "camera.json", "--scanner", "scanner.json"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(
+        String::from_utf8_lossy(&out.stderr),
+        "omni-eval: error: scanner.json: field transmitter.kind: transmitter kind \"fixed_planes\" cannot be used here: this needs kind \"polygon\" (the rotating polygon mirror)\n"
+    );
+}

@@ -53,6 +53,8 @@ pub struct FrameInput {
     pub corners: Result<Observation, String>,
     /// Stripe centres (px).
     pub stripe: Vec<[f64; 2]>,
+    /// The frame's size (px), if known: it must be the camera model's.
+    pub size: Option<(u32, u32)>,
 }
 
 /// A frame left out, and why.
@@ -275,6 +277,11 @@ pub fn fit_fixed_plane(
 ) -> Result<FixedPlaneFit, String> {
     let mut used = Vec::new();
     let mut skipped = Vec::new();
+    let (cw, ch) = camera.image_size();
+    if let Some(f) = frames.iter().find(|f| f.size.is_some_and(|s| s != (cw, ch))) {
+        let (w, h) = f.size.unwrap_or_default();
+        return Err(format!("{}: the frame is {w} × {h} px but the camera model is {cw} × {ch} px", f.name));
+    }
     for f in frames {
         match board_points(camera, f, opts) {
             Ok(b) => used.push(b),
@@ -439,7 +446,8 @@ pub fn detect_frames(
                 Some(g) => g[k].clone(),
                 None => detect_stripe(path, &opts.colour, &opts.ridge)?,
             };
-            Ok((FrameInput { name, corners, stripe }, entry, larger))
+            let size = Some((grey.width as u32, grey.height as u32));
+            Ok((FrameInput { name, corners, stripe, size }, entry, larger))
         })
         .collect();
     let mut frames = Vec::new();

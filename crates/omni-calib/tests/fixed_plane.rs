@@ -80,7 +80,12 @@ fn synth_frame(
         };
         stripe.push([px.x + dx, px.y + dy]);
     }
-    FrameInput { name: name.into(), corners: Ok(Observation { name: name.into(), board_mm, pixels }), stripe }
+    FrameInput {
+        name: name.into(),
+        corners: Ok(Observation { name: name.into(), board_mm, pixels }),
+        stripe,
+        size: Some((1280, 720)),
+    }
 }
 
 /// Board poses 200-400 mm in front of the camera (it looks along −z), turned up to ±25°, each
@@ -152,6 +157,11 @@ fn frames_without_board_or_stripe_are_skipped_and_named_and_one_frame_is_an_erro
     frames[1].corners = Err("board not found: no board found (3 corner candidates)".into());
     frames[2].stripe.truncate(5);
     let opts = FixedPlaneOptions { square_mm: SQUARE, ..Default::default() };
+    // A frame of another size than the camera's is an error naming it.
+    let mut other = frames.clone();
+    other[0].size = Some((640, 360));
+    let e = fit_fixed_plane(&cam, &other, &opts).unwrap_err();
+    assert_eq!(e, "v0: the frame is 640 × 360 px but the camera model is 1280 × 720 px");
     let e = fit_fixed_plane(&cam, &frames, &opts).unwrap_err();
     assert!(e.starts_with("1 usable frame of 3, at least 2 needed; skipped: v1: board not found"), "{e}");
     assert!(e.contains("v2: the board does not carry the stripe: 5 of 5 stripe points on the board"), "{e}");
@@ -194,9 +204,15 @@ fn real_frames_give_one_plane_that_no_frame_pulls() {
         ridge: omni_vision::stripe::RidgeParams::default(),
     };
     let frames = detect_frames(&paths, &detect, None).unwrap();
-    let fit =
-        fit_fixed_plane(cam.as_ref(), &frames, &FixedPlaneOptions { square_mm: 5.0, ..Default::default() }).unwrap();
+    let opts = FixedPlaneOptions { square_mm: 5.0, ..Default::default() };
+    let fit = fit_fixed_plane(cam.as_ref(), &frames, &opts).unwrap();
     let r = &fit.report;
+    // The reference estimator's centres through the same fit.
+    let reference: Vec<Vec<[f64; 2]>> = paths.iter().map(|p| column_centroids(p)).collect();
+    let ref_frames = detect_frames(&paths, &detect, Some(&reference)).unwrap();
+    let ref_fit = fit_fixed_plane(cam.as_ref(), &ref_frames, &opts).unwrap();
+    eprintln!("reference: {} frames, rms {:.4} mm", ref_fit.report.frames.len(), ref_fit.report.rms_mm);
+    assert!(r.rms_mm <= ref_fit.report.rms_mm, "omni-ridge {} mm, reference {} mm", r.rms_mm, ref_fit.report.rms_mm);
     eprintln!(
         "real: {} frames, rms {:.4} mm, loo {:.4} mm, straightness {:?} px",
         r.frames.len(),
@@ -213,4 +229,34 @@ fn real_frames_give_one_plane_that_no_frame_pulls() {
     assert!(r.rms_mm <= 1.15 * REAL_RMS_MM, "in-sample RMS {} mm", r.rms_mm);
     assert!(r.leave_one_out_rms_mm <= 1.3 * r.rms_mm, "{} vs {}", r.leave_one_out_rms_mm, r.rms_mm);
     assert!(r.frames.iter().all(|f| f.straightness_px < 1.0), "{:?}", r.frames);
+}
+
+/// The reference estimator: per column, the centroid of R − (G+B)/2 (clamped at 0) within
+/// ±10 px of the column's maximum, if that exceeds 20 levels (scripts/real_plane.py).
+fn column_centroids(path: &std::path::Path) -> Vec<[f64; 2]> {
+    use omni_vision::colour::{Channel, Colour, ColourSpec};
+    let read = |c| {
+        omni_vision::image_io::load_frame_channel(path, &ColourSpec { channel: Channel::Single(c), bayer: None })
+            .unwrap()
+    };
+    let (r, g, b) = (read(Colour::Red), read(Colour::Green), read(Colour::Blue));
+    let (w, h) = (r.width as usize, r.height as usize);
+    let c = |x: usize, y: usize| {
+        let i = y * w + x;
+        (r.data[i] as f64 - 0.5 * (g.data[i] as f64 + b.data[i] as f64)).max(0.0)
+    };
+    let mut out = Vec::new();
+    for x in 0..w {
+        // The first maximum from the top, as numpy's argmax.
+        let y0 = (0..h).fold(0, |best, y| if c(x, y) > c(x, best) { y } else { best });
+        if c(x, y0) < 20.0 {
+            continue;
+        }
+        let (lo, hi) = (y0.saturating_sub(10), (y0 + 11).min(h));
+        let (sw, sy) = (lo..hi).fold((0.0, 0.0), |(sw, sy), y| (sw + c(x, y), sy + c(x, y) * y as f64));
+        if sw > 0.0 {
+            out.push([x as f64, sy / sw]);
+        }
+    }
+    out
 }

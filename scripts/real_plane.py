@@ -31,13 +31,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-DATA = ROOT.parent / "shared" / "data" / "real-laser-handheld"
-STRIPE_FRAMES = [f"im{i}.png" for i in range(1, 18)]
-BOARD_FRAMES = [f"im{i}.png" for i in range(18, 37)]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+# The frames and the column-centroid reference of the stripe detector's own judge.
+from real_laser import BOARD_FRAMES, DATA, ROOT, STRIPE_FRAMES, reference_centres  # noqa: E402
+
 BOARD = {"format": "omniscan.board", "version": 1, "inner_cols": 9, "inner_rows": 6, "square_mm": 5, "margin_mm": 0}
-REFERENCE_HALF_WINDOW = 10
-REFERENCE_THRESHOLD = 20.0
 
 
 def run(cmd: list[str]) -> str:
@@ -45,25 +43,6 @@ def run(cmd: list[str]) -> str:
     if p.returncode != 0:
         sys.exit(f"real_plane.py: {Path(cmd[0]).name} failed (exit {p.returncode}): {p.stderr.strip()}")
     return p.stdout
-
-
-def reference_centres(bgr: np.ndarray) -> np.ndarray:
-    """Per-column centroid of R - (G+B)/2 within +-10 px of the column maximum (N x 2, px)."""
-    b, g, r = (bgr[:, :, k].astype(np.float64) for k in range(3))
-    c = np.clip(r - 0.5 * (g + b), 0, None)
-    h, w = c.shape
-    rows = np.argmax(c, axis=0)
-    out = []
-    for x in range(w):
-        y0 = rows[x]
-        if c[y0, x] < REFERENCE_THRESHOLD:
-            continue
-        lo, hi = max(0, y0 - REFERENCE_HALF_WINDOW), min(h, y0 + REFERENCE_HALF_WINDOW + 1)
-        wgt = c[lo:hi, x]
-        s = wgt.sum()
-        if s > 0:
-            out.append((x, float((np.arange(lo, hi) * wgt).sum() / s)))
-    return np.array(out, np.float64).reshape(-1, 2)
 
 
 def write_reference_stream(path: Path) -> None:

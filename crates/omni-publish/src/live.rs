@@ -1,0 +1,285 @@
+//! The live loop: measured frames in, sweeps out to every sink, as they happen.
+//!
+//! A reader thread drains the input as fast as it comes, so that the upstream tools (and the
+//! capture behind them) never wait on a pipe. Sweeps go to each sink through its own
+//! [`DropOldest`] queue: a sink that falls behind loses its oldest sweeps, counted, and holds
+//! back nothing else.
+
+use crate::queue::DropOldest;
+use crate::sweep::{Sweep, SweepAssembler};
+use nalgebra::Point3;
+use omni_cloud::motion::Trajectory;
+use omni_formats::stream::{Frame, Record, Status, StreamReader};
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::io::BufRead;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{RecvTimeoutError, sync_channel};
+use std::time::{Duration, Instant};
+
+/// Something that takes finished sweeps: a ROS 2 publisher, a Foxglove server, a file.
+pub trait Sink: Send {
+    /// A short name for the status records (`dds`, `foxglove`).
+    fn name(&self) -> &str;
+    /// Sends one sweep; an error is counted and reported, the loop goes on.
+    fn publish(&mut self, sweep: &Sweep) -> Result<(), String>;
+}
+
+/// How the loop runs.
+#[derive(Debug, Clone)]
+pub struct LiveOptions {
+    /// A sweep with no new frame for this long is published incomplete.
+    pub sweep_timeout: Duration,
+    /// Sweeps waiting per sink before the oldest is dropped.
+    pub queue: usize,
+    /// Frames per sweep, if known (else the header's `angles` tells).
+    pub frames_per_sweep: Option<u32>,
+    /// Delete each frame's image file once its points have arrived.
+    pub delete_frames: bool,
+}
+
+/// A sweep on its way to the sinks, with the arrival time of its last frame.
+pub struct Queued {
+    pub sweep: Sweep,
+    pub last_frame_at: Instant,
+}
+
+/// One line of the report: a sweep published (or failed) by a sink.
+#[derive(Debug, Clone)]
+pub struct Published {
+    pub sink: String,
+    pub revolution: u64,
+    pub facet: u32,
+    pub frames: u32,
+    pub points: usize,
+    pub complete: bool,
+    /// From the arrival of the sweep's last frame to the end of its publication (ms).
+    pub latency_ms: f64,
+    pub error: Option<String>,
+}
+
+impl Published {
+    pub fn to_json(&self) -> serde_json::Value {
+        let mut v = json!({"type": "sweep", "sink": self.sink, "revolution": self.revolution, "facet": self.facet,
+            "frames": self.frames, "points": self.points, "complete": self.complete,
+            "latency_ms": (self.latency_ms * 1000.0).round() / 1000.0});
+        if let Some(e) = &self.error {
+            v["error"] = e.clone().into();
+        }
+        v
+    }
+}
+
+/// What the run did, for the final status record.
+#[derive(Debug, Clone, Default)]
+pub struct Summary {
+    pub frames: u64,
+    pub sweeps: u64,
+    pub sweeps_incomplete: u64,
+    /// Per sink: sweeps dropped because it fell behind.
+    pub dropped: BTreeMap<String, u64>,
+    pub frames_deleted: u64,
+    /// The input's own status record, if it ended with one.
+    pub input_status: Option<Status>,
+    /// The input stopped without its status record.
+    pub cut_short: bool,
+}
+
+impl Summary {
+    pub fn to_json(&self) -> serde_json::Value {
+        json!({"type": "status", "frames": self.frames, "sweeps": self.sweeps,
+            "sweeps_incomplete": self.sweeps_incomplete, "sweeps_dropped": self.dropped,
+            "frames_deleted": self.frames_deleted, "input_complete": self.input_status.as_ref().map(|s| s.complete),
+            "cut_short": self.cut_short})
+    }
+}
+
+/// Runs until the input ends or `stop` is set: sweeps to `sinks`, a [`Published`] per sweep and
+/// sink to `report` (called from the sinks' threads, in order per sink).
+pub fn run<R: BufRead + Send + 'static>(
+    input: StreamReader<R>,
+    sinks: Vec<Box<dyn Sink>>,
+    report: Arc<dyn Fn(Published) + Send + Sync>,
+    opts: &LiveOptions,
+    deskew: Option<Trajectory>,
+    stop: Arc<AtomicBool>,
+) -> Result<Summary, String> {
+    let (tx, rx) = sync_channel::<Result<Record, String>>(1024);
+    let name = input.name().to_string();
+    let reader = std::thread::spawn(move || read_records(input, tx));
+    let queues: Vec<Arc<DropOldest<Arc<Queued>>>> =
+        sinks.iter().map(|_| Arc::new(DropOldest::new(opts.queue))).collect();
+    let names: Vec<String> = sinks.iter().map(|s| s.name().to_string()).collect();
+    let workers: Vec<_> = sinks
+        .into_iter()
+        .zip(&queues)
+        .map(|(sink, q)| {
+            let (q, report) = (q.clone(), report.clone());
+            std::thread::spawn(move || drain(sink, &q, &*report))
+        })
+        .collect();
+    let mut summary = Summary::default();
+    let mut assembler = SweepAssembler::new(opts.frames_per_sweep);
+    let mut frames_dir: Option<String> = None;
+    let mut deleter = FrameDeleter::default();
+    let mut failure = None;
+    let mut last_frame_at = Instant::now();
+    let emit = |sweep: Sweep, at: Instant, summary: &mut Summary| {
+        let mut sweep = sweep;
+        if let Some(traj) = &deskew {
+            deskew_to_end(&mut sweep, traj);
+        }
+        summary.sweeps += 1;
+        summary.sweeps_incomplete += u64::from(!sweep.complete);
+        let q = Arc::new(Queued { sweep, last_frame_at: at });
+        queues.iter().for_each(|queue| queue.push(q.clone()));
+    };
+    while !stop.load(Ordering::Relaxed) {
+        match rx.recv_timeout(opts.sweep_timeout.min(Duration::from_millis(100))) {
+            Ok(Ok(Record::Header(h))) => {
+                frames_dir = h.frames_dir.clone();
+                if opts.frames_per_sweep.is_none() {
+                    assembler = SweepAssembler::new(frames_per_sweep_of(&h));
+                }
+            }
+            Ok(Ok(Record::Frame(frame))) => {
+                last_frame_at = Instant::now();
+                summary.frames += 1;
+                for sweep in assembler.push(&frame) {
+                    emit(sweep, last_frame_at, &mut summary);
+                }
+                if opts.delete_frames {
+                    summary.frames_deleted += deleter.frame_passed(&frame, frames_dir.as_deref());
+                }
+            }
+            Ok(Ok(Record::Status(s))) => summary.input_status = Some(s),
+            Ok(Ok(Record::Error(_))) => {}
+            Ok(Err(e)) => {
+                failure = Some(e);
+                break;
+            }
+            Err(RecvTimeoutError::Timeout) => {
+                if assembler.is_open() && last_frame_at.elapsed() >= opts.sweep_timeout {
+                    emit(assembler.flush().expect("open"), last_frame_at, &mut summary);
+                }
+            }
+            Err(RecvTimeoutError::Disconnected) => break,
+        }
+    }
+    if let Some(sweep) = assembler.flush() {
+        emit(sweep, last_frame_at, &mut summary);
+    }
+    if opts.delete_frames {
+        summary.frames_deleted += deleter.finish();
+    }
+    queues.iter().for_each(|q| q.close());
+    for w in workers {
+        let _ = w.join();
+    }
+    for (name, q) in names.iter().zip(&queues) {
+        summary.dropped.insert(name.clone(), q.dropped());
+    }
+    summary.cut_short = summary.input_status.is_none() && failure.is_none() && !stop.load(Ordering::Relaxed);
+    // The reader may still block on a read that never ends (SIGINT with a silent input).
+    if reader.is_finished() {
+        let _ = reader.join();
+    }
+    match failure {
+        Some(e) => Err(format!("{name}: {e}")),
+        None => Ok(summary),
+    }
+}
+
+/// Trigger angles per facet from the header omni-trigger writes (`angles`: `0:30:0.5` or a
+/// list), if present and readable.
+pub fn frames_per_sweep_of(h: &omni_formats::stream::Header) -> Option<u32> {
+    let spec = h.extra.get("angles")?.as_str()?;
+    let n = omni_hw::schedule::AngleSpec::parse(spec).ok()?.degrees().len();
+    u32::try_from(n).ok()
+}
+
+fn read_records<R: BufRead>(mut input: StreamReader<R>, tx: std::sync::mpsc::SyncSender<Result<Record, String>>) {
+    loop {
+        let item = match input.next_record() {
+            Ok(Some(r)) => Ok(r),
+            Ok(None) => return,
+            Err(e) => Err(e.to_string()),
+        };
+        let fatal = item.is_err();
+        if tx.send(item).is_err() || fatal {
+            return;
+        }
+    }
+}
+
+fn drain(mut sink: Box<dyn Sink>, queue: &DropOldest<Arc<Queued>>, report: &(dyn Fn(Published) + Send + Sync)) {
+    while let Some(q) = queue.pop() {
+        let result = sink.publish(&q.sweep);
+        let s = &q.sweep;
+        report(Published {
+            sink: sink.name().to_string(),
+            revolution: s.revolution,
+            facet: s.facet,
+            frames: s.frames,
+            points: s.points.len(),
+            complete: s.complete,
+            latency_ms: q.last_frame_at.elapsed().as_secs_f64() * 1000.0,
+            error: result.err(),
+        });
+    }
+}
+
+/// Moves every point to where the sensor was at the sweep's last frame: the point was measured
+/// at its frame's time, when the sensor stood at `pose(t)`; in the end pose's frame it lies at
+/// `pose(end)⁻¹ · pose(t) · p`. Points whose time the odometry does not cover stay as they are.
+pub fn deskew_to_end(sweep: &mut Sweep, trajectory: &Trajectory) {
+    let Ok(end) = trajectory.pose_at(sweep.end_us) else { return };
+    let end_inv = end.inverse();
+    let mut cache: Option<(u32, nalgebra::Isometry3<f64>)> = None;
+    for p in &mut sweep.points {
+        let to_end = match cache {
+            Some((t, iso)) if t == p.t_ns => iso,
+            _ => match trajectory.pose_at(sweep.start_us + u64::from(p.t_ns) / 1000) {
+                Ok(pose) => {
+                    let iso = end_inv * pose;
+                    cache = Some((p.t_ns, iso));
+                    iso
+                }
+                Err(_) => continue,
+            },
+        };
+        let q = to_end * Point3::from(p.xyz_mm);
+        p.xyz_mm = [q.x, q.y, q.z];
+    }
+}
+
+/// Deletes frame files once measured. A laser frame goes as soon as its points arrive; a
+/// laser-off frame is shared by the laser frames of the next revolution (their
+/// `ambient_path`), so it goes once a frame two revolutions later arrives.
+#[derive(Default)]
+struct FrameDeleter {
+    /// Laser-off frames waiting: (revolution, path).
+    ambient: Vec<(u64, PathBuf)>,
+}
+
+impl FrameDeleter {
+    fn frame_passed(&mut self, frame: &Frame, frames_dir: Option<&str>) -> u64 {
+        let mut deleted = 0;
+        let path = frame.resolve_path(frames_dir, &frame.path);
+        if frame.lasers.is_empty() {
+            self.ambient.push((frame.revolution, path));
+        } else {
+            deleted += u64::from(std::fs::remove_file(&path).is_ok());
+        }
+        let (done, keep): (Vec<_>, Vec<_>) =
+            self.ambient.drain(..).partition(|(rev, _)| frame.revolution >= rev.saturating_add(2));
+        self.ambient = keep;
+        deleted + done.iter().filter(|(_, p)| std::fs::remove_file(p).is_ok()).count() as u64
+    }
+
+    fn finish(&mut self) -> u64 {
+        self.ambient.drain(..).filter(|(_, p)| std::fs::remove_file(p).is_ok()).count() as u64
+    }
+}

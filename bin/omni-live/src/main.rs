@@ -10,7 +10,7 @@ use omni_publish::{DdsSink, LiveOptions, Published, Sink};
 use std::io::Write;
 use std::net::IpAddr;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -107,10 +107,7 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run(a: Args) -> CliResult {
-    let stop = Arc::new(AtomicBool::new(false));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(sig, stop.clone()).map_err(|e| CliError::new(format!("signal handler: {e}")))?;
-    }
+    let stop = omni_cli::stop_on_interrupt().map_err(|e| CliError::new(format!("signal handler: {e}")))?;
     let deskew = match &a.poses {
         Some(p) => {
             let samples = omni_formats::odometry::read_odometry(p)?;

@@ -14,8 +14,6 @@ use omni_hw::{Client, ClientOptions, DeviceInfo};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 const TOOL: &str = "omni-trigger";
@@ -308,29 +306,10 @@ fn scan_config(a: &ScanArgs) -> CliResult<ScanConfig> {
             ..PairOptions::default()
         },
         silence_timeout: Duration::from_millis(1500),
-        cancel: Some(stop_on_interrupt()),
+        // Ctrl-C (SIGINT) or SIGTERM: the scan stops the controller and still ends its manifest
+        // with a status record.
+        cancel: Some(omni_cli::stop_on_interrupt().map_err(|e| CliError::new(format!("signal handler: {e}")))?),
     })
-}
-
-/// Raised by Ctrl-C (SIGINT) or SIGTERM, so an interrupted scan stops the controller and still
-/// ends its manifest with a status record.
-static INTERRUPTED: std::sync::LazyLock<Arc<AtomicBool>> =
-    std::sync::LazyLock::new(|| Arc::new(AtomicBool::new(false)));
-
-fn stop_on_interrupt() -> Arc<AtomicBool> {
-    extern "C" fn on_signal(_: libc::c_int) {
-        // The flag is initialised before the handler is installed, so this is one atomic store:
-        // async-signal-safe.
-        INTERRUPTED.store(true, Ordering::SeqCst);
-    }
-    let flag = INTERRUPTED.clone();
-    // SAFETY: the handler only performs an atomic store; `signal` gets valid arguments.
-    unsafe {
-        let handler = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
-        libc::signal(libc::SIGINT, handler);
-        libc::signal(libc::SIGTERM, handler);
-    }
-    flag
 }
 
 fn open_output(path: &Path) -> CliResult<Box<dyn Write>> {

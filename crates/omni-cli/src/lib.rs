@@ -85,15 +85,18 @@ pub fn main(tool: &str, body: impl FnOnce() -> CliResult) -> ExitCode {
 
 /// Watches SIGINT, SIGTERM and SIGHUP from a thread: on the first one, removes the temporary
 /// files and bag directories of atomic writes in progress and ends the process by that signal's default action (so
-/// the shell sees an interrupted tool). A tool that installs its own handler afterwards (an
-/// orderly stop) replaces this one.
+/// the shell sees an interrupted tool). After [`stop_on_interrupt`], SIGINT and SIGTERM are
+/// left to the tool's orderly stop.
 pub fn remove_temp_files_on_signal() {
     #[cfg(unix)]
     {
         use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
         let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) else { return };
         let spawned = std::thread::Builder::new().name("signals".into()).spawn(move || {
-            if let Some(sig) = signals.forever().next() {
+            for sig in signals.forever() {
+                if sig != SIGHUP && ORDERLY_STOP.load(std::sync::atomic::Ordering::SeqCst) {
+                    continue;
+                }
                 omni_formats::io::remove_temp_files();
                 let _ = signal_hook::low_level::emulate_default_handler(sig);
                 std::process::exit(128 + sig);
@@ -101,6 +104,22 @@ pub fn remove_temp_files_on_signal() {
         });
         drop(spawned);
     }
+}
+
+/// Set once a tool stops in order on SIGINT/SIGTERM (see [`stop_on_interrupt`]).
+static ORDERLY_STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// An orderly stop: SIGINT (Ctrl-C) and SIGTERM raise the returned flag instead of ending the
+/// process, so that a long-running tool (a scan, a live publisher) finishes what it holds and
+/// still writes its status. SIGHUP keeps its default.
+pub fn stop_on_interrupt() -> std::io::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    ORDERLY_STOP.store(true, std::sync::atomic::Ordering::SeqCst);
+    #[cfg(unix)]
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, flag.clone())?;
+    }
+    Ok(flag)
 }
 
 /// Whether stderr is an interactive terminal (progress bars are drawn only then).

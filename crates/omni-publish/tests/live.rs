@@ -40,10 +40,13 @@ fn header(angles: Option<&str>, frames_dir: Option<&str>) -> Record {
     Record::Header(h)
 }
 
+/// What an output got of a sweep: revolution, facet, points, complete.
+type Got = (u64, u32, usize, bool);
+
 /// An output that takes `delay` per sweep and remembers what it got.
 struct SlowSink {
     delay: Duration,
-    got: Arc<Mutex<Vec<(u64, u32, usize, bool)>>>,
+    got: Arc<Mutex<Vec<Got>>>,
 }
 
 impl Sink for SlowSink {
@@ -63,7 +66,7 @@ fn run_on_pipe(
     opts: LiveOptions,
     delay: Duration,
     write: impl FnOnce(&mut std::io::PipeWriter) + Send + 'static,
-) -> (live::Summary, Vec<(u64, u32, usize, bool)>, Vec<Published>) {
+) -> (live::Summary, Vec<Got>, Vec<Published>) {
     let (reader, mut writer) = std::io::pipe().unwrap();
     let feeder = std::thread::spawn(move || write(&mut writer));
     let got = Arc::new(Mutex::new(Vec::new()));

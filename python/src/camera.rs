@@ -2,7 +2,7 @@
 
 use crate::arrays::{Vectors, shaped};
 use numpy::PyArrayDyn;
-use omni_formats::{CameraFile, CameraSpec};
+use omni_formats::CameraFile;
 use omni_geom::{Point3, Vector2};
 use omni_model::CameraModel;
 use pyo3::prelude::*;

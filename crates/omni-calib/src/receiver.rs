@@ -1,6 +1,6 @@
-//! Receiver calibration: the catadioptric camera from checkerboard corners.
+//! Receiver calibration: the catadioptric (or an ordinary) camera from checkerboard corners.
 //!
-//! [`calibrate`] fits one of three models ([`ModelKind`]) to the corners of many board images:
+//! [`calibrate`] fits one of the models of [`ModelKind`] to the corners of many board images:
 //! 1. Initialisation without hand-tuning: principal point at the centre of the mirror rim circle
 //!    ([`Options::annulus`], else the image centre), ξ = 1, and the
 //!    generalised focal length γ chosen on a logarithmic grid by the median per-image
@@ -23,8 +23,12 @@
 //! The hyperbolic camera's blind centre comes from the annulus' inner circle, else it is shrunk
 //! (if needed) to keep every observed corner.
 //!
-//! The polynomial and central hyperbolic fits are checked against a Mei fit of the same images
-//! ([`validate::compare_with_mei`], [`Calibration::model_check`]).
+//! The ordinary-camera models (pinhole with radial-tangential distortion, Kannala–Brandt
+//! fisheye) start from the fitted Mei model too: principal point and aspect from it, focal length
+//! and radial distortion by linear least squares on its rays ([`ordinary_from_mei`]).
+//!
+//! The polynomial, central hyperbolic and ordinary fits are checked against a Mei fit of the same
+//! images ([`validate::compare_with_mei`], [`Calibration::model_check`]).
 //!
 //! [`session`] runs the commands of `omni-calib-receiver` (detection, fit, report, exports,
 //! conversions) on top of these.
@@ -1153,5 +1157,7 @@ fn describe(
     }
 }
 
+#[cfg(test)]
+mod ordinary_tests;
 #[cfg(test)]
 mod tests;

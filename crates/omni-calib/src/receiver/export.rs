@@ -182,9 +182,9 @@ pub fn kalibr_camchain(p: &MeiParams, rostopic: &str) -> String {
     kalibr_text("omni", &intrinsics, "radtan", &[p.k1, p.k2, p.p1, p.p2], (p.width, p.height), rostopic, FRAME_NOTE)
 }
 
-/// Kalibr `camchain.yaml` of any model Kalibr has: Mei (`omni` + `radtan`), pinhole (`pinhole`
-/// + `radtan`; Kalibr has no k3, so a pinhole with k3 ≠ 0 is refused) and fisheye (`pinhole` +
-/// `equidistant`).
+/// Kalibr `camchain.yaml` of any model Kalibr has: Mei (`omni` with `radtan`), pinhole
+/// (`pinhole` with `radtan`; Kalibr has no k3, so a pinhole with k3 ≠ 0 is refused) and fisheye
+/// (`pinhole` with `equidistant`).
 pub fn kalibr_camchain_of(spec: &CameraSpec, rostopic: &str) -> Result<String, String> {
     match spec {
         CameraSpec::Mei(p) => Ok(kalibr_camchain(p, rostopic)),
@@ -294,17 +294,6 @@ fn mei_from(v: [f64; 9], width: f64, height: f64) -> Result<MeiParams, String> {
     p.validate()?;
     omni_model::limits::check_image_size(p.width, p.height)?;
     Ok(p)
-}
-
-/// Reads camera `cam` (e.g. `cam0`) of a Kalibr `camchain.yaml`: `omni` projection with `radtan`
-/// (or `none`) distortion. The error names the key at fault.
-pub fn parse_kalibr_camchain(text: &str, cam: &str) -> Result<MeiParams, String> {
-    match parse_kalibr_camera(text, cam)? {
-        CameraSpec::Mei(p) => Ok(p),
-        _ => {
-            Err(format!("{cam}.camera_model: \"pinhole\" is not the unified (omni) model; only omni + radtan is read"))
-        }
-    }
 }
 
 /// Reads camera `cam` of a Kalibr `camchain.yaml` into camera.json's model: `omni` + `radtan`
@@ -600,18 +589,23 @@ mod tests {
         {
             assert!(text.contains(needed), "{needed} missing in {text}");
         }
-        assert_eq!(parse_kalibr_camchain(&text, "cam0").unwrap(), p);
+        assert_eq!(parse_kalibr_camera(&text, "cam0").unwrap(), CameraSpec::Mei(p.clone()));
         let pinhole = text.replace("camera_model: omni", "camera_model: pinhole");
         assert!(
-            parse_kalibr_camchain(&pinhole, "cam0")
-                .unwrap_err()
-                .contains("\"pinhole\" is not the unified (omni) model")
+            parse_kalibr_camera(&pinhole, "cam0").unwrap_err().contains("cam0.intrinsics: expected 4 numbers, got 5")
         );
+        let ds = text.replace("camera_model: omni", "camera_model: ds");
+        assert_eq!(
+            parse_kalibr_camera(&ds, "cam0").unwrap_err(),
+            "cam0.camera_model: \"ds\" is not read (omni or pinhole)"
+        );
+        let equi = text.replace("distortion_model: radtan", "distortion_model: equidistant");
+        assert!(parse_kalibr_camera(&equi, "cam0").unwrap_err().contains("\"equidistant\" is not read with omni"));
         assert!(
-            parse_kalibr_camchain(&text, "cam1").unwrap_err().contains("no camera \"cam1\" in the file (it has: cam0)")
+            parse_kalibr_camera(&text, "cam1").unwrap_err().contains("no camera \"cam1\" in the file (it has: cam0)")
         );
         let short = text.replace("resolution: [752, 480]", "resolution: [752]");
-        assert!(parse_kalibr_camchain(&short, "cam0").unwrap_err().contains("cam0.resolution: expected 2 numbers"));
+        assert!(parse_kalibr_camera(&short, "cam0").unwrap_err().contains("cam0.resolution: expected 2 numbers"));
     }
 
     #[test]
@@ -627,5 +621,65 @@ mod tests {
         assert!(parse_opencv_omnidir(&skewed).unwrap_err().contains("no skew"), "{skewed}");
         let no_size = text.replace("image_width: 752\n", "");
         assert_eq!(parse_opencv_omnidir(&no_size).unwrap_err(), "image_width: missing");
+    }
+
+    fn pinhole_sample() -> PinholeParams {
+        PinholeParams {
+            fx_px: 740.3,
+            fy_px: 740.9,
+            cx_px: 668.2,
+            cy_px: 313.6,
+            k1: -0.3275,
+            k2: 0.1156,
+            k3: -0.0192,
+            p1: -5.6e-4,
+            p2: 5.4e-4,
+            width: 1280,
+            height: 720,
+            viewpoint_mm: [0.0; 3],
+        }
+    }
+
+    fn fisheye_sample() -> FisheyeParams {
+        FisheyeParams::from_vector(&[725.95, 726.3, 673.5, 308.6, -0.0352, -0.0203, 0.0323, -0.0158], 1280, 720)
+    }
+
+    #[test]
+    fn ordinary_cameras_read_back_from_opencv_and_kalibr_files() {
+        let pinhole = CameraSpec::Pinhole(pinhole_sample());
+        let fisheye = CameraSpec::Fisheye(fisheye_sample());
+        let text = opencv_yaml_of(&pinhole).unwrap();
+        assert!(
+            text.contains("camera_matrix: !!opencv-matrix") && text.contains("(x, y, -z) of the omniscan"),
+            "{text}"
+        );
+        assert_eq!(parse_opencv(&text, OpencvModel::Auto).unwrap(), pinhole);
+        let text = opencv_yaml_of(&fisheye).unwrap();
+        assert_eq!(parse_opencv(&text, OpencvModel::Fisheye).unwrap(), fisheye);
+        assert!(parse_opencv(&text, OpencvModel::Auto).unwrap_err().contains("--model pinhole or fisheye"));
+        // K and D of 4 read as a pinhole are the pinhole k1 k2 p1 p2.
+        let CameraSpec::Pinhole(p) = parse_opencv(&text, OpencvModel::Pinhole).unwrap() else { panic!() };
+        assert_eq!((p.k1, p.p2, p.k3), (-0.0352, -0.0158, 0.0));
+        // Kalibr: pinhole + radtan needs k3 = 0; pinhole + equidistant is the fisheye.
+        assert!(kalibr_camchain_of(&pinhole, "/t").unwrap_err().contains("Kalibr's radtan has no k3"));
+        let radtan = CameraSpec::Pinhole(PinholeParams { k3: 0.0, ..pinhole_sample() });
+        let chain = kalibr_camchain_of(&radtan, "/t").unwrap();
+        assert!(chain.contains("camera_model: pinhole") && chain.contains("distortion_model: radtan"), "{chain}");
+        assert_eq!(parse_kalibr_camera(&chain, "cam0").unwrap(), radtan);
+        let chain = kalibr_camchain_of(&fisheye, "/t").unwrap();
+        assert!(chain.contains("distortion_model: equidistant"), "{chain}");
+        assert_eq!(parse_kalibr_camera(&chain, "cam0").unwrap(), fisheye);
+        let hyperbolic = CameraSpec::Hyperbolic(omni_model::HyperbolicParams::paper());
+        let refused = "needs a camera of kind mei, pinhole or fisheye, this one is hyperbolic";
+        assert_eq!(opencv_yaml_of(&hyperbolic).unwrap_err(), refused);
+    }
+
+    #[test]
+    fn opencv_rational_coefficients_are_refused_unless_zero() {
+        let text = opencv_pinhole_yaml(&pinhole_sample());
+        let eight = text.replace("rows: 5", "rows: 8").replace("-1.92e-2 ]", "-1.92e-2, 0., 0., 0. ]");
+        assert_eq!(parse_opencv(&eight, OpencvModel::Auto).unwrap(), CameraSpec::Pinhole(pinhole_sample()), "{eight}");
+        let rational = eight.replace("-1.92e-2, 0.,", "-1.92e-2, 0.5,");
+        assert!(parse_opencv(&rational, OpencvModel::Auto).unwrap_err().contains("rational"), "{rational}");
     }
 }

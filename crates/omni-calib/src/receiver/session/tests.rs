@@ -93,7 +93,7 @@ fn option_combinations_are_checked_first() {
         (CalibrateOptions { export_ocam: Some("o.txt".into()), ..base.clone() }, "--export-ocam needs --model ocam"),
         (
             CalibrateOptions { export_kalibr: Some("k.yaml".into()), model: ModelKind::Ocam, ..base.clone() },
-            "--export-kalibr needs --model mei, pinhole-radtan or fisheye",
+            "--export-kalibr needs --model mei, pinhole-radtan or fisheye (Kalibr's radtan has no k3)",
         ),
         (
             CalibrateOptions { export_kalibr: Some("k.yaml".into()), model: ModelKind::Pinhole, ..base.clone() },

@@ -193,4 +193,22 @@ mod tests {
         let (ray, pixel, _) = compare(&cam, &mei.spec).unwrap();
         assert!(pixel > 2.9 && ray > 0.1, "{ray}° {pixel} px");
     }
+
+    /// The ordinary models convert into themselves exactly (the fit starts from a Mei fit of the
+    /// rays), and a fisheye lens refuses to become a pinhole one at the image's corners.
+    #[test]
+    fn ordinary_models_convert_into_themselves() {
+        let v = [725.95, 726.3, 673.5, 308.6, -0.0352, -0.0203, 0.0323, -0.0158];
+        let fisheye = CameraSpec::Fisheye(omni_model::FisheyeParams::from_vector(&v, 1280, 720));
+        let h = HyperbolicParams::paper();
+        let same = convert(&fisheye, ModelKind::Fisheye, &h).unwrap();
+        assert!(same.max_ray_deg < 1e-4 && same.max_pixel_px < 1e-3, "{same:?}");
+        let v = [740.3, 740.9, 668.2, 313.6, -0.3275, 0.1156, -5.6e-4, 5.4e-4, -0.0192];
+        let pinhole = CameraSpec::Pinhole(omni_model::PinholeParams::from_vector(&v, 1280, 720));
+        let same = convert(&pinhole, ModelKind::Pinhole, &h).unwrap();
+        assert!(same.max_ray_deg < 1e-3 && same.max_pixel_px < 1e-2, "{same:?}");
+        let other = convert(&fisheye, ModelKind::Pinhole, &h).unwrap();
+        eprintln!("fisheye → pinhole: {:.4}° {:.4} px", other.max_ray_deg, other.max_pixel_px);
+        assert!(other.max_pixel_px > 1.0, "{other:?}");
+    }
 }

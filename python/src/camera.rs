@@ -11,8 +11,8 @@ use std::path::PathBuf;
 /// A float64 numpy array of any shape.
 type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 
-/// A receiver model loaded from camera.json (kinds hyperbolic, mei, ocam, pinhole, fisheye): maps pixels to world
-/// rays and world points to pixels, exactly as the omniscan tools do.
+/// A receiver model loaded from camera.json (kinds hyperbolic, mei, ocam, pinhole, fisheye): maps
+/// pixels to world rays and world points to pixels, exactly as the omniscan tools do.
 #[pyclass(frozen, module = "omniscan")]
 pub struct Camera {
     pub(crate) file: CameraFile,

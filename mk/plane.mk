@@ -1,9 +1,11 @@
 # The fixed light plane of the real hand-held line-laser sensor (../shared/data/real-laser-handheld,
 # read in place): `make real-plane` runs omni-calib-receiver --model mei on the board frames,
 # omni-calib-plane fixed on the stripe frames (omni-ridge's detector, and a column-centroid
-# reference for comparison) and prints one table; out/real-plane/ keeps camera.json,
+# reference for comparison), fits the receiver's other models beside OpenCV's on the same corners
+# (scripts/receiver_models.py) and prints one table; out/real-plane/ keeps camera.json,
 # scanner.json, the reports and plane.png. The assertions are Rust tests (`make test`:
-# crates/omni-calib/tests/fixed_plane.rs, bin/omni-calib-plane/tests/fixed.rs).
+# crates/omni-calib/tests/fixed_plane.rs, bin/omni-calib-plane/tests/fixed.rs), the receiver
+# models' in bin/omni-calib-receiver/tests/interop.py (`make test-calib-interop`).
 PLANE_PYTHON ?= .venv/bin/python
 
 .PHONY: real-plane

@@ -12,7 +12,10 @@ squares (nominal) in view:
 3. the same plane from a reference estimator's centres: per column, the centroid of
    R - (G+B)/2 within +-10 px of the column's maximum, if it exceeds 20 levels (what open laser
    scanners do), given to omni-calib-plane fixed --stripes;
-4. one table: receiver RMS, plane residual and leave-one-frame-out RMS (mm), plane uncertainty,
+4. the receiver's other models beside OpenCV's on the same detected corners
+   (scripts/receiver_models.py: omniscan mei, pinhole, pinhole-radtan, fisheye, robust and
+   --least-squares; OpenCV calibrateCamera pinhole, k3 = 0, rational, and cv2.fisheye);
+5. one table: receiver RMS per model, plane residual and leave-one-frame-out RMS (mm), plane uncertainty,
    per-frame straightness (px), both estimators; and a picture (plane.png): the 3-D points in the
    plane's own coordinates coloured by their residual, beside the frames with their stripe points.
 
@@ -34,6 +37,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 # The frames and the column-centroid reference of the stripe detector's own judge.
 from real_laser import BOARD_FRAMES, DATA, ROOT, STRIPE_FRAMES, reference_centres  # noqa: E402
+import receiver_models  # noqa: E402
 
 BOARD = {"format": "omniscan.board", "version": 1, "inner_cols": 9, "inner_rows": 6, "square_mm": 5, "margin_mm": 0}
 
@@ -143,9 +147,13 @@ def main() -> int:
     write_reference_stream(out / "reference.jsonl")
     ref = plane_fit(a.bin, out, "-reference", ["--stripes", str(out / "reference.jsonl")])
     png = picture(out, ridge)
+    models = receiver_models.compare(a.bin, out / "board.json", [str(DATA / n) for n in BOARD_FRAMES],
+                                     out / "receiver-models", float(BOARD["square_mm"]))
 
     print(f"receiver (mei, im18-im36): {cam['images_used']} of {len(BOARD_FRAMES)} boards, "
           f"RMS {cam['rms_per_corner_px']:.3f} px per corner")
+    receiver_models.print_table("receiver RMS per corner (px) per model, beside OpenCV's on the same corners "
+                                "(im18-im36, omniscan's detection):", models)
     print("plane from stripe frames im1-im17 (9 x 6 board, 5 mm squares nominal; mm):")
     print(f"{'centres':<18} {'frames':>6} {'points':>7} {'rms_mm':>8} {'loo_mm':>8} {'loo/rms':>7} "
           f"{'normal_sd_deg':>13} {'dist_sd_mm':>10}  (sigma: jackknife over frames)")

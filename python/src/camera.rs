@@ -2,7 +2,7 @@
 
 use crate::arrays::{Vectors, shaped};
 use numpy::PyArrayDyn;
-use omni_formats::{CameraFile, CameraSpec};
+use omni_formats::CameraFile;
 use omni_geom::{Point3, Vector2};
 use omni_model::CameraModel;
 use pyo3::prelude::*;
@@ -11,8 +11,8 @@ use std::path::PathBuf;
 /// A float64 numpy array of any shape.
 type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 
-/// A receiver model loaded from camera.json (kinds hyperbolic, mei, ocam): maps pixels to world
-/// rays and world points to pixels, exactly as the omniscan tools do.
+/// A receiver model loaded from camera.json (kinds hyperbolic, mei, ocam, pinhole, fisheye): maps
+/// pixels to world rays and world points to pixels, exactly as the omniscan tools do.
 #[pyclass(frozen, module = "omniscan")]
 pub struct Camera {
     pub(crate) file: CameraFile,
@@ -41,14 +41,10 @@ impl Camera {
         serde_json::to_string_pretty(&self.file).map_err(|e| crate::value_error(e.to_string()))
     }
 
-    /// The model kind: "hyperbolic", "mei" or "ocam".
+    /// The model kind: "hyperbolic", "mei", "ocam", "pinhole" or "fisheye".
     #[getter]
     fn kind(&self) -> &'static str {
-        match self.file.model {
-            CameraSpec::Hyperbolic(_) => "hyperbolic",
-            CameraSpec::Mei(_) => "mei",
-            CameraSpec::Ocam(_) => "ocam",
-        }
+        self.file.model.kind()
     }
 
     /// Image (width, height) in pixels.

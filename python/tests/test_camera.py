@@ -110,3 +110,37 @@ def test_bad_files_and_arguments_are_refused_with_their_names(tmp_path):
         mei_camera(fx_px=-1.0)
     with pytest.raises(ValueError, match=r"shape \(\.\.\., 2\)"):
         mei_camera().pixel_to_ray(np.zeros((4, 3)))
+
+
+# The ordinary cameras as the real hand-held set's OpenCV fits (docs/DECISIONS.md).
+PINHOLE = {"kind": "pinhole", "fx_px": 740.3, "fy_px": 740.9, "cx_px": 668.2, "cy_px": 313.6, "k1": -0.3275,
+           "k2": 0.1156, "p1": -5.6e-4, "p2": 5.4e-4, "k3": -0.0192, "width": 1280, "height": 720,
+           "viewpoint_mm": [1.0, -2.0, 3.0]}
+FISHEYE = {"kind": "fisheye", "fx_px": 725.95, "fy_px": 726.3, "cx_px": 673.5, "cy_px": 308.6, "k1": -0.0352,
+           "k2": -0.0203, "k3": 0.0323, "k4": -0.0158, "width": 1280, "height": 720,
+           "viewpoint_mm": [1.0, -2.0, 3.0]}
+
+
+@pytest.mark.parametrize("model", [PINHOLE, FISHEYE], ids=["pinhole", "fisheye"])
+def test_ordinary_cameras_match_opencv(model):
+    """Kinds pinhole and fisheye against cv2.projectPoints / cv2.fisheye.projectPoints: OpenCV's
+    camera frame is the world frame about the viewpoint with z flipped (the image looks down)."""
+    cam = omniscan.Camera.from_json(json.dumps({"format": "omniscan.camera", "version": 1, "model": model}))
+    assert cam.kind == model["kind"]
+    # (The pinhole fit's distortion turns back just inside the image's corners: no ray there.)
+    u, v = np.meshgrid(np.linspace(80, 1200, 15), np.linspace(40, 680, 9))
+    pixels = np.stack([u.ravel(), v.ravel()], axis=1)
+    origins, dirs = cam.pixel_to_ray(pixels)
+    assert np.isfinite(dirs).all()
+    np.testing.assert_allclose(origins, np.broadcast_to(model["viewpoint_mm"], origins.shape))
+    k = np.array([[model["fx_px"], 0, model["cx_px"]], [0, model["fy_px"], model["cy_px"]], [0, 0, 1.0]])
+    pts = (dirs * [1.0, 1.0, -1.0]).reshape(-1, 1, 3)
+    if model["kind"] == "fisheye":
+        d = np.array([[model["k1"]], [model["k2"]], [model["k3"]], [model["k4"]]])
+        px, _ = cv2.fisheye.projectPoints(pts, np.zeros((3, 1)), np.zeros((3, 1)), k, d)
+    else:
+        d = np.array([[model["k1"], model["k2"], model["p1"], model["p2"], model["k3"]]])
+        px, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), k, d)
+    np.testing.assert_allclose(px.reshape(-1, 2), pixels, atol=1e-8, rtol=0)
+    back = cam.point_to_pixel(origins + 500.0 * dirs)
+    np.testing.assert_allclose(back, pixels, atol=1e-8, rtol=0)

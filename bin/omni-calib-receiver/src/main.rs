@@ -17,8 +17,8 @@ use std::sync::OnceLock;
     // Help is printed as written, unwrapped: examples stay one line for copy and paste.
     term_width = 0,
     version,
-    about = "Calibrate the catadioptric camera (receiver) from checkerboard images: detect the corners, \
-fit a camera model, write camera.json with the fitted model and a report.",
+    about = "Calibrate the receiver camera (catadioptric, or an ordinary pinhole or fisheye camera) from \
+checkerboard images: detect the corners, fit a camera model, write camera.json with the fitted model and a report.",
     args_conflicts_with_subcommands = true,
     subcommand_negates_reqs = true,
     after_help = "Examples:\n  \
@@ -26,6 +26,8 @@ omni-calib-receiver --board board.json -o camera.json boards/*.png\n  \
 omni-calib-receiver --board board.json --model ocam --export-ocam calib_results.txt boards/\n  \
 omni-calib-receiver --board board.json --save-corners corners.json --overlay check/ boards/\n  \
 omni-calib-receiver --board board.json --corners corners.json --model mei --export-kalibr camchain.yaml\n  \
+omni-calib-receiver --board board.json --model pinhole --export-opencv calib.yaml boards/     (OpenCV calibrateCamera's model)\n  \
+omni-calib-receiver --board board.json --model fisheye --export-kalibr camchain.yaml boards/\n  \
 omni-calib-receiver --board board.json --annulus 511.5,511.5,102.5,493 boards/\n  \
 omni-calib-receiver --board board.json --annulus auto boards/\n  \
 omni-calib-receiver --board board.json --rim-image lit_room.png boards/\n  \
@@ -35,14 +37,20 @@ omni-calib-receiver export camera.json --to opencv -o omnidir.yaml\n  \
 omni-calib-receiver convert camera.json --to ocam -o ocam.json     (fits OCamCalib's model to the rays)\n  \
 omni-calib-receiver import-kalibr camchain.yaml -o camera.json\n  \
 omni-calib-receiver import-opencv omnidir.yaml -o camera.json\n  \
+omni-calib-receiver import-opencv --model fisheye fisheye.yaml -o camera.json\n  \
 omni-calib-receiver query --camera camera.json < questions.txt     (lines \"u v\" → rays, \"x y z\" → pixels)\n\n\
 Models: mei (unified sphere model + radial-tangential distortion, as Kalibr omni-radtan and OpenCV \
 omnidir), ocam (Scaramuzza polynomial, as OCamCalib), hyperbolic (the exact mirror of --mirror with \
-focal length and principal point fitted). Images may be files or directories (png, jpg, tif). \
+focal length and principal point fitted); for ordinary cameras: pinhole (radial-tangential k1 k2 p1 p2 k3, \
+as OpenCV calibrateCamera; alias opencv-pinhole), pinhole-radtan (k1 k2 p1 p2, k3 = 0, as Kalibr pinhole-radtan), \
+fisheye (Kannala-Brandt k1..k4, as OpenCV cv::fisheye and Kalibr pinhole-equi; aliases kannala-brandt, \
+pinhole-equi). ocam, hyperbolic, pinhole and fisheye fits are checked against a Mei fit of the same images. \
+Images may be files or directories (png, jpg, tif). \
 Images whose board is not found, has too few corners, or fits much worse than the others are \
 reported and left out. camera.json is written only if the calibration succeeded.\n\
 Exported Kalibr and OpenCV files describe the unit sphere (x, y, −z) of the omniscan world about \
-the viewpoint (written into the files as a comment; see docs/FORMATS.md).\n\
+the viewpoint, the pinhole and fisheye ones a camera frame (x, y, −z) (written into the files as a comment; see \
+docs/FORMATS.md).\n\
 Exit codes: 0 ok, 1 bad input or failed calibration, 2 usage error."
 )]
 struct Args {
@@ -57,7 +65,7 @@ struct CalibArgs {
     /// The checkerboard (board.json: inner corners and square size).
     #[arg(long, required = true)]
     board: Option<PathBuf>,
-    /// Camera model to fit: mei, ocam or hyperbolic.
+    /// Camera model to fit: mei, ocam, hyperbolic, pinhole, pinhole-radtan or fisheye (see below).
     #[arg(long, default_value = "mei")]
     model: ModelKind,
     /// Read corners from this file (see --save-corners) instead of detecting them.
@@ -83,10 +91,13 @@ struct CalibArgs {
     /// Also export OCamCalib calib_results.txt (needs --model ocam).
     #[arg(long, value_name = "FILE")]
     export_ocam: Option<PathBuf>,
-    /// Also export Kalibr camchain.yaml, omni + radtan (needs --model mei).
+    /// Also export Kalibr camchain.yaml: omni + radtan (--model mei), pinhole + radtan (--model
+    /// pinhole-radtan) or pinhole + equidistant (--model fisheye).
     #[arg(long, value_name = "FILE")]
     export_kalibr: Option<PathBuf>,
-    /// Also export OpenCV omnidir K, D, xi as OpenCV YAML (needs --model mei).
+    /// Also export an OpenCV FileStorage YAML: omnidir K, D, xi (--model mei), calibrateCamera's
+    /// camera_matrix, distortion_coefficients (--model pinhole, pinhole-radtan) or fisheye K, D
+    /// (--model fisheye).
     #[arg(long, value_name = "FILE")]
     export_opencv: Option<PathBuf>,
     /// The image topic written into --export-kalibr's camchain.yaml (`rostopic`).
@@ -99,6 +110,10 @@ struct CalibArgs {
     /// Huber threshold of the robust loss (px).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     huber_px: f64,
+    /// Fit by plain least squares: no Huber loss, no per-image weights, no image rejected as an
+    /// outlier. The cost OpenCV and Kalibr minimise, to compare RMS values with theirs.
+    #[arg(long, conflicts_with = "huber_px")]
+    least_squares: bool,
     /// Where the fitted model's single viewpoint sits in the world frame (mm). Board images fix
     /// the rays' directions, not the origin: 0,0,0 makes the viewpoint the origin; the mirror's
     /// focus 0,0,2c (0,0,80 for the paper's mirror) keeps SENSOR.md's frame, origin at the camera.
@@ -164,7 +179,8 @@ enum Command {
     },
     /// Write an existing camera.json in another tool's format without re-fitting: ocam
     /// (OCamCalib calib_results.txt, from kind ocam), kalibr (camchain.yaml) or opencv
-    /// (cv::omnidir YAML), both from kind mei.
+    /// (FileStorage YAML: omnidir, calibrateCamera or fisheye), both from kind mei, pinhole or
+    /// fisheye (Kalibr: a pinhole with k3 = 0).
     Export {
         /// The calibration (camera.json).
         camera: PathBuf,
@@ -184,7 +200,7 @@ enum Command {
     Convert {
         /// The calibration (camera.json).
         camera: PathBuf,
-        /// Target model: mei, ocam or hyperbolic.
+        /// Target model: mei, ocam, hyperbolic, pinhole, pinhole-radtan or fisheye.
         #[arg(long)]
         to: ModelKind,
         /// For --to hyperbolic: camera.json of kind hyperbolic giving the mirror (a, b, rim);
@@ -201,8 +217,9 @@ enum Command {
         #[arg(short, long, default_value = "camera.json")]
         output: PathBuf,
     },
-    /// Convert one camera of a Kalibr camchain.yaml (omni + radtan) into camera.json (kind mei).
-    /// Kalibr's sphere (x, y, z) is (x, y, −z) of the omniscan world; the numbers are the same.
+    /// Convert one camera of a Kalibr camchain.yaml into camera.json: omni + radtan (kind mei),
+    /// pinhole + radtan (kind pinhole), pinhole + equidistant (kind fisheye). Kalibr's sphere or
+    /// camera frame (x, y, z) is (x, y, −z) of the omniscan world; the numbers are the same.
     ImportKalibr {
         /// Kalibr's camchain.yaml (`-` = stdin).
         input: PathBuf,
@@ -213,11 +230,17 @@ enum Command {
         #[arg(short, long, default_value = "camera.json")]
         output: PathBuf,
     },
-    /// Convert an OpenCV cv::omnidir YAML file (K, D, xi, image_width, image_height) into
-    /// camera.json (kind mei). OpenCV's sphere (x, y, z) is (x, y, −z) of the omniscan world.
+    /// Convert an OpenCV FileStorage YAML file into camera.json: cv::omnidir (K, D, xi; kind
+    /// mei), calibrateCamera (camera_matrix or K, distortion_coefficients or D = k1 k2 p1 p2 [k3];
+    /// kind pinhole) or cv::fisheye (K, D = k1..k4; kind fisheye), with image_width and
+    /// image_height. OpenCV's sphere or camera frame (x, y, z) is (x, y, −z) of the omniscan world.
     ImportOpencv {
         /// The OpenCV FileStorage YAML file (`-` = stdin).
         input: PathBuf,
+        /// Which OpenCV model: auto (xi: omnidir; camera_matrix: pinhole; K and D alone are
+        /// ambiguous and refused), omnidir, pinhole or fisheye.
+        #[arg(long, default_value = "auto")]
+        model: export::OpencvModel,
         /// Output camera.json (`-` = stdout).
         #[arg(short, long, default_value = "camera.json")]
         output: PathBuf,
@@ -243,7 +266,7 @@ fn main() -> std::process::ExitCode {
                 session::convert(&opts, &out)
             }
             Some(Command::ImportKalibr { input, cam, output }) => session::import_kalibr(&input, &cam, &output),
-            Some(Command::ImportOpencv { input, output }) => session::import_opencv(&input, &output),
+            Some(Command::ImportOpencv { input, model, output }) => session::import_opencv(&input, model, &output),
             Some(Command::FindAnnulus { images }) => session::find_annulus(&images, &out).and_then(|a| {
                 // Through an io error, not println!: a closed stdout is a clean exit, not a panic.
                 writeln!(std::io::stdout(), "{:.3},{:.3},{:.3},{:.3}", a[0], a[1], a[2], a[3])
@@ -272,6 +295,7 @@ fn calibrate(a: CalibArgs, out: &Stderr) -> Result<(), Error> {
         rostopic: a.rostopic,
         folds: a.folds,
         huber_px: a.huber_px,
+        least_squares: a.least_squares,
         viewpoint_mm: a.viewpoint_mm,
         annulus: a.annulus,
         rim_image: a.rim_image,

@@ -350,12 +350,60 @@ fn export_and_import_kalibr_and_opencv_round_trip() {
     assert_eq!(out.status.code(), Some(1));
     assert!(stderr(&out).contains("--to ocam needs a camera of kind ocam, this one is mei"), "{}", stderr(&out));
     let bad = dir.path().join("bad.yaml");
-    std::fs::write(&bad, "cam0:\n  camera_model: pinhole\n").unwrap();
+    std::fs::write(&bad, "cam0:\n  camera_model: ds\n  distortion_model: radtan\n  resolution: [752, 480]\n").unwrap();
     let back = dir.path().join("x.json");
     let out = bin().arg("import-kalibr").arg(&bad).arg("-o").arg(&back).output().unwrap();
     assert_eq!(out.status.code(), Some(1));
-    assert!(stderr(&out).contains("bad.yaml: cam0.camera_model: \"pinhole\""), "{}", stderr(&out));
+    assert!(stderr(&out).contains("bad.yaml: cam0.camera_model: \"ds\" is not read"), "{}", stderr(&out));
     assert!(!back.exists());
+}
+
+/// The ordinary cameras go out to OpenCV's and Kalibr's files and come back the same; a pinhole
+/// with k3 is not written as Kalibr's radtan (which has no k3), and K, D alone need --model.
+#[test]
+fn pinhole_and_fisheye_round_trip_through_opencv_and_kalibr() {
+    let dir = tempfile::tempdir().unwrap();
+    let pinhole = r#"{"kind": "pinhole", "fx_px": 740.3, "fy_px": 740.9, "cx_px": 668.2, "cy_px": 313.6,
+        "k1": -0.3275, "k2": 0.1156, "p1": -5.6e-4, "p2": 5.4e-4, "k3": -0.0192, "width": 1280, "height": 720}"#;
+    let fisheye = r#"{"kind": "fisheye", "fx_px": 725.95, "fy_px": 726.3, "cx_px": 673.5, "cy_px": 308.6,
+        "k1": -0.0352, "k2": -0.0203, "k3": 0.0323, "k4": -0.0158, "width": 1280, "height": 720}"#;
+    let radtan = pinhole.replace(r#""k3": -0.0192"#, r#""k3": 0.0"#);
+    let cases = [
+        ("pinhole", pinhole.to_string(), "opencv", vec![]),
+        ("radtan", radtan, "kalibr", vec![]),
+        ("fisheye", fisheye.to_string(), "opencv", vec!["--model", "fisheye"]),
+        ("fisheye-k", fisheye.to_string(), "kalibr", vec![]),
+    ];
+    for (name, model, to, extra) in cases {
+        let cam = dir.path().join(format!("{name}.json"));
+        std::fs::write(&cam, format!(r#"{{"format": "omniscan.camera", "version": 1, "model": {model}}}"#)).unwrap();
+        let file = dir.path().join(format!("{name}.yaml"));
+        let out = bin().arg("export").arg(&cam).arg("--to").arg(to).arg("-o").arg(&file).output().unwrap();
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert!(std::fs::read_to_string(&file).unwrap().contains("camera's frame (X, Y, Z), Z forward, is (x, y, -z)"));
+        let back = dir.path().join(format!("{name}-back.json"));
+        let out = bin().arg(format!("import-{to}")).args(&extra).arg(&file).arg("-o").arg(&back).output().unwrap();
+        assert!(out.status.success(), "{name}: {}", stderr(&out));
+        let a: serde_json::Value = serde_json::from_slice(&std::fs::read(&cam).unwrap()).unwrap();
+        let b: serde_json::Value = serde_json::from_slice(&std::fs::read(&back).unwrap()).unwrap();
+        for (key, value) in a["model"].as_object().unwrap() {
+            assert_eq!(&b["model"][key], value, "{name}: {key}");
+        }
+    }
+    let out = bin()
+        .arg("export")
+        .arg(dir.path().join("pinhole.json"))
+        .arg("--to")
+        .arg("kalibr")
+        .arg("-o")
+        .arg("-")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("--to kalibr needs k3 = 0 (Kalibr's radtan has no k3"), "{}", stderr(&out));
+    let out = bin().arg("import-opencv").arg(dir.path().join("fisheye.yaml")).arg("-o").arg("-").output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("--model pinhole or fisheye"), "{}", stderr(&out));
 }
 
 /// `convert` fits the target model to the source's rays and reports the difference; beyond the

@@ -1,6 +1,6 @@
-//! Receiver calibration: the catadioptric camera from checkerboard corners.
+//! Receiver calibration: the catadioptric (or an ordinary) camera from checkerboard corners.
 //!
-//! [`calibrate`] fits one of three models ([`ModelKind`]) to the corners of many board images:
+//! [`calibrate`] fits one of the models of [`ModelKind`] to the corners of many board images:
 //! 1. Initialisation without hand-tuning: principal point at the centre of the mirror rim circle
 //!    ([`Options::annulus`], else the image centre), ξ = 1, and the
 //!    generalised focal length γ chosen on a logarithmic grid by the median per-image
@@ -23,8 +23,12 @@
 //! The hyperbolic camera's blind centre comes from the annulus' inner circle, else it is shrunk
 //! (if needed) to keep every observed corner.
 //!
-//! The polynomial and central hyperbolic fits are checked against a Mei fit of the same images
-//! ([`validate::compare_with_mei`], [`Calibration::model_check`]).
+//! The ordinary-camera models (pinhole with radial-tangential distortion, Kannala–Brandt
+//! fisheye) start from the fitted Mei model too: principal point and aspect from it, focal length
+//! and radial distortion by linear least squares on its rays ([`ordinary_from_mei`]).
+//!
+//! The polynomial, central hyperbolic and ordinary fits are checked against a Mei fit of the same
+//! images ([`validate::compare_with_mei`], [`Calibration::model_check`]).
 //!
 //! [`session`] runs the commands of `omni-calib-receiver` (detection, fit, report, exports,
 //! conversions) on top of these.
@@ -41,9 +45,13 @@ use crate::pose::{UNPROJECTABLE_PX, board_to_world, params_to_pose, pose_from_ra
 use nalgebra::{DMatrix, Isometry3, Point3, Vector2, Vector3};
 use omni_formats::CameraSpec;
 use omni_geom::lm;
+use omni_model::fisheye::{kb_intrinsics, kb_project, kb_unproject};
 use omni_model::mei::{mei_project, mei_unproject};
 use omni_model::ocam::{ocam_project, ocam_unproject};
-use omni_model::{CameraModel as _, HyperbolicCamera, HyperbolicParams, MeiParams, OcamParams};
+use omni_model::pinhole::{radtan_intrinsics, radtan_project, radtan_unproject};
+use omni_model::{
+    CameraModel as _, FisheyeParams, HyperbolicCamera, HyperbolicParams, MeiParams, OcamParams, PinholeParams,
+};
 use serde_json::json;
 
 /// The camera model to fit.
@@ -55,6 +63,33 @@ pub enum ModelKind {
     Ocam,
     /// The exact hyperbolic mirror model with the mirror (a, b) given.
     Hyperbolic,
+    /// An ordinary camera: pinhole with radial-tangential distortion k1 k2 p1 p2 k3 (OpenCV's
+    /// `calibrateCamera` default).
+    Pinhole,
+    /// The same with k3 = 0: k1 k2 p1 p2, Kalibr's `pinhole-radtan`.
+    PinholeRadtan,
+    /// An ordinary fisheye camera: Kannala–Brandt k1..k4 (OpenCV's `cv::fisheye`, Kalibr's
+    /// `pinhole-equi`).
+    Fisheye,
+}
+
+impl ModelKind {
+    /// The name `--model` takes and the report writes.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Mei => "mei",
+            ModelKind::Ocam => "ocam",
+            ModelKind::Hyperbolic => "hyperbolic",
+            ModelKind::Pinhole => "pinhole",
+            ModelKind::PinholeRadtan => "pinhole-radtan",
+            ModelKind::Fisheye => "fisheye",
+        }
+    }
+
+    /// The ordinary-camera models (pinhole and fisheye), fitted from the Mei model's rays.
+    pub fn is_ordinary(self) -> bool {
+        matches!(self, ModelKind::Pinhole | ModelKind::PinholeRadtan | ModelKind::Fisheye)
+    }
 }
 
 impl std::str::FromStr for ModelKind {
@@ -64,7 +99,13 @@ impl std::str::FromStr for ModelKind {
             "mei" => Ok(ModelKind::Mei),
             "ocam" => Ok(ModelKind::Ocam),
             "hyperbolic" => Ok(ModelKind::Hyperbolic),
-            _ => Err(format!("unknown model \"{s}\" (known: mei, ocam, hyperbolic)")),
+            "pinhole" | "opencv-pinhole" => Ok(ModelKind::Pinhole),
+            "pinhole-radtan" => Ok(ModelKind::PinholeRadtan),
+            "fisheye" | "kannala-brandt" | "pinhole-equi" => Ok(ModelKind::Fisheye),
+            _ => Err(format!(
+                "unknown model \"{s}\" (known: mei, ocam, hyperbolic, pinhole, pinhole-radtan, fisheye; \
+                 aliases opencv-pinhole, kannala-brandt, pinhole-equi)"
+            )),
         }
     }
 }
@@ -356,25 +397,46 @@ impl Model {
         v
     }
 
+    /// The central model's intrinsics as the model crate's maps take them (computed once per
+    /// parameter vector: the polynomial's scaling, the ordinary models' domain).
+    fn prepare(&self, full: &[f64]) -> Vec<f64> {
+        match self.kind {
+            ModelKind::Mei | ModelKind::Hyperbolic => full.to_vec(),
+            ModelKind::Ocam => self.ocam_vector(full),
+            ModelKind::Pinhole | ModelKind::PinholeRadtan => radtan_intrinsics(full),
+            ModelKind::Fisheye => kb_intrinsics(full),
+        }
+    }
+
+    /// [`Model::project`] of a central model with [`Model::prepare`]d intrinsics.
+    fn project_prepared(&self, prepared: &[f64], d: &Vector3<f64>) -> Option<Vector2<f64>> {
+        match self.kind {
+            ModelKind::Mei | ModelKind::Hyperbolic => mei_project(prepared, d),
+            ModelKind::Ocam => ocam_project(prepared, d, self.rho_max),
+            ModelKind::Pinhole | ModelKind::PinholeRadtan => radtan_project(prepared, d),
+            ModelKind::Fisheye => kb_project(prepared, d),
+        }
+    }
+
     /// Pixel of a viewing direction (central models; for the non-central one the direction seen
     /// from the mirror's focus, at 10 m).
     fn project(&self, full: &[f64], d: &Vector3<f64>) -> Option<Vector2<f64>> {
         if let Some(cam) = self.camera(full) {
             return cam.point_to_pixel(&(cam.viewpoint() + 1e4 * d.normalize()));
         }
-        match self.kind {
-            ModelKind::Mei | ModelKind::Hyperbolic => mei_project(full, d),
-            ModelKind::Ocam => ocam_project(&self.ocam_vector(full), d, self.rho_max),
-        }
+        self.project_prepared(&self.prepare(full), d)
     }
 
     fn unproject(&self, full: &[f64], px: &Vector2<f64>) -> Option<Vector3<f64>> {
         if let Some(cam) = self.camera(full) {
             return cam.pixel_to_ray(px).map(|r| r.dir.into_inner());
         }
+        let p = self.prepare(full);
         match self.kind {
-            ModelKind::Mei | ModelKind::Hyperbolic => mei_unproject(full, px),
-            ModelKind::Ocam => ocam_unproject(&self.ocam_vector(full), px),
+            ModelKind::Mei | ModelKind::Hyperbolic => mei_unproject(&p, px),
+            ModelKind::Ocam => ocam_unproject(&p, px),
+            ModelKind::Pinhole | ModelKind::PinholeRadtan => radtan_unproject(&p, px),
+            ModelKind::Fisheye => kb_unproject(&p, px),
         }
     }
 }
@@ -386,12 +448,13 @@ fn image_residuals(model: &Model, full: &[f64], pose: &[f64], obs: &Observation,
         out.fill(UNPROJECTABLE_PX);
         return;
     }
+    let prepared = if camera.is_none() { model.prepare(full) } else { Vec::new() };
     for (k, (xy, px)) in obs.board_mm.iter().zip(&obs.pixels).enumerate() {
         let p = board_to_world(pose, *xy);
         // The non-central projection iterates from the observed pixel.
         let q = match &camera {
             Some(cam) => cam.project_from(&p, &Vector2::new(px[0], px[1])),
-            None => model.project(full, &p.coords),
+            None => model.project_prepared(&prepared, &p.coords),
         };
         match q {
             Some(q) => {
@@ -684,6 +747,78 @@ fn ocam_from_mei(mei: &Model, obs: &[Observation], degree: usize, width: u32, he
     })
 }
 
+/// An ordinary-camera model (`kind`: pinhole, pinhole-radtan or fisheye) initialised from a
+/// fitted Mei model: its principal point and aspect, and the focal length and distortion by
+/// linear least squares from the Mei rays at the observed corners (the image radius is linear
+/// in f, f·k1, f·k2, …: u − cx = f·a·(1 + k1·r² + …) for the pinhole, ρ = f·θ·(1 + k1·θ² + …)
+/// for the fisheye); tangential terms start at 0.
+fn ordinary_from_mei(mei: &Model, obs: &[Observation], kind: ModelKind) -> Option<Model> {
+    let f = &mei.full;
+    let (cx, cy, aspect) = (f[3], f[4], f[2] / f[1]);
+    let n = match kind {
+        ModelKind::Pinhole => 4,
+        ModelKind::PinholeRadtan => 3,
+        _ => 5,
+    };
+    let (mut rows, mut rhs) = (Vec::new(), Vec::new());
+    for px in obs.iter().flat_map(|o| &o.pixels) {
+        let Some(d) = mei_unproject(f, &Vector2::new(px[0], px[1])) else { continue };
+        let (u, v) = (px[0] - cx, (px[1] - cy) / aspect);
+        let lateral = d.x.hypot(d.y);
+        if kind == ModelKind::Fisheye {
+            let t = lateral.atan2(-d.z);
+            if lateral < 1e-9 {
+                continue;
+            }
+            rows.push((0..n).map(|k| t.powi(2 * k as i32 + 1)).collect::<Vec<f64>>());
+            rhs.push(u.hypot(v));
+        } else {
+            if -d.z < 0.05 {
+                continue;
+            }
+            let (a, b) = (d.x / -d.z, d.y / -d.z);
+            let r2 = a * a + b * b;
+            for (x, target) in [(a, u), (b, v)] {
+                rows.push((0..n).map(|k| x * r2.powi(k as i32)).collect());
+                rhs.push(target);
+            }
+        }
+    }
+    if rows.len() < n + 4 {
+        return None;
+    }
+    let a = DMatrix::from_fn(rows.len(), n, |i, j| rows[i][j]);
+    let c = a.svd(true, true).solve(&nalgebra::DVector::from_vec(rhs), 1e-14).ok()?;
+    let focal = c[0];
+    if !(focal > 0.0) {
+        return None;
+    }
+    let k: Vec<f64> = (1..n).map(|i| c[i] / focal).collect();
+    let at = |i: usize| k.get(i).copied().unwrap_or(0.0);
+    let (full, names, free): (Vec<f64>, &[&str], Vec<usize>) = match kind {
+        ModelKind::Fisheye => (
+            vec![focal, focal * aspect, cx, cy, at(0), at(1), at(2), at(3)],
+            &["fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "k3", "k4"],
+            (0..8).collect(),
+        ),
+        _ => (
+            vec![focal, focal * aspect, cx, cy, at(0), at(1), 0.0, 0.0, at(2)],
+            &["fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2", "k3"],
+            // Kalibr's radtan has no k3: it stays 0.
+            if kind == ModelKind::PinholeRadtan { (0..8).collect() } else { (0..9).collect() },
+        ),
+    };
+    Some(Model {
+        kind,
+        full,
+        free,
+        names: names.iter().map(|s| s.to_string()).collect(),
+        rho_scale: 1.0,
+        rho_max: 0.0,
+        non_central: None,
+    })
+}
+
 /// Calibrates the receiver from the corners of board images of size `width × height` px.
 pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -> Result<Calibration, String> {
     let mut images: Vec<ImageReport> = obs
@@ -735,6 +870,21 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
     let mut fit = joint_fit(model, &sub, poses, opts).ok_or("the joint fit found no usable board")?;
     // The Mei fit the polynomial starts from: the reference of the model check.
     let mut mei_start = None;
+    if opts.model.is_ordinary() {
+        mei_start = Some(fit.clone());
+        let used: Vec<Observation> =
+            (0..sub.len()).filter(|&k| fit.reasons[k].is_none()).map(|k| sub[k].clone()).collect();
+        let ordinary = ordinary_from_mei(&fit.model, &used, opts.model)
+            .ok_or("pinhole/fisheye initialisation failed (too few corners in front of the camera)")?;
+        let poses = fit.poses.iter().zip(&fit.reasons).map(|(p, r)| if r.is_none() { *p } else { None }).collect();
+        let reasons = fit.reasons.clone();
+        fit = joint_fit(ordinary, &sub, poses, opts).ok_or("the pinhole/fisheye fit found no usable board")?;
+        for (k, r) in reasons.into_iter().enumerate() {
+            if r.is_some() {
+                fit.reasons[k] = r;
+            }
+        }
+    }
     if opts.model == ModelKind::Ocam {
         mei_start = Some(fit.clone());
         let used: Vec<Observation> =
@@ -994,8 +1144,20 @@ fn describe(
             }
             (model.names.clone(), values, stds, CameraSpec::Ocam(p))
         }
+        ModelKind::Pinhole | ModelKind::PinholeRadtan => {
+            let spec = CameraSpec::Pinhole(PinholeParams::from_vector(f, width, height));
+            let keep: Vec<usize> = if model.kind == ModelKind::Pinhole { (0..9).collect() } else { (0..8).collect() };
+            let pick = |v: &[f64]| keep.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+            (keep.iter().map(|&i| model.names[i].clone()).collect(), pick(f), pick(&std_full), spec)
+        }
+        ModelKind::Fisheye => {
+            let spec = CameraSpec::Fisheye(FisheyeParams::from_vector(f, width, height));
+            (model.names.clone(), f.clone(), std_full, spec)
+        }
     }
 }
 
+#[cfg(test)]
+mod ordinary_tests;
 #[cfg(test)]
 mod tests;

@@ -2,9 +2,9 @@
 
 use crate::{Error, Result, Versioned};
 use omni_model::{
-    CameraColour, CameraModel, FixedPlanes, FixedPlanesParams, HyperbolicCamera, HyperbolicParams, MeiCamera,
-    MeiParams, OcamCamera, OcamParams, Optics, TRANSMITTER_KIND_FIXED_PLANES, TRANSMITTER_KIND_POLYGON, Transmitter,
-    TransmitterModel, TransmitterParams,
+    CameraColour, CameraModel, FisheyeCamera, FisheyeParams, FixedPlanes, FixedPlanesParams, HyperbolicCamera,
+    HyperbolicParams, MeiCamera, MeiParams, OcamCamera, OcamParams, Optics, PinholeCamera, PinholeParams,
+    TRANSMITTER_KIND_FIXED_PLANES, TRANSMITTER_KIND_POLYGON, Transmitter, TransmitterModel, TransmitterParams,
 };
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -20,6 +20,12 @@ pub enum CameraSpec {
     Mei(MeiParams),
     /// Scaramuzza's polynomial model, OCamCalib (omni_model::ocam).
     Ocam(OcamParams),
+    /// An ordinary camera: pinhole with radial-tangential distortion, as OpenCV's
+    /// `calibrateCamera` and Kalibr's `pinhole-radtan` (omni_model::pinhole).
+    Pinhole(PinholeParams),
+    /// An ordinary fisheye camera: Kannala–Brandt, as OpenCV's `cv::fisheye` and Kalibr's
+    /// `pinhole-equi` (omni_model::fisheye).
+    Fisheye(FisheyeParams),
 }
 
 /// Deserialises `{"kind": K, ...params}` by hand so that errors name the exact parameter
@@ -38,9 +44,11 @@ impl<'de> Deserialize<'de> for CameraSpec {
             "hyperbolic" => Ok(CameraSpec::Hyperbolic(params(rest)?)),
             "mei" => Ok(CameraSpec::Mei(params(rest)?)),
             "ocam" => Ok(CameraSpec::Ocam(params(rest)?)),
-            other => {
-                Err(D::Error::custom(format!("unknown camera model kind \"{other}\" (known: hyperbolic, mei, ocam)")))
-            }
+            "pinhole" => Ok(CameraSpec::Pinhole(params(rest)?)),
+            "fisheye" => Ok(CameraSpec::Fisheye(params(rest)?)),
+            other => Err(D::Error::custom(format!(
+                "unknown camera model kind \"{other}\" (known: hyperbolic, mei, ocam, pinhole, fisheye)"
+            ))),
         }
     }
 }
@@ -52,6 +60,43 @@ impl CameraSpec {
             CameraSpec::Hyperbolic(p) => Ok(Box::new(HyperbolicCamera::new(p.clone())?)),
             CameraSpec::Mei(p) => Ok(Box::new(MeiCamera::new(p.clone())?)),
             CameraSpec::Ocam(p) => Ok(Box::new(OcamCamera::new(p.clone())?)),
+            CameraSpec::Pinhole(p) => Ok(Box::new(PinholeCamera::new(p.clone())?)),
+            CameraSpec::Fisheye(p) => Ok(Box::new(FisheyeCamera::new(p.clone())?)),
+        }
+    }
+
+    /// Where the model's rays start (mm, world frame): the generic models' `viewpoint_mm`, the
+    /// exact hyperbolic camera's upper mirror focus (0, 0, 2c).
+    pub fn viewpoint_mm(&self) -> [f64; 3] {
+        match self {
+            CameraSpec::Hyperbolic(h) => [0.0, 0.0, 2.0 * h.a_mm.hypot(h.b_mm)],
+            CameraSpec::Mei(p) => p.viewpoint_mm,
+            CameraSpec::Ocam(p) => p.viewpoint_mm,
+            CameraSpec::Pinhole(p) => p.viewpoint_mm,
+            CameraSpec::Fisheye(p) => p.viewpoint_mm,
+        }
+    }
+
+    /// Places a generic model's viewpoint (mm, world frame); the exact hyperbolic model keeps its
+    /// own (its mirror fixes it).
+    pub fn set_viewpoint_mm(&mut self, viewpoint: [f64; 3]) {
+        match self {
+            CameraSpec::Hyperbolic(_) => {}
+            CameraSpec::Mei(p) => p.viewpoint_mm = viewpoint,
+            CameraSpec::Ocam(p) => p.viewpoint_mm = viewpoint,
+            CameraSpec::Pinhole(p) => p.viewpoint_mm = viewpoint,
+            CameraSpec::Fisheye(p) => p.viewpoint_mm = viewpoint,
+        }
+    }
+
+    /// The kind's name as the file writes it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            CameraSpec::Hyperbolic(_) => "hyperbolic",
+            CameraSpec::Mei(_) => "mei",
+            CameraSpec::Ocam(_) => "ocam",
+            CameraSpec::Pinhole(_) => "pinhole",
+            CameraSpec::Fisheye(_) => "fisheye",
         }
     }
 }

@@ -166,6 +166,8 @@ pub struct CameraInfo {
 ///   offset x, y, z (mm), camera tilt x, y (degrees)]`, `k` the pinhole behind the mirror.
 /// * OCamCalib: `ocam`, `d = [c, d, e, a0, a1, …]` (the affine part, then the forward polynomial),
 ///   `k` holds only the centre (cx, cy; no focal length, the entries are 0).
+/// * Pinhole: ROS's own `plumb_bob`, `d = [k1, k2, p1, p2, k3]`.
+/// * Fisheye (Kannala–Brandt): ROS's own `equidistant`, `d = [k1, k2, k3, k4]`.
 pub fn camera_info(spec: &crate::CameraSpec) -> CameraInfo {
     use crate::CameraSpec;
     let k = |fx: f64, fy: f64, cx: f64, cy: f64| [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0];
@@ -183,6 +185,14 @@ pub fn camera_info(spec: &crate::CameraSpec) -> CameraInfo {
             let mut d = vec![o.c, o.d, o.e];
             d.extend(&o.poly);
             (o.width, o.height, "ocam", d, k(0.0, 0.0, o.cx_px, o.cy_px))
+        }
+        CameraSpec::Pinhole(c) => {
+            let d = vec![c.k1, c.k2, c.p1, c.p2, c.k3];
+            (c.width, c.height, "plumb_bob", d, k(c.fx_px, c.fy_px, c.cx_px, c.cy_px))
+        }
+        CameraSpec::Fisheye(c) => {
+            let d = vec![c.k1, c.k2, c.k3, c.k4];
+            (c.width, c.height, "equidistant", d, k(c.fx_px, c.fy_px, c.cx_px, c.cy_px))
         }
     };
     let mut p = [0.0; 12];

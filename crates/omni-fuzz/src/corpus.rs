@@ -9,7 +9,7 @@ use omni_formats::ply::{Encoding, PointCloud, ScalarField, write_ply_to};
 use omni_formats::stream::{Frame, Header, Record, Status, StripePoint};
 use omni_formats::{BoardFile, CameraFile, CameraSpec, ScannerFile};
 use omni_hw::framing::encode_line;
-use omni_model::{HyperbolicParams, MeiParams, TransmitterParams};
+use omni_model::{FisheyeParams, HyperbolicParams, MeiParams, PinholeParams, TransmitterParams};
 use std::path::{Path, PathBuf};
 
 /// One input with where it came from.
@@ -94,13 +94,18 @@ fn generated(target: &str) -> Vec<Seed> {
     }
 }
 
-/// The paper's hyperbolic camera, and the Mei model equal to it.
+/// The paper's hyperbolic camera, the Mei model equal to it, and the ordinary cameras (the real
+/// hand-held set's pinhole and fisheye fits).
 fn camera_seeds() -> Vec<Seed> {
     let h = HyperbolicParams::paper();
     let mei = MeiParams::from_hyperbolic(&h);
+    let pinhole = [740.3, 740.9, 668.2, 313.6, -0.3275, 0.1156, -5.6e-4, 5.4e-4, -0.0192];
+    let fisheye = [725.95, 726.3, 673.5, 308.6, -0.0352, -0.0203, 0.0323, -0.0158];
     vec![
         seed("hyperbolic", pretty(&CameraFile::new(CameraSpec::Hyperbolic(h)))),
         seed("mei", pretty(&CameraFile::new(CameraSpec::Mei(mei)))),
+        seed("pinhole", pretty(&CameraFile::new(CameraSpec::Pinhole(PinholeParams::from_vector(&pinhole, 1280, 720))))),
+        seed("fisheye", pretty(&CameraFile::new(CameraSpec::Fisheye(FisheyeParams::from_vector(&fisheye, 1280, 720))))),
     ]
 }
 

@@ -4,7 +4,9 @@
 //!   world rays. Implementations: [`HyperbolicCamera`] (the exact mirror + pinhole model of
 //!   SENSOR.md, optionally with the camera off the mirror focus), and the generic calibration
 //!   models [`MeiCamera`] (Mei/unified + radial-tangential) and [`OcamCamera`] (Scaramuzza
-//!   polynomial, OCamCalib), fitted by `omni_calib::receiver`.
+//!   polynomial, OCamCalib), and for ordinary cameras [`PinholeCamera`] (radial-tangential, as
+//!   OpenCV's `calibrateCamera`) and [`FisheyeCamera`] (Kannala–Brandt, as `cv::fisheye`), all
+//!   fitted by `omni_calib::receiver`.
 //! * [`Transmitter`]: the rotating polygon mirror and its line lasers, giving the world light
 //!   plane of any (mirror angle, facet, laser); [`FixedPlanes`]: static light planes (a line
 //!   laser rigid with the camera, or the polygon stopped), one per laser.
@@ -16,22 +18,26 @@
 
 mod camera;
 mod colour;
+pub mod fisheye;
 mod fixed;
 mod hyperbolic;
 pub mod limits;
 pub mod mei;
 pub mod ocam;
 mod optics;
+pub mod pinhole;
 mod transmitter;
 
 pub use fixed::{FixedPlaneParams, FixedPlanes, FixedPlanesParams, TransmitterModel};
 
 pub use camera::{CameraModel, CentralCamera, CentralParams, MirrorCircle};
 pub use colour::{BayerPattern, CameraColour, filter_response};
+pub use fisheye::{FisheyeCamera, FisheyeParams};
 pub use hyperbolic::{HyperbolicCamera, HyperbolicParams};
 pub use mei::{MeiCamera, MeiParams};
 pub use ocam::{OcamCamera, OcamParams};
 pub use optics::Optics;
+pub use pinhole::{PinholeCamera, PinholeParams};
 pub use transmitter::{FacetError, LaserParams, LightPlane, PolygonParams, Transmitter, TransmitterParams};
 
 /// `scanner.json`'s name of the rotating polygon transmitter ([`Transmitter`]).

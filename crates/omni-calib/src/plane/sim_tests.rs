@@ -192,11 +192,7 @@ fn at_true_viewpoint(mut spec: omni_formats::CameraSpec, sensor: &Sensor) -> Box
     let circle = sensor.camera.mirror_circle();
     let px = circle.centre + nalgebra::Vector2::new(0.5 * (circle.inner_radius + circle.outer_radius), 0.0);
     let viewpoint: [f64; 3] = sensor.camera.pixel_to_ray(&px).unwrap().origin.coords.into();
-    match &mut spec {
-        omni_formats::CameraSpec::Mei(p) => p.viewpoint_mm = viewpoint,
-        omni_formats::CameraSpec::Ocam(p) => p.viewpoint_mm = viewpoint,
-        omni_formats::CameraSpec::Hyperbolic(_) => {}
-    }
+    spec.set_viewpoint_mm(viewpoint);
     spec.build().unwrap()
 }
 

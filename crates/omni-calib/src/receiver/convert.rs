@@ -5,7 +5,7 @@
 //! target keeps the source's viewpoint.
 
 use super::{Model, Options};
-use super::{ModelKind, Observation, describe, ocam_from_mei};
+use super::{ModelKind, Observation, describe, ocam_from_mei, ordinary_from_mei};
 use nalgebra::{Vector2, Vector3};
 use omni_formats::CameraSpec;
 use omni_geom::lm;
@@ -123,6 +123,13 @@ pub fn convert(source: &CameraSpec, target: ModelKind, mirror: &HyperbolicParams
             ocam.free = (0..ocam.full.len()).collect();
             fit(ocam, &samples)
         }
+        ModelKind::Pinhole | ModelKind::PinholeRadtan | ModelKind::Fisheye => {
+            let mei = fit_mei(centre, outer, 1.0, false, &samples);
+            let pixels: Vec<[f64; 2]> = samples.iter().map(|s| s.0).collect();
+            let obs = Observation { name: String::new(), board_mm: vec![[0.0; 2]; pixels.len()], pixels };
+            let ordinary = ordinary_from_mei(&mei, &[obs], target).ok_or("pinhole/fisheye initialisation failed")?;
+            fit(ordinary, &samples)
+        }
     };
     let annulus = [centre[0], centre[1], circle.inner_radius, outer];
     let opts = Options { model: target, mirror: mirror.clone(), annulus: Some(annulus), ..Default::default() };
@@ -134,19 +141,7 @@ pub fn convert(source: &CameraSpec, target: ModelKind, mirror: &HyperbolicParams
 
 /// A central target starts its rays where the source does.
 fn keep_viewpoint(spec: &mut CameraSpec, source: &CameraSpec) {
-    let viewpoint = match source {
-        CameraSpec::Mei(p) => p.viewpoint_mm,
-        CameraSpec::Ocam(p) => p.viewpoint_mm,
-        CameraSpec::Hyperbolic(h) => {
-            let c = h.a_mm.hypot(h.b_mm);
-            [0.0, 0.0, 2.0 * c]
-        }
-    };
-    match spec {
-        CameraSpec::Mei(p) => p.viewpoint_mm = viewpoint,
-        CameraSpec::Ocam(p) => p.viewpoint_mm = viewpoint,
-        CameraSpec::Hyperbolic(_) => {}
-    }
+    spec.set_viewpoint_mm(source.viewpoint_mm());
 }
 
 /// Largest ray angle (deg) and pixel distance (px) between two cameras over a grid finer than
@@ -197,5 +192,23 @@ mod tests {
         let cam = HyperbolicCamera::new(moved).unwrap();
         let (ray, pixel, _) = compare(&cam, &mei.spec).unwrap();
         assert!(pixel > 2.9 && ray > 0.1, "{ray}° {pixel} px");
+    }
+
+    /// The ordinary models convert into themselves exactly (the fit starts from a Mei fit of the
+    /// rays), and a fisheye lens refuses to become a pinhole one at the image's corners.
+    #[test]
+    fn ordinary_models_convert_into_themselves() {
+        let v = [725.95, 726.3, 673.5, 308.6, -0.0352, -0.0203, 0.0323, -0.0158];
+        let fisheye = CameraSpec::Fisheye(omni_model::FisheyeParams::from_vector(&v, 1280, 720));
+        let h = HyperbolicParams::paper();
+        let same = convert(&fisheye, ModelKind::Fisheye, &h).unwrap();
+        assert!(same.max_ray_deg < 1e-4 && same.max_pixel_px < 1e-3, "{same:?}");
+        let v = [740.3, 740.9, 668.2, 313.6, -0.3275, 0.1156, -5.6e-4, 5.4e-4, -0.0192];
+        let pinhole = CameraSpec::Pinhole(omni_model::PinholeParams::from_vector(&v, 1280, 720));
+        let same = convert(&pinhole, ModelKind::Pinhole, &h).unwrap();
+        assert!(same.max_ray_deg < 1e-3 && same.max_pixel_px < 1e-2, "{same:?}");
+        let other = convert(&fisheye, ModelKind::Pinhole, &h).unwrap();
+        eprintln!("fisheye → pinhole: {:.4}° {:.4} px", other.max_ray_deg, other.max_pixel_px);
+        assert!(other.max_pixel_px > 1.0, "{other:?}");
     }
 }

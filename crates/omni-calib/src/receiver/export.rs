@@ -1,5 +1,10 @@
 //! Interoperability: OCamCalib `calib_results.txt` (export and import), Kalibr `camchain.yaml`
-//! (`omni` + `radtan`) and OpenCV `omnidir` parameters (K, D, ξ) as an OpenCV YAML file.
+//! (`omni` + `radtan`, `pinhole` + `radtan`, `pinhole` + `equidistant`) and OpenCV's
+//! `omnidir` (K, D, ξ), `calibrateCamera` (camera_matrix, distortion_coefficients) and
+//! `fisheye` (K, D) parameters as OpenCV FileStorage YAML files.
+//!
+//! The ordinary models (kinds pinhole and fisheye) are OpenCV's and Kalibr's own formulas in
+//! the camera frame (x, y, −z) of ours: the same numbers, as for the Mei model.
 //!
 //! Frames: Kalibr's and OpenCV's unit sphere is (x, y, −z) of the omniscan world, about the
 //! viewpoint (`viewpoint_mm`): the image centre looks along their +z, which is our −z. The
@@ -9,11 +14,16 @@
 //! the centre's header ([`CentreOrigin`]).
 
 use super::yaml;
+use omni_formats::CameraSpec;
 use omni_model::ocam::{INVERSE_MAX_DEGREE, INVERSE_TOLERANCE_PX, InverseFit};
-use omni_model::{MeiParams, OcamParams};
+use omni_model::{FisheyeParams, MeiParams, OcamParams, PinholeParams};
 
 /// The frame change between Kalibr/OpenCV and omniscan, as written into exported files.
 pub const FRAME_NOTE: &str = "frame: this camera's unit sphere (Xs, Ys, Zs) is (x, y, -z) of the omniscan world frame \
+about the viewpoint (viewpoint_mm in camera.json); pixels: x right, y down, (0, 0) at the centre of the top-left pixel";
+
+/// The frame change for the ordinary (pinhole, fisheye) cameras, as written into exported files.
+pub const CAMERA_FRAME_NOTE: &str = "frame: this camera's frame (X, Y, Z), Z forward, is (x, y, -z) of the omniscan world frame \
 about the viewpoint (viewpoint_mm in camera.json); pixels: x right, y down, (0, 0) at the centre of the top-left pixel";
 
 /// The centre header OCamCalib v3 writes: the values are 0-based, as its C code reads them.
@@ -168,12 +178,100 @@ pub const DEFAULT_ROSTOPIC: &str = "/omni/image_raw";
 /// Kalibr `camchain.yaml` with one camera (`omni` projection, `radtan` distortion), the image
 /// topic Kalibr's tools read and no overlapping cameras.
 pub fn kalibr_camchain(p: &MeiParams, rostopic: &str) -> String {
+    let intrinsics = [p.xi, p.fx_px, p.fy_px, p.cx_px, p.cy_px];
+    kalibr_text("omni", &intrinsics, "radtan", &[p.k1, p.k2, p.p1, p.p2], (p.width, p.height), rostopic, FRAME_NOTE)
+}
+
+/// Kalibr `camchain.yaml` of any model Kalibr has: Mei (`omni` with `radtan`), pinhole
+/// (`pinhole` with `radtan`; Kalibr has no k3, so a pinhole with k3 ≠ 0 is refused) and fisheye
+/// (`pinhole` with `equidistant`).
+pub fn kalibr_camchain_of(spec: &CameraSpec, rostopic: &str) -> Result<String, String> {
+    match spec {
+        CameraSpec::Mei(p) => Ok(kalibr_camchain(p, rostopic)),
+        CameraSpec::Pinhole(p) => {
+            if p.k3 != 0.0 {
+                return Err(format!(
+                    "needs k3 = 0 (Kalibr's radtan has no k3, this camera has {:e}; fit --model pinhole-radtan for Kalibr)",
+                    p.k3
+                ));
+            }
+            let intrinsics = [p.fx_px, p.fy_px, p.cx_px, p.cy_px];
+            let d = [p.k1, p.k2, p.p1, p.p2];
+            Ok(kalibr_text("pinhole", &intrinsics, "radtan", &d, (p.width, p.height), rostopic, CAMERA_FRAME_NOTE))
+        }
+        CameraSpec::Fisheye(p) => {
+            let intrinsics = [p.fx_px, p.fy_px, p.cx_px, p.cy_px];
+            let d = [p.k1, p.k2, p.k3, p.k4];
+            Ok(kalibr_text("pinhole", &intrinsics, "equidistant", &d, (p.width, p.height), rostopic, CAMERA_FRAME_NOTE))
+        }
+        other => Err(format!("needs a camera of kind mei, pinhole or fisheye, this one is {}", other.kind())),
+    }
+}
+
+fn kalibr_text(
+    model: &str,
+    intrinsics: &[f64],
+    distortion: &str,
+    coeffs: &[f64],
+    size: (u32, u32),
+    rostopic: &str,
+    note: &str,
+) -> String {
+    let list = |v: &[f64]| v.iter().map(|x| format!("{x:e}")).collect::<Vec<_>>().join(", ");
     format!(
-        "# Kalibr camchain (omni + radtan), written by omniscan.\n# {FRAME_NOTE}.\n\
-         cam0:\n  camera_model: omni\n  intrinsics: [{:e}, {:e}, {:e}, {:e}, {:e}]\n  distortion_model: radtan\n  \
-         distortion_coeffs: [{:e}, {:e}, {:e}, {:e}]\n  resolution: [{}, {}]\n  cam_overlaps: []\n  rostopic: {}\n",
-        p.xi, p.fx_px, p.fy_px, p.cx_px, p.cy_px, p.k1, p.k2, p.p1, p.p2, p.width, p.height, rostopic
+        "# Kalibr camchain ({model} + {distortion}), written by omniscan.\n# {note}.\n\
+         cam0:\n  camera_model: {model}\n  intrinsics: [{}]\n  distortion_model: {distortion}\n  \
+         distortion_coeffs: [{}]\n  resolution: [{}, {}]\n  cam_overlaps: []\n  rostopic: {rostopic}\n",
+        list(intrinsics),
+        list(coeffs),
+        size.0,
+        size.1
     )
+}
+
+/// An OpenCV FileStorage matrix entry (`dt: d`, numbers to full precision).
+fn opencv_matrix(name: &str, rows: usize, cols: usize, v: &[f64]) -> String {
+    let data = v.iter().map(|x| if *x == 0.0 { "0.".to_string() } else { format!("{x:e}") }).collect::<Vec<_>>();
+    format!("{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: [ {} ]\n", data.join(", "))
+}
+
+/// OpenCV's `calibrateCamera` parameters as a FileStorage YAML file, with the keys OpenCV's
+/// calibration sample writes: `camera_matrix`, `distortion_coefficients` (k1 k2 p1 p2 k3),
+/// `image_width`, `image_height`.
+pub fn opencv_pinhole_yaml(p: &PinholeParams) -> String {
+    let k = [p.fx_px, 0.0, p.cx_px, 0.0, p.fy_px, p.cy_px, 0.0, 0.0, 1.0];
+    format!(
+        "%YAML:1.0\n---\n# OpenCV calibrateCamera (camera_matrix, distortion_coefficients = k1 k2 p1 p2 k3), written by omniscan.\n\
+         # {CAMERA_FRAME_NOTE}.\nimage_width: {}\nimage_height: {}\n{}{}",
+        p.width,
+        p.height,
+        opencv_matrix("camera_matrix", 3, 3, &k),
+        opencv_matrix("distortion_coefficients", 5, 1, &[p.k1, p.k2, p.p1, p.p2, p.k3])
+    )
+}
+
+/// OpenCV's `cv::fisheye` parameters as a FileStorage YAML file: `K`, `D` (k1..k4),
+/// `image_width`, `image_height`.
+pub fn opencv_fisheye_yaml(p: &FisheyeParams) -> String {
+    let k = [p.fx_px, 0.0, p.cx_px, 0.0, p.fy_px, p.cy_px, 0.0, 0.0, 1.0];
+    format!(
+        "%YAML:1.0\n---\n# OpenCV cv::fisheye (K, D = k1 k2 k3 k4), written by omniscan.\n# {CAMERA_FRAME_NOTE}.\n\
+         image_width: {}\nimage_height: {}\n{}{}",
+        p.width,
+        p.height,
+        opencv_matrix("K", 3, 3, &k),
+        opencv_matrix("D", 4, 1, &[p.k1, p.k2, p.k3, p.k4])
+    )
+}
+
+/// The OpenCV file of a camera: omnidir (kind mei), calibrateCamera (pinhole) or fisheye.
+pub fn opencv_yaml_of(spec: &CameraSpec) -> Result<String, String> {
+    match spec {
+        CameraSpec::Mei(p) => Ok(opencv_omnidir_yaml(p)),
+        CameraSpec::Pinhole(p) => Ok(opencv_pinhole_yaml(p)),
+        CameraSpec::Fisheye(p) => Ok(opencv_fisheye_yaml(p)),
+        other => Err(format!("needs a camera of kind mei, pinhole or fisheye, this one is {}", other.kind())),
+    }
 }
 
 /// OpenCV `cv::omnidir` parameters as an OpenCV FileStorage YAML file: `K`, `D`, `xi`.
@@ -198,9 +296,10 @@ fn mei_from(v: [f64; 9], width: f64, height: f64) -> Result<MeiParams, String> {
     Ok(p)
 }
 
-/// Reads camera `cam` (e.g. `cam0`) of a Kalibr `camchain.yaml`: `omni` projection with `radtan`
-/// (or `none`) distortion. The error names the key at fault.
-pub fn parse_kalibr_camchain(text: &str, cam: &str) -> Result<MeiParams, String> {
+/// Reads camera `cam` of a Kalibr `camchain.yaml` into camera.json's model: `omni` + `radtan`
+/// (or `none`) is kind mei, `pinhole` + `radtan` (or `none`) kind pinhole (k3 = 0), `pinhole` +
+/// `equidistant` kind fisheye. The error names the key at fault.
+pub fn parse_kalibr_camera(text: &str, cam: &str) -> Result<CameraSpec, String> {
     let doc = yaml::FlatYaml::parse(text)?;
     if !doc.has_prefix(cam) {
         let cams = doc.top_keys().join(", ");
@@ -208,22 +307,148 @@ pub fn parse_kalibr_camchain(text: &str, cam: &str) -> Result<MeiParams, String>
     }
     let key = |k: &str| format!("{cam}.{k}");
     let model = doc.scalar(&key("camera_model"))?;
-    if model != "omni" {
-        return Err(format!(
-            "{}: {model:?} is not the unified (omni) model; only omni + radtan is read",
-            key("camera_model")
-        ));
-    }
-    let intrinsics = doc.numbers(&key("intrinsics"), Some(5))?;
-    let distortion = match doc.scalar(&key("distortion_model"))?.as_str() {
-        "radtan" => doc.numbers(&key("distortion_coeffs"), Some(4))?,
-        "none" => vec![0.0; 4],
-        other => return Err(format!("{}: {other:?} is not read (radtan or none)", key("distortion_model"))),
-    };
+    let distortion = doc.scalar(&key("distortion_model"))?;
+    let coeffs = || doc.numbers(&key("distortion_coeffs"), Some(4));
     let size = doc.numbers(&key("resolution"), Some(2))?;
-    let (i, d) = (&intrinsics, &distortion);
-    mei_from([i[0], i[1], i[2], i[3], i[4], d[0], d[1], d[2], d[3]], size[0], size[1])
-        .map_err(|e| format!("{cam}: {e}"))
+    let (w, h) = (size[0], size[1]);
+    let spec = match (model.as_str(), distortion.as_str()) {
+        ("omni", "radtan" | "none") => {
+            let i = doc.numbers(&key("intrinsics"), Some(5))?;
+            let d = if distortion == "none" { vec![0.0; 4] } else { coeffs()? };
+            CameraSpec::Mei(
+                mei_from([i[0], i[1], i[2], i[3], i[4], d[0], d[1], d[2], d[3]], w, h)
+                    .map_err(|e| format!("{cam}: {e}"))?,
+            )
+        }
+        ("pinhole", "radtan" | "none") => {
+            let i = doc.numbers(&key("intrinsics"), Some(4))?;
+            let d = if distortion == "none" { vec![0.0; 4] } else { coeffs()? };
+            CameraSpec::Pinhole(
+                pinhole_from(&[i[0], i[1], i[2], i[3], d[0], d[1], d[2], d[3], 0.0], w, h)
+                    .map_err(|e| format!("{cam}: {e}"))?,
+            )
+        }
+        ("pinhole", "equidistant") => {
+            let i = doc.numbers(&key("intrinsics"), Some(4))?;
+            let d = coeffs()?;
+            CameraSpec::Fisheye(
+                fisheye_from(&[i[0], i[1], i[2], i[3], d[0], d[1], d[2], d[3]], w, h)
+                    .map_err(|e| format!("{cam}: {e}"))?,
+            )
+        }
+        ("omni" | "pinhole", other) => {
+            let known = if model == "omni" { "radtan or none" } else { "radtan, equidistant or none" };
+            return Err(format!("{}: {other:?} is not read with {model} ({known})", key("distortion_model")));
+        }
+        (other, _) => {
+            return Err(format!("{}: {other:?} is not read (omni or pinhole)", key("camera_model")));
+        }
+    };
+    Ok(spec)
+}
+
+fn check_size(width: f64, height: f64) -> Result<(u32, u32), String> {
+    if !(width.fract() == 0.0 && height.fract() == 0.0 && width >= 1.0 && height >= 1.0) {
+        return Err(format!("image size: expected whole positive numbers, got {width} × {height}"));
+    }
+    Ok((width as u32, height as u32))
+}
+
+/// A pinhole camera of intrinsics fx, fy, cx, cy, k1, k2, p1, p2, k3 and size, checked.
+fn pinhole_from(v: &[f64], width: f64, height: f64) -> Result<PinholeParams, String> {
+    let (w, h) = check_size(width, height)?;
+    let p = PinholeParams::from_vector(v, w, h);
+    p.validate()?;
+    Ok(p)
+}
+
+/// A fisheye camera of intrinsics fx, fy, cx, cy, k1..k4 and size, checked.
+fn fisheye_from(v: &[f64], width: f64, height: f64) -> Result<FisheyeParams, String> {
+    let (w, h) = check_size(width, height)?;
+    let p = FisheyeParams::from_vector(v, w, h);
+    p.validate()?;
+    Ok(p)
+}
+
+/// Which OpenCV model a FileStorage file holds (`import-opencv --model`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OpencvModel {
+    /// `xi` present: omnidir; `camera_matrix` (calibrateCamera's sample names): pinhole; else
+    /// refused as ambiguous (K and D of 4 could be either pinhole or fisheye).
+    Auto,
+    Omnidir,
+    Pinhole,
+    Fisheye,
+}
+
+impl std::str::FromStr for OpencvModel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "auto" => Ok(OpencvModel::Auto),
+            "omnidir" => Ok(OpencvModel::Omnidir),
+            "pinhole" => Ok(OpencvModel::Pinhole),
+            "fisheye" => Ok(OpencvModel::Fisheye),
+            _ => Err(format!("unknown OpenCV model \"{s}\" (known: auto, omnidir, pinhole, fisheye)")),
+        }
+    }
+}
+
+/// Reads an OpenCV FileStorage file of the model `which` into camera.json's model.
+pub fn parse_opencv(text: &str, which: OpencvModel) -> Result<CameraSpec, String> {
+    let doc = yaml::FlatYaml::parse(text)?;
+    let which = match which {
+        OpencvModel::Auto if doc.has_prefix("xi") => OpencvModel::Omnidir,
+        OpencvModel::Auto if doc.has_prefix("camera_matrix") => OpencvModel::Pinhole,
+        OpencvModel::Auto => {
+            return Err(
+                "no xi and no camera_matrix: say which model K and D are for (--model pinhole or fisheye)".into()
+            );
+        }
+        other => other,
+    };
+    match which {
+        OpencvModel::Omnidir => Ok(CameraSpec::Mei(parse_opencv_omnidir(text)?)),
+        OpencvModel::Pinhole => {
+            let (k, k_name, d, d_name) = opencv_k_d(&doc)?;
+            // OpenCV writes 4, 5, 8, 12 or 14 coefficients; the model has the first 5.
+            if !(4..=14).contains(&d.len()) || d.iter().skip(5).any(|x| *x != 0.0) {
+                return Err(format!(
+                    "{d_name}: expected k1 k2 p1 p2 [k3] (4 or 5 numbers; the rational, thin-prism and tilt terms must be 0), got {d:?}"
+                ));
+            }
+            let at = |i: usize| d.get(i).copied().unwrap_or(0.0);
+            let (w, h) = (doc.number("image_width")?, doc.number("image_height")?);
+            let v = [k[0], k[4], k[2], k[5], at(0), at(1), at(2), at(3), at(4)];
+            pinhole_from(&v, w, h).map(CameraSpec::Pinhole).map_err(|e| format!("{k_name}/{d_name}: {e}"))
+        }
+        OpencvModel::Fisheye => {
+            let (k, k_name, d, d_name) = opencv_k_d(&doc)?;
+            if d.len() != 4 {
+                return Err(format!("{d_name}: expected k1 k2 k3 k4 (4 numbers), got {}", d.len()));
+            }
+            let (w, h) = (doc.number("image_width")?, doc.number("image_height")?);
+            let v = [k[0], k[4], k[2], k[5], d[0], d[1], d[2], d[3]];
+            fisheye_from(&v, w, h).map(CameraSpec::Fisheye).map_err(|e| format!("{k_name}/{d_name}: {e}"))
+        }
+        OpencvModel::Auto => unreachable!("resolved above"),
+    }
+}
+
+/// K (or camera_matrix), without skew, and D (or distortion_coefficients): (K, its name, D,
+/// its name).
+fn opencv_k_d(doc: &yaml::FlatYaml) -> Result<(Vec<f64>, String, Vec<f64>, String), String> {
+    let either = |a: &str, b: &str| if doc.has_prefix(a) { a.to_string() } else { b.to_string() };
+    let k_name = either("K", "camera_matrix");
+    let d_name = either("D", "distortion_coefficients");
+    let k = doc.numbers(&format!("{k_name}.data"), Some(9))?;
+    let d = doc.numbers(&format!("{d_name}.data"), None)?;
+    let skew_ok = k[1].abs() <= 1e-9 * k[0].abs();
+    let rest_ok = k[3] == 0.0 && k[6] == 0.0 && k[7] == 0.0 && k[8] == 1.0;
+    if !skew_ok || !rest_ok {
+        return Err(format!("{k_name}: expected [fx, 0, cx, 0, fy, cy, 0, 0, 1] (no skew), got {k:?}"));
+    }
+    Ok((k, k_name, d, d_name))
 }
 
 /// Reads an OpenCV `cv::omnidir` YAML file: `K` (or `camera_matrix`), `D` (or
@@ -364,18 +589,23 @@ mod tests {
         {
             assert!(text.contains(needed), "{needed} missing in {text}");
         }
-        assert_eq!(parse_kalibr_camchain(&text, "cam0").unwrap(), p);
+        assert_eq!(parse_kalibr_camera(&text, "cam0").unwrap(), CameraSpec::Mei(p.clone()));
         let pinhole = text.replace("camera_model: omni", "camera_model: pinhole");
         assert!(
-            parse_kalibr_camchain(&pinhole, "cam0")
-                .unwrap_err()
-                .contains("\"pinhole\" is not the unified (omni) model")
+            parse_kalibr_camera(&pinhole, "cam0").unwrap_err().contains("cam0.intrinsics: expected 4 numbers, got 5")
         );
+        let ds = text.replace("camera_model: omni", "camera_model: ds");
+        assert_eq!(
+            parse_kalibr_camera(&ds, "cam0").unwrap_err(),
+            "cam0.camera_model: \"ds\" is not read (omni or pinhole)"
+        );
+        let equi = text.replace("distortion_model: radtan", "distortion_model: equidistant");
+        assert!(parse_kalibr_camera(&equi, "cam0").unwrap_err().contains("\"equidistant\" is not read with omni"));
         assert!(
-            parse_kalibr_camchain(&text, "cam1").unwrap_err().contains("no camera \"cam1\" in the file (it has: cam0)")
+            parse_kalibr_camera(&text, "cam1").unwrap_err().contains("no camera \"cam1\" in the file (it has: cam0)")
         );
         let short = text.replace("resolution: [752, 480]", "resolution: [752]");
-        assert!(parse_kalibr_camchain(&short, "cam0").unwrap_err().contains("cam0.resolution: expected 2 numbers"));
+        assert!(parse_kalibr_camera(&short, "cam0").unwrap_err().contains("cam0.resolution: expected 2 numbers"));
     }
 
     #[test]
@@ -391,5 +621,65 @@ mod tests {
         assert!(parse_opencv_omnidir(&skewed).unwrap_err().contains("no skew"), "{skewed}");
         let no_size = text.replace("image_width: 752\n", "");
         assert_eq!(parse_opencv_omnidir(&no_size).unwrap_err(), "image_width: missing");
+    }
+
+    fn pinhole_sample() -> PinholeParams {
+        PinholeParams {
+            fx_px: 740.3,
+            fy_px: 740.9,
+            cx_px: 668.2,
+            cy_px: 313.6,
+            k1: -0.3275,
+            k2: 0.1156,
+            k3: -0.0192,
+            p1: -5.6e-4,
+            p2: 5.4e-4,
+            width: 1280,
+            height: 720,
+            viewpoint_mm: [0.0; 3],
+        }
+    }
+
+    fn fisheye_sample() -> FisheyeParams {
+        FisheyeParams::from_vector(&[725.95, 726.3, 673.5, 308.6, -0.0352, -0.0203, 0.0323, -0.0158], 1280, 720)
+    }
+
+    #[test]
+    fn ordinary_cameras_read_back_from_opencv_and_kalibr_files() {
+        let pinhole = CameraSpec::Pinhole(pinhole_sample());
+        let fisheye = CameraSpec::Fisheye(fisheye_sample());
+        let text = opencv_yaml_of(&pinhole).unwrap();
+        assert!(
+            text.contains("camera_matrix: !!opencv-matrix") && text.contains("(x, y, -z) of the omniscan"),
+            "{text}"
+        );
+        assert_eq!(parse_opencv(&text, OpencvModel::Auto).unwrap(), pinhole);
+        let text = opencv_yaml_of(&fisheye).unwrap();
+        assert_eq!(parse_opencv(&text, OpencvModel::Fisheye).unwrap(), fisheye);
+        assert!(parse_opencv(&text, OpencvModel::Auto).unwrap_err().contains("--model pinhole or fisheye"));
+        // K and D of 4 read as a pinhole are the pinhole k1 k2 p1 p2.
+        let CameraSpec::Pinhole(p) = parse_opencv(&text, OpencvModel::Pinhole).unwrap() else { panic!() };
+        assert_eq!((p.k1, p.p2, p.k3), (-0.0352, -0.0158, 0.0));
+        // Kalibr: pinhole + radtan needs k3 = 0; pinhole + equidistant is the fisheye.
+        assert!(kalibr_camchain_of(&pinhole, "/t").unwrap_err().contains("Kalibr's radtan has no k3"));
+        let radtan = CameraSpec::Pinhole(PinholeParams { k3: 0.0, ..pinhole_sample() });
+        let chain = kalibr_camchain_of(&radtan, "/t").unwrap();
+        assert!(chain.contains("camera_model: pinhole") && chain.contains("distortion_model: radtan"), "{chain}");
+        assert_eq!(parse_kalibr_camera(&chain, "cam0").unwrap(), radtan);
+        let chain = kalibr_camchain_of(&fisheye, "/t").unwrap();
+        assert!(chain.contains("distortion_model: equidistant"), "{chain}");
+        assert_eq!(parse_kalibr_camera(&chain, "cam0").unwrap(), fisheye);
+        let hyperbolic = CameraSpec::Hyperbolic(omni_model::HyperbolicParams::paper());
+        let refused = "needs a camera of kind mei, pinhole or fisheye, this one is hyperbolic";
+        assert_eq!(opencv_yaml_of(&hyperbolic).unwrap_err(), refused);
+    }
+
+    #[test]
+    fn opencv_rational_coefficients_are_refused_unless_zero() {
+        let text = opencv_pinhole_yaml(&pinhole_sample());
+        let eight = text.replace("rows: 5", "rows: 8").replace("-1.92e-2 ]", "-1.92e-2, 0., 0., 0. ]");
+        assert_eq!(parse_opencv(&eight, OpencvModel::Auto).unwrap(), CameraSpec::Pinhole(pinhole_sample()), "{eight}");
+        let rational = eight.replace("-1.92e-2, 0.,", "-1.92e-2, 0.5,");
+        assert!(parse_opencv(&rational, OpencvModel::Auto).unwrap_err().contains("rational"), "{rational}");
     }
 }

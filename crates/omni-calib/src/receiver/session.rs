@@ -100,6 +100,9 @@ pub struct CalibrateOptions {
     pub folds: usize,
     /// Huber threshold of the robust loss (px).
     pub huber_px: f64,
+    /// Plain least squares: no Huber loss, no per-image weights, no image rejected as an outlier
+    /// (the cost OpenCV and Kalibr minimise, to compare RMS values with theirs).
+    pub least_squares: bool,
     /// The fitted model's viewpoint in the world frame, `X,Y,Z` (mm) as typed; parsed before
     /// anything is read.
     pub viewpoint_mm: String,
@@ -130,6 +133,7 @@ impl CalibrateOptions {
             rostopic: export::DEFAULT_ROSTOPIC.to_string(),
             folds: 0,
             huber_px: 1.0,
+            least_squares: false,
             viewpoint_mm: "0,0,0".to_string(),
             annulus: None,
             rim_image: None,
@@ -150,8 +154,14 @@ fn check_options(opts: &CalibrateOptions) -> Result<Checked<'_>, Error> {
     if opts.export_ocam.is_some() && opts.model != ModelKind::Ocam {
         return Err(Error::Usage("--export-ocam needs --model ocam".into()));
     }
-    if (opts.export_kalibr.is_some() || opts.export_opencv.is_some()) && opts.model != ModelKind::Mei {
-        return Err(Error::Usage("--export-kalibr and --export-opencv need --model mei".into()));
+    let kalibr_or_opencv = matches!(opts.model, ModelKind::Mei | ModelKind::PinholeRadtan | ModelKind::Fisheye);
+    if opts.export_kalibr.is_some() && !kalibr_or_opencv {
+        return Err(Error::Usage(
+            "--export-kalibr needs --model mei, pinhole-radtan or fisheye (Kalibr's radtan has no k3)".into(),
+        ));
+    }
+    if opts.export_opencv.is_some() && !(kalibr_or_opencv || opts.model == ModelKind::Pinhole) {
+        return Err(Error::Usage("--export-opencv needs --model mei, pinhole, pinhole-radtan or fisheye".into()));
     }
     if opts.overlay.is_some() && opts.corners.is_some() {
         return Err(Error::Usage("--overlay needs images (it cannot be used with --corners)".into()));
@@ -176,11 +186,7 @@ pub fn parse_viewpoint(s: &str) -> Result<[f64; 3], Error> {
 
 /// Places the generic model's viewpoint (the exact hyperbolic model has its own, at 2c).
 fn set_viewpoint(spec: &mut CameraSpec, viewpoint: [f64; 3]) {
-    match spec {
-        CameraSpec::Mei(p) => p.viewpoint_mm = viewpoint,
-        CameraSpec::Ocam(p) => p.viewpoint_mm = viewpoint,
-        CameraSpec::Hyperbolic(_) => {}
-    }
+    spec.set_viewpoint_mm(viewpoint);
 }
 
 /// The mirror of a camera.json of kind hyperbolic (`--mirror`).
@@ -292,7 +298,7 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     }
     let corners = &detected.corners;
     let obs = corners.observations(board.square_mm);
-    let fit = Options {
+    let mut fit = Options {
         model: opts.model,
         huber_px: opts.huber_px,
         mirror,
@@ -300,6 +306,9 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
         non_central: opts.non_central,
         ..Default::default()
     };
+    if opts.least_squares {
+        fit = Options { huber_px: f64::INFINITY, outlier_factor: f64::INFINITY, reweight_images: false, ..fit };
+    }
     let mut cal = super::calibrate(corners.width, corners.height, &obs, &fit).map_err(|e| {
         let reasons: Vec<String> =
             corners.images.iter().filter_map(|i| i.reason.as_ref().map(|r| format!("{}: {r}", i.name))).collect();
@@ -353,7 +362,7 @@ pub fn report(
     held_out: Option<&HeldOut>,
 ) -> serde_json::Value {
     let mut report = cal.report_json();
-    report["model"] = serde_json::json!(format!("{model:?}").to_lowercase());
+    report["model"] = serde_json::json!(model.name());
     report["board"] = serde_json::json!({"inner_cols": board.inner_cols, "inner_rows": board.inner_rows, "square_mm": board.square_mm});
     if let Some(a) = annulus {
         report["annulus_px"] = serde_json::json!(a);
@@ -435,15 +444,14 @@ fn write_exports(opts: &CalibrateOptions, cal: &Calibration, out: &dyn Reporter)
                 write_text(path, &text)?;
             }
         }
-        CameraSpec::Mei(p) => {
+        spec => {
             if let Some(path) = &opts.export_kalibr {
-                write_text(path, &export::kalibr_camchain(p, &opts.rostopic))?;
+                write_text(path, &export::kalibr_camchain_of(spec, &opts.rostopic)?)?;
             }
             if let Some(path) = &opts.export_opencv {
-                write_text(path, &export::opencv_omnidir_yaml(p))?;
+                write_text(path, &export::opencv_yaml_of(spec)?)?;
             }
         }
-        _ => {}
     }
     Ok(())
 }

@@ -216,18 +216,33 @@ pub fn warnings(cal: &Calibration, opts: &Options) -> Vec<String> {
         && c.ratio() > MODEL_CHECK_RATIO
         && !mismatched_mirror
     {
-        let (name, fix) = match opts.model {
-            ModelKind::Hyperbolic => ("hyperbolic", "use --model mei, or --model hyperbolic --non-central"),
-            _ => ("ocam", "use --model mei"),
-        };
-        out.push(format!(
-            "the {name} model leaves {:.3} px RMS per corner where the Mei model leaves {:.3} px on the same images ({:.1} ×): the camera is probably off the mirror's focus or tilted, which the {name} model cannot follow; the two models' rays differ by {:.2}° (median), {:.2}° (max); {fix}",
+        let ratio = format!(
+            "the {} model leaves {:.3} px RMS per corner where the Mei model leaves {:.3} px on the same images ({:.1} ×)",
+            opts.model.name(),
             c.model_rms_px,
             c.mei_rms_px,
-            c.ratio(),
-            c.ray_median_deg,
-            c.ray_max_deg
-        ));
+            c.ratio()
+        );
+        let rays =
+            format!("the two models' rays differ by {:.2}° (median), {:.2}° (max)", c.ray_median_deg, c.ray_max_deg);
+        out.push(match opts.model {
+            ModelKind::Hyperbolic | ModelKind::Ocam => {
+                let (name, fix) = match opts.model {
+                    ModelKind::Hyperbolic => ("hyperbolic", "use --model mei, or --model hyperbolic --non-central"),
+                    _ => ("ocam", "use --model mei"),
+                };
+                format!(
+                    "{ratio}: the camera is probably off the mirror's focus or tilted, which the {name} model cannot follow; {rays}; {fix}"
+                )
+            }
+            // An ordinary camera's lens distorts more than the pinhole/fisheye polynomial follows
+            // (or the camera is catadioptric).
+            _ => format!(
+                "{ratio}: the lens distorts in a way the {} model cannot follow (a wide-angle or catadioptric camera); {rays}; use --model mei{}",
+                opts.model.name(),
+                if opts.model == ModelKind::Fisheye { "" } else { " or --model fisheye" }
+            ),
+        });
     }
     out
 }

@@ -4,7 +4,7 @@
 use super::{Error, Reporter, inverse_fit_line, read_mirror, write_text};
 use crate::receiver::{ModelKind, convert as conversion, export, query as questions};
 use omni_formats::{CameraFile, CameraSpec, read_doc, write_doc};
-use omni_model::{HyperbolicParams, MeiParams};
+use omni_model::HyperbolicParams;
 use std::io::BufRead as _;
 use std::path::{Path, PathBuf};
 
@@ -26,27 +26,33 @@ pub fn import_ocam(input: &Path, output: &Path) -> Result<(), Error> {
     Ok(())
 }
 
-/// Camera `cam` of a Kalibr camchain.yaml (`-` = stdin) to camera.json (kind mei).
+/// Camera `cam` of a Kalibr camchain.yaml (`-` = stdin) to camera.json (kind mei, pinhole or
+/// fisheye, as the file's camera and distortion models say).
 pub fn import_kalibr(input: &Path, cam: &str, output: &Path) -> Result<(), Error> {
-    import_mei(input, output, "kalibr", |t| export::parse_kalibr_camchain(t, cam))
+    import_spec(input, output, "kalibr", |t| export::parse_kalibr_camera(t, cam))
 }
 
-/// An OpenCV cv::omnidir YAML file (`-` = stdin) to camera.json (kind mei).
-pub fn import_opencv(input: &Path, output: &Path) -> Result<(), Error> {
-    import_mei(input, output, "opencv-omnidir", export::parse_opencv_omnidir)
+/// An OpenCV FileStorage YAML file (`-` = stdin) of the model `which` (omnidir, calibrateCamera's
+/// pinhole, fisheye; auto: see [`export::OpencvModel::Auto`]) to camera.json.
+pub fn import_opencv(input: &Path, which: export::OpencvModel, output: &Path) -> Result<(), Error> {
+    import_spec(input, output, "opencv", |t| export::parse_opencv(t, which))
 }
 
-/// Imports a Mei-model file (Kalibr, OpenCV) with `parse`; `kind` names the source format.
-fn import_mei(
+/// Imports a Kalibr or OpenCV file with `parse`; `source` names the source format.
+fn import_spec(
     input: &Path,
     output: &Path,
-    kind: &str,
-    parse: impl Fn(&str) -> Result<MeiParams, String>,
+    source: &str,
+    parse: impl Fn(&str) -> Result<CameraSpec, String>,
 ) -> Result<(), Error> {
     let (text, name) = read_text(input)?;
-    let params = parse(&text).map_err(|e| format!("{name}: {e}"))?;
-    let mut file = CameraFile::new(CameraSpec::Mei(params));
-    file.report = Some(serde_json::json!({"imported_from": name, "source_format": kind, "frame": export::FRAME_NOTE}));
+    let spec = parse(&text).map_err(|e| format!("{name}: {e}"))?;
+    let (format, frame) = match &spec {
+        CameraSpec::Mei(_) => (format!("{source}-omni"), export::FRAME_NOTE),
+        other => (format!("{source}-{}", other.kind()), export::CAMERA_FRAME_NOTE),
+    };
+    let mut file = CameraFile::new(spec);
+    file.report = Some(serde_json::json!({"imported_from": name, "source_format": format, "frame": frame}));
     write_doc(output, &file)?;
     Ok(())
 }
@@ -67,26 +73,22 @@ pub struct ExportOptions {
 /// Writes the camera in the format `opts.to`; a camera of the wrong kind is an error naming it.
 pub fn export_camera(opts: &ExportOptions, out: &dyn Reporter) -> Result<(), Error> {
     let file: CameraFile = read_doc(&opts.camera)?;
+    let refused = |e: String| Error::Failed(format!("{}: --to {} {e}", opts.camera.display(), opts.to));
     let text = match (opts.to.as_str(), &file.model) {
         ("ocam", CameraSpec::Ocam(p)) => {
             let (text, fit) = export::ocam_calib_results(p);
             out.say(&inverse_fit_line(&fit));
             text
         }
-        ("kalibr", CameraSpec::Mei(p)) => export::kalibr_camchain(p, &opts.rostopic),
-        ("opencv", CameraSpec::Mei(p)) => export::opencv_omnidir_yaml(p),
-        (to, model) => {
-            let kind = match model {
-                CameraSpec::Mei(_) => "mei",
-                CameraSpec::Ocam(_) => "ocam",
-                CameraSpec::Hyperbolic(_) => "hyperbolic",
-            };
-            let needs = if to == "ocam" { "ocam" } else { "mei" };
+        ("ocam", model) => {
             return Err(Error::Failed(format!(
-                "{}: --to {to} needs a camera of kind {needs}, this one is {kind}",
-                opts.camera.display()
+                "{}: --to ocam needs a camera of kind ocam, this one is {}",
+                opts.camera.display(),
+                model.kind()
             )));
         }
+        ("kalibr", model) => export::kalibr_camchain_of(model, &opts.rostopic).map_err(refused)?,
+        (_, model) => export::opencv_yaml_of(model).map_err(refused)?,
     };
     write_text(&opts.output, &text)
 }

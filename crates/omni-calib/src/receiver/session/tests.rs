@@ -93,11 +93,15 @@ fn option_combinations_are_checked_first() {
         (CalibrateOptions { export_ocam: Some("o.txt".into()), ..base.clone() }, "--export-ocam needs --model ocam"),
         (
             CalibrateOptions { export_kalibr: Some("k.yaml".into()), model: ModelKind::Ocam, ..base.clone() },
-            "--export-kalibr and --export-opencv need --model mei",
+            "--export-kalibr needs --model mei, pinhole-radtan or fisheye (Kalibr's radtan has no k3)",
+        ),
+        (
+            CalibrateOptions { export_kalibr: Some("k.yaml".into()), model: ModelKind::Pinhole, ..base.clone() },
+            "--export-kalibr needs --model mei, pinhole-radtan or fisheye (Kalibr's radtan has no k3)",
         ),
         (
             CalibrateOptions { export_opencv: Some("o.yaml".into()), model: ModelKind::Hyperbolic, ..base.clone() },
-            "--export-kalibr and --export-opencv need --model mei",
+            "--export-opencv needs --model mei, pinhole, pinhole-radtan or fisheye",
         ),
         (CalibrateOptions { huber_px: 0.0, ..base.clone() }, "--huber-px must be a positive number"),
         (CalibrateOptions { huber_px: f64::NAN, ..base.clone() }, "--huber-px must be a positive number"),
@@ -309,7 +313,8 @@ fn export_of_the_wrong_kind_names_the_camera() {
     let camera = dir.path().join("camera.json");
     write_doc(&camera, &CameraFile::new(CameraSpec::Hyperbolic(HyperbolicParams::paper()))).unwrap();
     let out = Lines::default();
-    for (to, needs) in [("ocam", "ocam"), ("kalibr", "mei"), ("opencv", "mei")] {
+    for (to, needs) in [("ocam", "ocam"), ("kalibr", "mei, pinhole or fisheye"), ("opencv", "mei, pinhole or fisheye")]
+    {
         let opts = ExportOptions {
             camera: camera.clone(),
             to: to.into(),

@@ -6,6 +6,7 @@ use omni_cli::{CliError, CliResult};
 use omni_cloud::motion::Trajectory;
 use omni_formats::stream::StreamReader;
 use omni_publish::dds::{DdsOptions, DdsPublisher, MAX_DOMAIN_ID};
+use omni_publish::foxglove::{FoxgloveOptions, FoxgloveSink};
 use omni_publish::{DdsSink, LiveOptions, Published, Sink};
 use std::io::Write;
 use std::net::IpAddr;
@@ -20,7 +21,7 @@ const TOOL: &str = "omni-live";
 #[command(
     term_width = 0,
     version,
-    about = "Publish every sweep as it is measured: ROS 2 PointCloud2 over DDS (no ROS install), one line per sweep on stdout.",
+    about = "Publish every sweep as it is measured: ROS 2 PointCloud2 over DDS (no ROS install) and Foxglove, one line per sweep on stdout.",
     long_about = "Reads the measured stream (`omni-ridge | omni-triangulate`, JSON Lines; `-` = stdin) as it \
 arrives, groups its frames into sweeps (one facet's pass of the lasers: every frame of one revolution and \
 facet, a full 360° x 60° scan) and publishes each sweep as soon as its last frame has arrived. The number \
@@ -35,6 +36,11 @@ frame, for deskewing) frame (uint32, trigger sequence number) alpha (float32, mi
 transient-local, so a late subscriber gets it); `/tf_static` (tf2_msgs/msg/TFMessage: --base-frame → \
 --frame-id from --extrinsics, transient-local). The DDS stack is RustDDS: no ROS library is needed at build \
 or run time; subscribers need a receive buffer of a few MB for large clouds.\n\n\
+With --foxglove [HOST:]PORT: a Foxglove WebSocket server (subprotocol foxglove.sdk.v1; bound to 127.0.0.1 \
+unless a host is given) with `PREFIX/points` (foxglove.PointCloud, the same fields and bytes), `PREFIX/image` \
+(foxglove.RawImage, the sweep's last laser frame, mono8/mono16), `PREFIX/calibration` (JSON) and `/tf` \
+(foxglove.FrameTransforms, from --extrinsics), the last two with every sweep. Open Foxglove, connect to \
+ws://HOST:PORT.\n\n\
 A slow or stalled consumer never holds back the input: each output keeps at most --queue sweeps waiting \
 and drops the oldest, counted in the status record. --delete-frames removes each frame's image once its \
 points have arrived (laser-off frames two revolutions later, when no frame can still need them), so that \
@@ -48,7 +54,8 @@ frames_deleted). SIGINT or SIGTERM ends the run cleanly: the open sweep is publi
     after_help = "Examples:\n  \
 omni-trigger scan --port /dev/ttyACM0 --frames /dev/shm/frames --angles 0:30:0.5 --duration 3600 | omni-ridge --camera camera.json | omni-triangulate --camera camera.json --scanner scanner.json | omni-live --ros2 --camera camera.json --scanner scanner.json --extrinsics base_link.json --delete-frames\n  \
 omni-live --ros2 --domain-id 7 --prefix /robot1/omniscan --dds-interface 127.0.0.1 points.jsonl\n  \
-omni-live --ros2 --poses odometry.jsonl points.jsonl\n\n\
+omni-live --ros2 --poses odometry.jsonl points.jsonl\n  \
+omni-live --foxglove 8765 --camera camera.json --scanner scanner.json points.jsonl\n\n\
 Exit codes: 0 ok (also after SIGINT/SIGTERM), 1 bad input, a file or an output that cannot be set up, 2 usage error."
 )]
 struct Args {
@@ -58,6 +65,9 @@ struct Args {
     /// Publish to ROS 2 over DDS.
     #[arg(long)]
     ros2: bool,
+    /// Serve Foxglove on [HOST:]PORT (host default 127.0.0.1; port 0 = any free one, printed on stderr).
+    #[arg(long, value_name = "[HOST:]PORT")]
+    foxglove: Option<String>,
     /// ROS 2 domain id (0-232); default: $ROS_DOMAIN_ID, else 0.
     #[arg(long)]
     domain_id: Option<u32>,
@@ -122,6 +132,9 @@ fn run(a: Args) -> CliResult {
     if a.ros2 {
         sinks.push(Box::new(ros2_sink(&a)?));
     }
+    if let Some(addr) = &a.foxglove {
+        sinks.push(Box::new(foxglove_sink(&a, addr)?));
+    }
     let input = StreamReader::open(&a.input)?;
     let out = Arc::new(Mutex::new(std::io::stdout()));
     let (out2, stop2) = (out.clone(), stop.clone());
@@ -180,6 +193,27 @@ fn ros2_sink(a: &Args) -> CliResult<DdsSink> {
         publisher.publish_tf_static(vec![t]).map_err(CliError::new)?;
     }
     Ok(DdsSink { publisher, frame_id: a.frame_id.clone() })
+}
+
+fn foxglove_sink(a: &Args, addr: &str) -> CliResult<FoxgloveSink> {
+    let (host, port) = match addr.rsplit_once(':') {
+        Some((h, p)) => (h.trim_start_matches('[').trim_end_matches(']').to_string(), p),
+        None => ("127.0.0.1".to_string(), addr),
+    };
+    let port: u16 =
+        port.parse().map_err(|_| CliError::usage(format!("--foxglove {addr}: expected [HOST:]PORT, PORT 0-65535")))?;
+    let sink = FoxgloveSink::start(FoxgloveOptions {
+        host,
+        port,
+        prefix: a.prefix.clone(),
+        frame_id: a.frame_id.clone(),
+        base_frame: a.base_frame.clone(),
+        extrinsics: a.extrinsics.as_deref().map(extrinsics).transpose()?,
+        calibration: calibration_json(a.camera.as_deref(), a.scanner.as_deref())?,
+    })
+    .map_err(CliError::new)?;
+    eprintln!("{TOOL}: Foxglove server on port {} (subprotocol foxglove.sdk.v1)", sink.port());
+    Ok(sink)
 }
 
 /// camera.json and scanner.json as one object, each checked by its own reader first.

@@ -147,3 +147,16 @@ fn sigterm_publishes_the_open_sweep_and_ends_with_the_status() {
         (Some("status"), Some(1), Some(1))
     );
 }
+
+#[test]
+fn a_foxglove_port_in_use_is_a_one_line_error() {
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port();
+    let o = run(&["--foxglove", &format!("127.0.0.1:{port}")], "");
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(e.contains(&format!("--foxglove 127.0.0.1:{port}")), "{e}");
+    let o = run(&["--foxglove", "localhost:http"], "");
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+}

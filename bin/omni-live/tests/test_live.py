@@ -1,5 +1,7 @@
-"""omni-live's ROS 2 output, read by a ROS-free DDS implementation (Cyclone DDS from PyPI) in a
-network namespace of the test's own (`unshare --net`: only `lo`, nothing leaves the machine).
+"""omni-live's live outputs read by independent clients: ROS 2 by a ROS-free DDS implementation
+(Cyclone DDS from PyPI) in a network namespace of the test's own (`unshare --net`: only `lo`,
+nothing leaves the machine); Foxglove by a WebSocket client (`websockets`) decoding with the
+protobuf schemas the server advertises, on 127.0.0.1.
 
 A small scan of the paper bench's plane is rendered by omni-sim and measured by the offline
 pipeline (`omni-ridge | omni-triangulate`); its frames are replayed as five sweeps through two
@@ -7,11 +9,15 @@ omni-live runs in turn (a publisher restart), beside a subscriber that never rea
 killed after the first sweep. Every received cloud must carry exactly the offline points.
 """
 
+import asyncio
+import base64
 import json
 import os
 import shutil
+import struct
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -154,3 +160,144 @@ def test_each_run_reports_its_sweeps_and_a_final_status(run):
         assert status == {"type": "status", "frames": 5 * n, "sweeps": n, "sweeps_incomplete": 0,
                           "sweeps_dropped": {"dds": 0}, "frames_deleted": 0, "input_complete": True,
                           "cut_short": False}
+
+
+# --- Foxglove -------------------------------------------------------------------------------
+
+SUBPROTOCOL = "foxglove.sdk.v1"
+
+
+def message_class(channel: dict):
+    """The protobuf class of an advertised channel, built from the schema the server sent."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    files = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(channel["schema"]))
+    pool = descriptor_pool.DescriptorPool()
+    for f in files.file:
+        pool.Add(f)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(channel["schemaName"]))
+
+
+async def foxglove_session(port: int, feed, topics: list) -> dict:
+    import websockets
+
+    got: dict = {"messages": {t: [] for t in topics}}
+    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL],
+                                  max_size=1 << 26) as ws:
+        got["subprotocol"] = ws.subprotocol
+        got["server_info"] = json.loads(await ws.recv())
+        channels: dict = {}
+        while not all(t in channels for t in topics):
+            msg = json.loads(await asyncio.wait_for(ws.recv(), 10))
+            if msg["op"] == "advertise":
+                channels.update({c["topic"]: c for c in msg["channels"]})
+        got["channels"] = channels
+        subs = [{"id": i, "channelId": channels[t]["id"]} for i, t in enumerate(topics)]
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+        await asyncio.sleep(0.3)
+        feeder = asyncio.get_running_loop().run_in_executor(None, feed)
+        want = {"/omniscan/points": 3, "/omniscan/image": 3}
+        while any(len(got["messages"].get(t, [])) < n for t, n in want.items()):
+            data = await asyncio.wait_for(ws.recv(), 20)
+            if isinstance(data, bytes) and data[0] == 0x01:
+                sub, _log_time = struct.unpack_from("<IQ", data, 1)
+                got["messages"][topics[sub]].append(data[13:])
+        await feeder
+    return got
+
+
+@pytest.fixture(scope="module")
+def foxglove(run):
+    d, frames = run["dir"], run["frames"]
+    (d / "fox.jsonl").write_text(replay(frames, range(0, 3), {**json.loads(
+        (d / "a.jsonl").read_text().splitlines()[0]), "frames_dir": str(d / "f")}))
+    proc = subprocess.Popen([tool("omni-live"), "--foxglove", "127.0.0.1:0", "--camera", d / "s/camera.json",
+                             "--scanner", d / "s/scanner.json", "--extrinsics", d / "base_link.json", "-"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    line = proc.stderr.readline().decode()
+    assert "Foxglove server on port" in line, line + proc.stderr.read().decode()
+    port = int(line.split("port")[1].split()[0])
+
+    def feed():
+        for rec in (d / "fox.jsonl").read_bytes().splitlines(keepends=True):
+            proc.stdin.write(rec)
+            proc.stdin.flush()
+            if json.loads(rec).get("last_of_sweep"):
+                time.sleep(0.1)
+
+    topics = ["/omniscan/points", "/omniscan/image", "/omniscan/calibration", "/tf"]
+    try:
+        got = asyncio.run(asyncio.wait_for(foxglove_session(port, feed, topics), 60))
+    finally:
+        proc.stdin.close()
+        out, err = proc.stdout.read(), proc.stderr.read()
+        proc.wait(timeout=30)
+    assert proc.returncode == 0, err.decode()
+    got["stdout"] = out.decode()
+    return got
+
+
+def test_foxglove_advertises_the_live_channels(foxglove):
+    assert foxglove["subprotocol"] == SUBPROTOCOL
+    assert foxglove["server_info"]["op"] == "serverInfo"
+    ch = foxglove["channels"]
+    assert (ch["/omniscan/points"]["schemaName"], ch["/omniscan/points"]["encoding"]) == ("foxglove.PointCloud", "protobuf")
+    assert ch["/omniscan/image"]["schemaName"] == "foxglove.RawImage"
+    assert ch["/omniscan/calibration"]["encoding"] == "json"
+    assert ch["/tf"]["schemaName"] == "foxglove.FrameTransforms"
+
+
+def test_foxglove_clouds_carry_the_offline_points(foxglove, run):
+    frames = run["frames"]
+    offline = (np.array([p[:3] for f in frames for p in f["points"]]) / 1000.0).astype(np.float32)
+    cls = message_class(foxglove["channels"]["/omniscan/points"])
+    clouds = [cls.FromString(m) for m in foxglove["messages"]["/omniscan/points"]]
+    assert len(clouds) == 3
+    for k, c in enumerate(clouds):
+        assert c.frame_id == "omniscan" and c.point_stride == 32
+        assert [(f.name, f.offset) for f in c.fields] == [(f[0], f[1]) for f in FIELDS]
+        pts = np.frombuffer(c.data, dtype=POINT)
+        assert np.array_equal(np.stack([pts["x"], pts["y"], pts["z"]], axis=1), offline)
+        stamp_us = FIRST_STAMP_US + FRAME_PERIOD_US * k * len(frames)
+        assert (c.timestamp.seconds, c.timestamp.nanos) == (stamp_us // 1_000_000, stamp_us % 1_000_000 * 1000)
+
+
+def test_foxglove_shows_each_sweeps_last_frame_the_calibration_and_the_transform(foxglove, run):
+    d = run["dir"]
+    cls = message_class(foxglove["channels"]["/omniscan/image"])
+    images = [cls.FromString(m) for m in foxglove["messages"]["/omniscan/image"]]
+    last = run["frames"][-1]["path"]
+    import cv2  # an independent PNG reader
+
+    truth = cv2.imread(str(d / "f" / last), cv2.IMREAD_UNCHANGED)
+    for img in images[:3]:
+        assert (img.width, img.height, img.encoding, img.step) == (1024, 1024, "mono8", 1024)
+        assert np.array_equal(np.frombuffer(img.data, np.uint8).reshape(1024, 1024), truth)
+    calib = json.loads(foxglove["messages"]["/omniscan/calibration"][0])
+    assert calib["camera"] == json.loads((d / "s/camera.json").read_text())
+    tf_cls = message_class(foxglove["channels"]["/tf"])
+    (tf,) = tf_cls.FromString(foxglove["messages"]["/tf"][0]).transforms
+    assert (tf.parent_frame_id, tf.child_frame_id) == ("base_link", "omniscan")
+    assert [tf.translation.x, tf.translation.y, tf.translation.z] == pytest.approx([0.01, 0.02, 0.3])
+    status = json.loads(foxglove["stdout"].splitlines()[-1])
+    assert (status["sweeps"], status["sweeps_dropped"]) == (3, {"foxglove": 0})
+
+
+def test_a_client_offering_only_the_old_subprotocol_is_refused(run):
+    import websockets
+
+    proc = subprocess.Popen([tool("omni-live"), "--foxglove", "127.0.0.1:0", "-"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        port = int(proc.stderr.readline().decode().split("port")[1].split()[0])
+
+        async def connect():
+            async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.websocket.v1"]) as ws:
+                return await ws.recv()
+
+        with pytest.raises(Exception):
+            asyncio.run(asyncio.wait_for(connect(), 10))
+    finally:
+        proc.stdin.close()
+        proc.stdout.read()
+        proc.wait(timeout=30)

@@ -23,8 +23,21 @@ use std::time::{Duration, Instant};
 pub trait Sink: Send {
     /// A short name for the status records (`dds`, `foxglove`).
     fn name(&self) -> &str;
-    /// Sends one sweep; an error is counted and reported, the loop goes on.
-    fn publish(&mut self, sweep: &Sweep) -> Result<(), String>;
+    /// Whether it shows the sweep's last frame (its file is then read before it is deleted).
+    fn wants_frame(&self) -> bool {
+        false
+    }
+    /// Sends one sweep, with its last laser frame's file if [`Sink::wants_frame`]; an error is
+    /// reported and the loop goes on.
+    fn publish(&mut self, sweep: &Sweep, frame: Option<&FrameFile>) -> Result<(), String>;
+}
+
+/// An image file's bytes as read (decoding is the sink's, off the loop's thread).
+#[derive(Debug, Clone)]
+pub struct FrameFile {
+    /// The path, for messages.
+    pub name: String,
+    pub bytes: Vec<u8>,
 }
 
 /// How the loop runs.
@@ -44,6 +57,8 @@ pub struct LiveOptions {
 pub struct Queued {
     pub sweep: Sweep,
     pub last_frame_at: Instant,
+    /// Its last laser frame's file, if a sink wants it and it could be read.
+    pub frame: Option<FrameFile>,
 }
 
 /// One line of the report: a sweep published (or failed) by a sink.
@@ -112,6 +127,7 @@ pub fn run<R: BufRead + Send + 'static>(
     let queues: Vec<Arc<DropOldest<Arc<Queued>>>> =
         sinks.iter().map(|_| Arc::new(DropOldest::new(opts.queue))).collect();
     let names: Vec<String> = sinks.iter().map(|s| s.name().to_string()).collect();
+    let read_frames = sinks.iter().any(|s| s.wants_frame());
     let workers: Vec<_> = sinks
         .into_iter()
         .zip(&queues)
@@ -126,14 +142,18 @@ pub fn run<R: BufRead + Send + 'static>(
     let mut deleter = FrameDeleter::default();
     let mut failure = None;
     let mut last_frame_at = Instant::now();
-    let emit = |sweep: Sweep, at: Instant, summary: &mut Summary| {
+    let emit = |sweep: Sweep, at: Instant, frames_dir: Option<&str>, summary: &mut Summary| {
         let mut sweep = sweep;
         if let Some(traj) = &deskew {
             deskew_to_end(&mut sweep, traj);
         }
         summary.sweeps += 1;
         summary.sweeps_incomplete += u64::from(!sweep.complete);
-        let q = Arc::new(Queued { sweep, last_frame_at: at });
+        let frame = match (&sweep.last_frame_path, read_frames) {
+            (Some(path), true) => read_frame(frames_dir, path),
+            _ => None,
+        };
+        let q = Arc::new(Queued { sweep, last_frame_at: at, frame });
         queues.iter().for_each(|queue| queue.push(q.clone()));
     };
     while !stop.load(Ordering::Relaxed) {
@@ -148,7 +168,7 @@ pub fn run<R: BufRead + Send + 'static>(
                 last_frame_at = Instant::now();
                 summary.frames += 1;
                 for sweep in assembler.push(&frame) {
-                    emit(sweep, last_frame_at, &mut summary);
+                    emit(sweep, last_frame_at, frames_dir.as_deref(), &mut summary);
                 }
                 if opts.delete_frames {
                     summary.frames_deleted += deleter.frame_passed(&frame, frames_dir.as_deref());
@@ -162,14 +182,14 @@ pub fn run<R: BufRead + Send + 'static>(
             }
             Err(RecvTimeoutError::Timeout) => {
                 if assembler.is_open() && last_frame_at.elapsed() >= opts.sweep_timeout {
-                    emit(assembler.flush().expect("open"), last_frame_at, &mut summary);
+                    emit(assembler.flush().expect("open"), last_frame_at, frames_dir.as_deref(), &mut summary);
                 }
             }
             Err(RecvTimeoutError::Disconnected) => break,
         }
     }
     if let Some(sweep) = assembler.flush() {
-        emit(sweep, last_frame_at, &mut summary);
+        emit(sweep, last_frame_at, frames_dir.as_deref(), &mut summary);
     }
     if opts.delete_frames {
         summary.frames_deleted += deleter.finish();
@@ -214,9 +234,16 @@ fn read_records<R: BufRead>(mut input: StreamReader<R>, tx: std::sync::mpsc::Syn
     }
 }
 
+/// The bytes of a frame file, or `None` if it is gone (a slow consumer upstream, or no file).
+fn read_frame(frames_dir: Option<&str>, path: &str) -> Option<FrameFile> {
+    let full = Frame::new(0, "", 0.0, 0).resolve_path(frames_dir, path);
+    let bytes = std::fs::read(&full).ok()?;
+    Some(FrameFile { name: full.display().to_string(), bytes })
+}
+
 fn drain(mut sink: Box<dyn Sink>, queue: &DropOldest<Arc<Queued>>, report: &(dyn Fn(Published) + Send + Sync)) {
     while let Some(q) = queue.pop() {
-        let result = sink.publish(&q.sweep);
+        let result = sink.publish(&q.sweep, q.frame.as_ref());
         let s = &q.sweep;
         report(Published {
             sink: sink.name().to_string(),
@@ -255,23 +282,29 @@ pub fn deskew_to_end(sweep: &mut Sweep, trajectory: &Trajectory) {
     }
 }
 
-/// Deletes frame files once measured. A laser frame goes as soon as its points arrive; a
-/// laser-off frame is shared by the laser frames of the next revolution (their
-/// `ambient_path`), so it goes once a frame two revolutions later arrives.
+/// Deletes frame files once measured. A laser frame goes when the next frame's points arrive
+/// (the sweep it closes may show it as its last image); a laser-off frame is shared by the
+/// laser frames of the next revolution (their `ambient_path`), so it goes once a frame two
+/// revolutions later arrives.
 #[derive(Default)]
 struct FrameDeleter {
     /// Laser-off frames waiting: (revolution, path).
     ambient: Vec<(u64, PathBuf)>,
+    /// The latest laser frame.
+    latest: Option<PathBuf>,
 }
 
 impl FrameDeleter {
     fn frame_passed(&mut self, frame: &Frame, frames_dir: Option<&str>) -> u64 {
         let mut deleted = 0;
+        if let Some(previous) = self.latest.take() {
+            deleted += u64::from(std::fs::remove_file(&previous).is_ok());
+        }
         let path = frame.resolve_path(frames_dir, &frame.path);
         if frame.lasers.is_empty() {
             self.ambient.push((frame.revolution, path));
         } else {
-            deleted += u64::from(std::fs::remove_file(&path).is_ok());
+            self.latest = Some(path);
         }
         let (done, keep): (Vec<_>, Vec<_>) =
             self.ambient.drain(..).partition(|(rev, _)| frame.revolution >= rev.saturating_add(2));
@@ -280,6 +313,11 @@ impl FrameDeleter {
     }
 
     fn finish(&mut self) -> u64 {
-        self.ambient.drain(..).filter(|(_, p)| std::fs::remove_file(p).is_ok()).count() as u64
+        self.ambient
+            .drain(..)
+            .map(|(_, p)| p)
+            .chain(self.latest.take())
+            .filter(|p| std::fs::remove_file(p).is_ok())
+            .count() as u64
     }
 }

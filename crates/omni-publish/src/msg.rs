@@ -207,6 +207,7 @@ mod tests {
             frames: 1,
             frames_missing: 0,
             complete: true,
+            last_frame_path: None,
             points: vec![p],
         };
         let msg = point_cloud2(&sweep, "omniscan");

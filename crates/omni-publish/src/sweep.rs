@@ -43,6 +43,8 @@ pub struct Sweep {
     pub frames_missing: u32,
     /// Ended by the next sweep's first frame with no frame missing inside it.
     pub complete: bool,
+    /// Image path (as the stream gives it) of its last frame with a laser on.
+    pub last_frame_path: Option<String>,
     pub points: Vec<SweepPoint>,
 }
 
@@ -96,11 +98,15 @@ impl SweepAssembler {
             frames: 0,
             frames_missing: 0,
             complete: false,
+            last_frame_path: None,
             points: Vec::new(),
         });
         sweep.frames_missing += missing;
         sweep.frames += 1;
         sweep.end_us = sweep.end_us.max(stamp);
+        if !frame.lasers.is_empty() {
+            sweep.last_frame_path = Some(frame.path.clone());
+        }
         let ring = self.open_frames;
         self.open_frames = self.open_frames.saturating_add(1);
         append_points(sweep, frame, ring, stamp);

@@ -4,7 +4,7 @@
 
 use omni_formats::stream::{Frame, Header, Point, Record, Status, StreamReader, StreamWriter, StripePoint};
 use omni_publish::live::{self, LiveOptions, Published};
-use omni_publish::{Sink, Sweep};
+use omni_publish::{FrameFile, Sink, Sweep};
 use std::io::{BufReader, Write};
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
@@ -53,7 +53,7 @@ impl Sink for SlowSink {
     fn name(&self) -> &str {
         "slow"
     }
-    fn publish(&mut self, s: &Sweep) -> Result<(), String> {
+    fn publish(&mut self, s: &Sweep, _frame: Option<&FrameFile>) -> Result<(), String> {
         std::thread::sleep(self.delay);
         self.got.lock().unwrap().push((s.revolution, s.facet, s.points.len(), s.complete));
         Ok(())
@@ -180,9 +180,11 @@ fn frames_are_deleted_once_measured_and_laser_off_frames_once_no_frame_can_need_
                 // After revolution 1: its laser frames are gone, revolution 0's laser-off
                 // frames stay (revolution 1 may still be in flight upstream).
                 std::thread::sleep(Duration::from_millis(100));
+                // The latest laser frame waits for the next one (the image of the sweep it closes).
                 let left: Vec<bool> = (0..20).map(|i| check_dir.join(format!("f{i}.pgm")).exists()).collect();
                 assert!(left[..10].iter().all(|&x| x), "laser-off frames deleted too early: {left:?}");
-                assert!(left[10..].iter().all(|&x| !x), "laser frames kept: {left:?}");
+                assert!(left[10..19].iter().all(|&x| !x), "laser frames kept: {left:?}");
+                assert!(left[19], "the latest laser frame deleted before the next arrived");
             }
         }
         w.write_all(&line(&Record::Status(Status::complete(30)))).unwrap();

@@ -48,11 +48,11 @@ disk use stays flat over hours. With --poses, each point is moved to where the s
 last frame (deskewed by its own time); without, points are published as measured, with `t` for the \
 robot's own deskewing.\n\n\
 stdout: one JSON line per sweep and output ({\"type\":\"sweep\",\"sink\",\"revolution\",\"facet\",\"frames\",\
-\"points\",\"complete\",\"latency_ms\"}, latency from the arrival of the sweep's last frame to the end of its \
+\"points\",\"complete\",\"latency_ms\",\"published_unix_us\"}, latency from the arrival of the sweep's last frame to the end of its \
 publication), and a last status line (frames, sweeps, sweeps_incomplete, sweeps_dropped per output, \
 frames_deleted). SIGINT or SIGTERM ends the run cleanly: the open sweep is published, the status written.",
     after_help = "Examples:\n  \
-omni-trigger scan --port /dev/ttyACM0 --frames /dev/shm/frames --angles 0:30:0.5 --duration 3600 | omni-ridge --camera camera.json | omni-triangulate --camera camera.json --scanner scanner.json | omni-live --ros2 --camera camera.json --scanner scanner.json --extrinsics base_link.json --delete-frames\n  \
+omni-trigger scan --port /dev/ttyACM0 --frames /dev/shm/frames --angles 0:30:0.5 --until-stopped | omni-ridge --camera camera.json | omni-triangulate --camera camera.json --scanner scanner.json | omni-live --ros2 --camera camera.json --scanner scanner.json --extrinsics base_link.json --delete-frames\n  \
 omni-live --ros2 --domain-id 7 --prefix /robot1/omniscan --dds-interface 127.0.0.1 points.jsonl\n  \
 omni-live --ros2 --poses odometry.jsonl points.jsonl\n  \
 omni-live --foxglove 8765 --camera camera.json --scanner scanner.json points.jsonl\n\n\

@@ -112,6 +112,10 @@ struct ScanArgs {
     /// Scan for this many seconds instead (then STOP).
     #[arg(long, allow_negative_numbers = true)]
     duration: Option<f64>,
+    /// Scan until SIGINT or SIGTERM (then STOP), the planned end of a live scan: the status
+    /// record is then complete (see omni-live).
+    #[arg(long, conflicts_with_all = ["duration", "revolutions"])]
+    until_stopped: bool,
     /// Motor speed in rev/min (0 = the fastest the controller's trigger rate allows).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     rpm: f64,
@@ -275,6 +279,7 @@ fn scan_config(a: &ScanArgs) -> CliResult<ScanConfig> {
         ),
     };
     let stop = match (a.revolutions, a.duration) {
+        _ if a.until_stopped => StopWhen::UntilStopped,
         (_, Some(d)) if !(d > 0.0 && d.is_finite()) => return Err(CliError::usage("--duration must be positive")),
         (_, Some(d)) => StopWhen::Duration(Duration::from_secs_f64(d)),
         (Some(0), None) => return Err(CliError::usage("--revolutions must be at least 1")),

@@ -290,6 +290,36 @@ fn an_interrupted_scan_stops_the_controller_and_ends_its_manifest_with_a_status(
 }
 
 #[test]
+fn a_scan_until_stopped_ends_complete_on_sigterm() {
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40"]);
+    let mut scan = Command::new(BIN)
+        .args(["scan", "--port", &emu.port, "--angles", "0,15", "--until-stopped", "--frames"])
+        .arg(emu.frames())
+        .arg("-o")
+        .arg(emu.manifest_path())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while std::fs::read_to_string(emu.manifest_path()).map(|t| t.matches("\"frame\"").count()).unwrap_or(0) < 3 {
+        assert!(started.elapsed() < Duration::from_secs(10), "scan produced no frames");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(Command::new("kill").args(["-TERM", &scan.id().to_string()]).status().unwrap().success());
+    let out = scan.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (frames, st) = read_manifest(&emu.manifest_path());
+    assert!(st.complete && st.errors.is_empty(), "{st:?}");
+    assert_eq!(st.frames + st.frames_missing, extra(&st, "controller_fired"), "{st:?}");
+    assert_frames_true(&frames, &emu.truth());
+    let both = Command::new(BIN)
+        .args(["scan", "--port", "x", "--frames", "f", "--until-stopped", "--duration", "3"])
+        .output()
+        .unwrap();
+    assert_eq!(both.status.code(), Some(2));
+}
+
+#[test]
 fn a_persistent_emulator_serves_several_tool_runs() {
     let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40", "--persist"]);
     for _ in 0..2 {

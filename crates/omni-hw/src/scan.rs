@@ -20,6 +20,8 @@ pub enum StopWhen {
     Revolutions(u64),
     /// After this long (host clock); the controller is sent STOP.
     Duration(Duration),
+    /// Until the cancel flag is raised (SIGINT/SIGTERM): a live scan, whose planned end that is.
+    UntilStopped,
 }
 
 /// What to scan.
@@ -128,7 +130,7 @@ pub struct ScanOutcome {
 pub fn expected_triggers(schedule: &Schedule, cfg: &ScanConfig) -> Option<u64> {
     match cfg.stop {
         StopWhen::Revolutions(n) => Some(n * schedule.per_revolution() * if cfg.ambient { 2 } else { 1 }),
-        StopWhen::Duration(_) => None,
+        StopWhen::Duration(_) | StopWhen::UntilStopped => None,
     }
 }
 
@@ -290,7 +292,8 @@ impl<P: Read + Write, S: FrameSource + ?Sized> Run<'_, P, S> {
             if (timed_out || cancelled) && !stop_sent {
                 self.client.request(Command::Stop).map_err(|e| e.to_string())?;
                 stop_sent = true;
-                self.interrupted = cancelled;
+                // Stopping a scan that runs until stopped is its planned end, not an interruption.
+                self.interrupted = cancelled && cfg.stop != StopWhen::UntilStopped;
             }
             if last_heard.elapsed() > cfg.silence_timeout {
                 self.check_alive()?;
@@ -321,14 +324,14 @@ pub fn run_scan<P: Read + Write, S: FrameSource + ?Sized>(
     let revolutions = match cfg.stop {
         StopWhen::Revolutions(n) if cfg.ambient => 2 * n,
         StopWhen::Revolutions(n) => n,
-        StopWhen::Duration(_) => 0,
+        StopWhen::Duration(_) | StopWhen::UntilStopped => 0,
     };
     let expected = match cfg.stop {
         StopWhen::Revolutions(_) => {
             let last = schedule.position((revolutions * schedule.per_revolution()).max(1) - 1);
             Some(Duration::from_secs_f64(last as f64 * 60.0 / (rpm.max(1e-9) * schedule.counts_per_rev as f64)))
         }
-        StopWhen::Duration(_) => None,
+        StopWhen::Duration(_) | StopWhen::UntilStopped => None,
     };
     let mut run = Run {
         client,

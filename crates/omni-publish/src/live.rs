@@ -72,6 +72,8 @@ pub struct Published {
     pub complete: bool,
     /// From the arrival of the sweep's last frame to the end of its publication (ms).
     pub latency_ms: f64,
+    /// When its publication ended (µs since the Unix epoch), to measure latency end to end.
+    pub published_unix_us: u64,
     pub error: Option<String>,
 }
 
@@ -79,7 +81,7 @@ impl Published {
     pub fn to_json(&self) -> serde_json::Value {
         let mut v = json!({"type": "sweep", "sink": self.sink, "revolution": self.revolution, "facet": self.facet,
             "frames": self.frames, "points": self.points, "complete": self.complete,
-            "latency_ms": (self.latency_ms * 1000.0).round() / 1000.0});
+            "latency_ms": (self.latency_ms * 1000.0).round() / 1000.0, "published_unix_us": self.published_unix_us});
         if let Some(e) = &self.error {
             v["error"] = e.clone().into();
         }
@@ -253,6 +255,9 @@ fn drain(mut sink: Box<dyn Sink>, queue: &DropOldest<Arc<Queued>>, report: &(dyn
             points: s.points.len(),
             complete: s.complete,
             latency_ms: q.last_frame_at.elapsed().as_secs_f64() * 1000.0,
+            published_unix_us: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_micros() as u64),
             error: result.err(),
         });
     }

@@ -292,7 +292,7 @@ fn an_interrupted_scan_stops_the_controller_and_ends_its_manifest_with_a_status(
 #[test]
 fn a_scan_until_stopped_ends_complete_on_sigterm() {
     let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40"]);
-    let mut scan = Command::new(BIN)
+    let scan = Command::new(BIN)
         .args(["scan", "--port", &emu.port, "--angles", "0,15", "--until-stopped", "--frames"])
         .arg(emu.frames())
         .arg("-o")

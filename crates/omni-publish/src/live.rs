@@ -326,3 +326,51 @@ impl FrameDeleter {
             .count() as u64
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sweep::SweepPoint;
+    use omni_formats::odometry::PoseSample;
+
+    fn point(x: f64, t_ns: u32) -> SweepPoint {
+        SweepPoint { xyz_mm: [x, 0.0, 0.0], intensity: 0.0, t_ns, frame: 0, ring: 0, alpha_deg: 0.0, laser: 0 }
+    }
+
+    #[test]
+    fn deskewing_moves_each_point_to_the_sensor_pose_at_the_sweeps_end() {
+        // The sensor drives along +x at 1 mm/ms and turns 90° about z over the 10 ms.
+        let pose = |t_ms: u64| PoseSample {
+            t_us: 1_000_000 + t_ms * 1000,
+            translation_mm: [t_ms as f64, 0.0, 0.0],
+            quaternion_wxyz: {
+                let a = (t_ms as f64 / 10.0) * std::f64::consts::FRAC_PI_4;
+                [a.cos(), 0.0, 0.0, a.sin()]
+            },
+        };
+        let traj = Trajectory::new(&(0..=10).map(pose).collect::<Vec<_>>(), 5_000).unwrap();
+        let mut sweep = Sweep {
+            revolution: 0,
+            facet: 0,
+            start_us: 1_000_000,
+            end_us: 1_010_000,
+            frames: 2,
+            frames_missing: 0,
+            complete: true,
+            last_frame_path: None,
+            points: vec![point(100.0, 0), point(100.0, 10_000_000)],
+        };
+        deskew_to_end(&mut sweep, &traj);
+        // The point taken at the start is world (100, 0, 0); seen from the end pose (at x = 10 mm,
+        // turned 90° about z) it is end⁻¹ · world.
+        let world_first = nalgebra::Vector3::new(100.0, 0.0, 0.0);
+        let end_rot =
+            nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), std::f64::consts::FRAC_PI_2);
+        let expected = end_rot.inverse() * (world_first - nalgebra::Vector3::new(10.0, 0.0, 0.0));
+        for (got, want) in sweep.points[0].xyz_mm.iter().zip(expected.iter()) {
+            assert!((got - want).abs() < 1e-9, "{:?} vs {expected:?}", sweep.points[0].xyz_mm);
+        }
+        // The point taken at the end pose is unchanged.
+        assert_eq!(sweep.points[1].xyz_mm, [100.0, 0.0, 0.0]);
+    }
+}

@@ -9,7 +9,8 @@
 #    omni-ridge on the same cores, against the 200 fps target, and a real scan from Aravis's
 #    fake GigE camera next to that camera's own limit;
 #  - end to end: frames per second of omni-ridge | omni-triangulate from PNG files, and of the
-#    stripe kernel on frames already in memory, against a 200 fps camera.
+#    stripe kernel on frames already in memory, against a 200 fps camera;
+#  - the live path (omni-live) under an emulated 200 fps camera: latency, CPU, memory, disk.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 target=${CARGO_TARGET_DIR:-$PWD/target}
@@ -115,6 +116,16 @@ PY
 fi
 echo "from raw frames in memory: see the omni-ridge criterion figures above (ms per 1 MP frame per core; 200 fps on 2 cores needs <= 10 ms per frame per core)"
 rm -rf "$tmp"
+
+section "Live for robots: 1 MP room frames at 200 fps through omni-ridge | omni-triangulate | omni-live --ros2 --delete-frames (targets: latency p50 <= 10 ms, p99 <= 30 ms; >= 30 % of 2 cores left; memory and disk flat)"
+# An emulated camera writes each frame and its record at 200 fps; a Cyclone DDS subscriber takes
+# every cloud; all in a network namespace of its own (needs root). LIVE_SECONDS=600 for the
+# 10-minute memory figure.
+if [ "$(id -u)" = 0 ] && .venv/bin/python -c 'import cyclonedds' 2>/dev/null; then
+  run .venv/bin/python scripts/bench_live.py --bin "$target/release" --seconds "${LIVE_SECONDS:-60}"
+else
+  echo "skipped: needs root (unshare --net) and the venv's cyclonedds (scripts/deps.sh)"
+fi
 
 section "summary"
 echo "bench.sh: $failures part(s) failed"

@@ -160,3 +160,10 @@ fn a_foxglove_port_in_use_is_a_one_line_error() {
     let o = run(&["--foxglove", "localhost:http"], "");
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
+
+#[test]
+fn an_empty_input_is_an_error() {
+    let o = run(&[], "");
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("stdin: empty stream"), "{}", stderr(&o));
+}

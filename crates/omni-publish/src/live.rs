@@ -144,6 +144,7 @@ pub fn run<R: BufRead + Send + 'static>(
     let mut deleter = FrameDeleter::default();
     let mut failure = None;
     let mut last_frame_at = Instant::now();
+    let mut saw_header = false;
     let emit = |sweep: Sweep, at: Instant, frames_dir: Option<&str>, summary: &mut Summary| {
         let mut sweep = sweep;
         if let Some(traj) = &deskew {
@@ -161,6 +162,7 @@ pub fn run<R: BufRead + Send + 'static>(
     while !stop.load(Ordering::Relaxed) {
         match rx.recv_timeout(opts.sweep_timeout.min(Duration::from_millis(100))) {
             Ok(Ok(Record::Header(h))) => {
+                saw_header = true;
                 frames_dir = h.frames_dir.clone();
                 if opts.frames_per_sweep.is_none() {
                     assembler = SweepAssembler::new(frames_per_sweep_of(&h));
@@ -203,7 +205,11 @@ pub fn run<R: BufRead + Send + 'static>(
     for (name, q) in names.iter().zip(&queues) {
         summary.dropped.insert(name.clone(), q.dropped());
     }
-    summary.cut_short = summary.input_status.is_none() && failure.is_none() && !stop.load(Ordering::Relaxed);
+    let stopped = stop.load(Ordering::Relaxed);
+    if !saw_header && summary.frames == 0 && failure.is_none() && !stopped {
+        failure = Some("empty stream (no header, no frames)".into());
+    }
+    summary.cut_short = summary.input_status.is_none() && failure.is_none() && !stopped;
     // The reader may still block on a read that never ends (SIGINT with a silent input).
     if reader.is_finished() {
         let _ = reader.join();

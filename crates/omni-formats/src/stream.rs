@@ -382,21 +382,11 @@ impl<R: BufRead> StreamReader<R> {
                 continue;
             }
             let loc = format!("line {}", self.line_no);
-            let value: serde_json::Value =
-                serde_json::from_str(line).map_err(|e| Error::new(&self.name, &loc, format!("invalid JSON: {e}")))?;
-            if value.get("type").and_then(|t| t.as_str()) == Some("header") {
-                crate::docs::check_header(&value, STREAM_FORMAT, STREAM_VERSION, &self.name)
-                    .map_err(|e| Error::new(&self.name, format!("{loc}, {}", e.location), e.message))?;
-            }
-            let probe = value.clone();
-            let mut record: Record = serde_path_to_error::deserialize(value).map_err(|e| {
-                let path = e.path().to_string();
-                let loc = if path == "." { loc.clone() } else { format!("{loc}, field {path}") };
-                match locate_frame_error(&probe) {
-                    Some(field_err) => Error::new(&self.name, &loc, field_err),
-                    None => Error::new(&self.name, loc, e.into_inner().to_string()),
-                }
-            })?;
+            // Straight into the record: the common case, without a JSON tree in between.
+            let mut record = match serde_json::from_str::<Record>(line) {
+                Ok(Record::Header(_)) | Err(_) => Self::parse_checked(line, &self.name, &loc)?,
+                Ok(record) => record,
+            };
             match &record {
                 Record::Frame(f) => {
                     f.validate().map_err(|m| Error::new(&self.name, format!("{loc} (frame {})", f.seq), m))?;
@@ -409,6 +399,28 @@ impl<R: BufRead> StreamReader<R> {
             }
             return Ok(Some(record));
         }
+    }
+}
+
+impl<R> StreamReader<R> {
+    /// The slow path, for headers (format and version checked first) and for records that do
+    /// not parse (the error names the field at fault).
+    fn parse_checked(line: &str, name: &str, loc: &str) -> Result<Record> {
+        let value: serde_json::Value =
+            serde_json::from_str(line).map_err(|e| Error::new(name, loc, format!("invalid JSON: {e}")))?;
+        if value.get("type").and_then(|t| t.as_str()) == Some("header") {
+            crate::docs::check_header(&value, STREAM_FORMAT, STREAM_VERSION, name)
+                .map_err(|e| Error::new(name, format!("{loc}, {}", e.location), e.message))?;
+        }
+        let probe = value.clone();
+        serde_path_to_error::deserialize(value).map_err(|e| {
+            let path = e.path().to_string();
+            let loc = if path == "." { loc.to_string() } else { format!("{loc}, field {path}") };
+            match locate_frame_error(&probe) {
+                Some(field_err) => Error::new(name, &loc, field_err),
+                None => Error::new(name, loc, e.into_inner().to_string()),
+            }
+        })
     }
 }
 

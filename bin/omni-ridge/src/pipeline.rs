@@ -24,6 +24,8 @@ pub struct Config {
     pub camera: Option<Box<dyn CameraModel>>,
     pub overlay: Option<PathBuf>,
     pub keep_going: bool,
+    /// Write the arrays in binary (stream version 2).
+    pub binary: bool,
     pub threads: usize,
     /// Appended to the header's producers.
     pub producer: String,
@@ -184,7 +186,8 @@ pub fn run(input: Input, writer: impl Write, output_name: &str, config: Config) 
         std::thread::spawn(move || worker(&job_rx, &out_tx, &detectors, overlay.as_deref().map(|p| p.as_path())));
     }
     drop(out_tx);
-    write_in_order(out_rx, token_tx, writer, output_name, config.keep_going, &read_error)?;
+    let out = StreamWriter::new(writer, output_name).binary(config.binary);
+    write_in_order(out_rx, token_tx, out, config.keep_going, &read_error)?;
     detectors.along.verdict(config.params.along_stripe_px)
 }
 
@@ -342,12 +345,10 @@ fn warn_if_colour_read_as_luma(path: &Path) {
 fn write_in_order(
     outcomes: Receiver<Outcome>,
     tokens: SyncSender<()>,
-    writer: impl Write,
-    output_name: &str,
+    mut out: StreamWriter<impl Write>,
     keep_going: bool,
     read_error: &Mutex<Option<(usize, String)>>,
 ) -> CliResult {
-    let mut out = StreamWriter::new(writer, output_name);
     let mut pending: BTreeMap<usize, Result<Record, FrameError>> = BTreeMap::new();
     let mut next = 0;
     let mut failures: Vec<String> = Vec::new();

@@ -138,6 +138,21 @@ fn output_is_the_same_for_any_thread_count_and_file_output_is_identical() {
 }
 
 #[test]
+fn binary_output_reads_back_to_the_same_records_and_says_version_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = scene(dir.path());
+    let json = run(&[], &text);
+    let binary = run(&["--binary"], &text);
+    assert!(json.status.success() && binary.status.success(), "{}", stderr(&binary));
+    let (mut a, b) = (records(&json.stdout), records(&binary.stdout));
+    let Record::Header(h) = &mut a[0] else { panic!() };
+    assert_eq!(h.version, 1);
+    h.version = omni_formats::stream::STREAM_BINARY_VERSION;
+    assert_eq!(a, b, "the same numbers, bit for bit");
+    assert!(binary.stdout.len() < json.stdout.len() * 2 / 3, "{} vs {} bytes", binary.stdout.len(), json.stdout.len());
+}
+
+#[test]
 fn laser_off_frame_removes_ambient_light() {
     let dir = tempfile::tempdir().unwrap();
     // A lamp: a bright, gently sloped patch that crosses the threshold around the ring.

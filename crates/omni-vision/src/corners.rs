@@ -11,7 +11,8 @@
 //!    columns to the right and rows downwards), and placed inside the board's `cols × rows`
 //!    corners, honouring the colour of the first square when the caller knows it.
 //! 4. Sub-pixel refinement by gradient orthogonality (as OpenCV's `cornerSubPix`), on the
-//!    pixel grid (no interpolation, no pixel locking), then its first-order bias on curved edges
+//!    pixel grid (no interpolation, no pixel locking), in the window (a fraction of the local
+//!    corner spacing) whose solution spreads least, then its first-order bias on curved edges
 //!    removed (`curvature`: the mirror images the board's lines as arcs, which pulls every
 //!    corner away from the arcs' concave side).
 //!
@@ -193,14 +194,15 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     if wi.max(wj) > limits.max_long + 1 || wi.min(wj) > limits.max_short + 1 {
         return Err(Rejection::LargerThanBoard { found: (wi.max(0) as u32, wj.max(0) as u32) });
     }
-    let positions = refine_grid(&refine_img, &cands, &grid);
+    let mut windows = HashMap::new();
+    let positions = refine_grid(&refine_img, &cands, &grid, &mut windows);
     let positions = drop_unsmooth(positions);
     let smooth = gaussian_blur(img, opts.saddle.sigma);
-    let positions = fill_missing(&refine_img, &smooth, positions, &limits, opts);
+    let positions = fill_missing(&refine_img, &smooth, positions, &limits, opts, &mut windows);
     let positions = drop_unsmooth(positions);
-    let positions = curvature::remove_curvature_bias(&refine_img, &positions, refine_half_window);
+    let positions = curvature::remove_curvature_bias(&refine_img, &positions, |cell: Cell| windows[&cell]);
     let positions = match opts.annulus {
-        Some(annulus) => drop_near_rim(positions, annulus),
+        Some(annulus) => drop_near_rim(positions, annulus, &windows),
         None => positions,
     };
     if positions.len() < opts.min_corners {
@@ -290,22 +292,42 @@ fn local_x_junction(img: &GrayF32, p: [f64; 2], spacing: f64, min_contrast: f32)
     saddle::circle_test(img, p, radius, 0.35 * min_contrast).is_some()
 }
 
-/// The refinement half-window (px) for a corner spacing (px).
-fn refine_half_window(spacing: f64) -> f64 {
-    (0.4 * spacing).clamp(2.5, 8.0)
+/// The refinement half-windows tried on each corner, as fractions of the local corner spacing:
+/// from well inside the four squares to just short of the next squares' edges (at 1 spacing).
+const WINDOW_FRACTIONS: [f64; 7] = [0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9];
+/// Bounds of the refinement half-window (px): a few pixels at least; at most enough for squares
+/// of about 70 px (larger windows only cost time).
+const HALF_WINDOW_PX: (f64, f64) = (2.5, 30.0);
+
+/// Refines a corner with the window (a fraction of the local spacing, [`WINDOW_FRACTIONS`]) whose
+/// solution spreads least: large windows average the noise of big, sharp squares, small ones keep
+/// clear of curvature and neighbouring edges on small, blurred ones. Windows must lie in the image.
+fn refine_adaptive(img: &GrayF32, start: [f64; 2], spacing: f64) -> Option<([f64; 2], f64)> {
+    let mut best: Option<([f64; 2], f64, f64)> = None;
+    for frac in WINDOW_FRACTIONS {
+        let hw = (frac * spacing).clamp(HALF_WINDOW_PX.0, HALF_WINDOW_PX.1);
+        if !img.inside(start[0], start[1], hw + 2.0) {
+            continue;
+        }
+        if let Some((p, spread)) = saddle::refine_corner_spread(img, start, hw) {
+            if best.is_none_or(|b| spread < b.2) {
+                best = Some((p, hw, spread));
+            }
+        }
+    }
+    best.map(|(p, half_window, _)| (p, half_window))
 }
 
 /// Removes corners whose refinement window reaches within 1 px of the annulus' rims
 /// (`[cx, cy, inner radius, outer radius]`, px).
-fn drop_near_rim(pos: HashMap<Cell, [f64; 2]>, annulus: [f64; 4]) -> HashMap<Cell, [f64; 2]> {
+fn drop_near_rim(
+    pos: HashMap<Cell, [f64; 2]>,
+    annulus: [f64; 4],
+    windows: &HashMap<Cell, f64>,
+) -> HashMap<Cell, [f64; 2]> {
     let [cx, cy, r0, r1] = annulus;
-    let keep = |&(i, j): &Cell, p: &[f64; 2]| {
-        let spacing = [(i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)]
-            .iter()
-            .filter_map(|n| pos.get(n))
-            .map(|q| (q[0] - p[0]).hypot(q[1] - p[1]))
-            .fold(f64::INFINITY, f64::min);
-        let margin = if spacing.is_finite() { refine_half_window(spacing) } else { 8.0 } + 1.0;
+    let keep = |cell: &Cell, p: &[f64; 2]| {
+        let margin = windows.get(cell).copied().unwrap_or(8.0) + 1.0;
         let r = (p[0] - cx).hypot(p[1] - cy);
         r >= r0 + margin && r <= r1 - margin
     };
@@ -313,7 +335,12 @@ fn drop_near_rim(pos: HashMap<Cell, [f64; 2]>, annulus: [f64; 4]) -> HashMap<Cel
 }
 
 /// Refines every grid corner; the window follows the local corner spacing.
-fn refine_grid(img: &GrayF32, cands: &[Candidate], grid: &Grid) -> HashMap<Cell, [f64; 2]> {
+fn refine_grid(
+    img: &GrayF32,
+    cands: &[Candidate],
+    grid: &Grid,
+    windows: &mut HashMap<Cell, f64>,
+) -> HashMap<Cell, [f64; 2]> {
     let mut out = HashMap::new();
     for (&(i, j), &k) in &grid.cells {
         let p = cands[k].px;
@@ -322,9 +349,9 @@ fn refine_grid(img: &GrayF32, cands: &[Candidate], grid: &Grid) -> HashMap<Cell,
             .filter_map(|n| grid.cells.get(n))
             .map(|&m| (cands[m].px[0] - p[0]).hypot(cands[m].px[1] - p[1]))
             .fold(f64::INFINITY, f64::min);
-        let half_window = refine_half_window(spacing);
-        if let Some(r) = saddle::refine_corner(img, p, half_window) {
+        if let Some((r, w)) = refine_adaptive(img, p, spacing) {
             out.insert((i, j), r);
+            windows.insert((i, j), w);
         }
     }
     out
@@ -339,6 +366,7 @@ fn fill_missing(
     mut pos: HashMap<Cell, [f64; 2]>,
     limits: &GrowLimits,
     opts: &DetectorOptions,
+    windows: &mut HashMap<Cell, f64>,
 ) -> HashMap<Cell, [f64; 2]> {
     loop {
         let current = bounds(pos.keys());
@@ -356,11 +384,7 @@ fn fill_missing(
             let Some((pred, spacing, line_dir)) = grid::predict_cell(&|c: Cell| pos.get(&c).copied(), cell) else {
                 continue;
             };
-            let half_window = refine_half_window(spacing);
-            if !refine_img.inside(pred[0], pred[1], half_window + 2.0) {
-                continue;
-            }
-            let Some(p) = saddle::refine_corner(refine_img, pred, half_window) else { continue };
+            let Some((p, window)) = refine_adaptive(refine_img, pred, spacing) else { continue };
             if (p[0] - pred[0]).hypot(p[1] - pred[1]) > opts.search_fraction * spacing {
                 continue;
             }
@@ -370,16 +394,17 @@ fn fill_missing(
             };
             let dir_angle = line_dir[1].atan2(line_dir[0]);
             if lines.iter().any(|&l| saddle::axial_difference(l, dir_angle) < opts.max_line_angle) {
-                added.push((cell, p));
+                added.push((cell, p, window));
             }
         }
         if added.is_empty() {
             return pos;
         }
-        for (cell, p) in added {
+        for (cell, p, window) in added {
             // Each pass adds cells found from the previous grid only; bounds are rechecked next pass.
             if grid::fits_limits_bounds(bounds(pos.keys()), cell, limits) {
                 pos.insert(cell, p);
+                windows.insert(cell, window);
             }
         }
     }

@@ -180,7 +180,8 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     };
     let refine_img = gaussian_blur(img, opts.refine_sigma);
     let verify = |p: [f64; 2], spacing: f64| local_x_junction(&refine_img, p, spacing, opts.saddle.min_contrast);
-    let grid = grid::grow_best_grid(&cands, &limits, opts.max_seeds, &verify);
+    let beyond = |p: [f64; 2], out: [f64; 2], along: [f64; 2]| squares_continue(&refine_img, &mask, p, out, along);
+    let grid = grid::grow_best_grid(&cands, &limits, opts.max_seeds, &verify, &beyond);
     if grid.is_empty() {
         return Err(Rejection::NoBoard { candidates: cands.len() });
     }
@@ -188,7 +189,7 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     // smaller board would otherwise be "found" inside a larger one). One extra row or column is
     // tolerated: on tiny, blurred boards the junctions along the border can pass for corners.
     let unbounded = GrowLimits { max_long: 4 * limits.max_long + 8, max_short: 4 * limits.max_long + 8, ..limits };
-    let wide = grid::grow_best_grid(&cands, &unbounded, opts.max_seeds, &verify);
+    let wide = grid::grow_further(&cands, &grid, &unbounded, &verify, &beyond);
     let (i0, i1, j0, j1) = wide.bounds();
     let (wi, wj) = (i1 - i0 + 1, j1 - j0 + 1);
     if wi.max(wj) > limits.max_long + 1 || wi.min(wj) > limits.max_short + 1 {
@@ -198,7 +199,7 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     let positions = refine_grid(&refine_img, &cands, &grid, &mut windows);
     let positions = drop_unsmooth(positions);
     let smooth = gaussian_blur(img, opts.saddle.sigma);
-    let positions = fill_missing(&refine_img, &smooth, positions, &limits, opts, &mut windows);
+    let positions = fill_missing(&refine_img, &smooth, positions, &limits, opts, &mut windows, &beyond);
     let positions = drop_unsmooth(positions);
     let positions = curvature::remove_curvature_bias(&refine_img, &positions, |cell: Cell| windows[&cell]);
     let positions = match opts.annulus {
@@ -284,6 +285,41 @@ pub fn seen_board_size(
     Some([wi.max(wj), wi.min(wj)])
 }
 
+/// Whether the squares beyond a corner continue the checkerboard ([`grid::outward_steps`]): the
+/// two squares half a step `out` beyond `p` (either side of the grid line along `along`) differ
+/// by half to twice the contrast of the two squares inside, with the opposite sign (an
+/// X-junction: each square beyond has the colour of the square diagonally across). Both bounds
+/// matter: a grid on the board must not run into a fainter pattern behind it, nor one on that
+/// pattern into the board. Samples
+/// outside the image or `inside` (the annulus) cannot tell, and pass.
+fn squares_continue(
+    img: &GrayF32,
+    inside: &dyn Fn(f64, f64) -> bool,
+    p: [f64; 2],
+    out: [f64; 2],
+    along: [f64; 2],
+) -> bool {
+    let square = |s: f64, t: f64| -> Option<f64> {
+        let c = [p[0] + s * out[0] + t * along[0], p[1] + s * out[1] + t * along[1]];
+        let mut sum = 0.0;
+        for (a, b) in [(0.0, 0.0), (0.15, 0.0), (-0.15, 0.0), (0.0, 0.15), (0.0, -0.15)] {
+            let (x, y) = (c[0] + a * out[0] + b * along[0], c[1] + a * out[1] + b * along[1]);
+            if !img.inside(x, y, 1.0) || !inside(x, y) {
+                return None;
+            }
+            sum += img.bilinear(x, y) as f64;
+        }
+        Some(sum / 5.0)
+    };
+    let (Some(in_plus), Some(in_minus), Some(out_plus), Some(out_minus)) =
+        (square(-0.5, 0.5), square(-0.5, -0.5), square(0.5, 0.5), square(0.5, -0.5))
+    else {
+        return true;
+    };
+    let (inner, outer) = (in_plus - in_minus, out_plus - out_minus);
+    inner * outer < 0.0 && (0.5..=2.0).contains(&(outer.abs() / inner.abs().max(1e-6)))
+}
+
 /// An X-junction test at the grid's own scale: a circle of 0.35 × the corner spacing stays inside
 /// the four squares around a true corner, while T-junctions at the board's border (black square,
 /// white square, white margin) show only two transitions there.
@@ -367,6 +403,7 @@ fn fill_missing(
     limits: &GrowLimits,
     opts: &DetectorOptions,
     windows: &mut HashMap<Cell, f64>,
+    beyond: grid::BeyondCheck,
 ) -> HashMap<Cell, [f64; 2]> {
     loop {
         let current = bounds(pos.keys());
@@ -393,7 +430,9 @@ fn fill_missing(
                 continue;
             };
             let dir_angle = line_dir[1].atan2(line_dir[0]);
-            if lines.iter().any(|&l| saddle::axial_difference(l, dir_angle) < opts.max_line_angle) {
+            let at = |c: Cell| pos.get(&c).copied();
+            let inner = grid::outward_steps(&at, cell, p).iter().all(|&(o, a)| beyond(p, o, a));
+            if inner && lines.iter().any(|&l| saddle::axial_difference(l, dir_angle) < opts.max_line_angle) {
                 added.push((cell, p, window));
             }
         }

@@ -328,16 +328,18 @@ fn local_x_junction(img: &GrayF32, p: [f64; 2], spacing: f64, min_contrast: f32)
     saddle::circle_test(img, p, radius, 0.35 * min_contrast).is_some()
 }
 
-/// The refinement half-windows tried on each corner, as fractions of the local corner spacing:
-/// from well inside the four squares to just short of the next squares' edges (at 1 spacing).
-const WINDOW_FRACTIONS: [f64; 7] = [0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9];
-/// Bounds of the refinement half-window (px): a few pixels at least; at most enough for squares
-/// of about 70 px (larger windows only cost time).
-const HALF_WINDOW_PX: (f64, f64) = (2.5, 30.0);
+/// The refinement half-windows tried on each corner, as fractions of the local corner spacing.
+/// Larger windows (up to 0.9) fit the real sets better still, but move corners of rendered
+/// mirror boards by up to 0.3 px (docs/DECISIONS.md, 2026-12-03).
+const WINDOW_FRACTIONS: [f64; 3] = [0.3, 0.4, 0.5];
+/// Bounds of the refinement half-window (px). Above 12 px rendered mirror boards lose accuracy
+/// (the curvature step removes the first-order bias only).
+const HALF_WINDOW_PX: (f64, f64) = (2.5, 12.0);
 
 /// Refines a corner with the window (a fraction of the local spacing, [`WINDOW_FRACTIONS`]) whose
-/// solution spreads least: large windows average the noise of big, sharp squares, small ones keep
-/// clear of curvature and neighbouring edges on small, blurred ones. Windows must lie in the image.
+/// solution spreads least ([`saddle::refine_corner_spread`]): large windows average the noise of
+/// big, sharp squares, small ones keep clear of neighbouring edges on small, blurred ones.
+/// Windows must lie in the image. Returns the corner and its half-window (px).
 fn refine_adaptive(img: &GrayF32, start: [f64; 2], spacing: f64) -> Option<([f64; 2], f64)> {
     let mut best: Option<([f64; 2], f64, f64)> = None;
     for frac in WINDOW_FRACTIONS {
@@ -345,10 +347,10 @@ fn refine_adaptive(img: &GrayF32, start: [f64; 2], spacing: f64) -> Option<([f64
         if !img.inside(start[0], start[1], hw + 2.0) {
             continue;
         }
-        if let Some((p, spread)) = saddle::refine_corner_spread(img, start, hw) {
-            if best.is_none_or(|b| spread < b.2) {
-                best = Some((p, hw, spread));
-            }
+        if let Some((p, spread)) = saddle::refine_corner_spread(img, start, hw)
+            && best.is_none_or(|b| spread < b.2)
+        {
+            best = Some((p, hw, spread));
         }
     }
     best.map(|(p, half_window, _)| (p, half_window))

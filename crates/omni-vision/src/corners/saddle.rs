@@ -256,10 +256,8 @@ pub(crate) struct WindowSample {
     pub weight: f64,
 }
 
-/// The Gaussian weight's σ in the refinement window, as a fraction of the half-window: the
-/// edges' straight parts well inside the window count, the window's rim little (0.45 measured
-/// better than 0.6 on the real sets once the window follows the square size; docs/DECISIONS.md).
-const WEIGHT_SIGMA: f64 = 0.45;
+/// The Gaussian weight's σ in the refinement window, as a fraction of the half-window.
+const WEIGHT_SIGMA: f64 = 0.6;
 
 /// The refinement window around `p`: every pixel within `half_window` (px) of it, with its
 /// gradient from the pixel values themselves and a Gaussian weight (σ = [`WEIGHT_SIGMA`] ×

@@ -14,7 +14,8 @@ variant: boards in common, corner differences (median and 90th percentile, px) a
 corner (Euclidean, px) of each fit.
 
 Usage: scripts/real_corners.py --bin DIR [--set miniomni|handheld] [--json FILE]
-The pytest test (scripts/tests/test_real_corners.py) imports `judge`.
+The pytest test (bin/omni-calib-receiver/tests/test_real_corners.py, `make test-calib-interop`)
+imports `judge`.
 """
 
 from __future__ import annotations

@@ -173,7 +173,9 @@ fn real_dir() -> PathBuf {
 }
 
 /// In-sample RMS of the plane on the real frames (mm, 5 mm squares nominal), measured
-/// 2026-12-03 (docs/DECISIONS.md): 0.0351 mm over 9 frames; the bound allows 15 %.
+/// 2026-12-03 (docs/DECISIONS.md): 0.0351 mm over 9 frames; the bound allows 15 %. Since the
+/// corner grid stops at the board's edge, im6's board (whole, the stripe across its top row) is
+/// found too: 0.0347 mm over 11 frames.
 const REAL_RMS_MM: f64 = 0.0351;
 
 #[test]
@@ -225,7 +227,7 @@ fn real_frames_give_one_plane_that_no_frame_pulls() {
     }
     assert!(r.frames.len() >= 8, "{} frames used", r.frames.len());
     // Frames without a board are named.
-    assert!(r.skipped.iter().any(|s| s.name.ends_with("im6.png") && s.reason.starts_with("board not found")));
+    assert!(r.skipped.iter().any(|s| s.name.ends_with("im13.png") && s.reason.starts_with("board not found")));
     assert!(r.rms_mm <= 1.15 * REAL_RMS_MM, "in-sample RMS {} mm", r.rms_mm);
     assert!(r.leave_one_out_rms_mm <= 1.3 * r.rms_mm, "{} vs {}", r.leave_one_out_rms_mm, r.rms_mm);
     assert!(r.frames.iter().all(|f| f.straightness_px < 1.0), "{:?}", r.frames);

@@ -11,7 +11,8 @@
 //!    columns to the right and rows downwards), and placed inside the board's `cols × rows`
 //!    corners, honouring the colour of the first square when the caller knows it.
 //! 4. Sub-pixel refinement by gradient orthogonality (as OpenCV's `cornerSubPix`), on the
-//!    pixel grid (no interpolation, no pixel locking), then its first-order bias on curved edges
+//!    pixel grid (no interpolation, no pixel locking), in the window (a fraction of the local
+//!    corner spacing) whose solution spreads least, then its first-order bias on curved edges
 //!    removed (`curvature`: the mirror images the board's lines as arcs, which pulls every
 //!    corner away from the arcs' concave side).
 //!
@@ -179,7 +180,8 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     };
     let refine_img = gaussian_blur(img, opts.refine_sigma);
     let verify = |p: [f64; 2], spacing: f64| local_x_junction(&refine_img, p, spacing, opts.saddle.min_contrast);
-    let grid = grid::grow_best_grid(&cands, &limits, opts.max_seeds, &verify);
+    let beyond = |p: [f64; 2], out: [f64; 2], along: [f64; 2]| squares_continue(&refine_img, &mask, p, out, along);
+    let grid = grid::grow_best_grid(&cands, &limits, opts.max_seeds, &verify, &beyond);
     if grid.is_empty() {
         return Err(Rejection::NoBoard { candidates: cands.len() });
     }
@@ -187,20 +189,21 @@ pub fn detect_board(img: &GrayF32, cols: u32, rows: u32, opts: &DetectorOptions)
     // smaller board would otherwise be "found" inside a larger one). One extra row or column is
     // tolerated: on tiny, blurred boards the junctions along the border can pass for corners.
     let unbounded = GrowLimits { max_long: 4 * limits.max_long + 8, max_short: 4 * limits.max_long + 8, ..limits };
-    let wide = grid::grow_best_grid(&cands, &unbounded, opts.max_seeds, &verify);
+    let wide = grid::grow_further(&cands, &grid, &unbounded, &verify, &beyond);
     let (i0, i1, j0, j1) = wide.bounds();
     let (wi, wj) = (i1 - i0 + 1, j1 - j0 + 1);
     if wi.max(wj) > limits.max_long + 1 || wi.min(wj) > limits.max_short + 1 {
         return Err(Rejection::LargerThanBoard { found: (wi.max(0) as u32, wj.max(0) as u32) });
     }
-    let positions = refine_grid(&refine_img, &cands, &grid);
+    let mut windows = HashMap::new();
+    let positions = refine_grid(&refine_img, &cands, &grid, &mut windows);
     let positions = drop_unsmooth(positions);
     let smooth = gaussian_blur(img, opts.saddle.sigma);
-    let positions = fill_missing(&refine_img, &smooth, positions, &limits, opts);
+    let positions = fill_missing(&refine_img, &smooth, positions, &limits, opts, &mut windows, &beyond);
     let positions = drop_unsmooth(positions);
-    let positions = curvature::remove_curvature_bias(&refine_img, &positions, refine_half_window);
+    let positions = curvature::remove_curvature_bias(&refine_img, &positions, |cell: Cell| windows[&cell]);
     let positions = match opts.annulus {
-        Some(annulus) => drop_near_rim(positions, annulus),
+        Some(annulus) => drop_near_rim(positions, annulus, &windows),
         None => positions,
     };
     if positions.len() < opts.min_corners {
@@ -282,6 +285,41 @@ pub fn seen_board_size(
     Some([wi.max(wj), wi.min(wj)])
 }
 
+/// Whether the squares beyond a corner continue the checkerboard ([`grid::outward_steps`]): the
+/// two squares half a step `out` beyond `p` (either side of the grid line along `along`) differ
+/// by half to twice the contrast of the two squares inside, with the opposite sign (an
+/// X-junction: each square beyond has the colour of the square diagonally across). Both bounds
+/// matter: a grid on the board must not run into a fainter pattern behind it, nor one on that
+/// pattern into the board. Samples
+/// outside the image or `inside` (the annulus) cannot tell, and pass.
+fn squares_continue(
+    img: &GrayF32,
+    inside: &dyn Fn(f64, f64) -> bool,
+    p: [f64; 2],
+    out: [f64; 2],
+    along: [f64; 2],
+) -> bool {
+    let square = |s: f64, t: f64| -> Option<f64> {
+        let c = [p[0] + s * out[0] + t * along[0], p[1] + s * out[1] + t * along[1]];
+        let mut sum = 0.0;
+        for (a, b) in [(0.0, 0.0), (0.15, 0.0), (-0.15, 0.0), (0.0, 0.15), (0.0, -0.15)] {
+            let (x, y) = (c[0] + a * out[0] + b * along[0], c[1] + a * out[1] + b * along[1]);
+            if !img.inside(x, y, 1.0) || !inside(x, y) {
+                return None;
+            }
+            sum += img.bilinear(x, y) as f64;
+        }
+        Some(sum / 5.0)
+    };
+    let (Some(in_plus), Some(in_minus), Some(out_plus), Some(out_minus)) =
+        (square(-0.5, 0.5), square(-0.5, -0.5), square(0.5, 0.5), square(0.5, -0.5))
+    else {
+        return true;
+    };
+    let (inner, outer) = (in_plus - in_minus, out_plus - out_minus);
+    inner * outer < 0.0 && (0.5..=2.0).contains(&(outer.abs() / inner.abs().max(1e-6)))
+}
+
 /// An X-junction test at the grid's own scale: a circle of 0.35 × the corner spacing stays inside
 /// the four squares around a true corner, while T-junctions at the board's border (black square,
 /// white square, white margin) show only two transitions there.
@@ -290,22 +328,44 @@ fn local_x_junction(img: &GrayF32, p: [f64; 2], spacing: f64, min_contrast: f32)
     saddle::circle_test(img, p, radius, 0.35 * min_contrast).is_some()
 }
 
-/// The refinement half-window (px) for a corner spacing (px).
-fn refine_half_window(spacing: f64) -> f64 {
-    (0.4 * spacing).clamp(2.5, 8.0)
+/// The refinement half-windows tried on each corner, as fractions of the local corner spacing.
+/// Larger windows (up to 0.9) fit the real sets better still, but move corners of rendered
+/// mirror boards by up to 0.3 px (docs/DECISIONS.md, 2026-12-03).
+const WINDOW_FRACTIONS: [f64; 3] = [0.3, 0.4, 0.5];
+/// Bounds of the refinement half-window (px). Above 12 px rendered mirror boards lose accuracy
+/// (the curvature step removes the first-order bias only).
+const HALF_WINDOW_PX: (f64, f64) = (2.5, 12.0);
+
+/// Refines a corner with the window (a fraction of the local spacing, [`WINDOW_FRACTIONS`]) whose
+/// solution spreads least ([`saddle::refine_corner_spread`]): large windows average the noise of
+/// big, sharp squares, small ones keep clear of neighbouring edges on small, blurred ones.
+/// Windows must lie in the image. Returns the corner and its half-window (px).
+fn refine_adaptive(img: &GrayF32, start: [f64; 2], spacing: f64) -> Option<([f64; 2], f64)> {
+    let mut best: Option<([f64; 2], f64, f64)> = None;
+    for frac in WINDOW_FRACTIONS {
+        let hw = (frac * spacing).clamp(HALF_WINDOW_PX.0, HALF_WINDOW_PX.1);
+        if !img.inside(start[0], start[1], hw + 2.0) {
+            continue;
+        }
+        if let Some((p, spread)) = saddle::refine_corner_spread(img, start, hw)
+            && best.is_none_or(|b| spread < b.2)
+        {
+            best = Some((p, hw, spread));
+        }
+    }
+    best.map(|(p, half_window, _)| (p, half_window))
 }
 
 /// Removes corners whose refinement window reaches within 1 px of the annulus' rims
 /// (`[cx, cy, inner radius, outer radius]`, px).
-fn drop_near_rim(pos: HashMap<Cell, [f64; 2]>, annulus: [f64; 4]) -> HashMap<Cell, [f64; 2]> {
+fn drop_near_rim(
+    pos: HashMap<Cell, [f64; 2]>,
+    annulus: [f64; 4],
+    windows: &HashMap<Cell, f64>,
+) -> HashMap<Cell, [f64; 2]> {
     let [cx, cy, r0, r1] = annulus;
-    let keep = |&(i, j): &Cell, p: &[f64; 2]| {
-        let spacing = [(i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)]
-            .iter()
-            .filter_map(|n| pos.get(n))
-            .map(|q| (q[0] - p[0]).hypot(q[1] - p[1]))
-            .fold(f64::INFINITY, f64::min);
-        let margin = if spacing.is_finite() { refine_half_window(spacing) } else { 8.0 } + 1.0;
+    let keep = |cell: &Cell, p: &[f64; 2]| {
+        let margin = windows.get(cell).copied().unwrap_or(8.0) + 1.0;
         let r = (p[0] - cx).hypot(p[1] - cy);
         r >= r0 + margin && r <= r1 - margin
     };
@@ -313,7 +373,12 @@ fn drop_near_rim(pos: HashMap<Cell, [f64; 2]>, annulus: [f64; 4]) -> HashMap<Cel
 }
 
 /// Refines every grid corner; the window follows the local corner spacing.
-fn refine_grid(img: &GrayF32, cands: &[Candidate], grid: &Grid) -> HashMap<Cell, [f64; 2]> {
+fn refine_grid(
+    img: &GrayF32,
+    cands: &[Candidate],
+    grid: &Grid,
+    windows: &mut HashMap<Cell, f64>,
+) -> HashMap<Cell, [f64; 2]> {
     let mut out = HashMap::new();
     for (&(i, j), &k) in &grid.cells {
         let p = cands[k].px;
@@ -322,9 +387,9 @@ fn refine_grid(img: &GrayF32, cands: &[Candidate], grid: &Grid) -> HashMap<Cell,
             .filter_map(|n| grid.cells.get(n))
             .map(|&m| (cands[m].px[0] - p[0]).hypot(cands[m].px[1] - p[1]))
             .fold(f64::INFINITY, f64::min);
-        let half_window = refine_half_window(spacing);
-        if let Some(r) = saddle::refine_corner(img, p, half_window) {
+        if let Some((r, w)) = refine_adaptive(img, p, spacing) {
             out.insert((i, j), r);
+            windows.insert((i, j), w);
         }
     }
     out
@@ -339,6 +404,8 @@ fn fill_missing(
     mut pos: HashMap<Cell, [f64; 2]>,
     limits: &GrowLimits,
     opts: &DetectorOptions,
+    windows: &mut HashMap<Cell, f64>,
+    beyond: grid::BeyondCheck,
 ) -> HashMap<Cell, [f64; 2]> {
     loop {
         let current = bounds(pos.keys());
@@ -356,11 +423,7 @@ fn fill_missing(
             let Some((pred, spacing, line_dir)) = grid::predict_cell(&|c: Cell| pos.get(&c).copied(), cell) else {
                 continue;
             };
-            let half_window = refine_half_window(spacing);
-            if !refine_img.inside(pred[0], pred[1], half_window + 2.0) {
-                continue;
-            }
-            let Some(p) = saddle::refine_corner(refine_img, pred, half_window) else { continue };
+            let Some((p, window)) = refine_adaptive(refine_img, pred, spacing) else { continue };
             if (p[0] - pred[0]).hypot(p[1] - pred[1]) > opts.search_fraction * spacing {
                 continue;
             }
@@ -369,17 +432,20 @@ fn fill_missing(
                 continue;
             };
             let dir_angle = line_dir[1].atan2(line_dir[0]);
-            if lines.iter().any(|&l| saddle::axial_difference(l, dir_angle) < opts.max_line_angle) {
-                added.push((cell, p));
+            let at = |c: Cell| pos.get(&c).copied();
+            let inner = grid::outward_steps(&at, cell, p).iter().all(|&(o, a)| beyond(p, o, a));
+            if inner && lines.iter().any(|&l| saddle::axial_difference(l, dir_angle) < opts.max_line_angle) {
+                added.push((cell, p, window));
             }
         }
         if added.is_empty() {
             return pos;
         }
-        for (cell, p) in added {
+        for (cell, p, window) in added {
             // Each pass adds cells found from the previous grid only; bounds are rechecked next pass.
             if grid::fits_limits_bounds(bounds(pos.keys()), cell, limits) {
                 pos.insert(cell, p);
+                windows.insert(cell, window);
             }
         }
     }

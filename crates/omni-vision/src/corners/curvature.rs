@@ -25,12 +25,12 @@ use nalgebra::{Matrix2, Vector2};
 use std::collections::HashMap;
 
 /// Corrected positions: every corner moved by minus its curvature bias (see the module docs).
-/// Corners whose line curvatures are unknown keep their position; `half_window` maps the
-/// local corner spacing (px) to the refinement's half-window (px).
+/// Corners whose line curvatures are unknown keep their position; `half_window` gives each
+/// corner's refinement half-window (px).
 pub(super) fn remove_curvature_bias(
     refine_img: &GrayF32,
     pos: &HashMap<Cell, [f64; 2]>,
-    half_window: impl Fn(f64) -> f64,
+    half_window: impl Fn(Cell) -> f64,
 ) -> HashMap<Cell, [f64; 2]> {
     pos.iter()
         .map(|(&cell, &p)| {
@@ -47,7 +47,7 @@ fn corner_bias(
     pos: &HashMap<Cell, [f64; 2]>,
     (i, j): Cell,
     p: [f64; 2],
-    half_window: &impl Fn(f64) -> f64,
+    half_window: &impl Fn(Cell) -> f64,
 ) -> Option<Vector2<f64>> {
     let at = |c: Cell| pos.get(&c).map(|q| Vector2::new(q[0], q[1]));
     let centre = Vector2::new(p[0], p[1]);
@@ -63,12 +63,7 @@ fn corner_bias(
         })
     });
     let [Some((t1, k1)), Some((t2, k2))] = lines else { return None };
-    let spacing = [(1, 0), (-1, 0), (0, 1), (0, -1)]
-        .iter()
-        .filter_map(|&(di, dj)| at((i + di, j + dj)))
-        .map(|q| (q - centre).norm())
-        .fold(f64::INFINITY, f64::min);
-    let hw = half_window(spacing).max(1.5);
+    let hw = half_window((i, j)).max(1.5);
     let (n1, n2) = (Vector2::new(-t1.y, t1.x), Vector2::new(-t2.y, t2.x));
     // The same window, weights and gradients as saddle::refine_corner.
     let mut a = Matrix2::zeros();
@@ -159,7 +154,7 @@ mod tests {
         }
         let refined: HashMap<Cell, [f64; 2]> =
             truth.iter().map(|(&c, &p)| (c, super::super::saddle::refine_corner(&img, p, 6.0).unwrap())).collect();
-        let corrected = remove_curvature_bias(&img, &refined, |_| 6.0);
+        let corrected = remove_curvature_bias(&img, &refined, |_: Cell| 6.0);
         let radial = |pos: &HashMap<Cell, [f64; 2]>| {
             let errs: Vec<f64> = truth
                 .iter()

@@ -111,16 +111,24 @@ fn has_line_along(c: &Candidate, dir: [f64; 2], tol: f64) -> bool {
     c.lines.iter().any(|&l| axial_difference(l, a) < tol)
 }
 
+/// A check of the squares beyond a corner the grid grows to: `(corner, out, along)` with `out`
+/// the grid step from the grid to the corner and `along` the step along the new grid line (px);
+/// true if the squares half a step further out continue the checkerboard (see
+/// [`outward_steps`]).
+pub type BeyondCheck<'a> = &'a dyn Fn([f64; 2], [f64; 2], [f64; 2]) -> bool;
+
 /// Grows the largest consistent grid found from the strongest seeds.
 ///
 /// `verify(position, local spacing)` re-checks a candidate at the scale of the grid around it
 /// (e.g. an X-junction test on a circle that stays inside the four squares), so that junctions
-/// at the board's border, which look like corners at a coarser scale, are not taken.
+/// at the board's border, which look like corners at a coarser scale, are not taken; `beyond`
+/// stops the growth at the board's outer squares.
 pub fn grow_best_grid(
     cands: &[Candidate],
     limits: &GrowLimits,
     max_seeds: usize,
     verify: &dyn Fn([f64; 2], f64) -> bool,
+    beyond: BeyondCheck,
 ) -> Grid {
     if cands.len() < 9 {
         return Grid::default();
@@ -143,7 +151,7 @@ pub fn grow_best_grid(
             continue;
         };
         tried += 1;
-        let grid = grow(cands, &index, grid, limits, verify);
+        let grid = grow(cands, &index, grid, limits, verify, beyond);
         for &k in grid.cells.values() {
             used_as_member[k] = true;
         }
@@ -152,6 +160,21 @@ pub fn grow_best_grid(
         }
     }
     best
+}
+
+/// `grid` grown further under other `limits` (e.g. without the board's size, to see how far the
+/// pattern of this board really extends).
+pub fn grow_further(
+    cands: &[Candidate],
+    grid: &Grid,
+    limits: &GrowLimits,
+    verify: &dyn Fn([f64; 2], f64) -> bool,
+    beyond: BeyondCheck,
+) -> Grid {
+    if grid.is_empty() {
+        return Grid::default();
+    }
+    grow(cands, &Index::new(cands, 16.0), grid.clone(), limits, verify, beyond)
 }
 
 /// The nearest candidate from `p` along direction `dir` (± `tol` rad) within `max_d`, which
@@ -279,6 +302,31 @@ pub fn fits_limits_bounds(bounds: (i32, i32, i32, i32), cell: Cell, limits: &Gro
     wi.max(wj) <= limits.max_long && wi.min(wj) <= limits.max_short
 }
 
+/// The steps `(out, along)` (px) at a corner placed at `p` in `cell` for every side on which it
+/// would end the grid: `out` from its neighbour inside the grid to `p`, `along` one step along
+/// that neighbour's perpendicular grid line. A corner is an inner corner of the board only if
+/// the squares half an `out` beyond it still alternate like the ones inside; the board's edge
+/// (T-junctions with the margin, or a background pattern behind it) fails that.
+pub fn outward_steps(pos: &dyn Fn(Cell) -> Option<[f64; 2]>, cell: Cell, p: [f64; 2]) -> Vec<([f64; 2], [f64; 2])> {
+    let (i, j) = cell;
+    let mut out = Vec::new();
+    for (di, dj) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+        let Some(inner) = pos((i - di, j - dj)) else { continue };
+        if pos((i + di, j + dj)).is_some() {
+            continue;
+        }
+        let n = (i - di, j - dj);
+        let (pi, pj) = (dj, di);
+        let along = match (pos((n.0 + pi, n.1 + pj)), pos((n.0 - pi, n.1 - pj))) {
+            (Some(a), _) => sub(a, inner),
+            (None, Some(b)) => sub(inner, b),
+            (None, None) => continue,
+        };
+        out.push((sub(p, inner), along));
+    }
+    out
+}
+
 fn fits_limits(grid: &Grid, cell: Cell, limits: &GrowLimits) -> bool {
     fits_limits_bounds(grid.bounds(), cell, limits)
 }
@@ -290,6 +338,7 @@ fn grow(
     mut grid: Grid,
     limits: &GrowLimits,
     verify: &dyn Fn([f64; 2], f64) -> bool,
+    beyond: BeyondCheck,
 ) -> Grid {
     let mut used: std::collections::HashSet<usize> = grid.cells.values().cloned().collect();
     loop {
@@ -309,10 +358,12 @@ fn grow(
             }
             let Some((pred, spacing, line_dir)) = predict(cands, &grid, cell) else { continue };
             let radius = limits.search_fraction * spacing;
+            let at = |c: Cell| grid.cells.get(&c).map(|&m| cands[m].px);
             let hit = index.within(cands, pred, radius).into_iter().find(|&(_, k)| {
                 !used.contains(&k)
                     && has_line_along(&cands[k], line_dir, limits.max_line_angle)
                     && verify(cands[k].px, spacing)
+                    && outward_steps(&at, cell, cands[k].px).iter().all(|&(o, a)| beyond(cands[k].px, o, a))
             });
             if let Some((_, k)) = hit {
                 grid.cells.insert(cell, k);

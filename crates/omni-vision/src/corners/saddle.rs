@@ -193,6 +193,15 @@ pub fn axial_difference(a: f64, b: f64) -> f64 {
 /// `window_samples`. `half_window` in px. Returns `None` if the system is singular or the
 /// corner drifts more than `half_window`.
 pub fn refine_corner(grad_img: &GrayF32, start: [f64; 2], half_window: f64) -> Option<[f64; 2]> {
+    refine_corner_spread(grad_img, start, half_window).map(|(p, _)| p)
+}
+
+/// [`refine_corner`] and the spread of its solution (px²): the trace of the sandwich covariance
+/// A⁻¹·(Σ w²·e²·g·gᵀ)·A⁻¹, where e = gᵀ(pixel − q) is each sample's misfit. It grows with the
+/// image noise and with everything the model of two straight edges through the corner does not
+/// explain (a neighbouring square's edge entering the window, curvature, an uneven blur), so it
+/// compares windows of different sizes on the same corner.
+pub fn refine_corner_spread(grad_img: &GrayF32, start: [f64; 2], half_window: f64) -> Option<([f64; 2], f64)> {
     let hw = half_window.max(1.5);
     let mut p = start;
     for _ in 0..30 {
@@ -221,7 +230,20 @@ pub fn refine_corner(grad_img: &GrayF32, start: [f64; 2], half_window: f64) -> O
             break;
         }
     }
-    Some(p)
+    Some((p, solution_spread(grad_img, p, hw)?))
+}
+
+/// The sandwich covariance trace (px²) of the gradient-orthogonality solution at `p`.
+fn solution_spread(img: &GrayF32, p: [f64; 2], hw: f64) -> Option<f64> {
+    let (mut a, mut m) = (nalgebra::Matrix2::<f64>::zeros(), nalgebra::Matrix2::<f64>::zeros());
+    for s in window_samples(img, p, hw) {
+        let g = nalgebra::Vector2::from(s.gradient);
+        let e = g.dot(&nalgebra::Vector2::from(s.offset));
+        a += s.weight * g * g.transpose();
+        m += (s.weight * e).powi(2) * g * g.transpose();
+    }
+    let inv = a.try_inverse()?;
+    Some((inv * m * inv).trace())
 }
 
 /// One gradient sample of the refinement window.
@@ -234,9 +256,12 @@ pub(crate) struct WindowSample {
     pub weight: f64,
 }
 
+/// The Gaussian weight's σ in the refinement window, as a fraction of the half-window.
+const WEIGHT_SIGMA: f64 = 0.6;
+
 /// The refinement window around `p`: every pixel within `half_window` (px) of it, with its
-/// gradient from the pixel values themselves and a Gaussian weight (σ = 0.6 × half-window)
-/// tapered to zero over the last pixel.
+/// gradient from the pixel values themselves and a Gaussian weight (σ = [`WEIGHT_SIGMA`] ×
+/// half-window) tapered to zero over the last pixel.
 ///
 /// The samples sit on the pixel grid, not at `p` + integer offsets: interpolated samples share
 /// `p`'s sub-pixel phase, and bilinear interpolation smooths the image by an amount that depends
@@ -245,7 +270,7 @@ pub(crate) struct WindowSample {
 pub(crate) fn window_samples(img: &GrayF32, p: [f64; 2], half_window: f64) -> impl Iterator<Item = WindowSample> + '_ {
     let r = half_window.ceil() as isize + 1;
     let (x0, y0) = (p[0].round() as isize, p[1].round() as isize);
-    let sigma_w = half_window * 0.6;
+    let sigma_w = half_window * WEIGHT_SIGMA;
     (-r..=r).flat_map(move |dy| (-r..=r).map(move |dx| (x0 + dx, y0 + dy))).filter_map(move |(x, y)| {
         let offset = [x as f64 - p[0], y as f64 - p[1]];
         let d = offset[0].hypot(offset[1]);

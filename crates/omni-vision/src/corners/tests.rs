@@ -122,3 +122,53 @@ fn whole_board_poses(board: &omni_formats::BoardFile, count: usize) -> Vec<nalge
         })
         .collect()
 }
+
+/// The grid stops at the board's edge: a 9 × 6 board (no paper margin) held 1 mm in front of a
+/// larger checkerboard of lower contrast (albedo 0.25 / 0.6 against the board's 0.05 / 0.85)
+/// whose squares continue the board's own, as a patterned wall or floor behind a board does. The
+/// background's junctions next to the board pass the X-junction test; the squares beyond them
+/// alternate with 0.44 × the board's contrast, so the grid must not take them. Before the
+/// squares-beyond check every board here was refused as "corner grid 14 × 17" (the grid ran
+/// over the whole background). Rendered at 512 px, as the size test above.
+#[test]
+fn the_grid_stops_at_the_board_edge_before_a_background_pattern() {
+    use omni_simulator::{RenderOptions, Scene, Sensor, board_object, corner_pixels, render_ambient_frame};
+    let sensor = Sensor::paper_scaled(512);
+    let board = omni_formats::BoardFile::new(9, 6, 30.0);
+    let wall = omni_formats::BoardFile::new(9 + 8, 6 + 8, 30.0);
+    let c = omni_model::CameraModel::mirror_circle(sensor.camera.as_ref());
+    let opts = DetectorOptions {
+        annulus: Some([c.centre.x, c.centre.y, c.inner_radius, c.outer_radius]),
+        ..Default::default()
+    };
+    for (k, pose) in whole_board_poses(&board, 3).iter().enumerate() {
+        // The wall's corner (4, 4) behind the board's corner (0, 0): an even shift keeps the colours.
+        let behind = pose * nalgebra::Translation3::new(-4.0 * 30.0, -4.0 * 30.0, 1.0);
+        let mut background = board_object(&wall, &behind);
+        background.albedo = 0.6;
+        if let omni_formats::scene::Shape::Checkerboard { dark_albedo, .. } = &mut background.shape {
+            *dark_albedo = 0.25;
+        }
+        let scene = Scene::from_file(omni_formats::scene::SceneFile::new(vec![board_object(&board, pose), background]))
+            .unwrap();
+        let frame =
+            render_ambient_frame(&sensor, &scene, &RenderOptions { seed: k as u64, ..RenderOptions::calibration() });
+        let truth: Vec<[f64; 2]> = corner_pixels(&sensor, &scene, pose, &board).into_iter().flatten().collect();
+        assert_eq!(truth.len(), 54, "board {k}: the whole board in view");
+        let img = GrayF32 {
+            width: frame.width as usize,
+            height: frame.height as usize,
+            data: frame.data.iter().map(|&v| v as f32 * 255.0 / frame.max_value() as f32).collect(),
+        };
+        for (cols, rows) in [(9, 6), (10, 6)] {
+            let b =
+                detect_board(&img, cols, rows, &opts).unwrap_or_else(|e| panic!("board {k} as {cols} × {rows}: {e}"));
+            assert_eq!((b.corners.len(), b.seen_size), (54, Some([9, 6])), "board {k} as {cols} × {rows}");
+            for corner in &b.corners {
+                let off =
+                    truth.iter().map(|t| (t[0] - corner.px[0]).hypot(t[1] - corner.px[1])).fold(f64::MAX, f64::min);
+                assert!(off < 0.5, "board {k}: corner {:?} is {off:.2} px from every board corner", corner.index);
+            }
+        }
+    }
+}

@@ -393,7 +393,8 @@ fn emulate_renders_from_camera_scanner_and_scene_files_and_names_bad_ones() {
     let png = std::fs::read(emu.frames().join(&frames[0].path)).unwrap();
     assert_eq!(u32::from_be_bytes(png[16..20].try_into().unwrap()), 48);
 
-    std::fs::write(&camera, "{\"format\":\"omniscan.camera\",\"version\":1,\"model\":{\"kind\":\"spherical\"}}").unwrap();
+    std::fs::write(&camera, "{\"format\":\"omniscan.camera\",\"version\":1,\"model\":{\"kind\":\"spherical\"}}")
+        .unwrap();
     let out = Command::new(BIN)
         .args(["emulate", "--camera", &s(&camera), "--scanner", &s(&scanner), "--frames"])
         .arg(files.path().join("frames"))

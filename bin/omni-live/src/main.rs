@@ -128,12 +128,16 @@ fn run(a: Args) -> CliResult {
         }
         None => None,
     };
+    // Files first, read once for every output: a bad file is reported before the network is
+    // touched.
+    let calibration = calibration_json(a.camera.as_deref(), a.scanner.as_deref())?;
+    let placement = a.extrinsics.as_deref().map(extrinsics).transpose()?;
     let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
     if a.ros2 {
-        sinks.push(Box::new(ros2_sink(&a)?));
+        sinks.push(Box::new(ros2_sink(&a, calibration.clone(), placement)?));
     }
     if let Some(addr) = &a.foxglove {
-        sinks.push(Box::new(foxglove_sink(&a, addr)?));
+        sinks.push(Box::new(foxglove_sink(&a, addr, calibration, placement)?));
     }
     let input = StreamReader::open(&a.input)?;
     let out = Arc::new(Mutex::new(std::io::stdout()));
@@ -160,7 +164,7 @@ fn run(a: Args) -> CliResult {
     Ok(())
 }
 
-fn ros2_sink(a: &Args) -> CliResult<DdsSink> {
+fn ros2_sink(a: &Args, calibration: Option<String>, tf: Option<nalgebra::Isometry3<f64>>) -> CliResult<DdsSink> {
     let domain = match a.domain_id {
         Some(d) => d,
         None => match std::env::var("ROS_DOMAIN_ID") {
@@ -173,12 +177,6 @@ fn ros2_sink(a: &Args) -> CliResult<DdsSink> {
     if domain > u32::from(MAX_DOMAIN_ID) {
         return Err(CliError::new(format!("--domain-id {domain} is out of range 0..={MAX_DOMAIN_ID}")));
     }
-    // Files first: a bad file is reported before the network is touched.
-    let calibration = calibration_json(a.camera.as_deref(), a.scanner.as_deref())?;
-    let tf = match &a.extrinsics {
-        Some(p) => Some(extrinsics(p)?),
-        None => None,
-    };
     let publisher = DdsPublisher::new(&DdsOptions {
         domain_id: domain as u16,
         prefix: a.prefix.clone(),
@@ -195,7 +193,12 @@ fn ros2_sink(a: &Args) -> CliResult<DdsSink> {
     Ok(DdsSink { publisher, frame_id: a.frame_id.clone() })
 }
 
-fn foxglove_sink(a: &Args, addr: &str) -> CliResult<FoxgloveSink> {
+fn foxglove_sink(
+    a: &Args,
+    addr: &str,
+    calibration: Option<String>,
+    extrinsics: Option<nalgebra::Isometry3<f64>>,
+) -> CliResult<FoxgloveSink> {
     let (host, port) = match addr.rsplit_once(':') {
         Some((h, p)) => (h.trim_start_matches('[').trim_end_matches(']').to_string(), p),
         None => ("127.0.0.1".to_string(), addr),
@@ -208,8 +211,8 @@ fn foxglove_sink(a: &Args, addr: &str) -> CliResult<FoxgloveSink> {
         prefix: a.prefix.clone(),
         frame_id: a.frame_id.clone(),
         base_frame: a.base_frame.clone(),
-        extrinsics: a.extrinsics.as_deref().map(extrinsics).transpose()?,
-        calibration: calibration_json(a.camera.as_deref(), a.scanner.as_deref())?,
+        extrinsics,
+        calibration,
     })
     .map_err(CliError::new)?;
     eprintln!("{TOOL}: Foxglove server on port {} (subprotocol foxglove.sdk.v1)", sink.port());

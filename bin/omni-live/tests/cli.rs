@@ -2,7 +2,7 @@
 //! one line before the network is touched, a closed stdout and SIGTERM are clean ends.
 
 use std::io::Write;
-use std::process::{Command, Output, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 
 const BIN: &str = env!("CARGO_BIN_EXE_omni-live");
 
@@ -24,14 +24,13 @@ fn stream(sweeps: u64) -> String {
     )
 }
 
+/// The tool with all three standard streams piped.
+fn spawn(args: &[&str]) -> Child {
+    Command::new(BIN).args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap()
+}
+
 fn run(args: &[&str], input: &str) -> Output {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn(args);
     let mut stdin = child.stdin.take().unwrap();
     let _ = stdin.write_all(input.as_bytes());
     drop(stdin);
@@ -106,13 +105,7 @@ fn a_malformed_record_is_named_by_its_line() {
 
 #[test]
 fn a_closed_stdout_is_a_clean_end() {
-    let mut child = Command::new(BIN)
-        .args(["--frames-per-sweep", "1"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn(&["--frames-per-sweep", "1"]);
     drop(child.stdout.take());
     let _ = child.stdin.take().unwrap().write_all(stream(50).as_bytes());
     let o = child.wait_with_output().unwrap();
@@ -122,13 +115,7 @@ fn a_closed_stdout_is_a_clean_end() {
 
 #[test]
 fn sigterm_publishes_the_open_sweep_and_ends_with_the_status() {
-    let mut child = Command::new(BIN)
-        .args(["--sweep-timeout-ms", "60000"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn(&["--sweep-timeout-ms", "60000"]);
     let mut stdin = child.stdin.take().unwrap();
     // Two frames of a three-frame sweep; the input stays open.
     let s = stream(1);

@@ -262,38 +262,13 @@ fn a_timed_scan_stops_the_controller_and_accounts_for_every_trigger() {
     assert!(status.complete);
 }
 
-#[test]
-fn an_interrupted_scan_stops_the_controller_and_ends_its_manifest_with_a_status() {
-    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40"]);
-    let mut scan = Command::new(BIN)
-        .args(["scan", "--port", &emu.port, "--angles", "0,15", "--revolutions", "20", "--frames"])
-        .arg(emu.frames())
-        .arg("-o")
-        .arg(emu.manifest_path())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let started = Instant::now();
-    while std::fs::read_to_string(emu.manifest_path()).map(|t| t.matches("\"frame\"").count()).unwrap_or(0) < 3 {
-        assert!(started.elapsed() < Duration::from_secs(10), "scan produced no frames");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    let kill = Command::new("kill").args(["-TERM", &scan.id().to_string()]).status().unwrap();
-    assert!(kill.success());
-    let status = scan.wait().unwrap();
-    assert_eq!(status.code(), Some(1));
-    let (frames, st) = read_manifest(&emu.manifest_path());
-    assert!(!st.complete && st.errors.iter().any(|e| e.contains("interrupted")), "{st:?}");
-    assert!(extra(&st, "controller_fired") < 480, "the controller was stopped: {st:?}");
-    assert_eq!(st.frames + st.frames_missing, extra(&st, "controller_fired"), "{st:?}");
-    assert_frames_true(&frames, &emu.truth());
-}
-
-#[test]
-fn a_scan_until_stopped_ends_complete_on_sigterm() {
-    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40"]);
+/// A scan on the emulator with `stop` (e.g. `--revolutions 20`), sent SIGTERM after its third
+/// frame: its output.
+fn scan_terminated_after_three_frames(emu: &Emulator, stop: &[&str]) -> std::process::Output {
     let scan = Command::new(BIN)
-        .args(["scan", "--port", &emu.port, "--angles", "0,15", "--until-stopped", "--frames"])
+        .args(["scan", "--port", &emu.port, "--angles", "0,15"])
+        .args(stop)
+        .arg("--frames")
         .arg(emu.frames())
         .arg("-o")
         .arg(emu.manifest_path())
@@ -306,7 +281,25 @@ fn a_scan_until_stopped_ends_complete_on_sigterm() {
         std::thread::sleep(Duration::from_millis(10));
     }
     assert!(Command::new("kill").args(["-TERM", &scan.id().to_string()]).status().unwrap().success());
-    let out = scan.wait_with_output().unwrap();
+    scan.wait_with_output().unwrap()
+}
+
+#[test]
+fn an_interrupted_scan_stops_the_controller_and_ends_its_manifest_with_a_status() {
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40"]);
+    let out = scan_terminated_after_three_frames(&emu, &["--revolutions", "20"]);
+    assert_eq!(out.status.code(), Some(1));
+    let (frames, st) = read_manifest(&emu.manifest_path());
+    assert!(!st.complete && st.errors.iter().any(|e| e.contains("interrupted")), "{st:?}");
+    assert!(extra(&st, "controller_fired") < 480, "the controller was stopped: {st:?}");
+    assert_eq!(st.frames + st.frames_missing, extra(&st, "controller_fired"), "{st:?}");
+    assert_frames_true(&frames, &emu.truth());
+}
+
+#[test]
+fn a_scan_until_stopped_ends_complete_on_sigterm() {
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40"]);
+    let out = scan_terminated_after_three_frames(&emu, &["--until-stopped"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let (frames, st) = read_manifest(&emu.manifest_path());
     assert!(st.complete && st.errors.is_empty(), "{st:?}");

@@ -167,6 +167,15 @@ fn all_lasers() -> Vec<u32> {
     vec![0, 1]
 }
 
+/// An image path of a frame record: relative paths are relative to the header's `frames_dir`.
+pub fn resolve_frame_path(frames_dir: Option<&str>, path: &str) -> std::path::PathBuf {
+    let p = std::path::Path::new(path);
+    match frames_dir {
+        Some(d) if p.is_relative() => std::path::Path::new(d).join(p),
+        _ => p.to_path_buf(),
+    }
+}
+
 impl Frame {
     /// A frame record with no stripe or points yet.
     pub fn new(seq: u64, path: impl Into<String>, alpha_deg: f64, facet: u32) -> Self {
@@ -210,11 +219,7 @@ impl Frame {
 
     /// The frame's image path resolved against the stream's frames directory.
     pub fn resolve_path(&self, frames_dir: Option<&str>, path: &str) -> std::path::PathBuf {
-        let p = std::path::Path::new(path);
-        match frames_dir {
-            Some(d) if p.is_relative() => std::path::Path::new(d).join(p),
-            _ => p.to_path_buf(),
-        }
+        resolve_frame_path(frames_dir, path)
     }
 }
 

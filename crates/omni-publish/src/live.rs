@@ -9,7 +9,7 @@ use crate::queue::DropOldest;
 use crate::sweep::{Sweep, SweepAssembler};
 use nalgebra::Point3;
 use omni_cloud::motion::Trajectory;
-use omni_formats::stream::{Frame, Record, Status, StreamReader};
+use omni_formats::stream::{Frame, Record, Status, StreamReader, resolve_frame_path};
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::io::BufRead;
@@ -244,7 +244,7 @@ fn read_records<R: BufRead>(mut input: StreamReader<R>, tx: std::sync::mpsc::Syn
 
 /// The bytes of a frame file, or `None` if it is gone (a slow consumer upstream, or no file).
 fn read_frame(frames_dir: Option<&str>, path: &str) -> Option<FrameFile> {
-    let full = Frame::new(0, "", 0.0, 0).resolve_path(frames_dir, path);
+    let full = resolve_frame_path(frames_dir, path);
     let bytes = std::fs::read(&full).ok()?;
     Some(FrameFile { name: full.display().to_string(), bytes })
 }
@@ -311,7 +311,7 @@ impl FrameDeleter {
         if let Some(previous) = self.latest.take() {
             deleted += u64::from(std::fs::remove_file(&previous).is_ok());
         }
-        let path = frame.resolve_path(frames_dir, &frame.path);
+        let path = resolve_frame_path(frames_dir, &frame.path);
         if frame.lasers.is_empty() {
             self.ambient.push((frame.revolution, path));
         } else {

@@ -5,7 +5,9 @@ An emulated camera writes realistic room frames (1024 x 1024 PGM, rendered once 
 into a frames directory at the camera's rate and emits each frame's manifest record as
 omni-trigger would; the live chain measures and publishes them:
 
-    camera | omni-ridge --camera | omni-triangulate | omni-live --ros2 --delete-frames
+    camera | omni-ridge --camera --binary | omni-triangulate --binary | omni-live --ros2 --delete-frames
+
+(`--json` runs the same chain with JSON Lines streams, for comparison.)
 
 with a ROS-free DDS subscriber (Cyclone) taking every cloud. Everything runs in a network
 namespace of its own (`unshare --net`, loopback only; needs root). Prints:
@@ -13,10 +15,10 @@ namespace of its own (`unshare --net`, loopback only; needs root). Prints:
   publication: p50, p99, max (ms);
 - CPU of the chain (omni-ridge + omni-triangulate + omni-live) and of the camera emulation, as a
   share of the 2 cores over the run;
-- resident memory of each process in the first and the last tenth of the run, and the frames
-  directory's size (disk flat: frames deleted once measured).
+- resident memory of each process in the first and the last tenth of the run, its peak, and its
+  mean in each tenth (flat or still growing), and the frames directory's size (disk flat: frames deleted once measured).
 
-Usage: scripts/bench_live.py [--bin DIR] [--seconds S] [--fps F]   (inside: --inner ...)
+Usage: scripts/bench_live.py [--bin DIR] [--seconds S] [--fps F] [--json]   (inside: --inner ...)
 """
 
 import argparse
@@ -74,9 +76,11 @@ def inner(args) -> int:
                             "/omniscan", "0"], stdout=subprocess.PIPE)
     sub.stdout.readline()
     cam = ["--camera", str(work / "sensor/camera.json")]
-    ridge = subprocess.Popen([str(bin_dir / "omni-ridge"), *cam, "-"], stdin=subprocess.PIPE,
+    binary = [] if args.json else ["--binary"]
+    ridge = subprocess.Popen([str(bin_dir / "omni-ridge"), *cam, *binary, "-"], stdin=subprocess.PIPE,
                              stdout=subprocess.PIPE)
-    tri = subprocess.Popen([str(bin_dir / "omni-triangulate"), *cam, "--scanner", str(work / "sensor/scanner.json")],
+    tri = subprocess.Popen([str(bin_dir / "omni-triangulate"), *cam, *binary,
+                            "--scanner", str(work / "sensor/scanner.json")],
                            stdin=ridge.stdout, stdout=subprocess.PIPE)
     live = subprocess.Popen([str(bin_dir / "omni-live"), "--ros2", "--delete-frames", "--queue", "2"],
                             stdin=tri.stdout, stdout=subprocess.PIPE)
@@ -131,14 +135,17 @@ def inner(args) -> int:
     first, last = samples[:tenth], samples[-tenth:]
     mean = lambda rows, k: sum(r[k] for r in rows) / len(rows)  # noqa: E731
     print(json.dumps({
-        "fps": args.fps, "seconds": round(wall, 1), "frames": n_total, "camera_behind_s": round(late, 3),
+        "streams": "json" if args.json else "binary", "fps": args.fps, "seconds": round(wall, 1), "frames": n_total, "camera_behind_s": round(late, 3),
         "sweeps_published": len(lat), "status": status,
         "latency_ms": {"p50": lat[len(lat) // 2], "p99": lat[min(len(lat) - 1, int(0.99 * len(lat)))],
                        "max": lat[-1]} if lat else None,
         "cpu_share_of_2_cores": {**{k: round(v / wall / 2, 3) for k, v in cpu.items()},
                                  "chain": round(sum(cpu.values()) / wall / 2, 3),
                                  "camera_emulation": round(camera_cpu / wall / 2, 3)},
-        "rss_mib_first_last": {k: [round(mean(first, k) / 1024, 1), round(mean(last, k) / 1024, 1)] for k in pids},
+        "rss_mib_first_last_max": {k: [round(mean(first, k) / 1024, 1), round(mean(last, k) / 1024, 1),
+                                       round(max(s[k] for s in samples) / 1024, 1)] for k in pids},
+        "rss_mib_by_tenth": {k: [round(mean(samples[i * tenth:(i + 1) * tenth], k) / 1024, 1)
+                                 for i in range(len(samples) // tenth)] for k in pids},
         "frames_dir_mib_first_last_max": [round(mean(first, "disk") / 2**20, 1), round(mean(last, "disk") / 2**20, 1),
                                           round(max(s["disk"] for s in samples) / 2**20, 1)],
     }))
@@ -150,6 +157,7 @@ def main() -> int:
     ap.add_argument("--bin", default=str(ROOT / "target/release"))
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--fps", type=float, default=200.0)
+    ap.add_argument("--json", action="store_true", help="JSON Lines streams between the tools (default: binary)")
     ap.add_argument("--inner", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--work", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -159,12 +167,12 @@ def main() -> int:
     try:
         script = ("ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo && "
                   f"exec {sys.executable} {Path(__file__).resolve()} --inner --bin {args.bin} --work {work} "
-                  f"--seconds {args.seconds} --fps {args.fps}")
+                  f"--seconds {args.seconds} --fps {args.fps}" + (" --json" if args.json else ""))
         p = subprocess.run(["unshare", "--net", "sh", "-c", script], capture_output=True, text=True)
         if p.returncode != 0:
             sys.exit(f"bench_live.py: {p.stderr.strip()[-2000:]}")
         result = json.loads(p.stdout.strip().splitlines()[-1])
-        print(json.dumps(result, indent=1))
+        print("{\n" + ",\n".join(f" {json.dumps(k)}: {json.dumps(v)}" for k, v in result.items()) + "\n}")
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return 0

@@ -117,7 +117,7 @@ fi
 echo "from raw frames in memory: see the omni-ridge criterion figures above (ms per 1 MP frame per core; 200 fps on 2 cores needs <= 10 ms per frame per core)"
 rm -rf "$tmp"
 
-section "Live for robots: 1 MP room frames at 200 fps through omni-ridge | omni-triangulate | omni-live --ros2 --delete-frames (targets: latency p50 <= 10 ms, p99 <= 30 ms; >= 30 % of 2 cores left; memory and disk flat)"
+section "Live for robots: 1 MP room frames at 200 fps through omni-ridge | omni-triangulate | omni-live --ros2, frames deleted once measured (targets: latency p50 <= 10 ms, p99 <= 30 ms; >= 30 % of 2 cores left; memory and disk flat)"
 # An emulated camera writes each frame and its record at 200 fps; a Cyclone DDS subscriber takes
 # every cloud; all in a network namespace of its own (needs root). LIVE_SECONDS=600 for the
 # 10-minute memory figure.

@@ -5,7 +5,7 @@ An emulated camera writes realistic room frames (1024 x 1024 PGM, rendered once 
 into a frames directory at the camera's rate and emits each frame's manifest record as
 omni-trigger would; the live chain measures and publishes them:
 
-    camera | omni-ridge --camera --binary | omni-triangulate --binary | omni-live --ros2 --delete-frames
+    camera | omni-ridge --camera --binary | omni-triangulate --binary | omni-live --ros2
 
 (`--json` runs the same chain with JSON Lines streams, for comparison.)
 
@@ -82,14 +82,14 @@ def inner(args) -> int:
     tri = subprocess.Popen([str(bin_dir / "omni-triangulate"), *cam, *binary,
                             "--scanner", str(work / "sensor/scanner.json")],
                            stdin=ridge.stdout, stdout=subprocess.PIPE)
-    live = subprocess.Popen([str(bin_dir / "omni-live"), "--ros2", "--delete-frames", "--queue", "2"],
+    live = subprocess.Popen([str(bin_dir / "omni-live"), "--ros2", "--queue", "2"],
                             stdin=tri.stdout, stdout=subprocess.PIPE)
     reports = []
     reader = threading.Thread(target=lambda: reports.extend(json.loads(x) for x in live.stdout))
     reader.start()
     pids = {"omni-ridge": ridge.pid, "omni-triangulate": tri.pid, "omni-live": live.pid}
     header = {"type": "header", "format": "omniscan.stream", "version": 1, "producers": ["bench_live.py camera"],
-              "frames_dir": str(live_dir), "angles": ANGLES}
+              "frames_dir": str(live_dir), "angles": ANGLES, "live": True}
     ridge.stdin.write((json.dumps(header) + "\n").encode())
     period = 1.0 / args.fps
     n_total = int(args.seconds * args.fps)

@@ -7,7 +7,7 @@ use omni_cloud::motion::Trajectory;
 use omni_formats::stream::StreamReader;
 use omni_publish::dds::{DdsOptions, DdsPublisher, MAX_DOMAIN_ID};
 use omni_publish::foxglove::{FoxgloveOptions, FoxgloveSink};
-use omni_publish::{DdsSink, LiveOptions, Published, Sink};
+use omni_publish::{DdsSink, FrameRetention, LiveOptions, Published, Sink};
 use std::io::Write;
 use std::net::IpAddr;
 use std::path::{Path, PathBuf};
@@ -42,9 +42,10 @@ unless a host is given) with `PREFIX/points` (foxglove.PointCloud, the same fiel
 (foxglove.FrameTransforms, from --extrinsics), the last two with every sweep. Open Foxglove, connect to \
 ws://HOST:PORT.\n\n\
 A slow or stalled consumer never holds back the input: each output keeps at most --queue sweeps waiting \
-and drops the oldest, counted in the status record. --delete-frames removes each frame's image once its \
-points have arrived (laser-off frames two revolutions later, when no frame can still need them), so that \
-disk use stays flat over hours. With --poses, each point is moved to where the sensor was at the sweep's \
+and drops the oldest, counted in the status record. The frames of a live capture (a stream whose header \
+says \"live\": true, as `omni-trigger scan --until-stopped` writes) are deleted once their points have \
+arrived (laser-off frames two revolutions later, when no frame can still need them), so that disk use stays \
+flat over hours; --keep-frames keeps them. A recorded scan's frames are kept unless --delete-frames. With --poses, each point is moved to where the sensor was at the sweep's \
 last frame (deskewed by its own time); without, points are published as measured, with `t` for the \
 robot's own deskewing.\n\n\
 stdout: one JSON line per sweep and output ({\"type\":\"sweep\",\"sink\",\"revolution\",\"facet\",\"frames\",\
@@ -52,7 +53,7 @@ stdout: one JSON line per sweep and output ({\"type\":\"sweep\",\"sink\",\"revol
 publication), and a last status line (frames, sweeps, sweeps_incomplete, sweeps_dropped per output, \
 frames_deleted). SIGINT or SIGTERM ends the run cleanly: the open sweep is published, the status written.",
     after_help = "Examples:\n  \
-omni-trigger scan --port /dev/ttyACM0 --frames /dev/shm/frames --angles 0:30:0.5 --until-stopped | omni-ridge --camera camera.json | omni-triangulate --camera camera.json --scanner scanner.json | omni-live --ros2 --camera camera.json --scanner scanner.json --extrinsics base_link.json --delete-frames\n  \
+omni-trigger scan --port /dev/ttyACM0 --frames /dev/shm/frames --angles 0:30:0.5 --until-stopped | omni-ridge --camera camera.json | omni-triangulate --camera camera.json --scanner scanner.json | omni-live --ros2 --camera camera.json --scanner scanner.json --extrinsics base_link.json\n  \
 omni-live --ros2 --domain-id 7 --prefix /robot1/omniscan --dds-interface 127.0.0.1 points.jsonl\n  \
 omni-live --ros2 --poses odometry.jsonl points.jsonl\n  \
 omni-live --foxglove 8765 --camera camera.json --scanner scanner.json points.jsonl\n\n\
@@ -107,7 +108,10 @@ struct Args {
     /// Sweeps waiting per output before the oldest is dropped.
     #[arg(long, default_value_t = 2)]
     queue: usize,
-    /// Delete each frame's image file once its points have arrived.
+    /// Keep every frame's image file, also from a live capture.
+    #[arg(long, conflicts_with = "delete_frames")]
+    keep_frames: bool,
+    /// Delete each frame's image file once its points have arrived, also from a recorded scan.
     #[arg(long)]
     delete_frames: bool,
 }
@@ -153,7 +157,11 @@ fn run(a: Args) -> CliResult {
         sweep_timeout: Duration::from_millis(a.sweep_timeout_ms.max(1)),
         queue: a.queue.max(1),
         frames_per_sweep: a.frames_per_sweep,
-        delete_frames: a.delete_frames,
+        frames: match (a.keep_frames, a.delete_frames) {
+            (true, _) => FrameRetention::Keep,
+            (_, true) => FrameRetention::Delete,
+            _ => FrameRetention::AsStreamSays,
+        },
     };
     let summary = omni_publish::live::run(input, sinks, report, &opts, deskew, stop).map_err(CliError::new)?;
     if summary.cut_short {

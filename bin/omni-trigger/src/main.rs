@@ -113,7 +113,8 @@ struct ScanArgs {
     #[arg(long, allow_negative_numbers = true)]
     duration: Option<f64>,
     /// Scan until SIGINT or SIGTERM (then STOP), the planned end of a live scan: the status
-    /// record is then complete (see omni-live).
+    /// record is then complete, and the header says `"live": true`, so that omni-live deletes
+    /// the frames once measured.
     #[arg(long, conflicts_with_all = ["duration", "revolutions"])]
     until_stopped: bool,
     /// Motor speed in rev/min (0 = the fastest the controller's trigger rate allows).
@@ -347,6 +348,10 @@ fn scan(a: ScanArgs) -> CliResult {
             "counts_per_rev": info.counts_per_rev, "facets": info.facets, "lasers": info.lasers}),
     );
     header.extra.insert("angles".into(), a.angles.clone().into());
+    if a.until_stopped {
+        // A live capture's frames are transient: the live stage deletes them once measured.
+        header.extra.insert("live".into(), true.into());
+    }
     if let Some(c) = a.camera.header() {
         header.extra.insert("genicam".into(), c);
     }

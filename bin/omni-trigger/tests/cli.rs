@@ -305,6 +305,9 @@ fn a_scan_until_stopped_ends_complete_on_sigterm() {
     assert!(st.complete && st.errors.is_empty(), "{st:?}");
     assert_eq!(st.frames + st.frames_missing, extra(&st, "controller_fired"), "{st:?}");
     assert_frames_true(&frames, &emu.truth());
+    let manifest = std::fs::read_to_string(emu.manifest_path()).unwrap();
+    let header: serde_json::Value = serde_json::from_str(manifest.lines().next().unwrap()).unwrap();
+    assert_eq!(header["live"], true, "a live capture's frames are marked transient: {header}");
     let both = Command::new(BIN)
         .args(["scan", "--port", "x", "--frames", "f", "--until-stopped", "--duration", "3"])
         .output()

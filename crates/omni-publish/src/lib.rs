@@ -11,7 +11,7 @@ pub mod msg;
 pub mod queue;
 pub mod sweep;
 
-pub use live::{FrameFile, LiveOptions, Published, Sink, Summary};
+pub use live::{FrameFile, FrameRetention, LiveOptions, Published, Sink, Summary};
 pub use sweep::{Sweep, SweepAssembler, SweepPoint};
 
 /// The ROS 2 sink: each sweep as a PointCloud2 in `frame_id`.

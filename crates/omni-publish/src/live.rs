@@ -49,9 +49,34 @@ pub struct LiveOptions {
     pub queue: usize,
     /// Frames per sweep, if known (else the header's `angles` tells).
     pub frames_per_sweep: Option<u32>,
-    /// Delete each frame's image file once its points have arrived.
-    pub delete_frames: bool,
+    /// Whether each frame's image file is deleted once its points have arrived.
+    pub frames: FrameRetention,
 }
+
+/// What happens to the frames' image files once measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FrameRetention {
+    /// Deleted when the stream's header says it is a live capture (`"live": true`, written by
+    /// `omni-trigger scan --until-stopped`), kept otherwise: a recorded scan replayed into the
+    /// live stage must not lose its frames.
+    #[default]
+    AsStreamSays,
+    Keep,
+    Delete,
+}
+
+impl FrameRetention {
+    fn deletes(self, header_says_live: bool) -> bool {
+        match self {
+            FrameRetention::AsStreamSays => header_says_live,
+            FrameRetention::Keep => false,
+            FrameRetention::Delete => true,
+        }
+    }
+}
+
+/// The header field that marks a live capture's frames as transient.
+pub const LIVE_HEADER_FIELD: &str = "live";
 
 /// A sweep on its way to the sinks, with the arrival time of its last frame.
 pub struct Queued {
@@ -145,6 +170,7 @@ pub fn run<R: BufRead + Send + 'static>(
     let mut failure = None;
     let mut last_frame_at = Instant::now();
     let mut saw_header = false;
+    let mut delete_frames = opts.frames.deletes(false);
     let emit = |sweep: Sweep, at: Instant, frames_dir: Option<&str>, summary: &mut Summary| {
         let mut sweep = sweep;
         if let Some(traj) = &deskew {
@@ -164,6 +190,8 @@ pub fn run<R: BufRead + Send + 'static>(
             Ok(Ok(Record::Header(h))) => {
                 saw_header = true;
                 frames_dir = h.frames_dir.clone();
+                let live = h.extra.get(LIVE_HEADER_FIELD).and_then(|v| v.as_bool()).unwrap_or(false);
+                delete_frames = opts.frames.deletes(live);
                 if opts.frames_per_sweep.is_none() {
                     assembler = SweepAssembler::new(frames_per_sweep_of(&h));
                 }
@@ -174,7 +202,7 @@ pub fn run<R: BufRead + Send + 'static>(
                 for sweep in assembler.push(&frame) {
                     emit(sweep, last_frame_at, frames_dir.as_deref(), &mut summary);
                 }
-                if opts.delete_frames {
+                if delete_frames {
                     summary.frames_deleted += deleter.frame_passed(&frame, frames_dir.as_deref());
                 }
             }
@@ -195,7 +223,7 @@ pub fn run<R: BufRead + Send + 'static>(
     if let Some(sweep) = assembler.flush() {
         emit(sweep, last_frame_at, frames_dir.as_deref(), &mut summary);
     }
-    if opts.delete_frames {
+    if delete_frames {
         summary.frames_deleted += deleter.finish();
     }
     queues.iter().for_each(|q| q.close());

@@ -3,7 +3,7 @@
 //! an incomplete sweep after the timeout, frames are deleted once measured.
 
 use omni_formats::stream::{Frame, Header, Point, Record, Status, StreamReader, StreamWriter, StripePoint};
-use omni_publish::live::{self, LiveOptions, Published};
+use omni_publish::live::{self, FrameRetention, LIVE_HEADER_FIELD, LiveOptions, Published};
 use omni_publish::{FrameFile, Sink, Sweep};
 use std::io::{BufReader, Write};
 use std::sync::atomic::AtomicBool;
@@ -88,7 +88,12 @@ fn run_on_pipe(
 }
 
 fn options() -> LiveOptions {
-    LiveOptions { sweep_timeout: Duration::from_millis(150), queue: 2, frames_per_sweep: None, delete_frames: false }
+    LiveOptions {
+        sweep_timeout: Duration::from_millis(150),
+        queue: 2,
+        frames_per_sweep: None,
+        frames: FrameRetention::Keep,
+    }
 }
 
 #[test]
@@ -158,7 +163,7 @@ fn frames_are_deleted_once_measured_and_laser_off_frames_once_no_frame_can_need_
     for n in &names {
         std::fs::write(d.join(n), b"P5 1 1 255 x").unwrap();
     }
-    let opts = LiveOptions { delete_frames: true, frames_per_sweep: Some(5), ..options() };
+    let opts = LiveOptions { frames: FrameRetention::Delete, frames_per_sweep: Some(5), ..options() };
     let dir_name = d.display().to_string();
     let check_dir = d.clone();
     let (summary, _, _) = run_on_pipe(opts, Duration::ZERO, move |w| {
@@ -191,4 +196,35 @@ fn frames_are_deleted_once_measured_and_laser_off_frames_once_no_frame_can_need_
     });
     assert_eq!(summary.frames_deleted, 30);
     assert_eq!(std::fs::read_dir(&d).unwrap().count(), 0);
+}
+
+/// Frames left after a five-frame stream whose header does or does not mark a live capture.
+fn frames_left_after(live_header: bool, frames: FrameRetention) -> usize {
+    let dir = tempfile::tempdir().unwrap();
+    for i in 0..5 {
+        std::fs::write(dir.path().join(format!("f{i}.pgm")), b"P5 1 1 255 x").unwrap();
+    }
+    let mut h = header(None, Some(&dir.path().display().to_string()));
+    if let Record::Header(h) = &mut h {
+        h.extra.insert(LIVE_HEADER_FIELD.into(), live_header.into());
+    }
+    let opts = LiveOptions { frames, frames_per_sweep: Some(5), ..options() };
+    let (summary, _, _) = run_on_pipe(opts, Duration::ZERO, move |w| {
+        w.write_all(&line(&h)).unwrap();
+        for seq in 0..5u64 {
+            w.write_all(&line(&Record::Frame(Box::new(frame(seq, 0, format!("f{seq}.pgm"), 1))))).unwrap();
+        }
+        w.write_all(&line(&Record::Status(Status::complete(5)))).unwrap();
+    });
+    let left = std::fs::read_dir(dir.path()).unwrap().count();
+    assert_eq!(summary.frames_deleted as usize, 5 - left);
+    left
+}
+
+#[test]
+fn a_live_capture_loses_its_frames_once_measured_and_a_recorded_scan_keeps_them() {
+    assert_eq!(frames_left_after(true, FrameRetention::AsStreamSays), 0);
+    assert_eq!(frames_left_after(false, FrameRetention::AsStreamSays), 5);
+    assert_eq!(frames_left_after(true, FrameRetention::Keep), 5);
+    assert_eq!(frames_left_after(false, FrameRetention::Delete), 0);
 }

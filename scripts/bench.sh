@@ -9,7 +9,8 @@
 #    omni-ridge on the same cores, against the 200 fps target, and a real scan from Aravis's
 #    fake GigE camera next to that camera's own limit;
 #  - end to end: frames per second of omni-ridge | omni-triangulate from PNG files, and of the
-#    stripe kernel on frames already in memory, against a 200 fps camera;
+#    stripe kernel on frames already in memory, against a 200 fps camera; the chain on dense
+#    room frames (scripts/bench_chain.py) against 1000 frames/s;
 #  - the live path (omni-live) under an emulated 200 fps camera: latency, CPU, memory, disk.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -116,6 +117,9 @@ PY
 fi
 echo "from raw frames in memory: see the omni-ridge criterion figures above (ms per 1 MP frame per core; 200 fps on 2 cores needs <= 10 ms per frame per core)"
 rm -rf "$tmp"
+
+section "Stripes to points on 1 MP room frames: omni-ridge | omni-triangulate, binary and JSON streams, PGM and PNG (targets: >= 1000 frames/s on 2 cores from PGM; from PNG <= 30 % of the CPU outside decoding)"
+run python3 scripts/bench_chain.py --bin "$target/release"
 
 section "Live for robots: 1 MP room frames at 200 fps through omni-ridge | omni-triangulate | omni-live --ros2, frames deleted once measured (targets: latency p50 <= 10 ms, p99 <= 30 ms; >= 30 % of 2 cores left; memory and disk flat)"
 # An emulated camera writes each frame and its record at 200 fps; a Cyclone DDS subscriber takes

@@ -200,23 +200,42 @@ pub fn channel_of_rgb8(samples: &[u8], stride: usize, width: u32, height: u32, c
     GrayImage { width, height, bit_depth: 8, data }
 }
 
-/// [`laser_contrast8`] of every pixel of interleaved samples, in blocks: the block's laser levels
-/// and other-channel sums gathered first (the only strided reads), then computed in lanes.
+/// [`laser_contrast8`] of every pixel of interleaved samples. The stride and the channels'
+/// places are made constants, so that the compiler turns the de-interleaving into shuffles and
+/// the arithmetic into vector lanes: with them read at run time the pass stays scalar.
 fn laser_contrast_rgb8(samples: &[u8], stride: usize, (l, a, b): (usize, usize, usize)) -> Vec<u16> {
-    const BLOCK: usize = 64;
-    let n = samples.len() / stride;
-    let mut out = vec![0u16; n];
-    let (mut level, mut others) = ([0u32; BLOCK], [0u32; BLOCK]);
-    for (dst, src) in out.chunks_mut(BLOCK).zip(samples.chunks(BLOCK * stride)) {
-        for (i, p) in src.chunks_exact(stride).enumerate() {
-            level[i] = p[l] as u32;
-            others[i] = p[a] as u32 + p[b] as u32;
-        }
-        for (o, (&lv, &s)) in dst.iter_mut().zip(level.iter().zip(&others)) {
-            *o = laser_contrast8(lv, s);
-        }
+    match (stride, l, a, b) {
+        (3, 0, 1, 2) => contrast_pass::<3, 0, 1, 2>(samples),
+        (3, 1, 0, 2) => contrast_pass::<3, 1, 0, 2>(samples),
+        (3, 2, 0, 1) => contrast_pass::<3, 2, 0, 1>(samples),
+        (4, 0, 1, 2) => contrast_pass::<4, 0, 1, 2>(samples),
+        (4, 1, 0, 2) => contrast_pass::<4, 1, 0, 2>(samples),
+        (4, 2, 0, 1) => contrast_pass::<4, 2, 0, 1>(samples),
+        _ => samples.chunks_exact(stride).map(|p| laser_contrast8(p[l] as u32, p[a] as u32 + p[b] as u32)).collect(),
     }
-    out
+}
+
+/// The pass in AVX2 where the processor has it (the build targets baseline x86-64, whose SSE2
+/// has neither byte shuffles nor 32-bit lane products), else as built. The same code either way.
+fn contrast_pass<const STRIDE: usize, const L: usize, const A: usize, const B: usize>(samples: &[u8]) -> Vec<u16> {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor has AVX2, checked on the line above.
+        return unsafe { contrast_pass_avx2::<STRIDE, L, A, B>(samples) };
+    }
+    contrast_lanes::<STRIDE, L, A, B>(samples)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn contrast_pass_avx2<const STRIDE: usize, const L: usize, const A: usize, const B: usize>(samples: &[u8]) -> Vec<u16> {
+    contrast_lanes::<STRIDE, L, A, B>(samples)
+}
+
+#[inline(always)]
+fn contrast_lanes<const STRIDE: usize, const L: usize, const A: usize, const B: usize>(samples: &[u8]) -> Vec<u16> {
+    let (pixels, _) = samples.as_chunks::<STRIDE>();
+    pixels.iter().map(|p| laser_contrast8(p[L] as u32, p[A] as u32 + p[B] as u32)).collect()
 }
 
 /// Demosaics a raw Bayer frame with Malvar, He and Cutler's gradient-corrected linear filters
@@ -336,13 +355,22 @@ mod tests {
         };
         let rgb: Vec<u8> = px.iter().flatten().copied().collect();
         let rgba: Vec<u8> = px.iter().flat_map(|p| [p[0], p[1], p[2], 7]).collect();
-        let channels =
-            [Channel::Luma, Channel::Single(Colour::Blue), Channel::Laser(Colour::Red), Channel::Laser(Colour::Green)];
+        let channels = [
+            Channel::Luma,
+            Channel::Single(Colour::Blue),
+            Channel::Laser(Colour::Red),
+            Channel::Laser(Colour::Green),
+            Channel::Laser(Colour::Blue),
+        ];
         for channel in channels {
             let want = general.channel(channel);
             assert_eq!(channel_of_rgb8(&rgb, 3, px.len() as u32, 1, channel), want, "{channel}");
             assert_eq!(channel_of_rgb8(&rgba, 4, px.len() as u32, 1, channel), want, "{channel}");
         }
+        // The baseline build's pass, which a processor with AVX2 never takes above.
+        let red = general.channel(Channel::Laser(Colour::Red)).data;
+        assert_eq!(contrast_lanes::<3, 0, 1, 2>(&rgb), red);
+        assert_eq!(contrast_lanes::<4, 0, 1, 2>(&rgba), red);
     }
 
     fn img_red(img: &RgbImage) -> Vec<u16> {

@@ -2,7 +2,8 @@
 //! across the stripe, coverage of the visible stripe in every direction, false points.
 
 use omni_simulator::{
-    BenchObject, Imaging, RenderOptions, Scene, Sensor, TruthPoint, paper_bench, render_laser_frame, truth_polylines,
+    BenchObject, Imaging, LaserFrame, RenderOptions, Scene, Sensor, TruthPoint, paper_bench, render_laser_frame,
+    truth_polylines,
 };
 use omni_vision::image_io::GrayImage;
 use omni_vision::stripe::{Method, RidgeDetector, RidgeParams, StripePoint};
@@ -217,6 +218,11 @@ fn to_gray(f: &omni_simulator::Frame16) -> GrayImage {
     GrayImage { width: f.width, height: f.height, bit_depth: f.bit_depth, data: f.data.clone() }
 }
 
+/// A monochrome camera's frame, as the detector reads it.
+fn grey(f: &LaserFrame) -> GrayImage {
+    to_gray(&f.image)
+}
+
 fn bench(object: BenchObject, opts: &RenderOptions, params: RidgeParams) -> Tally {
     bench_each(object, opts, &[params]).pop().unwrap()
 }
@@ -245,7 +251,7 @@ fn bench_at(
     alphas_deg: &[f64],
     laser_off: bool,
 ) -> Vec<Tally> {
-    bench_scene(&Scene::from_file(paper_bench(object)).unwrap(), opts, params, alphas_deg, laser_off, false)
+    bench_scene(&Scene::from_file(paper_bench(object)).unwrap(), opts, params, alphas_deg, laser_off, false, &grey)
 }
 
 /// As [`bench_at`], on any scene; with `judge`, the coverage of the visible stripe
@@ -257,6 +263,7 @@ fn bench_scene(
     alphas_deg: &[f64],
     laser_off: bool,
     judge: bool,
+    read: &dyn Fn(&LaserFrame) -> GrayImage,
 ) -> Vec<Tally> {
     let sensor = Sensor::paper_scaled(SIZE);
     let circle = sensor.camera.mirror_circle();
@@ -265,7 +272,7 @@ fn bench_scene(
     for (i, alpha) in alphas_deg.iter().map(|a| a.to_radians()).enumerate() {
         let o = RenderOptions { seed: i as u64, ..opts.clone() };
         let f = render_laser_frame(&sensor, scene, alpha, 0, &[0, 1], &o);
-        let mut image = to_gray(&f.image);
+        let mut image = read(&f);
         if laser_off {
             let off_opts = RenderOptions { seed: 90 + i as u64, ..opts.clone() };
             image
@@ -309,7 +316,7 @@ fn stripes_at_every_angle_to_the_rays_are_covered() {
     let scenes =
         [corridor(40.0), corridor(85.0), corridor(200.0), Scene::from_file(paper_bench(BenchObject::Plane)).unwrap()];
     for (k, scene) in scenes.iter().enumerate() {
-        let t = bench_scene(scene, &RenderOptions::ideal(), &[RidgeParams::default()], &SIX_ANGLES, true, true)
+        let t = bench_scene(scene, &RenderOptions::ideal(), &[RidgeParams::default()], &SIX_ANGLES, true, true, &grey)
             .pop()
             .unwrap();
         eprintln!("{}\n{}", t.line(&format!("ideal, scene {k}, laser-off")), t.visible_line());
@@ -336,7 +343,7 @@ fn stripes_at_every_angle_to_the_rays_are_covered() {
 fn curved_objects_are_covered_to_their_silhouettes_with_a_laser_off_frame() {
     for object in [BenchObject::Cylinder, BenchObject::Sphere] {
         let scene = Scene::from_file(paper_bench(object)).unwrap();
-        let t = bench_scene(&scene, &RenderOptions::ideal(), &[RidgeParams::default()], &SIX_ANGLES, true, true)
+        let t = bench_scene(&scene, &RenderOptions::ideal(), &[RidgeParams::default()], &SIX_ANGLES, true, true, &grey)
             .pop()
             .unwrap();
         eprintln!("{}\n{}", t.line(&format!("ideal {object:?}, laser-off")), t.visible_line());
@@ -592,7 +599,7 @@ fn speckled_positions(object: BenchObject, count: usize) -> [Tally; 2] {
     let opts = RenderOptions::default().with_optics(optics);
     let params = [RidgeParams::default(), RidgeParams { along_stripe_px: 3.0, ..Default::default() }];
     let scene = Scene::from_file(paper_bench(object)).unwrap();
-    <[Tally; 2]>::try_from(bench_scene(&scene, &opts, &params, &positions(count), true, true)).ok().unwrap()
+    <[Tally; 2]>::try_from(bench_scene(&scene, &opts, &params, &positions(count), true, true, &grey)).ok().unwrap()
 }
 
 /// Two matte walls parallel to the x axis, `half_gap` mm either side of the sensor, from 100 to
@@ -644,7 +651,8 @@ fn the_room_scene_is_covered_as_captured_and_with_laser_off_frames() {
     let ideal = RenderOptions::ideal();
     let opts = RenderOptions { laser_strength: 10.0 * ideal.laser_strength, ..ideal };
     for laser_off in [false, true] {
-        let t = bench_scene(&scene, &opts, &[RidgeParams::default()], &SIX_ANGLES, laser_off, true).pop().unwrap();
+        let t =
+            bench_scene(&scene, &opts, &[RidgeParams::default()], &SIX_ANGLES, laser_off, true, &grey).pop().unwrap();
         eprintln!("{}\n{}", t.line(&format!("room, ideal, laser ×10, laser-off {laser_off}")), t.visible_line());
         assert!(t.errors.len() > 5000, "laser-off {laser_off}: {} points", t.errors.len());
         assert_eq!(t.false_points, 0, "laser-off {laser_off}: false points");
@@ -686,6 +694,47 @@ fn real_shaped_stripes_2_to_20_px_wide() {
             assert_eq!(t.false_points, 0, "{fwhm} px {name}: false points");
             assert!(spread <= 0.04, "{fwhm} px {name}: spread {spread:.4} px");
             assert!((0.0..=0.2).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
+        }
+    }
+}
+
+/// Real-shaped stripes (2 and 5 px, as above) through a colour camera, read by their laser colour
+/// (R − (G+B)/2, `--laser red`): the raw RGGB mosaic demosaiced (`--bayer rggb`), and the
+/// camera's RGB frame saved as JPEG of quality 90 with 4:2:0 chroma. The camera's colour matrix
+/// and white balance are [`omni_model::CameraColour`]'s defaults. Both sample the laser's colour
+/// at a 2 px pitch, so the spread grows well past the grey stripes' 0.03 px: measured (windowed)
+/// spread 0.213 / 0.061 px (mosaic, 2 / 5 px), 0.121 / 0.100 px (JPEG), offsets +0.11 to +0.21 px,
+/// coverage 89–98 %, false points ≤ 0.27 %. Asserted with a margin, a guard on what the colour
+/// costs (docs/DECISIONS.md); the 0.015 px is not met through a mosaic or JPEG.
+#[test]
+fn real_shaped_stripes_through_a_bayer_mosaic_and_jpeg_read_by_their_colour() {
+    use omni_simulator::{BayerPattern, ColourOutput, SheetProfile};
+    use omni_vision::colour::{Channel, Colour, RgbImage, demosaic};
+    let red = Channel::Laser(Colour::Red);
+    let from_mosaic = |f: &LaserFrame| demosaic(&to_gray(&f.image), BayerPattern::Rggb).unwrap().channel(red);
+    let from_jpeg = |f: &LaserFrame| {
+        let jpeg = f.colour.as_ref().expect("an RGB frame").jpeg_round_trip(90).unwrap();
+        let data = jpeg.data.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+        RgbImage { width: jpeg.width, height: jpeg.height, bit_depth: 8, data }.channel(red)
+    };
+    let readers: [(&str, ColourOutput, &dyn Fn(&LaserFrame) -> GrayImage); 2] =
+        [("bayer", ColourOutput::Raw, &from_mosaic), ("jpeg", ColourOutput::Rgb, &from_jpeg)];
+    let scene = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
+    for fwhm in [2.0, 5.0] {
+        let ideal = RenderOptions::ideal();
+        let laser_strength = ideal.laser_strength * fwhm / 2.0;
+        let grey = RenderOptions { profile: SheetProfile::real(), stripe_fwhm_px: Some(fwhm), laser_strength, ..ideal };
+        for (name, output, read) in readers {
+            let opts = grey.clone().with_colour(Some(BayerPattern::Rggb), output);
+            let t =
+                bench_scene(&scene, &opts, &[RidgeParams::default()], &positions(8), false, false, read).pop().unwrap();
+            eprintln!("{}", t.line(&format!("real {fwhm} px {name}")));
+            let (rms, bias) = t.rms_bias();
+            let spread = (rms * rms - bias * bias).max(0.0).sqrt();
+            assert!(t.coverage(8).unwrap() >= 0.85, "{fwhm} px {name}: coverage {:?}", t.coverage(8));
+            assert!(t.false_points as f64 <= 0.005 * t.errors.len() as f64, "{fwhm} px {name}: false points");
+            assert!(spread <= 0.25, "{fwhm} px {name}: spread {spread:.4} px");
+            assert!((0.0..=0.25).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
         }
     }
 }

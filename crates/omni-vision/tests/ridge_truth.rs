@@ -218,6 +218,9 @@ fn to_gray(f: &omni_simulator::Frame16) -> GrayImage {
     GrayImage { width: f.width, height: f.height, bit_depth: f.bit_depth, data: f.data.clone() }
 }
 
+/// How a test reads a rendered frame into what the detector sees.
+type FrameReader = dyn Fn(&LaserFrame) -> GrayImage;
+
 /// A monochrome camera's frame, as the detector reads it.
 fn grey(f: &LaserFrame) -> GrayImage {
     to_gray(&f.image)
@@ -263,7 +266,7 @@ fn bench_scene(
     alphas_deg: &[f64],
     laser_off: bool,
     judge: bool,
-    read: &dyn Fn(&LaserFrame) -> GrayImage,
+    read: &FrameReader,
 ) -> Vec<Tally> {
     let sensor = Sensor::paper_scaled(SIZE);
     let circle = sensor.camera.mirror_circle();
@@ -717,7 +720,7 @@ fn real_shaped_stripes_through_a_bayer_mosaic_and_jpeg_read_by_their_colour() {
         let data = jpeg.data.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
         RgbImage { width: jpeg.width, height: jpeg.height, bit_depth: 8, data }.channel(red)
     };
-    let readers: [(&str, ColourOutput, &dyn Fn(&LaserFrame) -> GrayImage); 2] =
+    let readers: [(&str, ColourOutput, &FrameReader); 2] =
         [("bayer", ColourOutput::Raw, &from_mosaic), ("jpeg", ColourOutput::Rgb, &from_jpeg)];
     let scene = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
     for fwhm in [2.0, 5.0] {

@@ -714,8 +714,8 @@ fn real_shaped_stripes_through_a_bayer_mosaic_and_jpeg_read_by_their_colour() {
     use omni_simulator::{BayerPattern, ColourOutput, SheetProfile};
     use omni_vision::colour::{Channel, Colour, RgbImage, demosaic};
     let red = Channel::Laser(Colour::Red);
-    let from_mosaic = |f: &LaserFrame| demosaic(&to_gray(&f.image), BayerPattern::Rggb).unwrap().channel(red);
-    let from_jpeg = |f: &LaserFrame| {
+    let from_mosaic = move |f: &LaserFrame| demosaic(&to_gray(&f.image), BayerPattern::Rggb).unwrap().channel(red);
+    let from_jpeg = move |f: &LaserFrame| {
         let jpeg = f.colour.as_ref().expect("an RGB frame").jpeg_round_trip(90).unwrap();
         let data = jpeg.data.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
         RgbImage { width: jpeg.width, height: jpeg.height, bit_depth: 8, data }.channel(red)

@@ -69,17 +69,25 @@ fn poses(s: &Setup, n: usize, rng: &mut SplitMix64) -> Vec<Isometry3<f64>> {
 }
 
 /// Renders the frames (colour PNG in `dir`) and fits the plane from them as
-/// `omni-calib-plane fixed --laser red` does.
-fn render_and_fit(s: &Setup, opts: &RenderOptions, n: usize, seed: u64, dir: &std::path::Path) -> FixedPlaneFit {
+/// `omni-calib-plane fixed --laser red` does; also fits it with the same corners but the true
+/// stripe pixels (every 4th truth sample, ≈ 1 px apart) in place of the detected ones.
+fn render_and_fit(
+    s: &Setup,
+    opts: &RenderOptions,
+    n: usize,
+    seed: u64,
+    dir: &std::path::Path,
+) -> (FixedPlaneFit, FixedPlaneFit) {
     let mut rng = SplitMix64::new(seed);
     let t0 = std::time::Instant::now();
-    let poses = poses(s, n, &mut rng);
-    let paths: Vec<PathBuf> = poses
+    let mut truth = Vec::new();
+    let paths: Vec<PathBuf> = poses(s, n, &mut rng)
         .iter()
         .enumerate()
         .map(|(k, pose)| {
             let scene = Scene::from_file(SceneFile::new(vec![board_object(&s.board, pose)])).unwrap();
             let frame = render_laser_frame(&s.sensor, &scene, ALPHA, 0, &[0], opts);
+            truth.push(frame.truth.iter().step_by(4).map(|t| t.pixel).collect::<Vec<_>>());
             let rgb = frame.colour.expect("RGB frame");
             let path = dir.join(format!("f{k}.png"));
             std::fs::write(&path, rgb.encode(omni_simulator::FrameFormat::Png).unwrap()).unwrap();
@@ -100,11 +108,14 @@ fn render_and_fit(s: &Setup, opts: &RenderOptions, n: usize, seed: u64, dir: &st
         ridge: omni_vision::stripe::RidgeParams::default(),
     };
     let frames = detect_frames(&paths, &detect, None).unwrap();
-    diagnose(s, &poses, &frames);
     let opts = FixedPlaneOptions { square_mm: s.board.square_mm, ..Default::default() };
     let fit = fit_fixed_plane(s.sensor.camera.as_ref(), &frames, &opts).unwrap();
     eprintln!("detected and fitted in {:.2} s", t0.elapsed().as_secs_f64());
-    fit
+    let mut true_stripe = frames;
+    for (f, t) in true_stripe.iter_mut().zip(truth) {
+        f.stripe = t;
+    }
+    (fit, fit_fixed_plane(s.sensor.camera.as_ref(), &true_stripe, &opts).unwrap())
 }
 
 /// The fitted plane against the true one: the normals' angle (degrees) and the largest distance
@@ -168,16 +179,23 @@ fn options() -> RenderOptions {
     o
 }
 
-/// Measured 2026-12-04 (docs/DECISIONS.md): 0.050° and 0.092 mm at 300 mm, 10 of 10 frames,
-/// 40-103 stripe points per frame on the board. The issue's target (0.02°, 0.05 mm) is not
-/// met: over other seeds the errors range 0.018-0.19° and 0.036-0.37 mm, and a Gaussian stripe
-/// of the same width does no better; the frames' own errors (the jackknife σ) dominate. The
-/// bounds guard the figure measured here.
+/// Issue 34's virtual target, 0.02° and 0.05 mm at 300 mm from 10 frames, is met by the chain
+/// up to the stripe: with the detected corners and the true stripe pixels the plane comes back
+/// within 0.003° and 0.014 mm (measured 2026-12-04, docs/DECISIONS.md). With omni-ridge's
+/// stripe points it is not: 0.050° and 0.092 mm here, 40-103 points per frame on the board
+/// (other seeds: 0.018-0.19°, 0.036-0.37 mm). The detector's centres lie 0.1 mm (at ~300 mm)
+/// towards the real profile's tail, and near the squares' edges, where the stripe's brightness
+/// steps along it and its flanks fall on black, they scatter by up to 1.7 mm. The bounds on
+/// the detected stripe guard the figure measured here.
 #[test]
 fn rendered_fixed_plane_from_10_frames_through_the_detectors() {
     let s = setup(1024, 7, 5, 30.0);
     let dir = tempfile::tempdir().unwrap();
-    let fit = render_and_fit(&s, &options(), 10, 34, dir.path());
+    let (fit, true_stripe) = render_and_fit(&s, &options(), 10, 34, dir.path());
+    let (angle, worst) = report("true stripe pixels, detected corners", &s, &true_stripe);
+    assert_eq!(true_stripe.report.frames.len(), 10, "{:?}", true_stripe.report.skipped);
+    assert!(angle <= 0.02, "normal off by {angle}° with the true stripe");
+    assert!(worst <= 0.05, "plane off by {worst} mm at 300 mm with the true stripe");
     let (angle, worst) = report("rendered, real-shaped 4 px stripe", &s, &fit);
     let r = &fit.report;
     assert!(r.frames.len() >= 9, "{} frames used", r.frames.len());
@@ -187,60 +205,4 @@ fn rendered_fixed_plane_from_10_frames_through_the_detectors() {
     assert!(angle <= 0.08, "normal off by {angle}°");
     assert!(worst <= 0.15, "plane off by {worst} mm at 300 mm");
     assert!(r.leave_one_out_rms_mm <= 1.3 * r.rms_mm, "{} vs {}", r.leave_one_out_rms_mm, r.rms_mm);
-}
-
-/// Diagnostics: detected corners against the true ones (px), stripe points met with the true
-/// board plane against the true light plane (mm).
-fn diagnose(s: &Setup, poses: &[Isometry3<f64>], frames: &[omni_calib::fixed_plane::FrameInput]) {
-    let cam = s.sensor.camera.as_ref();
-    for (pose, f) in poses.iter().zip(frames) {
-        let truth: Vec<[f64; 2]> =
-            omni_simulator::board_corners(s.board.inner_cols, s.board.inner_rows, s.board.square_mm)
-                .iter()
-                .filter_map(|c| cam.point_to_pixel(&(pose * c)).map(|p| [p.x, p.y]))
-                .collect();
-        let (mut ss, mut n, mut worst) = (0.0, 0, 0.0f64);
-        if let Ok(obs) = &f.corners {
-            for px in &obs.pixels {
-                let d = truth
-                    .iter()
-                    .map(|t| ((t[0] - px[0]).powi(2) + (t[1] - px[1]).powi(2)).sqrt())
-                    .fold(f64::INFINITY, f64::min);
-                ss += d * d;
-                n += 1;
-                worst = worst.max(d);
-            }
-        }
-        let normal = pose.rotation * Vector3::z();
-        let offset = normal.dot(&pose.translation.vector);
-        let mut r = Vec::new();
-        for px in &f.stripe {
-            let Some(ray) = cam.pixel_to_ray(&omni_geom::Vector2::new(px[0], px[1])) else { continue };
-            let t = (offset - normal.dot(&ray.origin.coords)) / normal.dot(&ray.dir);
-            let p = ray.origin + ray.dir.into_inner() * t;
-            let local = pose.inverse() * p;
-            let sq = s.board.square_mm;
-            if local.x < -sq
-                || local.y < -sq
-                || local.x > s.board.inner_cols as f64 * sq
-                || local.y > s.board.inner_rows as f64 * sq
-            {
-                continue;
-            }
-            r.push(s.plane.signed_distance(&p));
-        }
-        r.sort_by(f64::total_cmp);
-        let m = r.len();
-        let mean = r.iter().sum::<f64>() / m.max(1) as f64;
-        let rms = (r.iter().map(|x| x * x).sum::<f64>() / m.max(1) as f64).sqrt();
-        eprintln!(
-            "  diag {}: corners {n} rms {:.3} px max {:.3}; stripe on board {m}: mean {:.4} mm median {:.4} rms {:.4}",
-            f.name,
-            (ss / n.max(1) as f64).sqrt(),
-            worst,
-            mean,
-            if m > 0 { r[m / 2] } else { f64::NAN },
-            rms
-        );
-    }
 }

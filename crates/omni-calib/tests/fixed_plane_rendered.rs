@@ -185,7 +185,7 @@ fn options() -> RenderOptions {
 /// stripe points it is not: 0.050° and 0.092 mm here, 40-103 points per frame on the board
 /// (other seeds: 0.018-0.19°, 0.036-0.37 mm). The detector's centres lie 0.1 mm (at ~300 mm)
 /// towards the real profile's tail, and near the squares' edges, where the stripe's brightness
-/// steps along it and its flanks fall on black, they scatter by up to 1.7 mm. The bounds on
+/// steps along it and its flanks fall on black, they scatter by 0.7-1.4 mm (sd). The bounds on
 /// the detected stripe guard the figure measured here.
 #[test]
 fn rendered_fixed_plane_from_10_frames_through_the_detectors() {

@@ -5,7 +5,8 @@
 # (scripts/receiver_models.py) and prints one table; out/real-plane/ keeps camera.json,
 # scanner.json, the reports and plane.png. The assertions are Rust tests (`make test`:
 # crates/omni-calib/tests/fixed_plane.rs, bin/omni-calib-plane/tests/fixed.rs), the receiver
-# models' in bin/omni-calib-receiver/tests/interop.py (`make test-calib-interop`).
+# models' in bin/omni-calib-receiver/tests/interop.py (`make test-calib-interop`). The virtual
+# sensor's rendered fixed plane is crates/omni-calib/tests/fixed_plane_rendered.rs (`make test`).
 PLANE_PYTHON ?= .venv/bin/python
 
 .PHONY: real-plane

@@ -90,3 +90,34 @@ fn a_board_file_that_does_not_match_is_named() {
     assert!(se.contains("9 × 6"), "{se}");
     assert!(!dir.path().join("scanner.json").exists());
 }
+
+/// im1's stripe runs on the paper's margin, off the printed pattern: its board is found but does
+/// not carry the stripe, so the frame is named with the reason and skipped. The two frames left
+/// give the plane (each frame's stripe lies in its board's plane, and im4 holds most points: the
+/// robust fit scores planes frame by frame, or it took im4's board plane for the light's).
+#[test]
+fn a_board_that_does_not_carry_the_stripe_is_named_and_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(dir.path(), &board(9, 6), &[3, 4, 1]);
+    let (so, se) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{se}");
+    assert!(so.contains("skipped") && so.contains("im1.png: the board does not carry the stripe: "), "{so}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["report"]["frames"].as_array().unwrap().len(), 2);
+}
+
+/// A board file naming more corners than the board has: the frames that show the board whole
+/// (im1, im2, im5: the stripe off the pattern) show 9 × 6, which the error names with the file.
+/// (Frames that cut the board cannot tell: a part of a larger board is a usable board.)
+#[test]
+fn a_board_file_larger_than_the_board_is_named_with_the_likely_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(dir.path(), &board(10, 7), &[1, 2, 3, 4, 5]);
+    let se = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{se}");
+    assert_eq!(se.lines().count(), 1, "{se}");
+    assert!(se.starts_with("omni-calib-plane: error: board.json: the board file says 10 × 7"), "{se}");
+    assert!(se.contains("the board is probably 9 × 6"), "{se}");
+    assert!(!dir.path().join("scanner.json").exists());
+}

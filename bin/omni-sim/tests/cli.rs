@@ -552,3 +552,39 @@ fn real_stripes_colour_bayer_and_jpeg_frames() {
     );
     assert_eq!(out.status.code(), Some(2));
 }
+
+/// The simulator renders through the polygon: a scanner file of fixed light planes is refused in
+/// one line naming its kind, before anything is written.
+#[test]
+fn a_fixed_plane_scanner_is_refused_naming_its_kind() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    let fixed = r#"{"format": "omniscan.scanner", "version": 2, "transmitter": {"kind": "fixed_planes",
+        "planes": [{"laser": 0, "normal": [0.05, 0.91, -0.41], "distance_mm": 6.6}]}}"#;
+    std::fs::write(d.join("fixed.json"), fixed).unwrap();
+    let scene = testdata("scenes/sphere.json");
+    let args = [
+        "scan",
+        "--camera",
+        "sensor/camera.json",
+        "--scanner",
+        "fixed.json",
+        "--scene",
+        &scene,
+        "--angles",
+        "20",
+        "--frames",
+        "f",
+        "-o",
+        "m.jsonl",
+    ];
+    let out = sim(&args, d);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert_eq!(
+        err,
+        "omni-sim: error: fixed.json: field transmitter.kind: transmitter kind \"fixed_planes\" cannot be used here: this needs kind \"polygon\" (the rotating polygon mirror)\n"
+    );
+    assert!(!d.join("m.jsonl").exists() && !d.join("f").exists());
+}

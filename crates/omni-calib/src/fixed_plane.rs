@@ -18,7 +18,7 @@
 use crate::pose::estimate_board_pose;
 use crate::receiver::Observation;
 use crate::receiver::corners_file::{CornersFile, ImageCorners};
-use omni_geom::robust_plane::{RobustPlaneFit, fit_plane_robust};
+use omni_geom::robust_plane::{RobustPlaneFit, fit_plane_robust_grouped};
 use omni_geom::{Isometry3, Plane, Point3, Vector2, Vector3};
 use omni_model::CameraModel;
 use rayon::prelude::*;
@@ -223,7 +223,11 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
 /// The robust plane of `frames`' points, oriented with offset ≥ 0.
 fn fit_frames(frames: &[&OnBoard], seed: u64) -> Option<RobustPlaneFit> {
     let pts: Vec<Point3<f64>> = frames.iter().flat_map(|f| f.points.iter().copied()).collect();
-    let mut fit = fit_plane_robust(&pts, seed)?;
+    // Each frame's points lie on one line of the plane: scored frame by frame, a plane through
+    // the line of a frame that holds most of the points does not win over the plane of all.
+    let group: Vec<usize> =
+        frames.iter().enumerate().flat_map(|(k, f)| std::iter::repeat_n(k, f.points.len())).collect();
+    let mut fit = fit_plane_robust_grouped(&pts, &group, seed)?;
     if fit.plane.offset < 0.0 {
         fit.plane = fit.plane.flipped();
         fit.basis = (-fit.basis.0, -fit.basis.1);

@@ -58,13 +58,31 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// The robust plane through `points` (at least 3, not all collinear); `seed` fixes the random
 /// triples. `None` if no plane fits (too few points, collinear, non-finite).
 pub fn fit_plane_robust(points: &[Point3<f64>], seed: u64) -> Option<RobustPlaneFit> {
+    fit_plane_robust_grouped(points, &vec![0; points.len()], seed)
+}
+
+/// [`fit_plane_robust`] for points that come in groups (`group[i]` is point i's, e.g. the
+/// frame it was measured in), each of which may lie on a line of the plane: a candidate plane
+/// is scored by the median over the groups of each group's median distance, so that a plane
+/// through one group's line alone, however many points that group holds, scores as badly as
+/// its distance from the other groups. With one group this is [`fit_plane_robust`].
+pub fn fit_plane_robust_grouped(points: &[Point3<f64>], group: &[usize], seed: u64) -> Option<RobustPlaneFit> {
     let n = points.len();
+    assert_eq!(group.len(), n, "one group per point");
     if n < 3 || points.iter().any(|p| !p.coords.iter().all(|x| x.is_finite())) {
         return None;
     }
     let step = n.div_ceil(SCORE_POINTS).max(1);
-    let sample: Vec<&Point3<f64>> = points.iter().step_by(step).collect();
-    let score = |pl: &Plane| median(sample.iter().map(|p| pl.signed_distance(p).abs()).collect());
+    let groups = group.iter().max().map_or(0, |g| g + 1);
+    let mut sample: Vec<Vec<&Point3<f64>>> = vec![Vec::new(); groups];
+    for (p, g) in points.iter().zip(group).step_by(step) {
+        sample[*g].push(p);
+    }
+    sample.retain(|s| !s.is_empty());
+    let score = |pl: &Plane| {
+        let per_group = sample.iter().map(|s| median(s.iter().map(|p| pl.signed_distance(p).abs()).collect()));
+        median(per_group.collect())
+    };
     let mut best: Option<(f64, Plane)> = fit_plane(points).map(|f| (score(&f.plane), f.plane));
     let mut rng = SplitMix64::new(seed);
     for _ in 0..TRIPLES {
@@ -137,6 +155,32 @@ pub fn weighted_plane(points: &[Point3<f64>], weights: &[f64]) -> Option<Plane> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn two_lines_of_a_plane_give_the_plane_when_one_holds_most_points() {
+        // Two stripes of one plane, each measured on its own board: 0.02 mm of noise across
+        // the line within the board's plane, so that each stripe's points lie exactly in that
+        // plane. The first holds 70 % of the points: its board's plane has median distance 0.
+        let mut rng = SplitMix64::new(3);
+        let truth = Plane::from_point_normal(&Point3::new(0.0, 0.0, 50.0), &Vector3::new(0.1, 0.9, -0.4));
+        let (e1, e2) = orthonormal_basis(&truth.normal);
+        let base = Point3::from(truth.normal.into_inner() * truth.offset);
+        let mut pts = Vec::new();
+        let mut group = Vec::new();
+        for (k, (count, along, at)) in [(700, e1, 0.0), (300, e1 + e2 * 0.3, 40.0)].into_iter().enumerate() {
+            let across = (truth.normal.into_inner() + e2).normalize();
+            for _ in 0..count {
+                let noise = across * (0.02 * rng.normal());
+                pts.push(base + e2 * at + along * (rng.uniform() * 100.0 - 50.0) + noise);
+                group.push(k);
+            }
+        }
+        let fit = fit_plane_robust_grouped(&pts, &group, 1).unwrap();
+        let sign = fit.plane.normal.dot(&truth.normal).signum();
+        let angle = (fit.plane.normal.into_inner() * sign).angle(&truth.normal).to_degrees();
+        assert!(angle < 0.05, "normal off by {angle}°");
+        assert!(fit.inliers.iter().filter(|k| **k).count() > 950);
+    }
 
     #[test]
     fn finds_the_plane_through_a_third_of_outliers() {

@@ -1,0 +1,208 @@
+//! The fixed light plane on the virtual sensor, rendered (issue 34's virtual target): the paper's
+//! polygon sensor with its motor stopped is a sensor with one fixed light plane. Its frames are
+//! rendered by the simulator with a real-shaped stripe (`SheetProfile::real`) over a checkerboard
+//! in a lit room, written as colour PNG files and read back by the same code
+//! `omni-calib-plane fixed` runs: the corners by omni-vision's detector, the stripe by
+//! omni-ridge's on the red laser contrast, the plane by `omni_calib::fixed_plane`. The receiver
+//! calibration is the true camera model.
+
+use nalgebra::{Rotation3, Translation3};
+use omni_calib::fixed_plane::{DetectOptions, FixedPlaneFit, FixedPlaneOptions, detect_frames, fit_fixed_plane};
+use omni_formats::BoardFile;
+use omni_formats::scene::SceneFile;
+use omni_geom::rng::SplitMix64;
+use omni_geom::{Isometry3, Plane, Point3, UnitQuaternion, Vector3};
+use omni_simulator::{ColourOutput, RenderOptions, Scene, Sensor, board_object, render_laser_frame};
+use std::path::PathBuf;
+
+/// The mirror angle at which the polygon is stopped (radians), facet 0, laser 0: the central ray
+/// leaves the facet about 16° upwards, so boards 200-400 mm out along it stay in the mirror's view.
+const ALPHA: f64 = 0.4;
+
+/// A board in front of the stopped sensor: `cols` × `rows` inner corners of `square` mm.
+struct Setup {
+    sensor: Sensor,
+    board: BoardFile,
+    /// The true light plane (world frame, offset ≥ 0).
+    plane: Plane,
+}
+
+fn setup(width: u32, cols: u32, rows: u32, square: f64) -> Setup {
+    let sensor = if width == 1024 { Sensor::paper() } else { Sensor::paper_scaled(width) };
+    let lp = sensor.transmitter.light_plane(ALPHA, 0, 0).expect("laser 0");
+    assert!(lp.on_facet);
+    let plane = if lp.plane.offset < 0.0 { lp.plane.flipped() } else { lp.plane };
+    Setup { sensor, board: BoardFile::new(cols, rows, square), plane }
+}
+
+/// `n` board poses 200-400 mm from the camera axis, at azimuths within ±25° of the laser's
+/// direction (+x), each centred on the light plane give or take a quarter of its height, facing
+/// the viewpoint within ±20° and turned by up to ±25° about its normal.
+fn poses(s: &Setup, n: usize, rng: &mut SplitMix64) -> Vec<Isometry3<f64>> {
+    let viewpoint = Point3::new(0.0, 0.0, 80.0);
+    let (cols, rows, sq) = (s.board.inner_cols as f64, s.board.inner_rows as f64, s.board.square_mm);
+    (0..n)
+        .map(|k| {
+            let d = 200.0 + 200.0 * k as f64 / (n - 1) as f64;
+            let azimuth = (rng.uniform() - 0.5) * 50f64.to_radians();
+            let (x, y) = (d * azimuth.cos(), d * azimuth.sin());
+            let nrm = s.plane.normal;
+            let z = (s.plane.offset - nrm.x * x - nrm.y * y) / nrm.z;
+            // Board frame: z into the board (away from the viewpoint), x along the columns
+            // (horizontal), y down the rows.
+            let zb = (Point3::new(x, y, z) - viewpoint).normalize();
+            let xb = Vector3::z().cross(&zb).normalize();
+            let yb = zb.cross(&xb);
+            let facing = Rotation3::from_basis_unchecked(&[xb, yb, zb]);
+            let tilt = UnitQuaternion::from_euler_angles(
+                (rng.uniform() - 0.5) * 40f64.to_radians(),
+                (rng.uniform() - 0.5) * 40f64.to_radians(),
+                (rng.uniform() - 0.5) * 50f64.to_radians(),
+            );
+            let rotation = UnitQuaternion::from_rotation_matrix(&facing) * tilt;
+            let shift = (rng.uniform() - 0.5) * 0.5 * (rows - 1.0) * sq;
+            let centre = Point3::new(x, y, z) + rotation * Vector3::new(0.0, shift, 0.0);
+            let half = rotation * Vector3::new((cols - 1.0) * sq / 2.0, (rows - 1.0) * sq / 2.0, 0.0);
+            Isometry3::from_parts(Translation3::from(centre.coords - half), rotation)
+        })
+        .collect()
+}
+
+/// Renders the frames (colour PNG in `dir`) and fits the plane from them as
+/// `omni-calib-plane fixed --laser red` does; also fits it with the same corners but the true
+/// stripe pixels (every 4th truth sample, ≈ 1 px apart) in place of the detected ones.
+fn render_and_fit(
+    s: &Setup,
+    opts: &RenderOptions,
+    n: usize,
+    seed: u64,
+    dir: &std::path::Path,
+) -> (FixedPlaneFit, FixedPlaneFit) {
+    let mut rng = SplitMix64::new(seed);
+    let t0 = std::time::Instant::now();
+    let mut truth = Vec::new();
+    let paths: Vec<PathBuf> = poses(s, n, &mut rng)
+        .iter()
+        .enumerate()
+        .map(|(k, pose)| {
+            let scene = Scene::from_file(SceneFile::new(vec![board_object(&s.board, pose)])).unwrap();
+            let frame = render_laser_frame(&s.sensor, &scene, ALPHA, 0, &[0], opts);
+            truth.push(frame.truth.iter().step_by(4).map(|t| t.pixel).collect::<Vec<_>>());
+            let rgb = frame.colour.expect("RGB frame");
+            let path = dir.join(format!("f{k}.png"));
+            std::fs::write(&path, rgb.encode(omni_simulator::FrameFormat::Png).unwrap()).unwrap();
+            path
+        })
+        .collect();
+    eprintln!("rendered {n} frames in {:.2} s", t0.elapsed().as_secs_f64());
+    let t0 = std::time::Instant::now();
+    let detect = DetectOptions {
+        inner_cols: s.board.inner_cols,
+        inner_rows: s.board.inner_rows,
+        square_mm: s.board.square_mm,
+        min_corners: 12,
+        colour: omni_vision::colour::ColourSpec {
+            channel: omni_vision::colour::Channel::Laser(omni_vision::colour::Colour::Red),
+            bayer: None,
+        },
+        ridge: omni_vision::stripe::RidgeParams::default(),
+    };
+    let frames = detect_frames(&paths, &detect, None).unwrap();
+    let opts = FixedPlaneOptions { square_mm: s.board.square_mm, ..Default::default() };
+    let fit = fit_fixed_plane(s.sensor.camera.as_ref(), &frames, &opts).unwrap();
+    eprintln!("detected and fitted in {:.2} s", t0.elapsed().as_secs_f64());
+    let mut true_stripe = frames;
+    for (f, t) in true_stripe.iter_mut().zip(truth) {
+        f.stripe = t;
+    }
+    (fit, fit_fixed_plane(s.sensor.camera.as_ref(), &true_stripe, &opts).unwrap())
+}
+
+/// The fitted plane against the true one: the normals' angle (degrees) and the largest distance
+/// along the normal (mm) between the two planes at 300 mm from the camera axis, where the stripe
+/// runs ahead of the laser and 50 mm to either side along it.
+fn errors(s: &Setup, fit: &FixedPlaneFit) -> (f64, f64) {
+    let angle = fit.plane.normal.angle(&s.plane.normal).to_degrees();
+    let worst = [-50.0f64, 0.0, 50.0]
+        .iter()
+        .map(|y| {
+            let x = (300.0f64 * 300.0 - y * y).sqrt();
+            let n = s.plane.normal;
+            let p = Point3::new(x, *y, (s.plane.offset - n.x * x - n.y * y) / n.z);
+            fit.plane.signed_distance(&p).abs()
+        })
+        .fold(0.0f64, f64::max);
+    (angle, worst)
+}
+
+fn report(label: &str, s: &Setup, fit: &FixedPlaneFit) -> (f64, f64) {
+    let r = &fit.report;
+    let (angle, worst) = errors(s, fit);
+    eprintln!(
+        "{label}: normal off by {angle:.4}°, plane off by {worst:.4} mm at 300 mm; {} frames, rms {:.4} mm, loo {:.4} mm, sigma {:.4}° (jackknife)",
+        r.frames.len(),
+        r.rms_mm,
+        r.leave_one_out_rms_mm,
+        r.plane.jackknife_normal_sigma_deg
+    );
+    for f in &r.frames {
+        eprintln!(
+            "  {}: {} corners {:.3} px, {:.0} mm, {} of {} stripe points on the board, {} inliers, mean {:.4} mm",
+            f.name,
+            f.corners,
+            f.corner_rms_px,
+            f.board_distance_mm,
+            f.board_points,
+            f.stripe_points,
+            f.inliers,
+            f.residual_mean_mm
+        );
+    }
+    for k in &r.skipped {
+        eprintln!("  skipped {}: {}", k.name, k.reason);
+    }
+    (angle, worst)
+}
+
+/// The idealised sensor (Gaussian PSF σ 0.7 px, photon and read noise) through a colour camera
+/// (RGB, no mosaic) in a room lit for the board (white ≈ 105 of 255) whose light the camera is
+/// white-balanced for: the default warm room makes every white square a faint red bar, which at
+/// 12-25 px the stripe detector's coarse scales take for a stripe. The laser's real-shaped stripe
+/// is 4 px wide (FWHM) and peaks at about 150 of 255 above the white squares in R − (G+B)/2.
+fn options() -> RenderOptions {
+    let mut o = RenderOptions { ambient_e: 6000.0, seed: 34, ..RenderOptions::ideal() }
+        .with_real_stripe(4.0)
+        .with_colour(None, ColourOutput::Rgb);
+    o.laser_strength *= 0.4;
+    let c = o.colour.as_mut().expect("colour camera");
+    c.ambient_rgb = [c.ambient_rgb[1] / c.white_balance[0], c.ambient_rgb[1], c.ambient_rgb[1] / c.white_balance[2]];
+    o
+}
+
+/// Issue 34's virtual target, 0.02° and 0.05 mm at 300 mm from 10 frames, is met by the chain
+/// up to the stripe: with the detected corners and the true stripe pixels the plane comes back
+/// within 0.003° and 0.014 mm (measured 2026-12-04, docs/DECISIONS.md). With omni-ridge's
+/// stripe points it is not: 0.050° and 0.092 mm here, 40-103 points per frame on the board
+/// (other seeds: 0.018-0.19°, 0.036-0.37 mm). The detector's centres lie 0.1 mm (at ~300 mm)
+/// towards the real profile's tail, and near the squares' edges, where the stripe's brightness
+/// steps along it and its flanks fall on black, they scatter by 0.7-1.4 mm (sd). The bounds on
+/// the detected stripe guard the figure measured here.
+#[test]
+fn rendered_fixed_plane_from_10_frames_through_the_detectors() {
+    let s = setup(1024, 7, 5, 30.0);
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, true_stripe) = render_and_fit(&s, &options(), 10, 34, dir.path());
+    let (angle, worst) = report("true stripe pixels, detected corners", &s, &true_stripe);
+    assert_eq!(true_stripe.report.frames.len(), 10, "{:?}", true_stripe.report.skipped);
+    assert!(angle <= 0.02, "normal off by {angle}° with the true stripe");
+    assert!(worst <= 0.05, "plane off by {worst} mm at 300 mm with the true stripe");
+    let (angle, worst) = report("rendered, real-shaped 4 px stripe", &s, &fit);
+    let r = &fit.report;
+    assert!(r.frames.len() >= 9, "{} frames used", r.frames.len());
+    let mut points: Vec<usize> = r.frames.iter().map(|f| f.board_points).collect();
+    points.sort_unstable();
+    assert!(points[points.len() / 2] >= 45, "stripe points per frame {points:?}");
+    assert!(angle <= 0.08, "normal off by {angle}°");
+    assert!(worst <= 0.15, "plane off by {worst} mm at 300 mm");
+    assert!(r.leave_one_out_rms_mm <= 1.3 * r.rms_mm, "{} vs {}", r.leave_one_out_rms_mm, r.rms_mm);
+}

@@ -1,7 +1,7 @@
 """omniscan's checkerboard corners against OpenCV's cornerSubPix on the real sets (read in place
 from ../shared/data, never copied), judged by scripts/real_corners.py: on the boards both find,
 both corner sets fitted with the same omniscan Mei model. The figures measured when these were
-set are in docs/DECISIONS.md ("Corners against OpenCV's cornerSubPix", 2026-12-03).
+set are in docs/DECISIONS.md ("Corners against OpenCV's cornerSubPix", 2026-12-03 and -04).
 """
 
 import os
@@ -29,24 +29,25 @@ def subpix(result: dict) -> dict:
 
 def test_handheld_corners_fit_at_least_as_well_as_every_cornersubpix_window():
     result = judged("handheld")
-    # Measured: 19 of 19 boards; Mei RMS 0.249 px with omniscan's corners against 0.282 px with
-    # cornerSubPix's best window (11) and 0.40-1.09 px with the others, on the same 19 boards.
+    # Measured (2026-12-04): 19 of 19 boards; Mei RMS 0.248 px with omniscan's corners against
+    # 0.282 px with cornerSubPix's best window (11) and 0.40-1.10 px with the others, on the same
+    # 19 boards.
     assert result["found_omniscan"] == 19, result
     for v, r in subpix(result).items():
         assert r["common"] >= 19, (v, r)
         assert r["rms_omniscan_px"] <= r["rms_opencv_px"], (v, r)
 
 
-def test_miniomni_finds_more_boards_and_stays_near_cornersubpix():
+def test_miniomni_finds_more_boards_and_fits_at_least_as_well_as_every_cornersubpix_window():
     result = judged("miniomni")
-    # Measured: 15 of 15 boards (OpenCV: 10 classic, 13 SB). Against cornerSubPix's best window
-    # (5, on the classic detector's 10 boards) omniscan's corners fit worse, 0.471 against
-    # 0.432 px: the issue's target is not met on this set (docs/DECISIONS.md). This guards the
-    # gap (0.039 px) with 0.01 px to spare, and the other windows, which it beats or nearly does.
+    # Measured (2026-12-04): 15 of 15 boards (OpenCV: 10 classic, 13 SB). Mei RMS 0.4328 px
+    # with omniscan's corners against 0.4349 px with cornerSubPix's best window (5, on the
+    # classic detector's 10 boards), and 0.4091-0.4856 against 0.4923-0.8302 px on the other
+    # rows. Tolerance 0: both fits are deterministic for a given OpenCV build and JPEG decoder,
+    # and the margin on the closest row is only 0.002 px (docs/DECISIONS.md).
     assert result["found_omniscan"] == 15, result
     rows = subpix(result)
     assert all(result["found_omniscan"] >= r["found_opencv"] for r in rows.values()), rows
-    best_v, best = real_corners.best_subpix(result)
-    assert best["rms_omniscan_px"] <= best["rms_opencv_px"] + 0.05, (best_v, best)
     for v, r in rows.items():
-        assert r["rms_omniscan_px"] <= r["rms_opencv_px"] + 0.05, (v, r)
+        assert r["common"] >= 10, (v, r)
+        assert r["rms_omniscan_px"] <= r["rms_opencv_px"], (v, r)

@@ -11,8 +11,10 @@
 //!    columns to the right and rows downwards), and placed inside the board's `cols × rows`
 //!    corners, honouring the colour of the first square when the caller knows it.
 //! 4. Sub-pixel refinement by gradient orthogonality (as OpenCV's `cornerSubPix`), on the
-//!    pixel grid (no interpolation, no pixel locking), in the window (a fraction of the local
-//!    corner spacing) whose solution spreads least, then its first-order bias on curved edges
+//!    pixel grid (no interpolation, no pixel locking), in the window (an ellipse spanned by a
+//!    fraction of the two local grid steps: the same part of each of the four squares however
+//!    the image stretches and skews them) whose solution spreads least, then its first-order
+//!    bias on curved edges
 //!    removed (`curvature`: the mirror images the board's lines as arcs, which pulls every
 //!    corner away from the arcs' concave side).
 //!
@@ -40,7 +42,7 @@ pub mod saddle;
 mod tests;
 
 pub use gray::{GrayF32, gaussian_blur, load_gray};
-pub use saddle::{Candidate, SaddleOptions};
+pub use saddle::{Candidate, SaddleOptions, Window};
 
 use grid::{Cell, Grid, GrowLimits};
 use std::collections::HashMap;
@@ -328,58 +330,100 @@ fn local_x_junction(img: &GrayF32, p: [f64; 2], spacing: f64, min_contrast: f32)
     saddle::circle_test(img, p, radius, 0.35 * min_contrast).is_some()
 }
 
-/// The refinement half-windows tried on each corner, as fractions of the local corner spacing.
-/// Larger windows (up to 0.9) fit the real sets better still, but move corners of rendered
-/// mirror boards by up to 0.3 px (docs/DECISIONS.md, 2026-12-03).
-const WINDOW_FRACTIONS: [f64; 3] = [0.3, 0.4, 0.5];
-/// Bounds of the refinement half-window (px). Above 12 px rendered mirror boards lose accuracy
-/// (the curvature step removes the first-order bias only).
+/// The refinement windows tried on each corner, as fractions of the local grid steps. Larger
+/// windows (0.7) move corners of rendered mirror boards by up to 0.24 px (docs/DECISIONS.md,
+/// 2026-12-04).
+const WINDOW_FRACTIONS: [f64; 4] = [0.3, 0.4, 0.5, 0.6];
+/// Bounds of the refinement window (px): its shortest semi-axis at least the first, the radius
+/// of the circle of its area at most the second. Above 12 px rendered mirror boards lose
+/// accuracy (the curvature step removes the first-order bias only); bounding the area rather
+/// than the longest axis keeps a stretched window as large as a circular one.
 const HALF_WINDOW_PX: (f64, f64) = (2.5, 12.0);
 
-/// Refines a corner with the window (a fraction of the local spacing, [`WINDOW_FRACTIONS`]) whose
-/// solution spreads least ([`saddle::refine_corner_spread`]): large windows average the noise of
-/// big, sharp squares, small ones keep clear of neighbouring edges on small, blurred ones.
-/// Windows must lie in the image. Returns the corner and its half-window (px).
-fn refine_adaptive(img: &GrayF32, start: [f64; 2], spacing: f64) -> Option<([f64; 2], f64)> {
-    let mut best: Option<([f64; 2], f64, f64)> = None;
+/// The local grid at a corner: the steps (px vectors) to its neighbours along the two grid
+/// lines, each the shorter of the two sides' steps in the direction of the line through both
+/// (one side where the other is missing), so that the window stays clear of the nearer
+/// neighbour where the image compresses the board; `None` where a line has no neighbour.
+fn grid_steps(at: &dyn Fn(Cell) -> Option<[f64; 2]>, (i, j): Cell, p: [f64; 2]) -> Option<[[f64; 2]; 2]> {
+    let step = |(di, dj): Cell| -> Option<[f64; 2]> {
+        let (plus, minus) = (at((i + di, j + dj)), at((i - di, j - dj)));
+        let (dir, len) = match (plus, minus) {
+            (Some(a), Some(b)) => {
+                let d = [a[0] - b[0], a[1] - b[1]];
+                (d, (a[0] - p[0]).hypot(a[1] - p[1]).min((p[0] - b[0]).hypot(p[1] - b[1])))
+            }
+            (Some(a), None) => ([a[0] - p[0], a[1] - p[1]], (a[0] - p[0]).hypot(a[1] - p[1])),
+            (None, Some(b)) => ([p[0] - b[0], p[1] - b[1]], (p[0] - b[0]).hypot(p[1] - b[1])),
+            (None, None) => return None,
+        };
+        let n = dir[0].hypot(dir[1]);
+        (n > 1e-9).then(|| [dir[0] / n * len, dir[1] / n * len])
+    };
+    Some([step((1, 0))?, step((0, 1))?])
+}
+
+/// The window of `fraction` at a corner: shaped by the grid steps where both are known (see
+/// [`saddle::Window`]), else a circle of `fraction` × `spacing`; scaled to stay within
+/// [`HALF_WINDOW_PX`] (the upper bound wins).
+fn window_at(steps: Option<[[f64; 2]; 2]>, spacing: f64, fraction: f64) -> Window {
+    let w =
+        steps.and_then(|[e1, e2]| Window::grid(e1, e2, fraction)).unwrap_or_else(|| Window::circle(fraction * spacing));
+    let (short, long) = w.semi_axes();
+    let k = (HALF_WINDOW_PX.0 / short).max(1.0).min(HALF_WINDOW_PX.1 / (short * long).sqrt());
+    w.scaled(k)
+}
+
+/// Refines a corner with the window (a fraction of the local grid steps, [`WINDOW_FRACTIONS`])
+/// whose solution spreads least ([`saddle::refine_corner_spread`]): large windows average the
+/// noise of big, sharp squares, small ones keep clear of neighbouring edges on small, blurred
+/// ones. Windows must lie in the image. Returns the corner and its window.
+fn refine_adaptive(
+    img: &GrayF32,
+    start: [f64; 2],
+    steps: Option<[[f64; 2]; 2]>,
+    spacing: f64,
+) -> Option<([f64; 2], Window)> {
+    let mut best: Option<([f64; 2], Window, f64)> = None;
     for frac in WINDOW_FRACTIONS {
-        let hw = (frac * spacing).clamp(HALF_WINDOW_PX.0, HALF_WINDOW_PX.1);
-        if !img.inside(start[0], start[1], hw + 2.0) {
+        let window = window_at(steps, spacing, frac);
+        if !img.inside(start[0], start[1], window.semi_axes().1 + 2.0) {
             continue;
         }
-        if let Some((p, spread)) = saddle::refine_corner_spread(img, start, hw)
+        if let Some((p, spread)) = saddle::refine_corner_spread(img, start, &window)
             && best.is_none_or(|b| spread < b.2)
         {
-            best = Some((p, hw, spread));
+            best = Some((p, window, spread));
         }
     }
-    best.map(|(p, half_window, _)| (p, half_window))
+    best.map(|(p, window, _)| (p, window))
 }
 
 /// Removes corners whose refinement window reaches within 1 px of the annulus' rims
-/// (`[cx, cy, inner radius, outer radius]`, px).
+/// (`[cx, cy, inner radius, outer radius]`, px), measured along the radius through the corner.
 fn drop_near_rim(
     pos: HashMap<Cell, [f64; 2]>,
     annulus: [f64; 4],
-    windows: &HashMap<Cell, f64>,
+    windows: &HashMap<Cell, Window>,
 ) -> HashMap<Cell, [f64; 2]> {
     let [cx, cy, r0, r1] = annulus;
     let keep = |cell: &Cell, p: &[f64; 2]| {
-        let margin = windows.get(cell).copied().unwrap_or(8.0) + 1.0;
         let r = (p[0] - cx).hypot(p[1] - cy);
+        let radial = if r > 1e-9 { [(p[0] - cx) / r, (p[1] - cy) / r] } else { [1.0, 0.0] };
+        let margin = windows.get(cell).map_or(8.0, |w| w.reach(radial)) + 1.0;
         r >= r0 + margin && r <= r1 - margin
     };
     pos.iter().filter(|(c, p)| keep(c, p)).map(|(c, p)| (*c, *p)).collect()
 }
 
-/// Refines every grid corner; the window follows the local corner spacing.
+/// Refines every grid corner; the window follows the local grid.
 fn refine_grid(
     img: &GrayF32,
     cands: &[Candidate],
     grid: &Grid,
-    windows: &mut HashMap<Cell, f64>,
+    windows: &mut HashMap<Cell, Window>,
 ) -> HashMap<Cell, [f64; 2]> {
     let mut out = HashMap::new();
+    let at = |c: Cell| grid.cells.get(&c).map(|&k| cands[k].px);
     for (&(i, j), &k) in &grid.cells {
         let p = cands[k].px;
         let spacing = [(i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)]
@@ -387,7 +431,7 @@ fn refine_grid(
             .filter_map(|n| grid.cells.get(n))
             .map(|&m| (cands[m].px[0] - p[0]).hypot(cands[m].px[1] - p[1]))
             .fold(f64::INFINITY, f64::min);
-        if let Some((r, w)) = refine_adaptive(img, p, spacing) {
+        if let Some((r, w)) = refine_adaptive(img, p, grid_steps(&at, (i, j), p), spacing) {
             out.insert((i, j), r);
             windows.insert((i, j), w);
         }
@@ -404,7 +448,7 @@ fn fill_missing(
     mut pos: HashMap<Cell, [f64; 2]>,
     limits: &GrowLimits,
     opts: &DetectorOptions,
-    windows: &mut HashMap<Cell, f64>,
+    windows: &mut HashMap<Cell, Window>,
     beyond: grid::BeyondCheck,
 ) -> HashMap<Cell, [f64; 2]> {
     loop {
@@ -423,7 +467,8 @@ fn fill_missing(
             let Some((pred, spacing, line_dir)) = grid::predict_cell(&|c: Cell| pos.get(&c).copied(), cell) else {
                 continue;
             };
-            let Some((p, window)) = refine_adaptive(refine_img, pred, spacing) else { continue };
+            let steps = grid_steps(&|c: Cell| pos.get(&c).copied(), cell, pred);
+            let Some((p, window)) = refine_adaptive(refine_img, pred, steps, spacing) else { continue };
             if (p[0] - pred[0]).hypot(p[1] - pred[1]) > opts.search_fraction * spacing {
                 continue;
             }

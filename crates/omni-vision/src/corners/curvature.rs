@@ -20,21 +20,21 @@
 
 use super::GrayF32;
 use super::grid::Cell;
-use super::saddle::window_samples;
+use super::saddle::{Window, window_samples};
 use nalgebra::{Matrix2, Vector2};
 use std::collections::HashMap;
 
 /// Corrected positions: every corner moved by minus its curvature bias (see the module docs).
-/// Corners whose line curvatures are unknown keep their position; `half_window` gives each
-/// corner's refinement half-window (px).
+/// Corners whose line curvatures are unknown keep their position; `window` gives each corner's
+/// refinement window.
 pub(super) fn remove_curvature_bias(
     refine_img: &GrayF32,
     pos: &HashMap<Cell, [f64; 2]>,
-    half_window: impl Fn(Cell) -> f64,
+    window: impl Fn(Cell) -> Window,
 ) -> HashMap<Cell, [f64; 2]> {
     pos.iter()
         .map(|(&cell, &p)| {
-            let bias = corner_bias(refine_img, pos, cell, p, &half_window).unwrap_or_default();
+            let bias = corner_bias(refine_img, pos, cell, p, &window).unwrap_or_default();
             (cell, [p[0] - bias.x, p[1] - bias.y])
         })
         .collect()
@@ -47,7 +47,7 @@ fn corner_bias(
     pos: &HashMap<Cell, [f64; 2]>,
     (i, j): Cell,
     p: [f64; 2],
-    half_window: &impl Fn(Cell) -> f64,
+    window: &impl Fn(Cell) -> Window,
 ) -> Option<Vector2<f64>> {
     let at = |c: Cell| pos.get(&c).map(|q| Vector2::new(q[0], q[1]));
     let centre = Vector2::new(p[0], p[1]);
@@ -63,12 +63,11 @@ fn corner_bias(
         })
     });
     let [Some((t1, k1)), Some((t2, k2))] = lines else { return None };
-    let hw = half_window((i, j)).max(1.5);
     let (n1, n2) = (Vector2::new(-t1.y, t1.x), Vector2::new(-t2.y, t2.x));
     // The same window, weights and gradients as saddle::refine_corner.
     let mut a = Matrix2::zeros();
     let mut b = Vector2::zeros();
-    for s in window_samples(img, p, hw) {
+    for s in window_samples(img, p, &window((i, j))) {
         let (offset, g) = (Vector2::from(s.offset), Vector2::from(s.gradient));
         a += s.weight * g * g.transpose();
         // The sample belongs to the edge whose normal its gradient follows.
@@ -154,7 +153,7 @@ mod tests {
         }
         let refined: HashMap<Cell, [f64; 2]> =
             truth.iter().map(|(&c, &p)| (c, super::super::saddle::refine_corner(&img, p, 6.0).unwrap())).collect();
-        let corrected = remove_curvature_bias(&img, &refined, |_: Cell| 6.0);
+        let corrected = remove_curvature_bias(&img, &refined, |_: Cell| Window::circle(6.0));
         let radial = |pos: &HashMap<Cell, [f64; 2]>| {
             let errs: Vec<f64> = truth
                 .iter()

@@ -190,23 +190,88 @@ pub fn axial_difference(a: f64, b: f64) -> f64 {
 /// Refines a corner to sub-pixel precision by gradient orthogonality (as OpenCV's
 /// `cornerSubPix`): every gradient in a window around an X-junction is orthogonal to the vector
 /// from the corner to its pixel, so the corner solves Σ w·g·gᵀ·(q − p) = 0 over the
-/// `window_samples`. `half_window` in px. Returns `None` if the system is singular or the
-/// corner drifts more than `half_window`.
+/// `window_samples`. `half_window` in px (a circular window). Returns `None` if the system is
+/// singular or the corner drifts more than `half_window`.
 pub fn refine_corner(grad_img: &GrayF32, start: [f64; 2], half_window: f64) -> Option<[f64; 2]> {
-    refine_corner_spread(grad_img, start, half_window).map(|(p, _)| p)
+    refine_corner_spread(grad_img, start, &Window::circle(half_window)).map(|(p, _)| p)
 }
 
-/// [`refine_corner`] and the spread of its solution (px²): the trace of the sandwich covariance
-/// A⁻¹·(Σ w²·e²·g·gᵀ)·A⁻¹, where e = gᵀ(pixel − q) is each sample's misfit. It grows with the
-/// image noise and with everything the model of two straight edges through the corner does not
-/// explain (a neighbouring square's edge entering the window, curvature, an uneven blur), so it
-/// compares windows of different sizes on the same corner.
-pub fn refine_corner_spread(grad_img: &GrayF32, start: [f64; 2], half_window: f64) -> Option<([f64; 2], f64)> {
-    let hw = half_window.max(1.5);
+/// The refinement window: the offsets o (px, pixel − corner) with |S·o| ≤ 1, an ellipse (a
+/// circle of radius r when S = I/r). Shaped by the local grid ([`Window::grid`]) it covers the
+/// same fraction of each of the four squares around the corner however the image stretches and
+/// skews them; a circle fitted to the shortest step covers only part of the longer squares and,
+/// on a skewed grid, reaches the far edges of the squares in the acute angles.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Window {
+    /// Image offset → window coordinates (row-major 2 × 2).
+    pub shape: [[f64; 2]; 2],
+}
+
+impl Window {
+    /// A circle of radius `half_window` px (at least 1.5 px).
+    pub fn circle(half_window: f64) -> Window {
+        let r = half_window.max(1.5);
+        Window { shape: [[1.0 / r, 0.0], [0.0, 1.0 / r]] }
+    }
+
+    /// The ellipse spanned by the two grid steps `e1`, `e2` (px vectors from the corner towards
+    /// its neighbours along the two grid lines) times `fraction`: o = fraction·(u·e1 + v·e2) with
+    /// u² + v² ≤ 1. `None` if the steps are (nearly) parallel.
+    pub fn grid(e1: [f64; 2], e2: [f64; 2], fraction: f64) -> Option<Window> {
+        let (a, b, c, d) = (fraction * e1[0], fraction * e2[0], fraction * e1[1], fraction * e2[1]);
+        let det = a * d - b * c;
+        let scale = (e1[0].hypot(e1[1]) * e2[0].hypot(e2[1])).max(1e-300) * fraction * fraction;
+        if !(det.abs() > 0.2 * scale) {
+            return None;
+        }
+        Some(Window { shape: [[d / det, -b / det], [-c / det, a / det]] })
+    }
+
+    /// The same window scaled by `k` about the corner.
+    pub fn scaled(&self, k: f64) -> Window {
+        let s = self.shape;
+        Window { shape: [[s[0][0] / k, s[0][1] / k], [s[1][0] / k, s[1][1] / k]] }
+    }
+
+    /// The window's semi-axes (px): (shortest, longest).
+    pub fn semi_axes(&self) -> (f64, f64) {
+        // Singular values of S; the semi-axes are their inverses.
+        let s = self.shape;
+        let (p, q) = (s[0][0] * s[0][0] + s[1][0] * s[1][0], s[0][1] * s[0][1] + s[1][1] * s[1][1]);
+        let r = s[0][0] * s[0][1] + s[1][0] * s[1][1];
+        let mean = 0.5 * (p + q);
+        let dev = (0.25 * (p - q) * (p - q) + r * r).sqrt();
+        let (big, small) = (mean + dev, (mean - dev).max(1e-300));
+        (1.0 / big.sqrt(), 1.0 / small.sqrt())
+    }
+
+    /// How far the window reaches along the unit direction `n` (px): |S⁻ᵀ·n|.
+    pub fn reach(&self, n: [f64; 2]) -> f64 {
+        let s = self.shape;
+        let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
+        // S⁻¹ = [[s11, −s01], [−s10, s00]] / det; its transpose applied to n.
+        let x = (s[1][1] * n[0] - s[1][0] * n[1]) / det;
+        let y = (-s[0][1] * n[0] + s[0][0] * n[1]) / det;
+        x.hypot(y)
+    }
+
+    /// |S·o|: 1 on the window's boundary.
+    pub fn radius(&self, o: [f64; 2]) -> f64 {
+        let s = self.shape;
+        (s[0][0] * o[0] + s[0][1] * o[1]).hypot(s[1][0] * o[0] + s[1][1] * o[1])
+    }
+}
+
+/// [`refine_corner`] in `window`, and the spread of its solution (px²): the trace of the
+/// sandwich covariance A⁻¹·(Σ w²·e²·g·gᵀ)·A⁻¹, where e = gᵀ(pixel − q) is each sample's misfit.
+/// It grows with the image noise and with everything the model of two straight edges through the
+/// corner does not explain (a neighbouring square's edge entering the window, curvature, an
+/// uneven blur), so it compares windows of different sizes on the same corner.
+pub fn refine_corner_spread(grad_img: &GrayF32, start: [f64; 2], window: &Window) -> Option<([f64; 2], f64)> {
     let mut p = start;
     for _ in 0..30 {
         let (mut a11, mut a12, mut a22, mut b1, mut b2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
-        for s in window_samples(grad_img, p, hw) {
+        for s in window_samples(grad_img, p, window) {
             let ([ox, oy], [gx, gy], w) = (s.offset, s.gradient, s.weight);
             let (gxx, gxy, gyy) = (w * gx * gx, w * gx * gy, w * gy * gy);
             a11 += gxx;
@@ -223,20 +288,20 @@ pub fn refine_corner_spread(grad_img: &GrayF32, start: [f64; 2], half_window: f6
         let dx = (a22 * b1 - a12 * b2) / det;
         let dy = (a11 * b2 - a12 * b1) / det;
         p = [p[0] + dx, p[1] + dy];
-        if ((p[0] - start[0]).powi(2) + (p[1] - start[1]).powi(2)).sqrt() > hw {
+        if window.radius([p[0] - start[0], p[1] - start[1]]) > 1.0 {
             return None;
         }
         if dx.hypot(dy) < 1e-4 {
             break;
         }
     }
-    Some((p, solution_spread(grad_img, p, hw)?))
+    Some((p, solution_spread(grad_img, p, window)?))
 }
 
 /// The sandwich covariance trace (px²) of the gradient-orthogonality solution at `p`.
-fn solution_spread(img: &GrayF32, p: [f64; 2], hw: f64) -> Option<f64> {
+fn solution_spread(img: &GrayF32, p: [f64; 2], window: &Window) -> Option<f64> {
     let (mut a, mut m) = (nalgebra::Matrix2::<f64>::zeros(), nalgebra::Matrix2::<f64>::zeros());
-    for s in window_samples(img, p, hw) {
+    for s in window_samples(img, p, window) {
         let g = nalgebra::Vector2::from(s.gradient);
         let e = g.dot(&nalgebra::Vector2::from(s.offset));
         a += s.weight * g * g.transpose();
@@ -256,31 +321,37 @@ pub(crate) struct WindowSample {
     pub weight: f64,
 }
 
-/// The Gaussian weight's σ in the refinement window, as a fraction of the half-window.
+/// The Gaussian weight's σ in the refinement window, as a fraction of the window's radius.
 const WEIGHT_SIGMA: f64 = 0.6;
 
-/// The refinement window around `p`: every pixel within `half_window` (px) of it, with its
-/// gradient from the pixel values themselves and a Gaussian weight (σ = [`WEIGHT_SIGMA`] ×
-/// half-window) tapered to zero over the last pixel.
+/// The refinement window around `p`: every pixel inside `window` (see [`Window`]), with its
+/// gradient from the pixel values themselves and a Gaussian weight (σ = [`WEIGHT_SIGMA`] × the
+/// window's radius in each direction) tapered to zero over the last pixel.
 ///
 /// The samples sit on the pixel grid, not at `p` + integer offsets: interpolated samples share
 /// `p`'s sub-pixel phase, and bilinear interpolation smooths the image by an amount that depends
 /// on that phase, which gives every corner an error that follows its phase coherently. The taper
 /// keeps the sums continuous in `p` as pixels enter and leave the window.
-pub(crate) fn window_samples(img: &GrayF32, p: [f64; 2], half_window: f64) -> impl Iterator<Item = WindowSample> + '_ {
-    let r = half_window.ceil() as isize + 1;
+pub(crate) fn window_samples<'a>(
+    img: &'a GrayF32,
+    p: [f64; 2],
+    window: &Window,
+) -> impl Iterator<Item = WindowSample> + use<'a> {
+    let window = *window;
+    let r = window.semi_axes().1.ceil() as isize + 1;
     let (x0, y0) = (p[0].round() as isize, p[1].round() as isize);
-    let sigma_w = half_window * WEIGHT_SIGMA;
     (-r..=r).flat_map(move |dy| (-r..=r).map(move |dx| (x0 + dx, y0 + dy))).filter_map(move |(x, y)| {
         let offset = [x as f64 - p[0], y as f64 - p[1]];
-        let d = offset[0].hypot(offset[1]);
-        let taper = (half_window + 0.5 - d).clamp(0.0, 1.0);
+        let rho = window.radius(offset);
+        // Distance (px) from the pixel to the window's boundary along the ray from the corner.
+        let to_edge = if rho > 1e-12 { (1.0 / rho - 1.0) * offset[0].hypot(offset[1]) } else { f64::INFINITY };
+        let taper = (to_edge + 0.5).clamp(0.0, 1.0);
         if taper <= 0.0 {
             return None;
         }
         let gx = 0.5 * (img.at(x + 1, y) - img.at(x - 1, y)) as f64;
         let gy = 0.5 * (img.at(x, y + 1) - img.at(x, y - 1)) as f64;
-        let weight = taper * (-d * d / (2.0 * sigma_w * sigma_w)).exp();
+        let weight = taper * (-rho * rho / (2.0 * WEIGHT_SIGMA * WEIGHT_SIGMA)).exp();
         Some(WindowSample { offset, gradient: [gx, gy], weight })
     })
 }

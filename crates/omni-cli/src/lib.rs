@@ -86,7 +86,7 @@ pub fn main(tool: &str, body: impl FnOnce() -> CliResult) -> ExitCode {
 
 /// Frames' buffers (1–30 MB, a few per frame) are allocated and freed frame after frame. glibc
 /// serves such sizes from fresh mappings and unmaps them when freed, so every frame faults in
-/// each of its buffers' pages anew: on 3 MB colour frames that cost four times the detection.
+/// each of its buffers' pages anew: on 3 MB colour frames that took three times the detection's CPU.
 /// Kept in the heap instead, freed buffers are reused; what stays resident is the largest set
 /// of buffers alive at once, which the tools' bounded frame queues already bound.
 fn keep_freed_frame_buffers() {

@@ -9,7 +9,7 @@ use omni_cli::{CliError, CliResult};
 use omni_formats::stream::{FrameError, Record, StreamReader, StreamWriter};
 use omni_model::CameraModel;
 use omni_vision::colour::ColourSpec;
-use omni_vision::image_io::{GrayImage, write_rgb_png};
+use omni_vision::image_io::{DecodedGray, GrayImage, load_gray_decoded, write_rgb_png};
 use omni_vision::stripe::{self, RidgeDetector, RidgeParams, SearchRegion};
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
@@ -114,12 +114,12 @@ impl AlongStripeTally {
 }
 
 impl Detectors {
-    fn for_image(&self, img: &GrayImage) -> Result<(&RidgeDetector, &'static str), String> {
+    fn for_size(&self, width: u32, height: u32) -> Result<(&RidgeDetector, &'static str), String> {
         match &self.camera {
             Some(d) => Ok((d, "the camera's image")),
             None => {
                 let detector = self.from_first_frame.get_or_init(|| {
-                    let whole = RidgeDetector::whole_frame(img.width, img.height, self.params);
+                    let whole = RidgeDetector::whole_frame(width, height, self.params);
                     match &self.region {
                         Some(region) => whole.with_region(region.clone()),
                         None => Ok(whole),
@@ -298,16 +298,11 @@ fn process_frame(
         frame.stripe = Some(Vec::new());
         return Ok(());
     }
-    let mut img = stripe::load_frame_image_cached(frame, frames_dir, &detectors.laser_off)?;
     let path = frame.resolve_path(frames_dir, &frame.path);
     if detectors.colour == ColourSpec::default() && !detectors.luma_hint.swap(true, Ordering::Relaxed) {
         warn_if_colour_read_as_luma(&path);
     }
-    if let (Some(ambient), None) = (&detectors.static_ambient, &frame.ambient_path) {
-        img.subtract_saturating(ambient).map_err(|m| format!("{}: static ambient's {m}", path.display()))?;
-    }
-    let (detector, what) = detectors.for_image(&img)?;
-    let mut points = stripe::frame_points(&img, detector, what).map_err(|m| format!("{}: {m}", path.display()))?;
+    let (mut points, img) = detect_points(frame, frames_dir, &path, detectors, overlay.is_some())?;
     let along = detectors.params.along_stripe_px;
     if along > 0.0 {
         let short = stripe::refuse_short_stripes(points, 2.0 * along);
@@ -317,13 +312,48 @@ fn process_frame(
         tally.longest_bits.fetch_max(short.longest_px.to_bits(), Ordering::Relaxed);
         points = short.kept;
     }
-    if let Some(dir) = overlay {
+    if let (Some(dir), Some(img)) = (overlay, img) {
         let rgb = stripe::draw_overlay(&img, &points);
         write_rgb_png(&dir.join(format!("{:06}.png", frame.seq)), img.width, img.height, &rgb)
             .map_err(|e| e.to_string())?;
     }
     frame.stripe = Some(points);
     Ok(())
+}
+
+/// The stripe points of a laser frame, and its image as read unless it was a plain 8-bit grey
+/// frame with nothing to subtract and no overlay to draw: those are measured on their own bytes.
+fn detect_points(
+    frame: &omni_formats::stream::Frame,
+    frames_dir: Option<&str>,
+    path: &Path,
+    detectors: &Detectors,
+    keep_image: bool,
+) -> Result<(Vec<stripe::StripePoint>, Option<GrayImage>), String> {
+    let plain = !keep_image
+        && detectors.colour == ColourSpec::default()
+        && frame.ambient_path.is_none()
+        && detectors.static_ambient.is_none();
+    let mut img = if plain {
+        match load_gray_decoded(path).map_err(|e| e.to_string())? {
+            DecodedGray::Eight { width, height, data } => {
+                let (detector, what) = detectors.for_size(width, height)?;
+                stripe::check_frame_size(width, height, detector, what)
+                    .map_err(|m| format!("{}: {m}", path.display()))?;
+                let pixels = stripe::Frame { width, height, data: &data, max_value: 255.0 };
+                return Ok((detector.detect_frame(&pixels, &mut stripe::Scratch::default()), None));
+            }
+            DecodedGray::Wide(img) => img,
+        }
+    } else {
+        stripe::load_frame_image_cached(frame, frames_dir, &detectors.laser_off)?
+    };
+    if let (Some(ambient), None) = (&detectors.static_ambient, &frame.ambient_path) {
+        img.subtract_saturating(ambient).map_err(|m| format!("{}: static ambient's {m}", path.display()))?;
+    }
+    let (detector, what) = detectors.for_size(img.width, img.height)?;
+    let points = stripe::frame_points(&img, detector, what).map_err(|m| format!("{}: {m}", path.display()))?;
+    Ok((points, Some(img)))
 }
 
 /// Colour frames read as luma lose a coloured laser on lit surfaces: says so once, naming the

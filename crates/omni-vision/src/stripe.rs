@@ -57,8 +57,8 @@ mod steger;
 pub use along::{ShortStripes, refuse_short_stripes};
 pub use estimators::Segment;
 pub use frames::{
-    LaserOffCache, STATIC_AMBIENT_MAX_FRAMES, STATIC_AMBIENT_MIN_FRAMES, check_size, frame_points, load_frame_image,
-    load_frame_image_cached, static_ambient, static_ambient_frames,
+    LaserOffCache, STATIC_AMBIENT_MAX_FRAMES, STATIC_AMBIENT_MIN_FRAMES, check_frame_size, check_size, frame_points,
+    load_frame_image, load_frame_image_cached, static_ambient, static_ambient_frames,
 };
 pub use omni_formats::stream::{StripePoint, quality};
 pub use overlay::draw_overlay;

@@ -133,9 +133,14 @@ pub fn static_ambient_frames(frames: &[Frame]) -> Result<Vec<usize>, String> {
 
 /// Checks that an image has the size the detector (camera) expects.
 pub fn check_size(img: &GrayImage, detector: &RidgeDetector, what: &str) -> Result<(), String> {
+    check_frame_size(img.width, img.height, detector, what)
+}
+
+/// [`check_size`] of a frame `width` × `height` px.
+pub fn check_frame_size(width: u32, height: u32, detector: &RidgeDetector, what: &str) -> Result<(), String> {
     let (w, h) = detector.image_size();
-    if (img.width, img.height) != (w, h) {
-        return Err(format!("image is {}x{} px, but {what} is {w}x{h} px", img.width, img.height));
+    if (width, height) != (w, h) {
+        return Err(format!("image is {width}x{height} px, but {what} is {w}x{h} px"));
     }
     Ok(())
 }

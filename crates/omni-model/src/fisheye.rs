@@ -76,12 +76,8 @@ impl FisheyeParams {
 
     /// Checks that the parameters are finite and meaningful; names the field at fault.
     pub fn validate(&self) -> Result<(), String> {
-        for (name, v) in [("fx_px", self.fx_px), ("fy_px", self.fy_px)] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{name} must be a positive number, got {v}"));
-            }
-        }
-        let finite = [
+        crate::fields::check_positive(&[("fx_px", self.fx_px), ("fy_px", self.fy_px)])?;
+        crate::fields::check_finite(&[
             ("cx_px", self.cx_px),
             ("cy_px", self.cy_px),
             ("k1", self.k1),
@@ -91,12 +87,7 @@ impl FisheyeParams {
             ("viewpoint_mm[0]", self.viewpoint_mm[0]),
             ("viewpoint_mm[1]", self.viewpoint_mm[1]),
             ("viewpoint_mm[2]", self.viewpoint_mm[2]),
-        ];
-        for (name, v) in finite {
-            if !v.is_finite() {
-                return Err(format!("{name} must be finite, got {v}"));
-            }
-        }
+        ])?;
         crate::limits::check_image_size(self.width, self.height)
     }
 }

@@ -18,6 +18,7 @@
 
 mod camera;
 mod colour;
+mod fields;
 pub mod fisheye;
 mod fixed;
 mod hyperbolic;

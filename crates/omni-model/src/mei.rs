@@ -124,15 +124,11 @@ impl MeiParams {
 
     /// Checks that the parameters are finite and meaningful; names the field at fault.
     pub fn validate(&self) -> Result<(), String> {
-        for (name, v) in [("fx_px", self.fx_px), ("fy_px", self.fy_px)] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{name} must be a positive number, got {v}"));
-            }
-        }
+        crate::fields::check_positive(&[("fx_px", self.fx_px), ("fy_px", self.fy_px)])?;
         if !(self.xi.is_finite() && self.xi >= 0.0) {
             return Err(format!("xi must be a non-negative number, got {}", self.xi));
         }
-        let finite = [
+        crate::fields::check_finite(&[
             ("cx_px", self.cx_px),
             ("cy_px", self.cy_px),
             ("k1", self.k1),
@@ -144,12 +140,7 @@ impl MeiParams {
             ("viewpoint_mm[0]", self.viewpoint_mm[0]),
             ("viewpoint_mm[1]", self.viewpoint_mm[1]),
             ("viewpoint_mm[2]", self.viewpoint_mm[2]),
-        ];
-        for (name, v) in finite {
-            if !v.is_finite() {
-                return Err(format!("{name} must be finite, got {v}"));
-            }
-        }
+        ])?;
         crate::limits::check_image_size(self.width, self.height)?;
         if self.inner_radius_px < 0.0 || self.outer_radius_px < 0.0 {
             return Err("inner_radius_px and outer_radius_px must be non-negative".into());

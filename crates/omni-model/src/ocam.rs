@@ -66,7 +66,7 @@ impl OcamParams {
                 return Err(format!("inv_poly[{k}] must be finite, got {v}"));
             }
         }
-        let finite = [
+        crate::fields::check_finite(&[
             ("cx_px", self.cx_px),
             ("cy_px", self.cy_px),
             ("c", self.c),
@@ -74,12 +74,7 @@ impl OcamParams {
             ("e", self.e),
             ("inner_radius_px", self.inner_radius_px),
             ("outer_radius_px", self.outer_radius_px),
-        ];
-        for (name, v) in finite {
-            if !v.is_finite() {
-                return Err(format!("{name} must be finite, got {v}"));
-            }
-        }
+        ])?;
         if (self.c - self.d * self.e).abs() < 1e-9 {
             return Err("affine matrix [c d; e 1] is singular".into());
         }

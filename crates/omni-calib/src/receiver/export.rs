@@ -476,6 +476,7 @@ pub fn parse_opencv_omnidir(text: &str) -> Result<MeiParams, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::receiver::ordinary_tests::{fisheye_truth, pinhole_truth};
     use omni_model::{CameraModel, MeiCamera, OcamCamera};
 
     fn ocam_sample() -> OcamParams {
@@ -623,31 +624,10 @@ mod tests {
         assert_eq!(parse_opencv_omnidir(&no_size).unwrap_err(), "image_width: missing");
     }
 
-    fn pinhole_sample() -> PinholeParams {
-        PinholeParams {
-            fx_px: 740.3,
-            fy_px: 740.9,
-            cx_px: 668.2,
-            cy_px: 313.6,
-            k1: -0.3275,
-            k2: 0.1156,
-            k3: -0.0192,
-            p1: -5.6e-4,
-            p2: 5.4e-4,
-            width: 1280,
-            height: 720,
-            viewpoint_mm: [0.0; 3],
-        }
-    }
-
-    fn fisheye_sample() -> FisheyeParams {
-        FisheyeParams::from_vector(&[725.95, 726.3, 673.5, 308.6, -0.0352, -0.0203, 0.0323, -0.0158], 1280, 720)
-    }
-
     #[test]
     fn ordinary_cameras_read_back_from_opencv_and_kalibr_files() {
-        let pinhole = CameraSpec::Pinhole(pinhole_sample());
-        let fisheye = CameraSpec::Fisheye(fisheye_sample());
+        let pinhole = CameraSpec::Pinhole(pinhole_truth());
+        let fisheye = CameraSpec::Fisheye(fisheye_truth());
         let text = opencv_yaml_of(&pinhole).unwrap();
         assert!(
             text.contains("camera_matrix: !!opencv-matrix") && text.contains("(x, y, -z) of the omniscan"),
@@ -662,7 +642,7 @@ mod tests {
         assert_eq!((p.k1, p.p2, p.k3), (-0.0352, -0.0158, 0.0));
         // Kalibr: pinhole + radtan needs k3 = 0; pinhole + equidistant is the fisheye.
         assert!(kalibr_camchain_of(&pinhole, "/t").unwrap_err().contains("Kalibr's radtan has no k3"));
-        let radtan = CameraSpec::Pinhole(PinholeParams { k3: 0.0, ..pinhole_sample() });
+        let radtan = CameraSpec::Pinhole(PinholeParams { k3: 0.0, ..pinhole_truth() });
         let chain = kalibr_camchain_of(&radtan, "/t").unwrap();
         assert!(chain.contains("camera_model: pinhole") && chain.contains("distortion_model: radtan"), "{chain}");
         assert_eq!(parse_kalibr_camera(&chain, "cam0").unwrap(), radtan);
@@ -676,9 +656,9 @@ mod tests {
 
     #[test]
     fn opencv_rational_coefficients_are_refused_unless_zero() {
-        let text = opencv_pinhole_yaml(&pinhole_sample());
+        let text = opencv_pinhole_yaml(&pinhole_truth());
         let eight = text.replace("rows: 5", "rows: 8").replace("-1.92e-2 ]", "-1.92e-2, 0., 0., 0. ]");
-        assert_eq!(parse_opencv(&eight, OpencvModel::Auto).unwrap(), CameraSpec::Pinhole(pinhole_sample()), "{eight}");
+        assert_eq!(parse_opencv(&eight, OpencvModel::Auto).unwrap(), CameraSpec::Pinhole(pinhole_truth()), "{eight}");
         let rational = eight.replace("-1.92e-2, 0.,", "-1.92e-2, 0.5,");
         assert!(parse_opencv(&rational, OpencvModel::Auto).unwrap_err().contains("rational"), "{rational}");
     }

@@ -6,7 +6,7 @@ use omni_geom::rng::SplitMix64;
 use omni_model::{CameraModel, FisheyeCamera, PinholeCamera};
 
 /// A wide-angle pinhole lens as OpenCV fits the hand-held laser set's camera (docs/DECISIONS.md).
-fn pinhole_truth() -> PinholeParams {
+pub(crate) fn pinhole_truth() -> PinholeParams {
     PinholeParams {
         fx_px: 740.3,
         fy_px: 740.9,
@@ -24,7 +24,7 @@ fn pinhole_truth() -> PinholeParams {
 }
 
 /// The same set's cv::fisheye fit.
-fn fisheye_truth() -> FisheyeParams {
+pub(crate) fn fisheye_truth() -> FisheyeParams {
     FisheyeParams {
         fx_px: 725.95,
         fy_px: 726.3,

@@ -673,10 +673,12 @@ fn the_room_scene_is_covered_as_captured_and_with_laser_off_frames() {
 /// energy in a one-sided tail 4 σ long, measured on real photographs), ideal optics otherwise,
 /// as bright at their peak whatever their width, on the bench plane; the truth is the sheet's
 /// peak. 2 and 5 px wide: covered ≥ 90 %, no false point, a spread about their mean offset
-/// ≤ 0.04 px (0.030 measured); the offset itself is the estimators' pull towards the tail (windowed centroid
-/// +0.11 / +0.14 px, Gaussian fit +0.085 / +0.077 px measured): they locate the profile's
-/// centre, not its peak. 10 and 20 px wide are printed, not asserted (docs/DECISIONS.md: found
-/// 0 % and 13 %; an open gap).
+/// ≤ 0.04 px (0.025-0.033 measured). The offset is +0.071 / +0.046 px (windowed and Gaussian
+/// fit alike), asserted ≤ 0.1: the detector moves each centre to its profile's top by the
+/// stripe's mean lean (+0.11 / +0.14 px from the windowed centroid alone); what is left is the
+/// blur's own shift of a lopsided peak (+0.04 / +0.01 px at 2 / 5 px,
+/// `SheetProfile::blurred_peak_offset_px`) and the sampling kernel's. 10 and 20 px wide are
+/// printed, not asserted (docs/DECISIONS.md: found 0 % and 15 %; an open gap).
 #[test]
 fn real_shaped_stripes_2_to_20_px_wide() {
     use omni_simulator::SheetProfile;
@@ -696,7 +698,7 @@ fn real_shaped_stripes_2_to_20_px_wide() {
             assert!(t.coverage(8).unwrap() >= 0.9, "{fwhm} px {name}: coverage {:?}", t.coverage(8));
             assert_eq!(t.false_points, 0, "{fwhm} px {name}: false points");
             assert!(spread <= 0.04, "{fwhm} px {name}: spread {spread:.4} px");
-            assert!((0.0..=0.2).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
+            assert!((0.0..=0.1).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
         }
     }
 }

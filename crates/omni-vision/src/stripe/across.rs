@@ -72,6 +72,19 @@ pub const MAX_WIDTH_SLOPE: f64 = 0.2;
 /// laser's line wider than its scale: a Gaussian has 0.39, a lit surface's blurred flat top
 /// nearly 1.
 pub const MAX_FLATNESS: f64 = 0.7;
+/// The level, as a fraction of the peak, above which a profile's top is measured
+/// ([`Centre::lean`]): high enough that a one-sided tail 17 % of the light moves the top's centroid
+/// by 0.01–0.02 px on 3–20 px wide stripes, where the centroid down to the threshold moves by
+/// 0.1–0.4 px (docs/DECISIONS.md).
+pub const TOP_LEVEL: f32 = 0.8;
+/// Half the arc (px) over which a stripe's leans are averaged ([`remove_steady_lean`]).
+const LEAN_HALF_ARC_PX: f64 = 12.0;
+/// Fewer profiles than this within the arc leave a point's centre where its estimator put it.
+const LEAN_MIN_PROFILES: usize = 8;
+/// Profiles flatter than this ([`Centre::flatness`]; a Gaussian has 0.39) give no lean: a
+/// flat top (a defocused lens's disc, a lit patch) is pulled by the stripe's bend unlike the
+/// estimator's centre, so its lean is the bend's, not the laser's shape.
+const LEAN_MAX_FLATNESS: f64 = 0.41;
 /// A fit that moves its point farther than this (px) is not trusted (a kink, another stripe).
 const MAX_MOVE_PX: f64 = 0.5;
 /// FWHM / σ of a Gaussian.
@@ -120,6 +133,9 @@ pub(super) struct Linked {
     pub normal: (f64, f64),
     /// Half-maximum width (px).
     pub half_width: f64,
+    /// The centre's offset from its profile's top along `normal` (px; [`Centre::lean`]); `None`
+    /// where it says nothing of the laser's shape (saturated or flat-topped profiles).
+    pub lean: Option<f64>,
 }
 
 /// A measured centre before linking.
@@ -138,6 +154,10 @@ struct Centre {
     /// The profile's width at 90 % of its peak over its half-maximum width: 0.39 for a
     /// Gaussian, near 1 for a lit surface's flat top.
     flatness: f64,
+    /// The estimator's centre minus the centroid of the profile's top ([`TOP_LEVEL`]), along
+    /// `normal` (px): 0 on a symmetric straight stripe, the tail's pull on a lopsided one;
+    /// `None` for a saturated profile (its plateau has no top to measure).
+    lean: Option<f64>,
 }
 
 impl RidgeDetector {
@@ -166,6 +186,7 @@ impl RidgeDetector {
             let refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
             kept.extend(refined);
         }
+        remove_steady_lean(&mut kept);
         kept
     }
 
@@ -196,7 +217,7 @@ impl RidgeDetector {
             for side in [-0.5, 0.5] {
                 let start = (u - side * ny, v + side * nx);
                 if let Some(m) = self.measure_profile(frame, start, c.normal, threshold, reach, buffers) {
-                    out.push((Linked { point: m.point, normal: m.normal, half_width: m.half_width }, reach));
+                    out.push((m.linked(), reach));
                 }
             }
         }
@@ -235,7 +256,7 @@ impl RidgeDetector {
                     };
                     taken.insert(m.point.u, m.point.v);
                     at = m.point;
-                    out.push(Linked { point: m.point, normal: m.normal, half_width: m.half_width });
+                    out.push(m.linked());
                 }
             }
         }
@@ -463,7 +484,9 @@ impl RidgeDetector {
             if saturated { quality::SATURATED } else { 0 } | self.contrast_and_width_flags(peak, width, t, max_width);
         let point = StripePoint { u, v, intensity: peak as f64, width, quality: flags };
         let pull_variance = (!saturated).then(|| self.pull_variance(raw, q, &seg, t, index)).flatten();
-        Some(Centre { point, normal: (nx, ny), half_width, asymmetry, pull_variance, flatness })
+        let top = if saturated { None } else { estimators::top_centroid(q, &seg, TOP_LEVEL * peak) };
+        let lean = top.map(|centre| (index - centre) * SAMPLE_STEP_PX);
+        Some(Centre { point, normal: (nx, ny), half_width, asymmetry, pull_variance, flatness, lean })
     }
 
     /// The variance σ² (px²) for which the blur moves this profile's centre by σ²κ/2 towards the
@@ -628,9 +651,55 @@ impl RidgeDetector {
             let mut p = c.point;
             p.u += shift * c.normal.0;
             p.v += shift * c.normal.1;
-            out.push(Linked { point: p, normal: c.normal, half_width: c.half_width });
+            let lean = c.lean.filter(|_| c.flatness <= LEAN_MAX_FLATNESS);
+            out.push(Linked { point: p, lean, ..c.linked() });
         }
         out
+    }
+}
+
+impl Centre {
+    fn linked(&self) -> Linked {
+        Linked { point: self.point, normal: self.normal, half_width: self.half_width, lean: self.lean }
+    }
+}
+
+/// Moves each point by the mean lean ([`Centre::lean`]) of its stripe within
+/// ±[`LEAN_HALF_ARC_PX`]: from the estimator's centre to the profile's top. A laser's tail lies
+/// on the same side of its stripe all along it, so the mean keeps the tail's pull and averages
+/// away each profile's noise, which at the top alone is 1.5–3 times the estimator's.
+fn remove_steady_lean(points: &mut [Linked]) {
+    let placed = points.iter().map(|l| [l.point.u, l.point.v, l.normal.0, l.normal.1]);
+    let grid = Grid::from_placed(placed, LEAN_HALF_ARC_PX);
+    let reach2 = LEAN_HALF_ARC_PX * LEAN_HALF_ARC_PX;
+    let shifts: Vec<f64> = points
+        .iter()
+        .map(|l| {
+            if l.point.quality & quality::SATURATED != 0 {
+                return 0.0;
+            }
+            let (px, py, (nx, ny)) = (l.point.u, l.point.v, l.normal);
+            let (mut sum, mut count) = (0.0, 0usize);
+            grid.visit(px, py, |j, &[ou, ov, onx, ony]| {
+                let (ex, ey) = (ou - px, ov - py);
+                let cos = onx * nx + ony * ny;
+                if ex * ex + ey * ey > reach2 || cos.abs() < SAME_STRIPE_COS {
+                    return;
+                }
+                let (t, d) = (-ny * ex + nx * ey, nx * ex + ny * ey);
+                if let Some(lean) = points[j].lean
+                    && d.abs() <= 0.5 + 0.25 * t.abs()
+                {
+                    sum += if cos > 0.0 { lean } else { -lean };
+                    count += 1;
+                }
+            });
+            if count >= LEAN_MIN_PROFILES { sum / count as f64 } else { 0.0 }
+        })
+        .collect();
+    for (l, shift) in points.iter_mut().zip(shifts) {
+        l.point.u -= shift * l.normal.0;
+        l.point.v -= shift * l.normal.1;
     }
 }
 
@@ -1046,33 +1115,33 @@ struct Grid {
 
 impl Grid {
     fn new(centres: &[Centre], reach: f64) -> Grid {
+        Grid::from_placed(centres.iter().map(|c| [c.point.u, c.point.v, c.normal.0, c.normal.1]), reach)
+    }
+
+    /// The grid of points given as (u, v, nx, ny).
+    fn from_placed(points: impl Iterator<Item = [f64; 4]>, reach: f64) -> Grid {
+        let points: Vec<[f64; 4]> = points.collect();
         let cell = reach.max(1.0);
-        let key = |c: &Centre| ((c.point.v / cell).max(0.0) as usize, (c.point.u / cell).max(0.0) as usize);
-        let rows = centres.iter().map(|c| key(c).0 + 1).max().unwrap_or(0);
-        let columns = centres.iter().map(|c| key(c).1 + 1).max().unwrap_or(0);
+        let key = |p: &[f64; 4]| ((p[1] / cell).max(0.0) as usize, (p[0] / cell).max(0.0) as usize);
+        let rows = points.iter().map(|p| key(p).0 + 1).max().unwrap_or(0);
+        let columns = points.iter().map(|p| key(p).1 + 1).max().unwrap_or(0);
         let mut start = vec![0u32; rows * columns + 1];
-        for c in centres {
-            let (r, q) = key(c);
+        for p in &points {
+            let (r, q) = key(p);
             start[r * columns + q + 1] += 1;
         }
         for k in 1..start.len() {
             start[k] += start[k - 1];
         }
         let mut fill = start.clone();
-        let mut order = vec![0u32; centres.len()];
-        for (i, c) in centres.iter().enumerate() {
-            let (r, q) = key(c);
+        let mut order = vec![0u32; points.len()];
+        for (i, p) in points.iter().enumerate() {
+            let (r, q) = key(p);
             let slot = &mut fill[r * columns + q];
             order[*slot as usize] = i as u32;
             *slot += 1;
         }
-        let placed = order
-            .iter()
-            .map(|&i| {
-                let c = &centres[i as usize];
-                [c.point.u, c.point.v, c.normal.0, c.normal.1]
-            })
-            .collect();
+        let placed = order.iter().map(|&i| points[i as usize]).collect();
         Grid { cell, columns, rows, start, order, placed }
     }
 

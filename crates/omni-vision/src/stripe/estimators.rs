@@ -40,6 +40,28 @@ pub fn windowed_centroid(p: &[f32], s: &Segment, t: f32) -> Option<f64> {
     (sw > 0.0).then(|| swk / sw)
 }
 
+/// Centroid of the profile's top: weights `p − level` over the contiguous run of samples at or
+/// above `level` around the peak, widened by one sample each side (those weigh 0). With a level
+/// high on the peak (see `across::TOP_LEVEL`) a one-sided tail barely moves it, where a
+/// centroid down to the threshold follows the tail.
+pub fn top_centroid(p: &[f32], s: &Segment, level: f32) -> Option<f64> {
+    let mut lo = s.peak;
+    while lo > 0 && p[lo - 1] >= level {
+        lo -= 1;
+    }
+    let mut hi = s.peak;
+    while hi + 1 < p.len() && p[hi + 1] >= level {
+        hi += 1;
+    }
+    let (mut sw, mut swk) = (0.0f64, 0.0f64);
+    for k in lo.saturating_sub(1)..=(hi + 1).min(p.len() - 1) {
+        let w = (p[k] - level).max(0.0) as f64;
+        sw += w;
+        swk += w * k as f64;
+    }
+    (sw > 0.0).then(|| swk / sw)
+}
+
 /// Gaussian peak fit: a parabola fitted to the logarithms of the samples above 30 % of the
 /// peak (least squares, weighted by intensity² since the noise of ln p is σ/p), whose vertex
 /// is the centre. Exact for a Gaussian profile on zero background; with three samples it is the
@@ -181,6 +203,34 @@ mod tests {
             assert!(e_gauss.abs() < 1e-4, "gauss c={c} e={e_gauss}");
             assert!(e_br.abs() < 0.06, "blais-rioux c={c} e={e_br}");
         }
+    }
+
+    /// `omni_simulator::SheetProfile::real`'s shape: a Gaussian core of σ with 17 % of the light
+    /// in the same Gaussian convolved with an exponential 4 σ long on the + side, at `x` from
+    /// the core's centre (numerical convolution, unit peak of the core).
+    fn tailed(x: f64, sigma: f64) -> f64 {
+        let g = |d: f64| (-d * d / (2.0 * sigma * sigma)).exp();
+        let tau = 4.0 * sigma;
+        let tail: f64 = (0..4000).map(|j| j as f64 * 0.01).map(|e| (-e / tau).exp() / tau * g(x - e) * 0.01).sum();
+        0.83 * g(x) + 0.17 * tail
+    }
+
+    #[test]
+    fn the_top_centroid_barely_follows_a_one_sided_tail() {
+        let sigma = 3.0;
+        let mode =
+            (0..4000).map(|i| i as f64 * 0.001).max_by(|a, b| tailed(*a, sigma).total_cmp(&tailed(*b, sigma))).unwrap();
+        for i in 0..10 {
+            let c = 30.0 + i as f64 * 0.1;
+            let p: Vec<f32> = (0..90).map(|k| (200.0 * tailed(k as f64 - c, sigma)) as f32).collect();
+            let s = segment(&p, 10.0);
+            let top = top_centroid(&p, &s, 0.8 * p[s.peak]).unwrap() - c - mode;
+            let windowed = windowed_centroid(&p, &s, 10.0).unwrap() - c - mode;
+            assert!(windowed > 0.15 && top.abs() < 0.3 * windowed, "c={c}: top {top}, windowed {windowed}");
+        }
+        let core = profile(80, 30.3, sigma, 200.0, 0.0);
+        let gauss = top_centroid(&core, &segment(&core, 10.0), 160.0).unwrap() - 30.3;
+        assert!(gauss.abs() < 0.03, "Gaussian: {gauss}");
     }
 
     #[test]

@@ -109,6 +109,10 @@ struct FixedArgs {
     /// Keep stripe points up to this far outside the printed pattern (mm; negative: inside).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     margin_mm: f64,
+    /// Drop stripe points closer than this (px, as imaged) to a square's edge, where the stripe
+    /// falls on a white and a black square at once and its centre moves (0: keep them).
+    #[arg(long, default_value_t = 3.0, value_name = "PX", allow_negative_numbers = true)]
+    edge_clearance_px: f64,
     /// Fewest stripe points on the board for a frame to be used.
     #[arg(long, default_value_t = 30)]
     min_points: usize,
@@ -387,6 +391,9 @@ fn fixed(a: &FixedArgs) -> CliResult {
     if !a.margin_mm.is_finite() {
         return Err(CliError::usage("--margin-mm must be a finite number"));
     }
+    if !(a.edge_clearance_px.is_finite() && a.edge_clearance_px >= 0.0) {
+        return Err(CliError::usage("--edge-clearance-px must be a finite number >= 0"));
+    }
     if a.min_points < 3 {
         return Err(CliError::usage("--min-points must be at least 3"));
     }
@@ -426,8 +433,13 @@ fn fixed(a: &FixedArgs) -> CliResult {
             CliError::new(m)
         }
     })?;
-    let opts =
-        FixedPlaneOptions { square_mm: board.square_mm, margin_mm: a.margin_mm, min_points: a.min_points, seed: 1 };
+    let opts = FixedPlaneOptions {
+        square_mm: board.square_mm,
+        margin_mm: a.margin_mm,
+        edge_clearance_px: a.edge_clearance_px,
+        min_points: a.min_points,
+        seed: 1,
+    };
     let fit = fixed_plane::fit_fixed_plane(camera.as_ref(), &frames, &opts).map_err(CliError::new)?;
     let mut report = serde_json::to_value(&fit.report)?;
     report["inputs"] = serde_json::json!({
@@ -437,6 +449,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         "channel": detect.colour.channel.to_string(),
         "stripes": a.stripes.as_deref().map(name),
         "margin_mm": a.margin_mm,
+        "edge_clearance_px": a.edge_clearance_px,
         "min_points": a.min_points,
     });
     let mut params = omni_model::FixedPlanesParams::single(&fit.plane);

@@ -121,3 +121,25 @@ fn a_board_file_larger_than_the_board_is_named_with_the_likely_size() {
     assert!(se.contains("the board is probably 9 × 6"), "{se}");
     assert!(!dir.path().join("scanner.json").exists());
 }
+
+/// The edge clearance is reported with the inputs; a negative or non-finite one is a usage error.
+#[test]
+fn the_edge_clearance_is_reported_and_a_negative_one_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(dir.path(), &board(9, 6), &[3, 4]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["report"]["inputs"]["edge_clearance_px"], 3.0, "{report}");
+    for bad in ["-1", "nan"] {
+        let out = Command::new(BIN)
+            .current_dir(dir.path())
+            .args(["fixed", "--camera", "camera.json", "--board", "board.json", "--edge-clearance-px", bad])
+            .arg(frame(3))
+            .output()
+            .unwrap();
+        let se = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{bad}: {se}");
+        assert!(se.contains("--edge-clearance-px") && se.lines().count() == 1, "{bad}: {se}");
+    }
+}

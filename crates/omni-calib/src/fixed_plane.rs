@@ -33,6 +33,11 @@ pub struct FixedPlaneOptions {
     /// Stripe points are kept up to this far outside the printed pattern's outline (mm;
     /// negative keeps them this far inside it).
     pub margin_mm: f64,
+    /// Stripe points are dropped where they lie closer than this (px, as imaged there) to a
+    /// square's edge on the board: there the stripe's profile falls on a white and a black
+    /// square, whose albedos make it lopsided and move its centre. 0 (the default) keeps every
+    /// point, as exact stripe pixels need; `omni-calib-plane fixed` clears 3 px.
+    pub edge_clearance_px: f64,
     /// Fewest stripe points on the board for a frame to be used.
     pub min_points: usize,
     /// Seed of the robust fit's random triples.
@@ -41,7 +46,7 @@ pub struct FixedPlaneOptions {
 
 impl Default for FixedPlaneOptions {
     fn default() -> Self {
-        FixedPlaneOptions { square_mm: 1.0, margin_mm: 0.0, min_points: 30, seed: 1 }
+        FixedPlaneOptions { square_mm: 1.0, margin_mm: 0.0, edge_clearance_px: 0.0, min_points: 30, seed: 1 }
     }
 }
 
@@ -182,24 +187,39 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
     let normal = pose.rotation * Vector3::z();
     let offset = normal.dot(&pose.translation.vector);
     let inverse = pose.inverse();
+    let on_board = |u: f64, v: f64| {
+        let ray = camera.pixel_to_ray(&Vector2::new(u, v))?;
+        let denom = normal.dot(&ray.dir);
+        let t = (offset - normal.dot(&ray.origin.coords)) / denom;
+        (denom.abs() >= 1e-9 && t > 0.0).then(|| ray.origin + ray.dir.into_inner() * t)
+    };
+    // Distance (mm) from a board point to the nearest square edge: the lines through the inner
+    // corners, which lie at multiples of the square.
+    let square = opts.square_mm;
+    let edge_distance = |x: f64, y: f64| {
+        let off = |c: f64| ((c / square) - (c / square).round()).abs() * square;
+        off(x).min(off(y))
+    };
     let mut points = Vec::new();
     let mut pixels = Vec::new();
     for px in &f.stripe {
-        let Some(ray) = camera.pixel_to_ray(&Vector2::new(px[0], px[1])) else { continue };
-        let denom = normal.dot(&ray.dir);
-        if denom.abs() < 1e-9 {
-            continue;
-        }
-        let t = (offset - normal.dot(&ray.origin.coords)) / denom;
-        if !(t > 0.0) {
-            continue;
-        }
-        let p = ray.origin + ray.dir.into_inner() * t;
+        let Some(p) = on_board(px[0], px[1]) else { continue };
         let local = inverse * p;
-        if local.x >= x0 && local.x <= x1 && local.y >= y0 && local.y <= y1 {
-            points.push(p);
-            pixels.push(*px);
+        if !(local.x >= x0 && local.x <= x1 && local.y >= y0 && local.y <= y1) {
+            continue;
         }
+        if opts.edge_clearance_px > 0.0 {
+            // The board's footprint of one pixel here (mm), the larger of the two axes'.
+            let footprint = [on_board(px[0] + 1.0, px[1]), on_board(px[0], px[1] + 1.0)]
+                .iter()
+                .map(|q| q.map_or(f64::INFINITY, |q| (q - p).norm()))
+                .fold(0.0f64, f64::max);
+            if edge_distance(local.x, local.y) < opts.edge_clearance_px * footprint {
+                continue;
+            }
+        }
+        points.push(p);
+        pixels.push(*px);
     }
     if points.len() < opts.min_points {
         return Err(format!(

@@ -172,11 +172,11 @@ fn real_dir() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/real-laser-handheld"))
 }
 
-/// In-sample RMS of the plane on the real frames (mm, 5 mm squares nominal), measured
-/// 2026-12-03 (docs/DECISIONS.md): 0.0351 mm over 9 frames; the bound allows 15 %. Since the
-/// corner grid stops at the board's edge, im6's board (whole, the stripe across its top row) is
-/// found too: 0.0347 mm over 11 frames.
-const REAL_RMS_MM: f64 = 0.0351;
+/// In-sample RMS of the plane on the real frames (mm, 5 mm squares nominal) with stripe points
+/// within 3 px of a square's edge dropped, as `omni-calib-plane fixed` does: 0.0311 mm over 11
+/// frames, measured 2026-12-04 (docs/DECISIONS.md; 0.0323 keeping them, 0.0351 before the
+/// detector measured the profile's top); the bound allows 15 %.
+const REAL_RMS_MM: f64 = 0.0311;
 
 #[test]
 fn real_frames_give_one_plane_that_no_frame_pulls() {
@@ -206,7 +206,7 @@ fn real_frames_give_one_plane_that_no_frame_pulls() {
         ridge: omni_vision::stripe::RidgeParams::default(),
     };
     let frames = detect_frames(&paths, &detect, None).unwrap();
-    let opts = FixedPlaneOptions { square_mm: 5.0, ..Default::default() };
+    let opts = FixedPlaneOptions { square_mm: 5.0, edge_clearance_px: 3.0, ..Default::default() };
     let fit = fit_fixed_plane(cam.as_ref(), &frames, &opts).unwrap();
     let r = &fit.report;
     // The reference estimator's centres through the same fit.

@@ -108,7 +108,14 @@ fn render_and_fit(
         ridge: omni_vision::stripe::RidgeParams::default(),
     };
     let frames = detect_frames(&paths, &detect, None).unwrap();
-    let opts = FixedPlaneOptions { square_mm: s.board.square_mm, ..Default::default() };
+    // As `omni-calib-plane fixed` does: points within 3 px of a square's edge dropped. A board
+    // whose stripe runs along a row of squares keeps few points then: 10 make a frame here.
+    let opts = FixedPlaneOptions {
+        square_mm: s.board.square_mm,
+        edge_clearance_px: 3.0,
+        min_points: 10,
+        ..Default::default()
+    };
     let fit = fit_fixed_plane(s.sensor.camera.as_ref(), &frames, &opts).unwrap();
     eprintln!("detected and fitted in {:.2} s", t0.elapsed().as_secs_f64());
     let mut true_stripe = frames;
@@ -181,19 +188,21 @@ fn options() -> RenderOptions {
 
 /// Issue 34's virtual target, 0.02° and 0.05 mm at 300 mm from 10 frames, is met by the chain
 /// up to the stripe: with the detected corners and the true stripe pixels the plane comes back
-/// within 0.004° and 0.014 mm (measured 2026-12-04, docs/DECISIONS.md). With omni-ridge's
-/// stripe points it is not: 0.021° and 0.066 mm here since the detector measures the profile's
-/// top (0.050° and 0.092 mm before), 40-103 points per frame on the board; other seeds give
-/// 0.018-0.17° and 0.021-0.35 mm. Near the squares' edges, where the stripe's brightness steps
-/// along it and its flanks fall on black, its centres scatter by 0.7-1.4 mm (sd). The bounds on
-/// the detected stripe guard the figure measured here.
+/// within 0.006° and 0.020 mm (measured 2026-12-04, docs/DECISIONS.md). With omni-ridge's
+/// stripe points it is not: 0.018° and 0.093 mm here, 0.010-0.037° and 0.086-0.117 mm over
+/// seeds 1-5. What is left is the detector's offset towards the real profile's tail, 0.07 px
+/// at 1.9 mm per px: the blur's own shift of a lopsided peak, which a detector cannot undo
+/// without the tail's shape. Without the 3 px clearance from the squares' edges (where the
+/// stripe's profile falls on white and black at once, its centres scatter by 0.35-0.76 px) the
+/// seeds spread over 0.018-0.17° and 0.021-0.35 mm. The bounds on the detected stripe guard the
+/// figure measured here.
 #[test]
 fn rendered_fixed_plane_from_10_frames_through_the_detectors() {
     let s = setup(1024, 7, 5, 30.0);
     let dir = tempfile::tempdir().unwrap();
     let (fit, true_stripe) = render_and_fit(&s, &options(), 10, 34, dir.path());
     let (angle, worst) = report("true stripe pixels, detected corners", &s, &true_stripe);
-    assert_eq!(true_stripe.report.frames.len(), 10, "{:?}", true_stripe.report.skipped);
+    assert!(true_stripe.report.frames.len() >= 9, "{:?}", true_stripe.report.skipped);
     assert!(angle <= 0.02, "normal off by {angle}° with the true stripe");
     assert!(worst <= 0.05, "plane off by {worst} mm at 300 mm with the true stripe");
     let (angle, worst) = report("rendered, real-shaped 4 px stripe", &s, &fit);
@@ -201,7 +210,7 @@ fn rendered_fixed_plane_from_10_frames_through_the_detectors() {
     assert!(r.frames.len() >= 9, "{} frames used", r.frames.len());
     let mut points: Vec<usize> = r.frames.iter().map(|f| f.board_points).collect();
     points.sort_unstable();
-    assert!(points[points.len() / 2] >= 45, "stripe points per frame {points:?}");
+    assert!(points[points.len() / 2] >= 20, "stripe points per frame {points:?}");
     assert!(angle <= 0.04, "normal off by {angle}°");
     assert!(worst <= 0.1, "plane off by {worst} mm at 300 mm");
     assert!(r.leave_one_out_rms_mm <= 1.3 * r.rms_mm, "{} vs {}", r.leave_one_out_rms_mm, r.rms_mm);

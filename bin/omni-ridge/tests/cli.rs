@@ -169,15 +169,16 @@ fn laser_off_frame_removes_ambient_light() {
     assert!(pts.len() as f64 >= 0.85 * std::f64::consts::TAU * 40.0, "{} points", pts.len());
     let worst = pts.iter().map(|p| ((p.u - CENTRE).hypot(p.v - CENTRE) - 40.0).abs()).fold(0.0, f64::max);
     assert!(worst < 0.05, "worst {worst}");
-    // Without the laser-off frame the lamp's slope under the ring tilts the profiles: the
-    // centres move towards it, and the lopsided ones are dropped.
+    // Without the laser-off frame the lamp's slope under the ring tilts the profiles the same
+    // way along the ring: the centres are those of the profiles' tops, which the slope barely
+    // moves (worst 0.034 px measured; 0.092 px when the windowed centroid's lean was kept).
     f.ambient_path = None;
     let out = run(&[], &stream_text(&[header(dir.path()), Record::Frame(f)]));
     let Record::Frame(g) = &records(&out.stdout)[1] else { panic!() };
     let lit = g.stripe.as_ref().unwrap();
     let worst_lit = lit.iter().map(|p| ((p.u - CENTRE).hypot(p.v - CENTRE) - 40.0).abs()).fold(0.0, f64::max);
     eprintln!("without the laser-off frame: {} points, worst {worst_lit:.3} px", lit.len());
-    assert!(worst_lit > worst && lit.len() <= pts.len(), "{} points, worst {worst_lit}", lit.len());
+    assert!(worst_lit < 0.05 && lit.len() <= pts.len(), "{} points, worst {worst_lit}", lit.len());
 }
 
 #[test]

@@ -677,8 +677,11 @@ fn the_room_scene_is_covered_as_captured_and_with_laser_off_frames() {
 /// fit alike), asserted ≤ 0.1: the detector moves each centre to its profile's top by the
 /// stripe's mean lean (+0.11 / +0.14 px from the windowed centroid alone); what is left is the
 /// blur's own shift of a lopsided peak (+0.04 / +0.01 px at 2 / 5 px,
-/// `SheetProfile::blurred_peak_offset_px`) and the sampling kernel's. 10 and 20 px wide are
-/// printed, not asserted (docs/DECISIONS.md: found 0 % and 15 %; an open gap).
+/// `SheetProfile::blurred_peak_offset_px`) and the sampling kernel's. 10 px wide, found one
+/// scale coarser (the frame's own scale sees its profiles still falling where their reach ends):
+/// covered 93 %, no false point, offset +0.059 px, spread 0.13 px (a few points re-measured from
+/// the coarse scale lie 0.5 px off: p99 0.57); asserted ≥ 90 %, none false, offset ≤ 0.1 px,
+/// spread ≤ 0.2 px. 20 px wide is printed, not asserted (docs/DECISIONS.md: 15 %; open).
 #[test]
 fn real_shaped_stripes_2_to_20_px_wide() {
     use omni_simulator::SheetProfile;
@@ -690,14 +693,15 @@ fn real_shaped_stripes_2_to_20_px_wide() {
         let tallies = bench_at(BenchObject::Plane, &opts, &[RidgeParams::default(), gauss], &positions(8), false);
         for (t, name) in tallies.iter().zip(["windowed", "gauss"]) {
             eprintln!("{}", t.line(&format!("real {fwhm} px {name}")));
-            if fwhm > 5.0 {
+            if fwhm > 10.0 {
                 continue;
             }
             let (rms, bias) = t.rms_bias();
             let spread = (rms * rms - bias * bias).max(0.0).sqrt();
             assert!(t.coverage(8).unwrap() >= 0.9, "{fwhm} px {name}: coverage {:?}", t.coverage(8));
             assert_eq!(t.false_points, 0, "{fwhm} px {name}: false points");
-            assert!(spread <= 0.04, "{fwhm} px {name}: spread {spread:.4} px");
+            let max_spread = if fwhm > 5.0 { 0.2 } else { 0.04 };
+            assert!(spread <= max_spread, "{fwhm} px {name}: spread {spread:.4} px");
             assert!((0.0..=0.1).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
         }
     }

@@ -77,6 +77,10 @@ pub const MAX_FLATNESS: f64 = 0.7;
 /// by 0.01–0.02 px on 3–20 px wide stripes, where the centroid down to the threshold moves by
 /// 0.1–0.4 px (docs/DECISIONS.md).
 pub const TOP_LEVEL: f32 = 0.8;
+/// A profile's coarse samples must still fall by this fraction of the threshold per px at both
+/// ends of its reach to count as a stripe too wide for the scale (the cone + pyramid frames' lit
+/// faces: 1–5 such profiles per frame; a 10 px real-shaped stripe: 120–180).
+const TOO_WIDE_SLOPE: f32 = 0.25;
 /// Half the arc (px) over which a stripe's leans are averaged ([`remove_steady_lean`]).
 const LEAN_HALF_ARC_PX: f64 = 12.0;
 /// Fewer profiles than this within the arc leave a point's centre where its estimator put it.
@@ -123,6 +127,8 @@ struct Buffers {
     raw: Vec<f32>,
     /// The profile above the background.
     contrast: Vec<f32>,
+    /// Profiles still falling at both ends of their reach (too wide for this scale).
+    too_wide: usize,
 }
 
 /// A point that passed the linking checks, with what a finer scale needs to re-measure it.
@@ -180,8 +186,10 @@ impl RidgeDetector {
             .collect();
         let mut kept = self.link_and_correct(&centres);
         // Profiles too wide for this scale that peak like a laser's line (a lit surface's flat
-        // top is wide at every scale).
-        let wide = centres.iter().filter(|c| c.half_width > super::scales::NARROW_HALF_WIDTH_PX && peaks(c)).count();
+        // top is wide at every scale), measured or still falling where their reach ended.
+        let measured_wide =
+            centres.iter().filter(|c| c.half_width > super::scales::NARROW_HALF_WIDTH_PX && peaks(c)).count();
+        let wide = measured_wide + buffers.too_wide;
         if let Some(coarse) = self.coarser_stripes(frame, threshold, scale, wide, kept.len()) {
             let refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
             kept.extend(refined);
@@ -408,8 +416,16 @@ impl RidgeDetector {
             return None; // the profile leaves the image
         }
         let min = |v: &[f32]| v.iter().fold(f32::INFINITY, |m, &x| m.min(x));
-        let background = min(&coarse[..=reach as usize]).max(min(&coarse[reach as usize..]));
+        let (left_min, right_min) = (min(&coarse[..=reach as usize]), min(&coarse[reach as usize..]));
+        let background = left_min.max(right_min);
         let t = threshold as f32;
+        // Still falling steeply at both ends of the reach, from a peak well above them: a stripe
+        // too wide for this scale. A lit surface's top is level and its shading falls slowly.
+        let (first, last) = (coarse[0], coarse[n - 1]);
+        let falling = coarse[1] - first > TOO_WIDE_SLOPE * t && coarse[n - 2] - last > TOO_WIDE_SLOPE * t;
+        if falling && first <= left_min && last <= right_min && coarse[reach as usize] - first.max(last) > 2.0 * t {
+            buffers.too_wide += 1;
+        }
         // Fine samples with the Gaussian kernel, outwards from the seed until `tail` samples on
         // each side are at or below the threshold and below the flank levels the checks use
         // (Blais–Rioux's filter reaches two samples further).

@@ -288,6 +288,7 @@ impl RidgeDetector {
         let y_lo = ((self.cy - self.r_out).floor().max(1.0)) as usize;
         let y_hi = ((self.cy + self.r_out).ceil() as usize).min(h.saturating_sub(2));
         let at = |x: usize, y: usize| frame.at(x, y);
+        let zeros = vec![P::from_threshold(0.0); w];
         for y in y_lo..=y_hi {
             hits.clear();
             let dy = y as f64 - self.cy;
@@ -299,22 +300,27 @@ impl RidgeDetector {
                 continue;
             }
             let x_end = x_hi as usize + 1;
-            // Pixels whose four neighbours k px away exist take the fast, branch-free test.
-            let interior = y >= k && y + k < h;
-            let (a, b) = if interior { (x_lo.max(k), x_end.min(w.saturating_sub(k))) } else { (x_lo, x_lo) };
-            // Left border, fast stretch, right border: the hits come in increasing x.
-            let border = |range: std::ops::Range<usize>| range.filter(|&x| stands_out(frame, x, y, k, t));
-            hits.extend(border(x_lo..a.max(x_lo)));
+            // The branch-free test over the row's chord, its neighbours k px away taken from the
+            // frame or, beyond its edges, from a row of zeros (as `stands_out` counts them); the
+            // hits come in increasing x.
+            let (a, b) = (x_lo.max(k), x_end.min(w.saturating_sub(k)));
             if a < b {
                 let d = frame.data;
-                let cur = &d[y * w + a..y * w + b];
-                let left = &d[y * w + a - k..y * w + b - k];
-                let right = &d[y * w + a + k..y * w + b + k];
-                let up = &d[(y - k) * w + a..(y - k) * w + b];
-                let down = &d[(y + k) * w + a..(y + k) * w + b];
-                P::for_each_contrast_hit(cur, left, right, up, down, tp, |i| hits.push(a + i));
+                let row = &d[y * w..(y + 1) * w];
+                let up = if y >= k { &d[(y - k) * w..(y - k + 1) * w] } else { &zeros[..] };
+                let down = if y + k < h { &d[(y + k) * w..(y + k + 1) * w] } else { &zeros[..] };
+                let mut scan = |lo: usize, hi: usize, left: &[P], right: &[P]| {
+                    P::for_each_contrast_hit(&row[lo..hi], left, right, &up[lo..hi], &down[lo..hi], tp, |i| {
+                        hits.push(lo + i)
+                    })
+                };
+                // Left border (left neighbours beyond the frame), stretch, right border.
+                scan(x_lo, a, &zeros[..a - x_lo], &row[x_lo + k..a + k]);
+                scan(a, b, &row[a - k..b - k], &row[a + k..b + k]);
+                scan(b, x_end, &row[b - k..x_end - k], &zeros[..x_end - b]);
+            } else {
+                hits.extend((x_lo..x_end).filter(|&x| stands_out(frame, x, y, k, t)));
             }
-            hits.extend(border(b.max(a)..x_end));
             // The current row run: (last x, best value, best x).
             let mut run: Option<(usize, f32, usize)> = None;
             for &x in &hits {

@@ -183,6 +183,8 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         y0 = y0.min(xy[1]);
         y1 = y1.max(xy[1]);
     }
+    let square = opts.square_mm;
+    let pattern = (x0 - square, x1 + square, y0 - square, y1 + square);
     let (x0, x1, y0, y1) = (x0 - pad, x1 + pad, y0 - pad, y1 + pad);
     let normal = pose.rotation * Vector3::z();
     let offset = normal.dot(&pose.translation.vector);
@@ -193,10 +195,14 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         let t = (offset - normal.dot(&ray.origin.coords)) / denom;
         (denom.abs() >= 1e-9 && t > 0.0).then(|| ray.origin + ray.dir.into_inner() * t)
     };
-    // Distance (mm) from a board point to the nearest square edge: the lines through the inner
-    // corners, which lie at multiples of the square.
-    let square = opts.square_mm;
+    // Distance (mm) from a board point to the nearest square edge: inside the pattern the lines
+    // through the inner corners, which lie at multiples of the square; outside it, its outline.
     let edge_distance = |x: f64, y: f64| {
+        let (px0, px1, py0, py1) = pattern;
+        let (dx, dy) = ((px0 - x).max(x - px1), (py0 - y).max(y - py1));
+        if dx > 0.0 || dy > 0.0 {
+            return dx.max(0.0).hypot(dy.max(0.0));
+        }
         let off = |c: f64| ((c / square) - (c / square).round()).abs() * square;
         off(x).min(off(y))
     };

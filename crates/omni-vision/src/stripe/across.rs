@@ -73,13 +73,13 @@ pub const MAX_WIDTH_SLOPE: f64 = 0.2;
 /// nearly 1.
 pub const MAX_FLATNESS: f64 = 0.7;
 /// The level, as a fraction of the peak, above which a profile's top is measured
-/// ([`Centre::lean`]): high enough that a one-sided tail 17 % of the light moves the top's centroid
-/// by 0.01–0.02 px on 3–20 px wide stripes, where the centroid down to the threshold moves by
-/// 0.1–0.4 px (docs/DECISIONS.md).
+/// ([`Centre::lean`]): high enough that a one-sided tail barely moves the top's centroid (a
+/// fifth to a tenth of what it moves the centroid down to the threshold), low enough that the
+/// top keeps a few samples (docs/DECISIONS.md).
 pub const TOP_LEVEL: f32 = 0.8;
 /// A profile's coarse samples must still fall by this fraction of the threshold per px at both
-/// ends of its reach to count as a stripe too wide for the scale (the cone + pyramid frames' lit
-/// faces: 1–5 such profiles per frame; a 10 px real-shaped stripe: 120–180).
+/// ends of its reach to count as a stripe too wide for the scale: a laser's flanks are steep
+/// there, a lit surface's shading is not (docs/DECISIONS.md).
 const TOO_WIDE_SLOPE: f32 = 0.25;
 /// Half the arc (px) over which a stripe's leans are averaged ([`remove_steady_lean`]).
 const LEAN_HALF_ARC_PX: f64 = 12.0;

@@ -335,6 +335,33 @@ fn stripes_at_every_angle_to_the_rays_are_covered() {
     }
 }
 
+/// Real-shaped 4 px stripes (`SheetProfile::real()`, a tail on one side) on the bench's plane,
+/// cylinder and sphere, laser-off frames: the visible stripe covered ≥ 90 % in every band it
+/// has (measured 97.0 % plane; 100 % cylinder and sphere), no false point, offset towards the
+/// tail ≤ 0.1 px (+0.044 / +0.069 / +0.045). Not asserted, in docs/DECISIONS.md: the walls of
+/// `corridor`, where these stripes are 7 px wide and lopsided by 0.18–0.23 at every scale (the
+/// tail and the wall's slant together) and refused as cut: 15–89 % per band from 20° to 80°.
+#[test]
+fn real_shaped_stripes_on_curved_objects_are_covered() {
+    use omni_simulator::SheetProfile;
+    let ideal = RenderOptions::ideal();
+    let laser_strength = ideal.laser_strength * 2.0;
+    let opts = RenderOptions { profile: SheetProfile::real(), stripe_fwhm_px: Some(4.0), laser_strength, ..ideal };
+    for object in [BenchObject::Plane, BenchObject::Cylinder, BenchObject::Sphere] {
+        let scene = Scene::from_file(paper_bench(object)).unwrap();
+        let t = bench_scene(&scene, &opts, &[RidgeParams::default()], &SIX_ANGLES, true, true, &grey).pop().unwrap();
+        eprintln!("{}\n{}", t.line(&format!("real 4 px, {object:?}, laser-off")), t.visible_line());
+        assert_eq!(t.false_points, 0, "{object:?}: false points");
+        let (_, bias) = t.rms_bias();
+        assert!((0.0..=0.1).contains(&bias), "{object:?}: offset {bias:+.4} px");
+        for band in 2..9 {
+            if let Some(c) = t.visible_coverage(band) {
+                assert!(c >= 0.9, "{object:?}, band {}–{}°: {c:.3}", 10 * band, 10 * band + 10);
+            }
+        }
+    }
+}
+
 /// Curved objects are measured to within a few px of their silhouettes once the room's light
 /// is taken out with a laser-off frame. Without it the silhouette's ambient edge runs under the
 /// last 3–10 px of each stripe, whose profiles are then refused as cut (lopsided): ideal

@@ -10,7 +10,8 @@
 //!   the blur measured on the frame itself, not a default.
 //!   A laser's lopsided profile (a faint tail on one side, the same all along the stripe) pulls
 //!   any centroid towards the tail: each point is moved by its stripe's mean offset between the
-//!   estimator's centre and its profile's top, so centres lie at the profile's peak.
+//!   estimator's centre and the centroid of its profile's top, and a stripe lopsided all along
+//!   its length is the laser's shape, not a cut.
 //! * [`Sampling::Rays`] samples along rays from the mirror centre, `ceil(2π · outer_radius)` of
 //!   them so neighbours are ≤ 1 px apart at the rim; a stripe at angle β to its ray is measured
 //!   with error / sin β, so rays crossing a stripe at β < 30° are skipped.

@@ -705,11 +705,12 @@ fn the_room_scene_is_covered_as_captured_and_with_laser_off_frames() {
 /// fit alike), asserted ≤ 0.1: the detector moves each centre to its profile's top by the
 /// stripe's mean lean (+0.11 / +0.14 px from the windowed centroid alone); what is left is the
 /// blur's own shift of a lopsided peak (+0.04 / +0.01 px at 2 / 5 px,
-/// `SheetProfile::blurred_peak_offset_px`) and the sampling kernel's. 10 px wide, found one
-/// scale coarser (the frame's own scale sees its profiles still falling where their reach ends):
-/// covered 93 %, no false point, offset +0.059 px, spread 0.13 px (a few points re-measured from
-/// the coarse scale lie 0.5 px off: p99 0.57); asserted ≥ 90 %, none false, offset ≤ 0.1 px,
-/// spread ≤ 0.2 px. 20 px wide is printed, not asserted (docs/DECISIONS.md: 15 %; open).
+/// `SheetProfile::blurred_peak_offset_px`) and the sampling kernel's. 10 and 20 px wide, found
+/// at coarser scales (the frame's own scale sees their profiles still falling where their reach
+/// ends), their lopsidedness kept as the laser's shape: 10 px covered 99.4 %, no false point,
+/// offset +0.062 px, spread 0.13 px (a few points re-measured from the coarse scale lie 0.5 px
+/// off); 20 px covered 95.6 %, 0.66 % false, offset +0.11 px, spread 0.16 px. Asserted: ≥ 90 %,
+/// none false (20 px: ≤ 1 %), offset ≤ 0.1 px (0.15), spread ≤ 0.2 px (0.25).
 #[test]
 fn real_shaped_stripes_2_to_20_px_wide() {
     use omni_simulator::SheetProfile;
@@ -721,16 +722,19 @@ fn real_shaped_stripes_2_to_20_px_wide() {
         let tallies = bench_at(BenchObject::Plane, &opts, &[RidgeParams::default(), gauss], &positions(8), false);
         for (t, name) in tallies.iter().zip(["windowed", "gauss"]) {
             eprintln!("{}", t.line(&format!("real {fwhm} px {name}")));
-            if fwhm > 10.0 {
-                continue;
-            }
             let (rms, bias) = t.rms_bias();
             let spread = (rms * rms - bias * bias).max(0.0).sqrt();
+            // (spread, offset, share of false points) allowed at each width.
+            let (max_spread, max_offset, max_false) = match fwhm {
+                w if w <= 5.0 => (0.04, 0.1, 0.0),
+                w if w <= 10.0 => (0.2, 0.1, 0.0),
+                _ => (0.25, 0.15, 0.01),
+            };
             assert!(t.coverage(8).unwrap() >= 0.9, "{fwhm} px {name}: coverage {:?}", t.coverage(8));
-            assert_eq!(t.false_points, 0, "{fwhm} px {name}: false points");
-            let max_spread = if fwhm > 5.0 { 0.2 } else { 0.04 };
+            let false_share = t.false_points as f64 / (t.false_points + t.errors.len()) as f64;
+            assert!(false_share <= max_false, "{fwhm} px {name}: false points {}", t.false_points);
             assert!(spread <= max_spread, "{fwhm} px {name}: spread {spread:.4} px");
-            assert!((0.0..=0.1).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
+            assert!((0.0..=max_offset).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
         }
     }
 }

@@ -60,9 +60,12 @@ pub const MAX_ASYMMETRY: f64 = 0.1;
 /// A stripe's steady lopsidedness (its points' median) up to this is taken as the laser's
 /// shape; beyond it no laser is that lopsided, and the stripe is judged as if symmetric.
 pub const MAX_STEADY_ASYMMETRY: f64 = 0.5;
-/// Fewest points of a stripe whose median lopsidedness is taken as its shape; shorter pieces
-/// are judged as if symmetric.
-const STEADY_MIN_POINTS: usize = 64;
+/// Shortest stripe (px of the frame's own scale, about one point per px) whose median
+/// lopsidedness is taken as its shape; shorter pieces are judged as if symmetric. A coarser
+/// scale's points each stand for as many px as its binning, down to [`STEADY_MIN_POINTS`].
+const STEADY_MIN_PX: usize = 64;
+/// Fewest points of a stripe whose median lopsidedness is taken as its shape, at any scale.
+const STEADY_MIN_POINTS: usize = 16;
 /// The fraction of the peak where lopsidedness is measured: low on the flanks, where a cut
 /// shows first.
 pub const ASYMMETRY_LEVEL: f32 = 0.25;
@@ -192,7 +195,7 @@ impl RidgeDetector {
             .into_iter()
             .filter_map(|(x, y, axis)| self.measure_seed(frame, x, y, axis, threshold, &mut buffers))
             .collect();
-        let mut kept = self.link_and_correct(&centres);
+        let mut kept = self.link_and_correct(&centres, scale);
         // Profiles too wide for this scale that peak like a laser's line (a lit surface's flat
         // top is wide at every scale), measured or still falling where their reach ended.
         let measured_wide =
@@ -552,7 +555,7 @@ impl RidgeDetector {
 
     /// Links each centre to its neighbours on the same stripe and returns the points that
     /// survive the checks, corrected for the blur's pull and fitted along the stripe (module docs).
-    fn link_and_correct(&self, centres: &[Centre]) -> Vec<Linked> {
+    fn link_and_correct(&self, centres: &[Centre], scale: u32) -> Vec<Linked> {
         let widest =
             half_width_quantile(centres, NARROW_PERCENTILE).map_or(f64::INFINITY, |w| MAX_HALF_WIDTH_RATIO * w);
         let along = self.params.along_stripe_px;
@@ -666,7 +669,7 @@ impl RidgeDetector {
         // the neighbours' mean tells the two apart. A laser's own shape leaves its whole stripe
         // lopsided the same way: a cut is a departure from the stripe's steady lopsidedness.
         let means: Vec<(usize, f64)> = kept.iter().zip(&lopsided).map(|(k, l)| (k.0, l.mean)).collect();
-        let steady = stripes.steady(&means);
+        let steady = stripes.steady(&means, (STEADY_MIN_PX / scale as usize).max(STEADY_MIN_POINTS));
         let mut judged = lopsided.iter();
         kept.retain(|k| {
             let l = judged.next().expect("one judgement per kept point");
@@ -800,9 +803,9 @@ impl Stripes {
     /// shape, 0 where it is not. A laser is lopsided by about as much on all its stripes, so a
     /// stripe's median counts if it lies within [`MAX_ASYMMETRY`] of the frame's typical one
     /// (the median of the stripes' medians' sizes, weighted by their points) and below
-    /// [`MAX_STEADY_ASYMMETRY`]; stripes of fewer than [`STEADY_MIN_POINTS`] points have none.
+    /// [`MAX_STEADY_ASYMMETRY`]; stripes of fewer than `min_points` points have none.
     /// Returns it for every centre, as seen along its own normal.
-    fn steady(&mut self, points: &[(usize, f64)]) -> Vec<f64> {
+    fn steady(&mut self, points: &[(usize, f64)], min_points: usize) -> Vec<f64> {
         let mut by_root: std::collections::BTreeMap<usize, Vec<f64>> = std::collections::BTreeMap::new();
         for &(i, asymmetry) in points {
             let (root, flip) = self.find(i);
@@ -810,7 +813,7 @@ impl Stripes {
         }
         let medians: Vec<(usize, f64, usize)> = by_root
             .into_iter()
-            .filter(|(_, a)| a.len() >= STEADY_MIN_POINTS)
+            .filter(|(_, a)| a.len() >= min_points)
             .map(|(root, mut a)| {
                 let mid = a.len() / 2;
                 (root, *a.select_nth_unstable_by(mid, f64::total_cmp).1, a.len())

@@ -802,7 +802,7 @@ impl Stripes {
     /// point's own normal): the median along the stripe's orientation where it is the laser's
     /// shape, 0 where it is not. A laser is lopsided by about as much on all its stripes, so a
     /// stripe's median counts if it lies within [`MAX_ASYMMETRY`] of the frame's typical one
-    /// (the median of the stripes' medians' sizes, weighted by their points) and below
+    /// (the median of the stripes' medians' magnitudes, weighted by their points) and below
     /// [`MAX_STEADY_ASYMMETRY`]; stripes of fewer than `min_points` points have none.
     /// Returns it for every centre, as seen along its own normal.
     fn steady(&mut self, points: &[(usize, f64)], min_points: usize) -> Vec<f64> {

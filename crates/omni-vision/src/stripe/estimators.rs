@@ -40,26 +40,11 @@ pub fn windowed_centroid(p: &[f32], s: &Segment, t: f32) -> Option<f64> {
     (sw > 0.0).then(|| swk / sw)
 }
 
-/// Centroid of the profile's top: weights `p − level` over the contiguous run of samples at or
-/// above `level` around the peak, widened by one sample each side (those weigh 0). With a level
-/// high on the peak (see `across::TOP_LEVEL`) a one-sided tail barely moves it, where a
-/// centroid down to the threshold follows the tail.
+/// Centroid of the profile's top: the windowed centroid of the run of samples above `level`
+/// around the peak. With a level high on the peak (see `across::TOP_LEVEL`) a one-sided tail
+/// barely moves it, where a centroid down to the threshold follows the tail.
 pub fn top_centroid(p: &[f32], s: &Segment, level: f32) -> Option<f64> {
-    let mut lo = s.peak;
-    while lo > 0 && p[lo - 1] >= level {
-        lo -= 1;
-    }
-    let mut hi = s.peak;
-    while hi + 1 < p.len() && p[hi + 1] >= level {
-        hi += 1;
-    }
-    let (mut sw, mut swk) = (0.0f64, 0.0f64);
-    for k in lo.saturating_sub(1)..=(hi + 1).min(p.len() - 1) {
-        let w = (p[k] - level).max(0.0) as f64;
-        sw += w;
-        swk += w * k as f64;
-    }
-    (sw > 0.0).then(|| swk / sw)
+    windowed_centroid(p, &super::segment_at(p, s.peak, level)?, level)
 }
 
 /// Gaussian peak fit: a parabola fitted to the logarithms of the samples above 30 % of the

@@ -60,11 +60,13 @@ pub const MAX_ASYMMETRY: f64 = 0.1;
 /// A stripe's steady lopsidedness (its points' median) up to this is taken as the laser's
 /// shape; beyond it no laser is that lopsided, and the stripe is judged as if symmetric.
 pub const MAX_STEADY_ASYMMETRY: f64 = 0.5;
-/// Shortest stripe (px of the frame's own scale, about one point per px) whose median
-/// lopsidedness is taken as its shape; shorter pieces are judged as if symmetric. A coarser
-/// scale's points each stand for as many px as its binning, down to [`STEADY_MIN_POINTS`].
+/// Least length of stripe (px of the frame's own scale, about one point per px), summed over
+/// the frame's stripes that are lopsided alike, for that lopsidedness to be taken as the
+/// laser's shape; with less the stripes are judged as if symmetric. A coarser scale's points
+/// each stand for as many px as its binning, down to [`STEADY_MIN_POINTS`].
 const STEADY_MIN_PX: usize = 64;
-/// Fewest points of a stripe whose median lopsidedness is taken as its shape, at any scale.
+/// Fewest points of a stripe whose median lopsidedness can count as the laser's shape, at any
+/// scale.
 const STEADY_MIN_POINTS: usize = 16;
 /// The fraction of the peak where lopsidedness is measured: low on the flanks, where a cut
 /// shows first.
@@ -803,7 +805,9 @@ impl Stripes {
     /// shape, 0 where it is not. A laser is lopsided by about as much on all its stripes, so a
     /// stripe's median counts if it lies within [`MAX_ASYMMETRY`] of the frame's typical one
     /// (the median of the stripes' medians' magnitudes, weighted by their points) and below
-    /// [`MAX_STEADY_ASYMMETRY`]; stripes of fewer than `min_points` points have none.
+    /// [`MAX_STEADY_ASYMMETRY`], and the stripes that agree so hold `min_points` points in all:
+    /// the laser's shape is the frame's evidence, not one stripe's, so a laser seen only on
+    /// short stripes keeps it. Stripes of fewer than [`STEADY_MIN_POINTS`] have none.
     /// Returns it for every centre, as seen along its own normal.
     fn steady(&mut self, points: &[(usize, f64)], min_points: usize) -> Vec<f64> {
         let mut by_root: std::collections::BTreeMap<usize, Vec<f64>> = std::collections::BTreeMap::new();
@@ -813,7 +817,7 @@ impl Stripes {
         }
         let medians: Vec<(usize, f64, usize)> = by_root
             .into_iter()
-            .filter(|(_, a)| a.len() >= min_points)
+            .filter(|(_, a)| a.len() >= STEADY_MIN_POINTS)
             .map(|(root, mut a)| {
                 let mid = a.len() / 2;
                 (root, *a.select_nth_unstable_by(mid, f64::total_cmp).1, a.len())
@@ -830,9 +834,11 @@ impl Stripes {
                 2 * seen >= total
             })
             .map_or(0.0, |s| s.0);
+        let agrees = |m: f64| m.abs() <= MAX_STEADY_ASYMMETRY && (m.abs() - typical).abs() <= MAX_ASYMMETRY;
+        let support: usize = medians.iter().filter(|m| agrees(m.1)).map(|m| m.2).sum();
         let shape: std::collections::BTreeMap<usize, f64> = medians
             .into_iter()
-            .filter(|&(_, m, _)| m.abs() <= MAX_STEADY_ASYMMETRY && (m.abs() - typical).abs() <= MAX_ASYMMETRY)
+            .filter(|&(_, m, _)| support >= min_points && agrees(m))
             .map(|(root, m, _)| (root, m))
             .collect();
         (0..self.parent.len())

@@ -84,9 +84,11 @@ struct Args {
     /// with a warning, and a run in which no stripe is that long fails.
     #[arg(long, default_value_t = 0.0, value_name = "PX", allow_negative_numbers = true)]
     along_stripe: f64,
-    /// With --sampling rays only: the camera's optical blur (Gaussian PSF σ, px; pixel area not
-    /// included), whose pull on curved stripes is removed [default: measured on each frame, as
-    /// the normal sampling always does].
+    /// The lens's blur (Gaussian PSF σ, px; pixel area not included), whose pull on curved
+    /// stripes (σ²κ/2 towards their centre of curvature) is removed [default: from the --camera
+    /// file's optics (F-number, wavelength, pixel pitch, defocus) if it has them, else measured
+    /// on each frame's stripes, which counts a wide laser sheet's own width as blur and
+    /// over-corrects wide curved stripes].
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     optics_blur: Option<f64>,
     /// Coarsest scale at which stripes wider than --max-width are searched: 1 (off), 2, 4, 8 or
@@ -202,10 +204,17 @@ fn main() -> ExitCode {
             max_scale: args.max_scale,
         };
         params.validate().map_err(CliError::usage)?;
-        let camera = match &args.camera {
-            Some(path) => Some(omni_formats::CameraFile::load(path)?.1),
-            None => None,
+        let (camera, lens_blur) = match &args.camera {
+            Some(path) => {
+                let (file, model) = omni_formats::CameraFile::load(path)?;
+                (Some(model), file.optics.map(|o| o.psf_sigma_px()))
+            }
+            None => (None, None),
         };
+        let params = RidgeParams { optics_blur_px: params.optics_blur_px.or(lens_blur), ..params };
+        if let Some(path) = &args.camera {
+            params.validate().map_err(|e| format!("{}: field optics: {e}", path.display()))?;
+        }
         if let Some(dir) = &args.overlay {
             std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         }

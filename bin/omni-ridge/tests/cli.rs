@@ -555,3 +555,54 @@ fn the_whole_frame_is_searched_without_a_camera_and_a_roi_narrows_it() {
     let top = points(&["--roi", "0,0,128,40"]);
     assert!(!top.is_empty() && top.iter().all(|p| p.v < 39.5) && top.len() < all.len() / 2, "{} points", top.len());
 }
+
+/// Mean signed radial error (px) of the points of the first frame `args` finds in `text`.
+fn mean_radial_error(args: &[&str], text: &str, radius: f64) -> f64 {
+    let out = run(args, text);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let recs = records(&out.stdout);
+    let Record::Frame(f) = &recs[1] else { panic!("no frame") };
+    let pts = f.stripe.as_ref().unwrap();
+    assert!(pts.len() > 150, "{} points", pts.len());
+    pts.iter().map(|p| (p.u - CENTRE).hypot(p.v - CENTRE) - radius).sum::<f64>() / pts.len() as f64
+}
+
+/// A ring 5 px wide (σ 2.2 px) drawn sharp, so its width is all the sheet's and no lens pulls
+/// it: measured on the frame, the blur's pull is taken as the profile's whole σ² (5.5 px² with
+/// the sampling kernel) and the ring comes out 0.075 px too large; with the lens's blur known
+/// (given, or from the camera file's optics) only the kernel's and the pixel's σ² are removed,
+/// and the ring keeps its radius (−0.0001 px).
+#[test]
+fn a_known_lens_blur_keeps_wide_curved_stripes_in_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let radius = 32.0;
+    let mut img = GrayImage::new(SIZE, SIZE, 8);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            let d = (x as f64 - CENTRE).hypot(y as f64 - CENTRE) - radius;
+            img.data[(y * SIZE + x) as usize] = (160.0 * (-d * d / 9.68).exp()).round() as u16;
+        }
+    }
+    write_gray_png(&dir.path().join("wide.png"), &img).unwrap();
+    let text = stream_text(&[header(dir.path()), frame(0, "wide.png"), status(1)]);
+    let measured = mean_radial_error(&[], &text, radius);
+    let given = mean_radial_error(&["--optics-blur", "0"], &text, radius);
+    assert!(measured > 0.05, "measured blur: {measured:+.4} px");
+    assert!(given.abs() < 0.02, "--optics-blur 0: {given:+.4} px");
+    // An in-focus F/2 lens on 10 µm pixels: σ 0.05 px of diffraction, next to nothing.
+    let mut params = omni_model::HyperbolicParams::paper();
+    (params.width, params.height, params.cx_px, params.cy_px) = (SIZE, SIZE, CENTRE, CENTRE);
+    (params.fx_px, params.fy_px) = (243.75, 243.75);
+    let mut camera = omni_formats::CameraFile::new(omni_formats::CameraSpec::Hyperbolic(params));
+    camera.optics = Some(omni_model::Optics {
+        wavelength_nm: 650.0,
+        f_number: 2.0,
+        pixel_pitch_um: 10.0,
+        defocus_px: 0.0,
+        speckle_patterns: 2,
+    });
+    let cam = dir.path().join("camera.json");
+    omni_formats::write_doc(&cam, &camera).unwrap();
+    let from_optics = mean_radial_error(&["--camera", cam.to_str().unwrap()], &text, radius);
+    assert!((from_optics - given).abs() < 0.005, "camera optics {from_optics:+.4}, given 0: {given:+.4} px");
+}

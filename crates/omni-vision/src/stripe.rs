@@ -171,9 +171,10 @@ pub struct RidgeParams {
     /// Averages speckle and noise (±3 px: about 35 % lower RMS under speckle) at the price of
     /// lateral resolution.
     pub along_stripe_px: f64,
-    /// With [`Sampling::Rays`] only: the camera's optical blur (Gaussian PSF σ, px), pixel
-    /// integration not included, whose pull on curved stripes the `normal` post-pass removes;
-    /// `None` (the default) measures the blur on each frame, as the normal sampling always does.
+    /// The lens's blur (Gaussian PSF σ, px of the frame), pixel integration not included, whose
+    /// pull on curved stripes is removed (with the pixel's area and the sampling kernel on top).
+    /// `None` (the default) measures the blur on each frame's stripes, which takes a wide laser
+    /// sheet's own width for blur: wide curved stripes are then over-corrected.
     pub optics_blur_px: Option<f64>,
     /// With [`Sampling::Normal`]: the coarsest scale (1, 2, 4, 8 or 16: frames binned that many
     /// pixels square) at which stripes too wide for `max_width` are searched (`scales`).

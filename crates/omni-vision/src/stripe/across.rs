@@ -555,6 +555,26 @@ impl RidgeDetector {
         }
     }
 
+    /// The variance (px² of this scale) of the blur whose pull on curved stripes is removed: the
+    /// lens's PSF given in the settings ([`super::RidgeParams::optics_blur_px`], in the frame's
+    /// own pixels) with the pixel's area and the sampling kernel, else measured on `centres`,
+    /// the stripe's own profiles (a frame's other candidates, lit areas and textures refused by
+    /// the checks, are wider and would inflate it). A profile's width is the sheet's as well as
+    /// the blur's, and only the blur pulls: where the sheet is wider than the blur the
+    /// measured variance over-corrects (σ²κ/2 with the sheet's σ²), so a known lens is better.
+    fn blur_variance<'a>(&self, centres: impl Iterator<Item = &'a Centre>, scale: u32) -> f64 {
+        match self.params.optics_blur_px {
+            // Binned `scale` pixels square, the lens's σ shrinks by the scale and each coarse
+            // pixel's area is a box one coarse pixel wide.
+            Some(sigma) => {
+                (sigma / scale as f64).powi(2)
+                    + super::normal::PIXEL_AREA_VARIANCE_PX2
+                    + super::sampling::SAMPLE_SIGMA_PX.powi(2)
+            }
+            None => pull_variance_median(centres).unwrap_or(0.0),
+        }
+    }
+
     /// Links each centre to its neighbours on the same stripe and returns the points that
     /// survive the checks, corrected for the blur's pull and fitted along the stripe (module docs).
     fn link_and_correct(&self, centres: &[Centre], scale: u32) -> Vec<Linked> {
@@ -678,9 +698,7 @@ impl RidgeDetector {
             let s = steady[k.0];
             (l.mean - s).abs() <= MAX_ASYMMETRY && l.own.is_none_or(|a| (a - s).abs() <= 2.0 * MAX_ASYMMETRY)
         });
-        // The blur, from the stripe's own profiles (a frame's other candidates, lit areas and
-        // textures refused above, are wider and would inflate it).
-        let blur_variance = pull_variance_median(kept.iter().map(|k| &centres[k.0])).unwrap_or(0.0);
+        let blur_variance = self.blur_variance(kept.iter().map(|k| &centres[k.0]), scale);
         let mut out = Vec::with_capacity(kept.len());
         for (i, curvature, offset, local) in kept {
             let c = &centres[i];

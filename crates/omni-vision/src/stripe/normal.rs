@@ -45,7 +45,7 @@ pub const MIN_BIAS_PX: f64 = 0.005;
 /// Samples beyond the stripe's edges on the normal profile, for the background (px).
 const BACKGROUND_MARGIN_PX: f64 = 3.0;
 /// Variance (px²) of the pixel's area as a blur: a unit box, 1/12.
-const PIXEL_AREA_VARIANCE_PX2: f64 = 1.0 / 12.0;
+pub(super) const PIXEL_AREA_VARIANCE_PX2: f64 = 1.0 / 12.0;
 
 /// Local shape of a stripe around a point: slope dr/ds, second derivative d²r/ds², and the
 /// slope of ln(intensity) along s (s: arc length around the mirror centre, px).

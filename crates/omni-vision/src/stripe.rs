@@ -7,7 +7,7 @@
 //!   point is kept only if it agrees with its neighbours on the stripe (width, symmetry, a sheet
 //!   that goes on): a profile cut by a silhouette or a crease has no reliable centre, whatever the
 //!   ambient level. The blur's pull towards a curved stripe's centre of curvature is removed with
-//!   the blur measured on the frame itself, not a default.
+//!   the lens's blur where it is given, else with the blur measured on the frame itself.
 //!   A laser's lopsided profile (a faint tail on one side, the same all along the stripe) pulls
 //!   any centroid towards the tail: each point is moved by its stripe's mean offset between the
 //!   estimator's centre and the centroid of its profile's top, and a stripe lopsided all along

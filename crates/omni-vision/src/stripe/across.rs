@@ -21,10 +21,12 @@
 //!   along it, so the stripe's local shape (a cubic through its neighbours) and the change of its
 //!   contrast along it give the pull, σ²κ/2 on an evenly lit arc and more or less where the
 //!   stripe bends faster, dims or brightens, as on a curved object's flank before its
-//!   silhouette. σ² is measured on the frame itself (the median, over the stripe points that
-//!   pass the checks above, of the second moment that scales the pull, see
-//!   [`RidgeDetector::pull_variance`]), so that the pull comes out right for any lens, Gaussian
-//!   or defocused, without being told its blur, and lit areas refused as stripes do not enter it;
+//!   silhouette. σ² is the lens's blur when it is known ([`super::RidgeParams::optics_blur_px`])
+//!   with the pixel's and the sampling kernel's; otherwise it is measured on the frame itself
+//!   (the median, over the stripe points that pass the checks above, of the second moment that
+//!   scales the pull, see [`RidgeDetector::pull_variance`]), so that the pull comes out right
+//!   for any lens, Gaussian or defocused, without being told its blur, as long as the laser's
+//!   sheet is narrower than the blur (its own width does not pull);
 //! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): a
 //!   line through the neighbours once a wider parabola's curvature is taken out, so that a curved
 //!   stripe keeps its centre.

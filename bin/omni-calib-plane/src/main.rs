@@ -106,6 +106,11 @@ struct FixedArgs {
     /// Stripe detector: coarsest scale (1, 2, 4, 8, 16) at which wider stripes are searched.
     #[arg(long, default_value_t = 8, value_name = "N")]
     max_scale: u32,
+    /// Stripe detector: the lens's blur (Gaussian PSF σ, px), whose pull on curved stripes is
+    /// removed [default: from the camera file's optics if it has them, else measured on each
+    /// frame's stripes, as omni-ridge].
+    #[arg(long, value_name = "PX", allow_negative_numbers = true)]
+    optics_blur: Option<f64>,
     /// Keep stripe points up to this far outside the printed pattern (mm; negative: inside).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     margin_mm: f64,
@@ -385,6 +390,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         threshold: a.threshold,
         max_width: a.max_width,
         max_scale: a.max_scale,
+        optics_blur_px: a.optics_blur,
         ..Default::default()
     };
     ridge.validate().map_err(CliError::usage)?;
@@ -406,7 +412,12 @@ fn fixed(a: &FixedArgs) -> CliResult {
         (None, Some("luma")) => Channel::Luma,
         (None, Some(c)) => Channel::Single(c.parse().map_err(CliError::usage)?),
     };
-    let (_, camera) = CameraFile::load(&a.camera)?;
+    let (camera_file, camera) = CameraFile::load(&a.camera)?;
+    let ridge = omni_vision::stripe::RidgeParams {
+        optics_blur_px: ridge.optics_blur_px.or(camera_file.optics.map(|o| o.psf_sigma_px())),
+        ..ridge
+    };
+    ridge.validate().map_err(|e| CliError::new(format!("{}: field optics: {e}", a.camera.display())))?;
     let board: omni_formats::BoardFile = read_doc(&a.board)?;
     let (paths, given) = match &a.stripes {
         Some(path) => {

@@ -54,6 +54,11 @@ fn calibrates_the_real_images_exports_and_reimports() {
     assert!(rms <= 0.4, "RMS {rms} px");
     assert!(cam["report"]["images_used"].as_u64().unwrap() >= 14);
     assert!(cam["report"]["parameters"]["xi"]["std"].as_f64().unwrap() > 0.0);
+    // The lens's blur on the board edges: per image 0.56-0.64 px (MiniOmni1-15), median 0.60.
+    let blur = &cam["report"]["lens_blur"];
+    let sigma = blur["psf_sigma_px"].as_f64().unwrap();
+    assert!((0.55..=0.65).contains(&sigma) && blur["images"] == 15, "{blur}");
+    assert!(String::from_utf8_lossy(&out.stdout).contains("--optics-blur") || stderr(&out).contains("--optics-blur"));
     assert_eq!(std::fs::read_dir(&overlay).unwrap().count(), 15);
     let kalibr = std::fs::read_to_string(dir.path().join("camchain.yaml")).unwrap();
     assert!(kalibr.contains("camera_model: omni") && kalibr.contains("resolution: [752, 480]"), "{kalibr}");

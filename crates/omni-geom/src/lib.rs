@@ -23,6 +23,15 @@ pub use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Unit, UnitQuaternion, 
 pub use plane::Plane;
 pub use ray::{IntersectError, Intersection, Ray, intersect_ray_plane};
 
+/// The error function (Abramowitz & Stegun 7.1.26, |error| < 1.5e-7).
+pub fn erf(x: f64) -> f64 {
+    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
+    let poly =
+        t * (0.254_829_592 + t * (-0.284_496_736 + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+    let y = 1.0 - poly * (-x * x).exp();
+    if x >= 0.0 { y } else { -y }
+}
+
 /// Rotates `v` about the unit axis `axis` by `angle` (radians, right-hand rule).
 pub fn rotate_about(axis: &Unit<Vector3<f64>>, angle: f64, v: &Vector3<f64>) -> Vector3<f64> {
     Rotation3::from_axis_angle(axis, angle) * v

@@ -26,7 +26,7 @@ use crate::profile::{Shape, SheetProfile};
 use crate::rng::{SplitMix64, mix};
 use crate::scene::{Hit, Scene};
 use crate::sensor::Sensor;
-use omni_geom::{Point3, Vector2, Vector3};
+use omni_geom::{Point3, Vector2, Vector3, erf};
 use omni_model::LightPlane;
 use omni_model::Optics;
 use rayon::prelude::*;
@@ -850,15 +850,6 @@ impl PixelPsf {
         });
         out
     }
-}
-
-/// The error function (Abramowitz & Stegun 7.1.26, |error| < 1.5e-7).
-fn erf(x: f64) -> f64 {
-    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
-    let poly =
-        t * (0.254_829_592 + t * (-0.284_496_736 + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
-    let y = 1.0 - poly * (-x * x).exp();
-    if x >= 0.0 { y } else { -y }
 }
 
 /// Signal of an `n × n` grid of samples inside pixel (x, y), row-major.

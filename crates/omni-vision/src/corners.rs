@@ -34,6 +34,7 @@
 //! ```
 
 mod curvature;
+pub mod edge_blur;
 pub mod gray;
 pub mod grid;
 pub mod overlay;
@@ -41,6 +42,7 @@ pub mod saddle;
 #[cfg(test)]
 mod tests;
 
+pub use edge_blur::{EdgeBlur, edge_blur};
 pub use gray::{GrayF32, gaussian_blur, load_gray};
 pub use saddle::{Candidate, SaddleOptions, Window};
 

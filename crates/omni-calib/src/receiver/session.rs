@@ -19,7 +19,7 @@ use super::validate::{self, HeldOut};
 use super::{Calibration, ModelKind, Observation, Options, export};
 use omni_formats::{BoardFile, CameraFile, CameraSpec, read_doc, write_doc};
 use omni_model::HyperbolicParams;
-use omni_vision::corners::{DetectorOptions, GrayF32, detect_board, load_gray, overlay};
+use omni_vision::corners::{DetectorOptions, GrayF32, detect_board, edge_blur, load_gray, overlay};
 use omni_vision::image_io::expand_image_paths;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -197,10 +197,50 @@ fn read_mirror(path: &Path) -> Result<HyperbolicParams, Error> {
     }
 }
 
-/// Detected corners and the images (kept for the overlays).
+/// Detected corners, the images (kept for the overlays) and the lens's blur on each image's
+/// board edges (px, where measured).
 struct Detected {
     corners: CornersFile,
     images: Vec<Option<GrayF32>>,
+    blurs: Vec<f64>,
+}
+
+/// The lens's blur over the images (PSF σ, px): median, fewest and most, and how many images.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LensBlur {
+    pub median_px: f64,
+    pub min_px: f64,
+    pub max_px: f64,
+    pub images: usize,
+}
+
+impl LensBlur {
+    /// Over the images' blurs; `None` if there are none.
+    pub fn of(mut blurs: Vec<f64>) -> Option<LensBlur> {
+        if blurs.is_empty() {
+            return None;
+        }
+        blurs.sort_by(f64::total_cmp);
+        let n = blurs.len();
+        let median_px = if n % 2 == 1 { blurs[n / 2] } else { 0.5 * (blurs[n / 2 - 1] + blurs[n / 2]) };
+        Some(LensBlur { median_px, min_px: blurs[0], max_px: blurs[n - 1], images: n })
+    }
+
+    /// The line the tool prints.
+    pub fn line(&self) -> String {
+        format!(
+            "lens blur on the board edges: PSF σ {:.2} px (median of {} images, {:.2}-{:.2}); omni-ridge --optics-blur {:.2} \
+             removes only the lens's pull from curved stripes",
+            self.median_px, self.images, self.min_px, self.max_px, self.median_px
+        )
+    }
+
+    /// Its entry in the report.
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "psf_sigma_px": self.median_px, "min_px": self.min_px, "max_px": self.max_px, "images": self.images,
+        })
+    }
 }
 
 /// Detects the board in every image (in parallel); all images must have one size.
@@ -213,23 +253,28 @@ fn detect(
 ) -> Result<Detected, Error> {
     let detector = DetectorOptions { annulus, ..Default::default() };
     out.detection_started(paths.len());
-    let results: Vec<Result<(GrayF32, ImageCorners), String>> = paths
+    // Each image, its corners and its edges' blur (px).
+    type OneImage = (GrayF32, ImageCorners, Option<f64>);
+    let results: Vec<Result<OneImage, String>> = paths
         .par_iter()
         .map(|p| {
             let img = load_gray(p)?;
             let name = p.display().to_string();
             let found = detect_board(&img, board.inner_cols, board.inner_rows, &detector);
+            let blur = found.as_ref().ok().and_then(|b| edge_blur(&img, b)).map(|e| e.sigma_px);
             out.image_detected();
             let entry = ImageCorners::from_detection(name, found);
-            Ok((img, entry))
+            Ok((img, entry, blur))
         })
         .collect();
     out.detection_finished();
     let mut size: Option<(usize, usize, String)> = None;
     let mut file = CornersFile::new(0, 0, board.inner_cols, board.inner_rows);
     let mut images = Vec::new();
+    let mut blurs = Vec::new();
     for r in results {
-        let (img, entry) = r?;
+        let (img, entry, blur) = r?;
+        blurs.extend(blur);
         match &size {
             None => size = Some((img.width, img.height, entry.name.clone())),
             Some((w, h, first)) if (*w, *h) != (img.width, img.height) => {
@@ -246,7 +291,7 @@ fn detect(
     let (w, h, _) = size.ok_or_else(|| Error::Failed("no images given".into()))?;
     file.width = w as u32;
     file.height = h as u32;
-    Ok(Detected { corners: file, images })
+    Ok(Detected { corners: file, images, blurs })
 }
 
 /// A corners file, checked and matched against the board.
@@ -281,7 +326,7 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     let paths = if opts.corners.is_some() { Vec::new() } else { expand_image_paths(&opts.images)? };
     let annulus = annulus::resolve(checked.annulus.as_ref(), &paths, out)?;
     let detected = match &opts.corners {
-        Some(path) => Detected { corners: load_corners(path, &board)?, images: Vec::new() },
+        Some(path) => Detected { corners: load_corners(path, &board)?, images: Vec::new(), blurs: Vec::new() },
         None => detect(&paths, &board, annulus.as_ref().map(|a| a.annulus), opts.overlay.is_some(), out)?,
     };
     if let Some(annulus::Resolved { source: Some((rim_w, rim_h, rim_source)), .. }) = &annulus
@@ -323,6 +368,10 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     for line in summary_lines(&cal) {
         out.say(&line);
     }
+    let lens_blur = LensBlur::of(detected.blurs.clone());
+    if let Some(b) = &lens_blur {
+        out.say(&b.line());
+    }
     let warnings: Vec<String> =
         corners.board_size_warning().into_iter().chain(validate::warnings(&cal, &fit)).collect();
     for w in &warnings {
@@ -346,7 +395,11 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     let mut spec = cal.spec.clone();
     set_viewpoint(&mut spec, checked.viewpoint_mm);
     let mut file = CameraFile::new(spec);
-    file.report = Some(report(&cal, opts.model, &board, annulus, &warnings, held_out.as_ref()));
+    let mut r = report(&cal, opts.model, &board, annulus, &warnings, held_out.as_ref());
+    if let Some(b) = &lens_blur {
+        r["lens_blur"] = b.json();
+    }
+    file.report = Some(r);
     write_doc(&opts.output, &file)?;
     Ok(())
 }

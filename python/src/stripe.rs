@@ -116,8 +116,8 @@ fn image_of(w: usize, h: usize, bit_depth: u8, data: Vec<u16>, what: &str) -> Py
 /// image (omni-ridge without --camera). `ambient`, a laser-off frame of the same size, depth and
 /// kind, read the same way, is subtracted first. `max_scale` (1–16) is the coarsest scale at
 /// which stripes too wide for `max_width` are searched. `optics_blur_px` is the lens's PSF σ
-/// whose pull on curved stripes is removed (default: from `camera`'s optics if it has them,
-/// else measured on the frame's stripes, as omni-ridge). Settings left as None keep
+/// whose pull on curved stripes is removed (default: from `camera`, its lens_blur_px or its
+/// optics, else measured on the frame's stripes, as omni-ridge). Settings left as None keep
 /// omni-ridge's defaults (method windowed, sampling normal, threshold 4 % of full scale; widths
 /// in px; `threshold` in the image's units). Returns an (n, 5) float64 array of
 /// (u, v, intensity, width, quality) rows: u, v in px, quality a bit set (1 saturated, 2 weak,
@@ -175,8 +175,8 @@ pub fn detect_stripe<'py>(
     let (detector, what) = match camera {
         Some(cam) => {
             let (w, h) = cam.model.image_size();
-            // The lens's blur from the camera's optics unless given, as omni-ridge --camera.
-            let lens_blur = cam.file.optics.map(|o| o.psf_sigma_px());
+            // The lens's blur from the camera unless given, as omni-ridge --camera.
+            let lens_blur = cam.file.lens_blur();
             let params = RidgeParams { optics_blur_px: params.optics_blur_px.or(lens_blur), ..params };
             params.validate().map_err(|e| crate::value_error(format!("camera optics: {e}")))?;
             (RidgeDetector::new(w, h, cam.model.mirror_circle(), params), "the camera's image")

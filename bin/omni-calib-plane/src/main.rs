@@ -107,8 +107,8 @@ struct FixedArgs {
     #[arg(long, default_value_t = 8, value_name = "N")]
     max_scale: u32,
     /// Stripe detector: the lens's blur (Gaussian PSF σ, px), whose pull on curved stripes is
-    /// removed [default: from the camera file's optics if it has them, else measured on each
-    /// frame's stripes, as omni-ridge].
+    /// removed [default: from the camera file (its lens_blur_px, else its optics), else measured
+    /// on each frame's stripes, as omni-ridge].
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     optics_blur: Option<f64>,
     /// Keep stripe points up to this far outside the printed pattern (mm; negative: inside).
@@ -413,10 +413,8 @@ fn fixed(a: &FixedArgs) -> CliResult {
         (None, Some(c)) => Channel::Single(c.parse().map_err(CliError::usage)?),
     };
     let (camera_file, camera) = CameraFile::load(&a.camera)?;
-    let ridge = omni_vision::stripe::RidgeParams {
-        optics_blur_px: ridge.optics_blur_px.or(camera_file.optics.map(|o| o.psf_sigma_px())),
-        ..ridge
-    };
+    let ridge =
+        omni_vision::stripe::RidgeParams { optics_blur_px: ridge.optics_blur_px.or(camera_file.lens_blur()), ..ridge };
     ridge.validate().map_err(|e| CliError::new(format!("{}: field optics: {e}", a.camera.display())))?;
     let board: omni_formats::BoardFile = read_doc(&a.board)?;
     let (paths, given) = match &a.stripes {

@@ -86,8 +86,9 @@ struct Args {
     along_stripe: f64,
     /// The lens's blur (Gaussian PSF σ, px; pixel area not included), whose pull on curved
     /// stripes (σ²κ/2 towards their centre of curvature) is removed [default: from the --camera
-    /// file's optics (F-number, wavelength, pixel pitch, defocus) if it has them, else measured
-    /// on each frame's stripes, which counts a wide laser sheet's own width as blur and
+    /// file: its lens_blur_px (omni-calib-receiver measures it on the boards' edges), else what
+    /// its optics imply (F-number, wavelength, pixel pitch, defocus); without either, measured on
+    /// each frame's stripes, which counts a wide laser sheet's own width as blur and
     /// over-corrects wide curved stripes].
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     optics_blur: Option<f64>,
@@ -207,7 +208,7 @@ fn main() -> ExitCode {
         let (camera, lens_blur) = match &args.camera {
             Some(path) => {
                 let (file, model) = omni_formats::CameraFile::load(path)?;
-                (Some(model), file.optics.map(|o| o.psf_sigma_px()))
+                (Some(model), file.lens_blur())
             }
             None => (None, None),
         };

@@ -570,8 +570,8 @@ fn mean_radial_error(args: &[&str], text: &str, radius: f64) -> f64 {
 /// A ring 5 px wide (σ 2.2 px) drawn sharp, so its width is all the sheet's and no lens pulls
 /// it: measured on the frame, the blur's pull is taken as the profile's whole σ² (5.5 px² with
 /// the sampling kernel) and the ring comes out 0.075 px too large; with the lens's blur known
-/// (given, or from the camera file's optics) only the kernel's and the pixel's σ² are removed,
-/// and the ring keeps its radius (−0.0001 px).
+/// (given, or from the camera file: its measured `lens_blur_px`, else its optics) only the
+/// kernel's and the pixel's σ² are removed, and the ring keeps its radius (−0.0001 px).
 #[test]
 fn a_known_lens_blur_keeps_wide_curved_stripes_in_place() {
     let dir = tempfile::tempdir().unwrap();
@@ -605,4 +605,10 @@ fn a_known_lens_blur_keeps_wide_curved_stripes_in_place() {
     omni_formats::write_doc(&cam, &camera).unwrap();
     let from_optics = mean_radial_error(&["--camera", cam.to_str().unwrap()], &text, radius);
     assert!((from_optics - given).abs() < 0.005, "camera optics {from_optics:+.4}, given 0: {given:+.4} px");
+    // The blur a calibration measured (lens_blur_px) comes before the optics'.
+    camera.lens_blur_px = Some(1.5);
+    omni_formats::write_doc(&cam, &camera).unwrap();
+    let measured_lens = mean_radial_error(&["--camera", cam.to_str().unwrap()], &text, radius);
+    let given_lens = mean_radial_error(&["--optics-blur", "1.5"], &text, radius);
+    assert!((measured_lens - given_lens).abs() < 1e-9 && (measured_lens - given).abs() > 0.02, "{measured_lens:+.4}");
 }

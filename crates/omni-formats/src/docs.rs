@@ -112,6 +112,11 @@ pub struct CameraFile {
     /// simulator renders with them and `omni-eval budget` predicts noise from them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub optics: Option<Optics>,
+    /// The lens's blur as measured (Gaussian PSF σ, px, the pixel's area not included), e.g. by
+    /// `omni-calib-receiver` on its boards' edges; the stripe detector removes its pull on curved
+    /// stripes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lens_blur_px: Option<f64>,
     /// A colour camera's filters and processing (mosaic, responses, white balance, colour
     /// matrix); absent: a monochrome camera. The simulator renders colour frames from it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -133,9 +138,16 @@ impl CameraFile {
             version: Self::VERSION,
             model,
             optics: None,
+            lens_blur_px: None,
             colour: None,
             report: None,
         }
+    }
+
+    /// The lens's blur (PSF σ, px) the stripe detector should remove: the measured one, else the
+    /// one the optics imply; `None` if the file has neither.
+    pub fn lens_blur(&self) -> Option<f64> {
+        self.lens_blur_px.or(self.optics.map(|o| o.psf_sigma_px()))
     }
 
     /// Reads and validates `camera.json`, returning the usable model.
@@ -154,6 +166,11 @@ impl CameraFile {
         }
         if let Some(colour) = &file.colour {
             colour.validate().map_err(|m| Error::new(source_name, "field colour", m))?;
+        }
+        if let Some(blur) = file.lens_blur_px
+            && !(blur.is_finite() && blur > 0.0 && blur <= 5.0)
+        {
+            return Err(Error::new(source_name, "field lens_blur_px", format!("must be within (0, 5] px, got {blur}")));
         }
         Ok((file, model))
     }
@@ -531,6 +548,21 @@ mod tests {
         std::fs::write(&path, serde_json::to_vec(&v).unwrap()).unwrap();
         let e = CameraFile::load(&path).err().unwrap().to_string();
         assert!(e.contains("camera.json") && e.contains("field model") && e.contains("16384"), "{e}");
+    }
+
+    #[test]
+    fn the_lens_blur_is_read_and_checked() {
+        let parse = |v: &serde_json::Value| CameraFile::parse(&serde_json::to_vec(v).unwrap(), "camera.json");
+        let mut v = camera_json();
+        assert_eq!(parse(&v).unwrap().0.lens_blur(), None);
+        v["optics"] = serde_json::to_value(Optics::paper()).unwrap();
+        let from_optics = parse(&v).unwrap().0.lens_blur().unwrap();
+        assert!((from_optics - Optics::paper().psf_sigma_px()).abs() < 1e-12);
+        v["lens_blur_px"] = 0.6.into();
+        assert_eq!(parse(&v).unwrap().0.lens_blur(), Some(0.6));
+        v["lens_blur_px"] = (-1.0).into();
+        let e = parse(&v).err().unwrap().to_string();
+        assert_eq!(e, "camera.json: field lens_blur_px: must be within (0, 5] px, got -1");
     }
 
     fn scanner_parse(v: &serde_json::Value) -> Result<(ScannerFile, TransmitterModel)> {

@@ -229,9 +229,9 @@ impl LensBlur {
     /// The line the tool prints.
     pub fn line(&self) -> String {
         format!(
-            "lens blur on the board edges: PSF σ {:.2} px (median of {} images, {:.2}-{:.2}); omni-ridge --optics-blur {:.2} \
-             removes only the lens's pull from curved stripes",
-            self.median_px, self.images, self.min_px, self.max_px, self.median_px
+            "lens blur on the board edges: PSF σ {:.2} px (median of {} images, {:.2}-{:.2}), in camera.json as \
+             lens_blur_px: omni-ridge --camera removes only the lens's pull from curved stripes",
+            self.median_px, self.images, self.min_px, self.max_px
         )
     }
 
@@ -395,6 +395,7 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     let mut spec = cal.spec.clone();
     set_viewpoint(&mut spec, checked.viewpoint_mm);
     let mut file = CameraFile::new(spec);
+    file.lens_blur_px = lens_blur.map(|b| b.median_px);
     let mut r = report(&cal, opts.model, &board, annulus, &warnings, held_out.as_ref());
     if let Some(b) = &lens_blur {
         r["lens_blur"] = b.json();

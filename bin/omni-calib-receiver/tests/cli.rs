@@ -421,7 +421,7 @@ fn convert_reports_the_difference_and_refuses_beyond_the_tolerance() {
     let text = r#"{"format": "omniscan.camera", "version": 1, "model": {"kind": "hyperbolic", "a_mm": 35.33,
         "b_mm": 18.756, "fx_px": 1950.0, "fy_px": 1950.0, "cx_px": 511.5, "cy_px": 511.5, "width": 1024,
         "height": 1024, "rim_radius_mm": 25.0, "inner_radius_mm": 4.0, "camera_offset_mm": [0, 0, 0],
-        "camera_tilt_deg": [0, 0]}}"#;
+        "camera_tilt_deg": [0, 0]}, "lens_blur_px": 0.6}"#;
     std::fs::write(&cam, text).unwrap();
     let out_path = dir.path().join("ocam.json");
     let out = bin().arg("convert").arg(&cam).arg("--to").arg("ocam").arg("-o").arg(&out_path).output().unwrap();
@@ -429,6 +429,7 @@ fn convert_reports_the_difference_and_refuses_beyond_the_tolerance() {
     assert!(stderr(&out).contains("converted to Ocam over"), "{}", stderr(&out));
     let c: serde_json::Value = serde_json::from_slice(&std::fs::read(&out_path).unwrap()).unwrap();
     assert_eq!(c["model"]["kind"], "ocam");
+    assert_eq!(c["lens_blur_px"], 0.6, "the lens's blur stays with the camera");
     let viewpoint_z = c["model"]["viewpoint_mm"][2].as_f64().unwrap();
     assert!((viewpoint_z - 2.0 * 35.33f64.hypot(18.756)).abs() < 1e-9, "rays start at the focus 2c: {viewpoint_z}");
     let ray = c["report"]["max_ray_difference_deg"].as_f64().unwrap();

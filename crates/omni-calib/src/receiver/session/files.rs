@@ -135,7 +135,13 @@ pub fn convert(opts: &ConvertOptions, out: &dyn Reporter) -> Result<(), Error> {
             opts.max_pixel_px
         )));
     }
-    let mut file = CameraFile::new(c.spec);
+    // The lens, its blur and the colour filters are the same camera's whatever the model.
+    let mut file = CameraFile {
+        optics: source.optics,
+        lens_blur_px: source.lens_blur_px,
+        colour: source.colour.clone(),
+        ..CameraFile::new(c.spec)
+    };
     file.report = Some(serde_json::json!({
         "converted_from": camera.display().to_string(),
         "max_ray_difference_deg": c.max_ray_deg,

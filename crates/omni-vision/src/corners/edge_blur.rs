@@ -37,11 +37,12 @@ pub struct EdgeBlur {
 /// edge could be measured (too short, too little contrast, a fit that failed).
 pub fn edge_blur(img: &GrayF32, board: &BoardCorners) -> Option<EdgeBlur> {
     let at: std::collections::HashMap<[u32; 2], [f64; 2]> = board.corners.iter().map(|c| (c.index, c.px)).collect();
+    let brightest = img.data.iter().fold(0.0f32, |m, &v| m.max(v)) as f64;
     let mut sigmas: Vec<f64> = board
         .corners
         .iter()
         .flat_map(|c| [[c.index[0] + 1, c.index[1]], [c.index[0], c.index[1] + 1]].map(|n| (c.px, at.get(&n).copied())))
-        .filter_map(|(a, b)| edge_sigma(img, a, b?))
+        .filter_map(|(a, b)| edge_sigma(img, brightest, a, b?))
         .collect();
     if sigmas.is_empty() {
         return None;
@@ -51,8 +52,9 @@ pub fn edge_blur(img: &GrayF32, board: &BoardCorners) -> Option<EdgeBlur> {
     Some(EdgeBlur { sigma_px, edges: sigmas.len() })
 }
 
-/// The PSF σ (px) on the edge between corners `a` and `b`, or `None`.
-fn edge_sigma(img: &GrayF32, a: [f64; 2], b: [f64; 2]) -> Option<f64> {
+/// The PSF σ (px) on the edge between corners `a` and `b`, or `None`; `brightest` is the image's
+/// largest sample.
+fn edge_sigma(img: &GrayF32, brightest: f64, a: [f64; 2], b: [f64; 2]) -> Option<f64> {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let length = dx.hypot(dy);
     if length < MIN_EDGE_PX {
@@ -87,9 +89,9 @@ fn edge_sigma(img: &GrayF32, a: [f64; 2], b: [f64; 2]) -> Option<f64> {
     };
     let (dark, light) = (mean_on(-1.0)?, mean_on(1.0)?);
     let step = light - dark;
-    let full = img.data.iter().fold(0.0f32, |m, &v| m.max(v)) as f64;
-    // A faint step (a board seen edge-on, a shadow) or a clipped one says nothing of the lens.
-    if step.abs() < 0.1 * full || samples.iter().any(|s| s.1 >= full && full >= 255.0) {
+    // A faint step (a board seen edge-on, a shadow) or a clipped one (at 255, the full scale of
+    // the detector's images) says nothing of the lens.
+    if step.abs() < 0.1 * brightest || samples.iter().any(|s| s.1 >= 255.0) {
         return None;
     }
     let fit = lm::minimize(&EdgeFit { samples: &samples }, &[dark, step, 0.0, 1.0], &lm::Options::default());

@@ -47,7 +47,9 @@ fisheye (Kannala-Brandt k1..k4, as OpenCV cv::fisheye and Kalibr pinhole-equi; a
 pinhole-equi). ocam, hyperbolic, pinhole and fisheye fits are checked against a Mei fit of the same images. \
 Images may be files or directories (png, jpg, tif). \
 Images whose board is not found, has too few corners, or fits much worse than the others are \
-reported and left out. camera.json is written only if the calibration succeeded.\n\
+reported and left out. camera.json is written only if the calibration succeeded. \
+It also carries the lens's blur measured on the boards' edges (lens_blur_px: the PSF's σ in px, \
+the median over the images), which omni-ridge --camera removes from curved stripes.\n\
 Exported Kalibr and OpenCV files describe the unit sphere (x, y, −z) of the omniscan world about \
 the viewpoint, the pinhole and fisheye ones a camera frame (x, y, −z) (written into the files as a comment; see \
 docs/FORMATS.md).\n\

@@ -197,10 +197,10 @@ fn options() -> RenderOptions {
 /// 0.076 mm here, 0.006-0.033° and 0.060-0.101 mm over seeds 1-5 (with the blur measured on the
 /// frames 0.019° and 0.086 mm, 0.008-0.036° and 0.064-0.111 mm). What is left is the detector's
 /// offset towards the real profile's tail, 0.04-0.05 px at 1.9 mm per px: the blur's own shift
-/// of a lopsided peak, which a detector cannot undo without the tail's shape. Without the 3 px clearance from the squares' edges (where the
-/// stripe's profile falls on white and black at once, its centres scatter by 0.35-0.76 px) the
-/// seeds spread over 0.018-0.17° and 0.021-0.35 mm. The bounds on the detected stripe guard the
-/// figure measured here.
+/// of a lopsided peak, which a detector cannot undo without the tail's shape. Without the 3 px
+/// clearance from the squares' edges (where the stripe's profile falls on white and black at
+/// once, its centres scatter by 0.35-0.76 px) the seeds spread over 0.018-0.17° and 0.021-0.35
+/// mm. The bounds on the detected stripe guard the figure measured here.
 #[test]
 fn rendered_fixed_plane_from_10_frames_through_the_detectors() {
     let s = setup(1024, 7, 5, 30.0);

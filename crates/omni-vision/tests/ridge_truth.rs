@@ -317,8 +317,8 @@ fn ideal_optics_accuracy_on_the_bench() {
 
 /// Stripes crossing the rays from the mirror centre at every angle are measured: walls along
 /// the x axis at 40, 85, 200 and 300 mm from the sensor carry stripes at 10–20°, 20–40°, 40–70°
-/// and 50–80° to the rays, the bench plane at 80–90°. Ideal optics, laser-off frames; coverage of the
-/// visible stripe ([`Visibility`]: twice the threshold, not cut) ≥ 90 % in every 10° band.
+/// and 50–80° to the rays, the bench plane at 80–90°. Ideal optics, laser-off frames; coverage
+/// of the visible stripe ([`Visibility`]: twice the threshold, not cut) ≥ 90 % in every 10° band.
 #[test]
 fn stripes_at_every_angle_to_the_rays_are_covered() {
     let mut every = Tally::default();

@@ -53,6 +53,14 @@ impl Camera {
         self.model.image_size()
     }
 
+    /// The lens's blur (PSF σ, px) the stripe detector removes from curved stripes: camera.json's
+    /// `lens_blur_px` (measured by omni-calib-receiver on its boards' edges), else what its
+    /// `optics` imply, else None.
+    #[getter]
+    fn lens_blur_px(&self) -> Option<f64> {
+        self.file.lens_blur()
+    }
+
     /// The mirror annulus (centre x, centre y, inner radius, outer radius), all in pixels.
     #[getter]
     fn mirror_circle(&self) -> (f64, f64, f64, f64) {

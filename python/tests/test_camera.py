@@ -99,6 +99,20 @@ def test_pixels_outside_the_mirror_have_no_ray(sim):
     assert np.isfinite(dirs[2]).all()
 
 
+def test_the_lens_blur_comes_from_the_measurement_else_the_optics():
+    doc = {"format": "omniscan.camera", "version": 1, "model": {"kind": "mei", **MEI}}
+    assert omniscan.Camera.from_json(json.dumps(doc)).lens_blur_px is None
+    # F/4 at 650 nm on 4.65 um pixels, a 1.5 px blur circle: hypot(0.42 * 0.559, 1.5 / 4) px.
+    doc["optics"] = {"wavelength_nm": 650.0, "f_number": 4.0, "pixel_pitch_um": 4.65, "defocus_px": 1.5}
+    expected = np.hypot(0.42 * 0.65 * 4.0 / 4.65, 1.5 / 4.0)
+    assert omniscan.Camera.from_json(json.dumps(doc)).lens_blur_px == pytest.approx(expected, rel=1e-9)
+    doc["lens_blur_px"] = 0.6
+    assert omniscan.Camera.from_json(json.dumps(doc)).lens_blur_px == 0.6
+    doc["lens_blur_px"] = 9.0
+    with pytest.raises(omniscan.FormatError, match="lens_blur_px"):
+        omniscan.Camera.from_json(json.dumps(doc))
+
+
 def test_bad_files_and_arguments_are_refused_with_their_names(tmp_path):
     with pytest.raises(OSError, match="missing.json"):
         omniscan.Camera.load(tmp_path / "missing.json")

@@ -460,6 +460,9 @@ fn fixed(a: &FixedArgs) -> CliResult {
         "margin_mm": a.margin_mm,
         "edge_clearance_px": a.edge_clearance_px,
         "min_points": a.min_points,
+        // The lens's blur the stripe detector removed from curved stripes; null: measured on each
+        // frame's stripes (or the centres came from --stripes).
+        "optics_blur_px": if a.stripes.is_some() { None } else { ridge.optics_blur_px },
     });
     let mut params = omni_model::FixedPlanesParams::single(&fit.plane);
     params.planes[0].laser = a.laser_id;

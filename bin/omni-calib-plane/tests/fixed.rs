@@ -122,7 +122,8 @@ fn a_board_file_larger_than_the_board_is_named_with_the_likely_size() {
     assert!(!dir.path().join("scanner.json").exists());
 }
 
-/// The edge clearance is reported with the inputs; a negative or non-finite one is a usage error.
+/// The edge clearance and the lens's blur are reported with the inputs; a negative or
+/// non-finite one is a usage error.
 #[test]
 fn the_edge_clearance_is_reported_and_a_negative_one_refused() {
     let dir = tempfile::tempdir().unwrap();
@@ -131,15 +132,19 @@ fn the_edge_clearance_is_reported_and_a_negative_one_refused() {
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
     assert_eq!(report["report"]["inputs"]["edge_clearance_px"], 3.0, "{report}");
-    for bad in ["-1", "nan"] {
+    // The camera has no lens blur: the stripe detector measured it on each frame.
+    assert_eq!(report["report"]["inputs"]["optics_blur_px"], serde_json::Value::Null, "{report}");
+    let named =
+        [("--edge-clearance-px", "-1", "--edge-clearance-px"), ("--edge-clearance-px", "nan", "--edge-clearance-px")];
+    for (flag, bad, says) in named.into_iter().chain([("--optics-blur", "-1", "optics blur")]) {
         let out = Command::new(BIN)
             .current_dir(dir.path())
-            .args(["fixed", "--camera", "camera.json", "--board", "board.json", "--edge-clearance-px", bad])
+            .args(["fixed", "--camera", "camera.json", "--board", "board.json", flag, bad])
             .arg(frame(3))
             .output()
             .unwrap();
         let se = text(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{bad}: {se}");
-        assert!(se.contains("--edge-clearance-px") && se.lines().count() == 1, "{bad}: {se}");
+        assert_eq!(out.status.code(), Some(2), "{flag} {bad}: {se}");
+        assert!(se.contains(says) && se.lines().count() == 1, "{flag} {bad}: {se}");
     }
 }

@@ -175,10 +175,7 @@ pub fn detect_stripe<'py>(
     let (detector, what) = match camera {
         Some(cam) => {
             let (w, h) = cam.model.image_size();
-            // The lens's blur from the camera unless given, as omni-ridge --camera.
-            let lens_blur = cam.file.lens_blur();
-            let params = RidgeParams { optics_blur_px: params.optics_blur_px.or(lens_blur), ..params };
-            params.validate().map_err(|e| crate::value_error(format!("camera optics: {e}")))?;
+            let params = params.with_lens_blur_of(&cam.file).map_err(|e| crate::value_error(format!("camera: {e}")))?;
             (RidgeDetector::new(w, h, cam.model.mirror_circle(), params), "the camera's image")
         }
         None => (RidgeDetector::whole_frame(img.width, img.height, params), "the image"),

@@ -413,9 +413,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         (None, Some(c)) => Channel::Single(c.parse().map_err(CliError::usage)?),
     };
     let (camera_file, camera) = CameraFile::load(&a.camera)?;
-    let ridge =
-        omni_vision::stripe::RidgeParams { optics_blur_px: ridge.optics_blur_px.or(camera_file.lens_blur()), ..ridge };
-    ridge.validate().map_err(|e| CliError::new(format!("{}: field optics: {e}", a.camera.display())))?;
+    let ridge = ridge.with_lens_blur_of(&camera_file).map_err(|e| format!("{}: {e}", a.camera.display()))?;
     let board: omni_formats::BoardFile = read_doc(&a.board)?;
     let (paths, given) = match &a.stripes {
         Some(path) => {

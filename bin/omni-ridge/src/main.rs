@@ -205,17 +205,13 @@ fn main() -> ExitCode {
             max_scale: args.max_scale,
         };
         params.validate().map_err(CliError::usage)?;
-        let (camera, lens_blur) = match &args.camera {
+        let (camera, params) = match &args.camera {
             Some(path) => {
                 let (file, model) = omni_formats::CameraFile::load(path)?;
-                (Some(model), file.lens_blur())
+                (Some(model), params.with_lens_blur_of(&file).map_err(|e| format!("{}: {e}", path.display()))?)
             }
-            None => (None, None),
+            None => (None, params),
         };
-        let params = RidgeParams { optics_blur_px: params.optics_blur_px.or(lens_blur), ..params };
-        if let Some(path) = &args.camera {
-            params.validate().map_err(|e| format!("{}: field optics: {e}", path.display()))?;
-        }
         if let Some(dir) = &args.overlay {
             std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         }

@@ -198,6 +198,15 @@ impl Default for RidgeParams {
 }
 
 impl RidgeParams {
+    /// These settings with the lens's blur taken from `camera` (its measured `lens_blur_px`, else
+    /// what its optics imply) unless [`optics_blur_px`](Self::optics_blur_px) is set, checked;
+    /// the message names the field.
+    pub fn with_lens_blur_of(self, camera: &omni_formats::CameraFile) -> Result<RidgeParams, String> {
+        let params = RidgeParams { optics_blur_px: self.optics_blur_px.or(camera.lens_blur()), ..self };
+        params.validate().map_err(|e| format!("field lens_blur_px / optics: {e}"))?;
+        Ok(params)
+    }
+
     /// The threshold for a frame whose samples saturate at `max_value`.
     pub fn threshold_for(&self, max_value: f64) -> f64 {
         self.threshold.unwrap_or(0.04 * max_value)
@@ -232,6 +241,13 @@ impl RidgeParams {
         }
         Ok(())
     }
+}
+
+/// The variance (px² of a frame binned `scale` pixels square) of the blur that pulls curved
+/// stripes when the lens's PSF σ (`sigma_px`, in the frame's own pixels) is known: the lens's,
+/// the pixel's area (one binned pixel's box) and the sampling kernel's.
+fn known_blur_variance(sigma_px: f64, scale: u32) -> f64 {
+    (sigma_px / scale as f64).powi(2) + crate::PIXEL_AREA_VARIANCE_PX2 + sampling::SAMPLE_SIGMA_PX.powi(2)
 }
 
 /// A sample type the detector reads directly: 8- or 16-bit.

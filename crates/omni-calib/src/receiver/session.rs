@@ -216,10 +216,11 @@ pub struct LensBlur {
 
 impl LensBlur {
     /// Over the images' blurs; `None` if there are none.
-    pub fn of(mut blurs: Vec<f64>) -> Option<LensBlur> {
+    pub fn of(blurs: &[f64]) -> Option<LensBlur> {
         if blurs.is_empty() {
             return None;
         }
+        let mut blurs = blurs.to_vec();
         blurs.sort_by(f64::total_cmp);
         let n = blurs.len();
         let median_px = if n % 2 == 1 { blurs[n / 2] } else { 0.5 * (blurs[n / 2 - 1] + blurs[n / 2]) };
@@ -368,7 +369,7 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     for line in summary_lines(&cal) {
         out.say(&line);
     }
-    let lens_blur = LensBlur::of(detected.blurs.clone());
+    let lens_blur = LensBlur::of(&detected.blurs);
     if let Some(b) = &lens_blur {
         out.say(&b.line());
     }

@@ -10,10 +10,8 @@
 //! `omni-ridge --optics-blur` takes it.
 
 use super::{BoardCorners, GrayF32};
+use crate::PIXEL_AREA_VARIANCE_PX2;
 use omni_geom::lm::{self, Problem};
-
-/// Variance (px²) of a pixel's area along any direction: a unit square's.
-const PIXEL_AREA_VARIANCE_PX2: f64 = 1.0 / 12.0;
 /// Shortest edge (px between its corners) measured: the next parallel edge must lie beyond the
 /// pixels fitted, and the X-junctions at its ends away from them.
 const MIN_EDGE_PX: f64 = 12.0;

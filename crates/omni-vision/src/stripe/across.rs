@@ -566,13 +566,7 @@ impl RidgeDetector {
     /// measured variance over-corrects (σ²κ/2 with the sheet's σ²), so a known lens is better.
     fn blur_variance<'a>(&self, centres: impl Iterator<Item = &'a Centre>, scale: u32) -> f64 {
         match self.params.optics_blur_px {
-            // Binned `scale` pixels square, the lens's σ shrinks by the scale and each coarse
-            // pixel's area is a box one coarse pixel wide.
-            Some(sigma) => {
-                (sigma / scale as f64).powi(2)
-                    + super::normal::PIXEL_AREA_VARIANCE_PX2
-                    + super::sampling::SAMPLE_SIGMA_PX.powi(2)
-            }
+            Some(sigma) => super::known_blur_variance(sigma, scale),
             None => pull_variance_median(centres).unwrap_or(0.0),
         }
     }

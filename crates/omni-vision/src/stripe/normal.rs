@@ -19,7 +19,6 @@
 //! [`MAX_MOVE_PX`]. Steger's Hessian method is left alone: its centre comes from the image's own
 //! second derivatives, not from the ray's profile.
 
-use super::sampling::SAMPLE_SIGMA_PX;
 use super::{
     Frame, Method, Pixel, RayRadius, RidgeDetector, SAMPLE_STEP_PX, StripePoint, fine_segment, min_or_nan, quality,
 };
@@ -44,8 +43,6 @@ pub const MAX_MOVE_PX: f64 = 0.5;
 pub const MIN_BIAS_PX: f64 = 0.005;
 /// Samples beyond the stripe's edges on the normal profile, for the background (px).
 const BACKGROUND_MARGIN_PX: f64 = 3.0;
-/// Variance (px²) of the pixel's area as a blur: a unit box, 1/12.
-pub(super) const PIXEL_AREA_VARIANCE_PX2: f64 = 1.0 / 12.0;
 
 /// Local shape of a stripe around a point: slope dr/ds, second derivative d²r/ds², and the
 /// slope of ln(intensity) along s (s: arc length around the mirror centre, px).
@@ -77,7 +74,7 @@ impl RidgeDetector {
         let log_intensity: Vec<f64> = points.iter().map(|p| p.intensity.max(1e-9).ln()).collect();
         let shapes: Vec<Option<Shape>> = (0..points.len()).map(|k| local_shape(&polar, &log_intensity, k)).collect();
         let blur_variance = match self.params.optics_blur_px {
-            Some(sigma) => sigma * sigma + PIXEL_AREA_VARIANCE_PX2 + SAMPLE_SIGMA_PX.powi(2),
+            Some(sigma) => super::known_blur_variance(sigma, 1),
             None => measured_blur_variance(&points, &shapes, threshold).unwrap_or(0.0),
         };
         // The normal profiles' buffers, reused (raw samples, contrast).

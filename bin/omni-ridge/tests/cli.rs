@@ -219,13 +219,8 @@ fn keep_going_writes_error_records_and_fails_at_the_end() {
 fn frames_of_another_size_than_the_camera_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let text = scene(dir.path());
-    let mut params = omni_model::HyperbolicParams::paper();
-    (params.width, params.height, params.cx_px, params.cy_px) = (160, 128, 79.5, 63.5);
-    params.fx_px = 243.75;
-    params.fy_px = 243.75;
     let cam = dir.path().join("camera.json");
-    omni_formats::write_doc(&cam, &omni_formats::CameraFile::new(omni_formats::CameraSpec::Hyperbolic(params)))
-        .unwrap();
+    omni_formats::write_doc(&cam, &small_camera(160)).unwrap();
     let out = run(&["--camera", cam.to_str().unwrap()], &text);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1));
@@ -556,6 +551,15 @@ fn the_whole_frame_is_searched_without_a_camera_and_a_roi_narrows_it() {
     assert!(!top.is_empty() && top.iter().all(|p| p.v < 39.5) && top.len() < all.len() / 2, "{} points", top.len());
 }
 
+/// The paper sensor's camera scaled to `width` × 128 px, centred on the frame.
+fn small_camera(width: u32) -> omni_formats::CameraFile {
+    let mut params = omni_model::HyperbolicParams::paper();
+    (params.width, params.height) = (width, SIZE);
+    (params.cx_px, params.cy_px) = ((width as f64 - 1.0) / 2.0, CENTRE);
+    (params.fx_px, params.fy_px) = (243.75, 243.75);
+    omni_formats::CameraFile::new(omni_formats::CameraSpec::Hyperbolic(params))
+}
+
 /// Mean signed radial error (px) of the points of the first frame `args` finds in `text`.
 fn mean_radial_error(args: &[&str], text: &str, radius: f64) -> f64 {
     let out = run(args, text);
@@ -590,10 +594,7 @@ fn a_known_lens_blur_keeps_wide_curved_stripes_in_place() {
     assert!(measured > 0.05, "measured blur: {measured:+.4} px");
     assert!(given.abs() < 0.02, "--optics-blur 0: {given:+.4} px");
     // An in-focus F/2 lens on 10 µm pixels: σ 0.05 px of diffraction, next to nothing.
-    let mut params = omni_model::HyperbolicParams::paper();
-    (params.width, params.height, params.cx_px, params.cy_px) = (SIZE, SIZE, CENTRE, CENTRE);
-    (params.fx_px, params.fy_px) = (243.75, 243.75);
-    let mut camera = omni_formats::CameraFile::new(omni_formats::CameraSpec::Hyperbolic(params));
+    let mut camera = small_camera(SIZE);
     camera.optics = Some(omni_model::Optics {
         wavelength_nm: 650.0,
         f_number: 2.0,

@@ -90,8 +90,19 @@ pub const MAX_FLATNESS: f64 = 0.7;
 /// The level, as a fraction of the peak, above which a profile's top is measured
 /// ([`Centre::lean`]): high enough that a one-sided tail barely moves the top's centroid (a
 /// fifth to a tenth of what it moves the centroid down to the threshold), low enough that the
-/// top keeps a few samples (docs/DECISIONS.md).
+/// top keeps a few samples (docs/DECISIONS.md). A cubic fitted to the top has its vertex above it.
 pub const TOP_LEVEL: f32 = 0.8;
+/// Half the window of the cubic fitted to a profile's top ([`Centre::top_shape`]), in
+/// half-maximum half-widths: wide enough for a third derivative, narrow enough that a one-sided
+/// tail's slope below the top does not bend the cubic (docs/DECISIONS.md).
+const TOP_HALF_WINDOW: f64 = 0.75;
+/// The largest skew of a profile's top (L‴/L″ × the profile's σ, [`Centre::top_shape`]) a
+/// laser's shape makes: a one-sided tail holding a third of the light gives 0.17; speckle on a
+/// wide, flat top gives more (docs/DECISIONS.md).
+const MAX_TOP_SKEW: f64 = 0.3;
+/// A stripe's median top shape counts when it exceeds this many of its standard errors (as if
+/// its profiles scattered independently; neighbours share pixels, so they do not).
+const SIGNIFICANT_ERRORS: f64 = 5.0;
 /// A profile's coarse samples must still fall by this fraction of the threshold per px at both
 /// ends of its reach to count as a stripe too wide for the scale: a laser's flanks are steep
 /// there, a lit surface's shading is not (docs/DECISIONS.md).
@@ -154,8 +165,9 @@ pub(super) struct Linked {
     pub normal: (f64, f64),
     /// Half-maximum width (px).
     pub half_width: f64,
-    /// The centre's offset from its profile's top along `normal` (px; [`Centre::lean`]); `None`
-    /// where it says nothing of the laser's shape (saturated or flat-topped profiles).
+    /// The centre's offset along `normal` from the peak of the light its profile blurs (px;
+    /// [`Centre::lean`] less the blur's shift of a lopsided peak); `None` where it says nothing
+    /// of the laser's shape (saturated or flat-topped profiles).
     pub lean: Option<f64>,
 }
 
@@ -179,6 +191,12 @@ struct Centre {
     /// `normal` (px): 0 on a symmetric straight stripe, the tail's pull on a lopsided one;
     /// `None` for a saturated profile (its plateau has no top to measure).
     lean: Option<f64>,
+    /// The shape of the profile's top in units of the profile's σ (half-maximum width / 2.355):
+    /// the top's centroid less the vertex of a cubic through the top's logarithm L, and L‴/L″
+    /// there (see [`stripe_top`]), both along `normal`. The vertex is the
+    /// image's peak; a blur of variance s moved the lopsided peak of the light it blurred by
+    /// −(s/2)·L‴/L″. `None` where the top fits no cubic.
+    top_shape: Option<[f64; 2]>,
 }
 
 impl RidgeDetector {
@@ -521,9 +539,15 @@ impl RidgeDetector {
             if saturated { quality::SATURATED } else { 0 } | self.contrast_and_width_flags(peak, width, t, max_width);
         let point = StripePoint { u, v, intensity: peak as f64, width, quality: flags };
         let pull_variance = (!saturated).then(|| self.pull_variance(raw, q, &seg, t, index)).flatten();
+        // The top: the samples above TOP_LEVEL of the peak, their centroid and shape.
         let top = if saturated { None } else { estimators::top_centroid(q, &seg, TOP_LEVEL * peak) };
-        let lean = top.map(|centre| (index - centre) * SAMPLE_STEP_PX);
-        Some(Centre { point, normal: (nx, ny), half_width, asymmetry, pull_variance, flatness, lean })
+        let lean = top.map(|(centre, _)| (index - centre) * SAMPLE_STEP_PX);
+        let sigma = half_width / FWHM_PER_SIGMA;
+        let top_shape = top.filter(|_| flatness <= LEAN_MAX_FLATNESS).and_then(|(centre, top)| {
+            let (vertex, skew) = stripe_top(q, &top, half_width)?;
+            Some([(centre - vertex) * SAMPLE_STEP_PX / sigma, skew / SAMPLE_STEP_PX * sigma])
+        });
+        Some(Centre { point, normal: (nx, ny), half_width, asymmetry, pull_variance, flatness, lean, top_shape })
     }
 
     /// The variance σ² (px²) for which the blur moves this profile's centre by σ²κ/2 towards the
@@ -569,6 +593,15 @@ impl RidgeDetector {
             Some(sigma) => super::known_blur_variance(sigma, scale),
             None => pull_variance_median(centres).unwrap_or(0.0),
         }
+    }
+
+    /// The variance (px² of this scale) of the blur between the light and the profiles' samples
+    /// whose shift of lopsided peaks the leans undo ([`Linked::lean`]): the lens's PSF given in the
+    /// settings with the pixel's area and the sampling kernel, else those two alone. Unlike the
+    /// pull's, it is never measured on the profiles: a wide sheet's width would count as blur
+    /// and over-correct, where leaving out an unknown lens under-corrects.
+    fn peak_blur_variance(&self, scale: u32) -> f64 {
+        super::known_blur_variance(self.params.optics_blur_px.unwrap_or(0.0), scale)
     }
 
     /// Links each centre to its neighbours on the same stripe and returns the points that
@@ -695,6 +728,13 @@ impl RidgeDetector {
             (l.mean - s).abs() <= MAX_ASYMMETRY && l.own.is_none_or(|a| (a - s).abs() <= 2.0 * MAX_ASYMMETRY)
         });
         let blur_variance = self.blur_variance(kept.iter().map(|k| &centres[k.0]), scale);
+        // The laser's shape, like its steady lopsidedness, is the stripe's: the medians over the
+        // stripe of its tops' shapes, in units of each profile's σ (alike for a laser's shape
+        // at any width), where they stand out from the profiles' scatter. Per profile they are
+        // noisy (a cubic's third derivative); along a bend or a step they are not the laser's.
+        let shapes: Vec<(usize, [f64; 2])> = kept.iter().filter_map(|k| Some((k.0, centres[k.0].top_shape?))).collect();
+        let stripe_shape = stripes.medians(&shapes, STEADY_MIN_POINTS);
+        let peak_blur = self.peak_blur_variance(scale);
         let mut out = Vec::with_capacity(kept.len());
         for (i, curvature, offset, local) in kept {
             let c = &centres[i];
@@ -712,7 +752,12 @@ impl RidgeDetector {
             let mut p = c.point;
             p.u += shift * c.normal.0;
             p.v += shift * c.normal.1;
-            let lean = c.lean.filter(|_| c.flatness <= LEAN_MAX_FLATNESS);
+            // From the top's centroid to the image's peak, and back by the blur's shift of a
+            // lopsided peak, −(s/2)·L‴/L″ (`Centre::top_shape`).
+            let sigma = c.half_width / FWHM_PER_SIGMA;
+            let [top_offset, skew] = stripe_shape.of(&mut stripes, i);
+            let (to_peak, deblur) = (top_offset * sigma, 0.5 * peak_blur * skew / sigma);
+            let lean = c.lean.filter(|_| c.flatness <= LEAN_MAX_FLATNESS).map(|lean| lean + to_peak - deblur);
             out.push(Linked { point: p, lean, ..c.linked() });
         }
         out
@@ -725,10 +770,10 @@ impl Centre {
     }
 }
 
-/// Moves each point by the mean lean ([`Centre::lean`]) of its stripe within
-/// ±[`LEAN_HALF_ARC_PX`]: from the estimator's centre to the profile's top. A laser's tail lies
-/// on the same side of its stripe all along it, so the mean keeps the tail's pull and averages
-/// away each profile's noise, which at the top alone is 1.5–3 times the estimator's.
+/// Moves each point by the mean lean ([`Linked::lean`]) of its stripe within
+/// ±[`LEAN_HALF_ARC_PX`]: from the estimator's centre to the peak of the light. A laser's tail
+/// lies on the same side of its stripe all along it, so the mean keeps the tail's pull and
+/// averages away each profile's noise, which at the top alone is 1.5–3 times the estimator's.
 fn remove_steady_lean(points: &mut [Linked]) {
     let placed = points.iter().map(|l| [l.point.u, l.point.v, l.normal.0, l.normal.1]);
     let grid = Grid::from_placed(placed, LEAN_HALF_ARC_PX);
@@ -762,6 +807,19 @@ fn remove_steady_lean(points: &mut [Linked]) {
         l.point.u -= shift * l.normal.0;
         l.point.v -= shift * l.normal.1;
     }
+}
+
+/// The top of a profile (`q` above its background, half-maximum width `half_width` px; `top`
+/// its samples above [`TOP_LEVEL`] of the peak) as [`estimators::log_cubic_top`] fits it:
+/// (vertex, skew) in samples. `None` where the fit says nothing of the laser's shape: a vertex
+/// outside the top, or a skew beyond [`MAX_TOP_SKEW`].
+fn stripe_top(q: &[f32], top: &Segment, half_width: f64) -> Option<(f64, f64)> {
+    // `as` truncates: ⌊x + ½⌋ rounds (`f64::round` is a library call on baseline x86-64).
+    let half_window = ((TOP_HALF_WINDOW * 0.5 * half_width / SAMPLE_STEP_PX + 0.5) as usize).max(2);
+    let (vertex, skew) = estimators::log_cubic_top(q, top.peak, half_window)?;
+    let sigma = half_width / FWHM_PER_SIGMA / SAMPLE_STEP_PX;
+    let inside = (top.start as f64 - 1.0..=top.end as f64).contains(&vertex);
+    (inside && (skew * sigma).abs() <= MAX_TOP_SKEW).then_some((vertex, skew))
 }
 
 /// A point's lopsidedness ([`Centre::asymmetry`]): its neighbours' mean, and its own where too
@@ -814,6 +872,31 @@ impl Stripes {
         }
     }
 
+    /// Each stripe's medians of its points' `(index, values)` (values along each point's own
+    /// normal) where they stand out from their scatter (over [`SIGNIFICANT_ERRORS`] of their
+    /// standard error, from their median absolute deviation), else 0; stripes of fewer than
+    /// `min_points` have none.
+    fn medians<const N: usize>(&mut self, points: &[(usize, [f64; N])], min_points: usize) -> StripeMedians<N> {
+        let mut oriented: Vec<(usize, [f64; N])> = points
+            .iter()
+            .map(|&(i, values)| {
+                let (root, flip) = self.find(i);
+                (root, if flip { values.map(|v| -v) } else { values })
+            })
+            .collect();
+        oriented.sort_unstable_by_key(|p| p.0);
+        let mut by_root = vec![[0.0; N]; self.parent.len()];
+        let mut values = Vec::new();
+        for run in oriented.chunk_by(|a, b| a.0 == b.0).filter(|run| run.len() >= min_points) {
+            for (k, median) in by_root[run[0].0].iter_mut().enumerate() {
+                values.clear();
+                values.extend(run.iter().map(|p| p.1[k]));
+                *median = significant_median(&mut values);
+            }
+        }
+        StripeMedians { by_root }
+    }
+
     /// Each stripe's steady lopsidedness, from its points' `(index, asymmetry)` (along each
     /// point's own normal): the median along the stripe's orientation where it is the laser's
     /// shape, 0 where it is not. A laser is lopsided by about as much on all its stripes, so a
@@ -863,6 +946,34 @@ impl Stripes {
             })
             .collect()
     }
+}
+
+/// Per-stripe values ([`Stripes::medians`]), indexed by the stripe's root.
+struct StripeMedians<const N: usize> {
+    by_root: Vec<[f64; N]>,
+}
+
+impl<const N: usize> StripeMedians<N> {
+    /// The values of centre `i`'s stripe, as seen along its own normal.
+    fn of(&self, stripes: &mut Stripes, i: usize) -> [f64; N] {
+        let (root, flip) = stripes.find(i);
+        let values = self.by_root[root];
+        if flip { values.map(|v| -v) } else { values }
+    }
+}
+
+/// The median of `values` (reordered) if it exceeds [`SIGNIFICANT_ERRORS`] of its standard
+/// error, else 0. The error is 1.2533 σ/√n, σ = 1.4826 × the median absolute deviation (normal
+/// scatter).
+fn significant_median(values: &mut [f64]) -> f64 {
+    let mid = values.len() / 2;
+    let median = *values.select_nth_unstable_by(mid, f64::total_cmp).1;
+    for v in values.iter_mut() {
+        *v = (*v - median).abs();
+    }
+    let mad = *values.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let error = 1.2533 * 1.4826 * mad / (values.len() as f64).sqrt();
+    if median.abs() > SIGNIFICANT_ERRORS * error { median } else { 0.0 }
 }
 
 /// A neighbour of a point on its stripe, in the point's frame: arc t and offset d along its

@@ -10,8 +10,10 @@
 //!   the lens's blur where it is given, else with the blur measured on the frame itself.
 //!   A laser's lopsided profile (a faint tail on one side, the same all along the stripe) pulls
 //!   any centroid towards the tail: each point is moved by its stripe's mean offset between the
-//!   estimator's centre and the centroid of its profile's top, and a stripe lopsided all along
-//!   its length is the laser's shape, not a cut.
+//!   estimator's centre and the centroid of its profile's top, then on to the peak of the light
+//!   before the blur by its stripe's median top shape (a cubic through the top's logarithm: its
+//!   vertex is the image's peak, and its skew gives the blur's shift of a lopsided peak). A
+//!   stripe lopsided all along its length is the laser's shape, not a cut.
 //! * [`Sampling::Rays`] samples along rays from the mirror centre, `ceil(2π · outer_radius)` of
 //!   them so neighbours are ≤ 1 px apart at the rim; a stripe at angle β to its ray is measured
 //!   with error / sin β, so rays crossing a stripe at β < 30° are skipped.

@@ -27,6 +27,11 @@
 //!   scales the pull, see [`RidgeDetector::pull_variance`]), so that the pull comes out right
 //!   for any lens, Gaussian or defocused, without being told its blur, as long as the laser's
 //!   sheet is narrower than the blur (its own width does not pull);
+//! * moves each point to the peak of the light its profile blurs: by the mean offset of its
+//!   stripe's profiles from their tops' centroids ([`Centre::lean`]), and by the stripe's median
+//!   top shape from there to the image's peak and back by the blur's shift of a lopsided peak,
+//!   −(s/2)·L‴/L″ for a blur of variance s and L the profile's logarithm
+//!   ([`Centre::top_shape`]; the lens's blur where known, else the pixel's and the kernel's);
 //! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): a
 //!   line through the neighbours once a wider parabola's curvature is taken out, so that a curved
 //!   stripe keeps its centre.

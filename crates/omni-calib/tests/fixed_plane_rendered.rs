@@ -193,11 +193,11 @@ fn options() -> RenderOptions {
 /// Issue 34's virtual target, 0.02° and 0.05 mm at 300 mm from 10 frames, is met by the chain
 /// up to the stripe: with the detected corners and the true stripe pixels the plane comes back
 /// within 0.006° and 0.020 mm (measured 2026-12-04, docs/DECISIONS.md). With omni-ridge's
-/// stripe points (the lens's blur known, as from a camera file's optics) it is not: 0.014° and
-/// 0.076 mm here, 0.006-0.033° and 0.060-0.101 mm over seeds 1-5 (with the blur measured on the
-/// frames 0.019° and 0.086 mm, 0.008-0.036° and 0.064-0.111 mm). What is left is the detector's
-/// offset towards the real profile's tail, 0.04-0.05 px at 1.9 mm per px: the blur's own shift
-/// of a lopsided peak, which a detector cannot undo without the tail's shape. Without the 3 px
+/// stripe points (the lens's blur known, as from a camera file's optics) it is not: 0.013° and
+/// 0.073 mm here, 0.006-0.033° and 0.060-0.101 mm over seeds 1-5. What is left is the detector's
+/// offset towards the real profile's tail, 0.05 px at 1.9 mm per px: the board's squares cut the
+/// stripe into pieces too short for their top's shape to be told from noise, so only the
+/// profiles' tops, not the light's peak under the blur, are found (docs/DECISIONS.md). Without the 3 px
 /// clearance from the squares' edges (where the stripe's profile falls on white and black at
 /// once, its centres scatter by 0.35-0.76 px) the seeds spread over 0.018-0.17° and 0.021-0.35
 /// mm. The bounds on the detected stripe guard the figure measured here.

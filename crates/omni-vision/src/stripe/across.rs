@@ -174,6 +174,9 @@ pub(super) struct Linked {
     /// [`Centre::lean`] less the blur's shift of a lopsided peak); `None` where it says nothing
     /// of the laser's shape (saturated or flat-topped profiles).
     pub lean: Option<f64>,
+    /// The profile's top shape ([`Centre::top_shape`]) where the lean has not taken its
+    /// stripe's yet (points re-measured from a coarser scale).
+    top_shape: Option<[f64; 2]>,
 }
 
 /// A measured centre before linking.
@@ -229,7 +232,8 @@ impl RidgeDetector {
             centres.iter().filter(|c| c.half_width > super::scales::NARROW_HALF_WIDTH_PX && peaks(c)).count();
         let wide = measured_wide + buffers.too_wide;
         if let Some(coarse) = self.coarser_stripes(frame, threshold, scale, wide, kept.len()) {
-            let refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
+            let mut refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
+            lean_to_the_lights_peak(&mut refined, self.peak_blur_variance(scale));
             kept.extend(refined);
         }
         remove_steady_lean(&mut kept);
@@ -763,7 +767,7 @@ impl RidgeDetector {
             let [top_offset, skew] = stripe_shape.of(&mut stripes, i);
             let (to_peak, deblur) = (top_offset * sigma, 0.5 * peak_blur * skew / sigma);
             let lean = c.lean.filter(|_| c.flatness <= LEAN_MAX_FLATNESS).map(|lean| lean + to_peak - deblur);
-            out.push(Linked { point: p, lean, ..c.linked() });
+            out.push(Linked { point: p, lean, top_shape: None, ..c.linked() });
         }
         out
     }
@@ -771,7 +775,13 @@ impl RidgeDetector {
 
 impl Centre {
     fn linked(&self) -> Linked {
-        Linked { point: self.point, normal: self.normal, half_width: self.half_width, lean: self.lean }
+        Linked {
+            point: self.point,
+            normal: self.normal,
+            half_width: self.half_width,
+            lean: self.lean,
+            top_shape: self.top_shape,
+        }
     }
 }
 
@@ -811,6 +821,36 @@ fn remove_steady_lean(points: &mut [Linked]) {
     for (l, shift) in points.iter_mut().zip(shifts) {
         l.point.u -= shift * l.normal.0;
         l.point.v -= shift * l.normal.1;
+    }
+}
+
+/// Adds to each point's lean (from its top's centroid) its stripe's median top shape, as
+/// `link_and_correct` does for the points it links: from the top's centroid to the image's peak
+/// and back by the blur's shift of a lopsided peak (`blur_variance`, px²). For points re-measured
+/// from a coarser scale, whose stripes are the chains of points within [`super::along::STRIPE_LINK_PX`] of each
+/// other with nearly parallel normals.
+fn lean_to_the_lights_peak(points: &mut [Linked], blur_variance: f64) {
+    let placed = points.iter().map(|l| [l.point.u, l.point.v, l.normal.0, l.normal.1]);
+    let grid = Grid::from_placed(placed, super::along::STRIPE_LINK_PX);
+    let mut stripes = Stripes::new(points.len());
+    for (i, l) in points.iter().enumerate() {
+        let (px, py, (nx, ny)) = (l.point.u, l.point.v, l.normal);
+        grid.visit(px, py, |j, &[ou, ov, onx, ony]| {
+            let (ex, ey) = (ou - px, ov - py);
+            let cos = onx * nx + ony * ny;
+            if j != i && ex * ex + ey * ey <= super::along::STRIPE_LINK_PX.powi(2) && cos.abs() >= SAME_STRIPE_COS {
+                stripes.join(i, j, cos < 0.0);
+            }
+        });
+    }
+    let shapes: Vec<(usize, [f64; 2])> =
+        points.iter().enumerate().filter_map(|(i, l)| Some((i, l.top_shape.filter(|_| l.lean.is_some())?))).collect();
+    let stripe_shape = stripes.medians(&shapes, STEADY_MIN_POINTS);
+    for (i, l) in points.iter_mut().enumerate() {
+        let sigma = l.half_width / FWHM_PER_SIGMA;
+        let [top_offset, skew] = stripe_shape.of(&mut stripes, i);
+        l.lean = l.lean.map(|lean| lean + top_offset * sigma - 0.5 * blur_variance * skew / sigma);
+        l.top_shape = None;
     }
 }
 

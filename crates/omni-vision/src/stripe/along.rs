@@ -96,7 +96,7 @@ pub fn fit_along_stripe(points: &[StripePoint], centre: (f64, f64), half_px: f64
 
 /// Points of one stripe lie at most this far (px) from their nearest neighbour on it: about one
 /// per pixel of length, with gaps where a point was dropped (a dark speckle).
-const STRIPE_LINK_PX: f64 = 2.5;
+pub(super) const STRIPE_LINK_PX: f64 = 2.5;
 
 /// What [`refuse_short_stripes`] kept and refused.
 #[derive(Debug, Clone, Default, PartialEq)]

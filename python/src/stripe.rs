@@ -116,7 +116,8 @@ fn image_of(w: usize, h: usize, bit_depth: u8, data: Vec<u16>, what: &str) -> Py
 /// image (omni-ridge without --camera). `ambient`, a laser-off frame of the same size, depth and
 /// kind, read the same way, is subtracted first. `max_scale` (1–16) is the coarsest scale at
 /// which stripes too wide for `max_width` are searched. `optics_blur_px` is the lens's PSF σ
-/// whose pull on curved stripes is removed (default: from `camera`, its lens_blur_px or its
+/// whose pull on curved stripes is removed and whose shift of a lopsided laser's peak is
+/// undone (default: from `camera`, its lens_blur_px or its
 /// optics, else measured on the frame's stripes, as omni-ridge). Settings left as None keep
 /// omni-ridge's defaults (method windowed, sampling normal, threshold 4 % of full scale; widths
 /// in px; `threshold` in the image's units). Returns an (n, 5) float64 array of

@@ -85,11 +85,13 @@ struct Args {
     #[arg(long, default_value_t = 0.0, value_name = "PX", allow_negative_numbers = true)]
     along_stripe: f64,
     /// The lens's blur (Gaussian PSF σ, px; pixel area not included), whose pull on curved
-    /// stripes (σ²κ/2 towards their centre of curvature) is removed [default: from the --camera
-    /// file: its lens_blur_px (omni-calib-receiver measures it on the boards' edges), else what
-    /// its optics imply (F-number, wavelength, pixel pitch, defocus); without either, measured on
-    /// each frame's stripes, which counts a wide laser sheet's own width as blur and
-    /// over-corrects wide curved stripes].
+    /// stripes (σ²κ/2 towards their centre of curvature) is removed, and whose shift of a
+    /// lopsided laser's peak (a tail on one side) is undone [default: from the --camera file:
+    /// its lens_blur_px (omni-calib-receiver measures it on the boards' edges), else what its
+    /// optics imply (F-number, wavelength, pixel pitch, defocus); without either, the pull's
+    /// blur is measured on each frame's stripes, which counts a wide laser sheet's own width as
+    /// blur and over-corrects wide curved stripes, and only the pixel's and the sampling's blur
+    /// is undone at a lopsided peak].
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     optics_blur: Option<f64>,
     /// Coarsest scale at which stripes wider than --max-width are searched: 1 (off), 2, 4, 8 or

@@ -201,9 +201,9 @@ struct Centre {
     lean: Option<f64>,
     /// The shape of the profile's top in units of the profile's σ (half-maximum width / 2.355):
     /// the top's centroid less the vertex of a cubic through the top's logarithm L, and L‴/L″
-    /// there (see [`stripe_top`]), both along `normal`. The vertex is the
-    /// image's peak; a blur of variance s moved the lopsided peak of the light it blurred by
-    /// −(s/2)·L‴/L″. `None` where the top fits no cubic.
+    /// there ([`stripe_top`]), both along `normal`. The vertex is the image's peak; a blur of
+    /// variance s moved the lopsided peak of the light it blurred by −(s/2)·L‴/L″. `None` where
+    /// the top fits no cubic.
     top_shape: Option<[f64; 2]>,
 }
 
@@ -826,9 +826,9 @@ fn remove_steady_lean(points: &mut [Linked]) {
 
 /// Adds to each point's lean (from its top's centroid) its stripe's median top shape, as
 /// `link_and_correct` does for the points it links: from the top's centroid to the image's peak
-/// and back by the blur's shift of a lopsided peak (`blur_variance`, px²). For points re-measured
-/// from a coarser scale, whose stripes are the chains of points within [`super::along::STRIPE_LINK_PX`] of each
-/// other with nearly parallel normals.
+/// and back by the blur's shift of a lopsided peak (`blur_variance`, px²). For points
+/// re-measured from a coarser scale, whose stripes are the chains of points within
+/// [`super::along::STRIPE_LINK_PX`] of each other with nearly parallel normals.
 fn lean_to_the_lights_peak(points: &mut [Linked], blur_variance: f64) {
     let placed = points.iter().map(|l| [l.point.u, l.point.v, l.normal.0, l.normal.1]);
     let grid = Grid::from_placed(placed, super::along::STRIPE_LINK_PX);

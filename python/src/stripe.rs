@@ -159,6 +159,7 @@ pub fn detect_stripe<'py>(
     params.along_stripe_px = along_stripe_px.unwrap_or(params.along_stripe_px);
     params.optics_blur_px = optics_blur_px.or(params.optics_blur_px);
     params.max_scale = max_scale.unwrap_or(params.max_scale);
+    params.mosaic = bayer.is_some();
     params.validate().map_err(crate::value_error)?;
     let spec = colour_spec(channel, laser, bayer)?;
 

@@ -132,7 +132,9 @@ struct Args {
     laser: Option<String>,
     /// Frames are raw Bayer mosaics (grey images, 8 or 16 bit) with this colour filter order,
     /// row 0 then row 1 (rggb: R G / G B): demosaiced (Malvar-He-Cutler), then read as
-    /// --channel or --laser says (luma without either).
+    /// --channel or --laser says (luma without either). Red and blue are sampled one pixel in
+    /// four, so a stripe's centre moves by up to about 0.1 px with where it falls between
+    /// their columns; a stripe along a row or column keeps that shift all along it.
     #[arg(long, value_name = "ORDER", value_parser = ["rggb", "bggr", "grbg", "gbrg"])]
     bayer: Option<String>,
     /// Keep only points in this rectangle of pixels (x, y of its top-left pixel, width, height),
@@ -205,6 +207,7 @@ fn main() -> ExitCode {
             along_stripe_px: args.along_stripe,
             optics_blur_px: args.optics_blur,
             max_scale: args.max_scale,
+            mosaic: args.bayer.is_some(),
         };
         params.validate().map_err(CliError::usage)?;
         let (camera, params) = match &args.camera {

@@ -181,6 +181,11 @@ pub struct RidgeParams {
     /// With [`Sampling::Normal`]: the coarsest scale (1, 2, 4, 8 or 16: frames binned that many
     /// pixels square) at which stripes too wide for `max_width` are searched (`scales`).
     pub max_scale: u32,
+    /// The frame's colour was demosaiced from a colour mosaic (Bayer): the laser's colour is
+    /// sampled one pixel in two along each axis, and a profile's top (a few px) is shaped by
+    /// the interpolation, alike all along a stripe that runs with the mosaic's rows or
+    /// columns. Such a stripe's centres are not moved by its top's shape to the light's peak.
+    pub mosaic: bool,
 }
 
 impl Default for RidgeParams {
@@ -195,6 +200,7 @@ impl Default for RidgeParams {
             along_stripe_px: 0.0,
             optics_blur_px: None,
             max_scale: 8,
+            mosaic: false,
         }
     }
 }

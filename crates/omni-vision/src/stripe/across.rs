@@ -233,7 +233,8 @@ impl RidgeDetector {
         let wide = measured_wide + buffers.too_wide;
         if let Some(coarse) = self.coarser_stripes(frame, threshold, scale, wide, kept.len()) {
             let mut refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
-            lean_to_the_lights_peak(&mut refined, self.peak_blur_variance(scale));
+            let mosaic = self.params.mosaic && scale == 1;
+            lean_to_the_lights_peak(&mut refined, self.peak_blur_variance(scale), mosaic);
             kept.extend(refined);
         }
         remove_steady_lean(&mut kept);
@@ -742,7 +743,11 @@ impl RidgeDetector {
         // at any width), where they stand out from the profiles' scatter. Per profile they are
         // noisy (a cubic's third derivative); along a bend or a step they are not the laser's.
         let shapes: Vec<(usize, [f64; 2])> = kept.iter().filter_map(|k| Some((k.0, centres[k.0].top_shape?))).collect();
-        let stripe_shape = stripes.medians(&shapes, STEADY_MIN_POINTS);
+        let mut stripe_shape = stripes.medians(&shapes, STEADY_MIN_POINTS);
+        if self.params.mosaic && scale == 1 {
+            let placed = shapes.iter().map(|&(i, _)| (i, centres[i].point.u, centres[i].point.v, centres[i].normal));
+            stripe_shape.keep_where_the_mosaic_averages_out(&mut stripes, placed);
+        }
         let peak_blur = self.peak_blur_variance(scale);
         let mut out = Vec::with_capacity(kept.len());
         for (i, curvature, offset, local) in kept {
@@ -829,7 +834,7 @@ fn remove_steady_lean(points: &mut [Linked]) {
 /// and back by the blur's shift of a lopsided peak (`blur_variance`, px²). For points
 /// re-measured from a coarser scale, whose stripes are the chains of points within
 /// [`super::along::STRIPE_LINK_PX`] of each other with nearly parallel normals.
-fn lean_to_the_lights_peak(points: &mut [Linked], blur_variance: f64) {
+fn lean_to_the_lights_peak(points: &mut [Linked], blur_variance: f64, mosaic: bool) {
     let placed = points.iter().map(|l| [l.point.u, l.point.v, l.normal.0, l.normal.1]);
     let grid = Grid::from_placed(placed, super::along::STRIPE_LINK_PX);
     let mut stripes = Stripes::new(points.len());
@@ -845,7 +850,11 @@ fn lean_to_the_lights_peak(points: &mut [Linked], blur_variance: f64) {
     }
     let shapes: Vec<(usize, [f64; 2])> =
         points.iter().enumerate().filter_map(|(i, l)| Some((i, l.top_shape.filter(|_| l.lean.is_some())?))).collect();
-    let stripe_shape = stripes.medians(&shapes, STEADY_MIN_POINTS);
+    let mut stripe_shape = stripes.medians(&shapes, STEADY_MIN_POINTS);
+    if mosaic {
+        let placed = shapes.iter().map(|&(i, _)| (i, points[i].point.u, points[i].point.v, points[i].normal));
+        stripe_shape.keep_where_the_mosaic_averages_out(&mut stripes, placed);
+    }
     for (i, l) in points.iter_mut().enumerate() {
         let sigma = l.half_width / FWHM_PER_SIGMA;
         let [top_offset, skew] = stripe_shape.of(&mut stripes, i);
@@ -993,12 +1002,43 @@ impl Stripes {
     }
 }
 
+/// The longest mean unit phasor of a stripe's places across a colour mosaic's period for its
+/// top's shape to count ([`StripeMedians::keep_where_the_mosaic_averages_out`]): 0 for places
+/// spread evenly over the period, 1 for one place.
+const MOSAIC_PHASE_RESULTANT: f64 = 0.5;
+
 /// Per-stripe values ([`Stripes::medians`]), indexed by the stripe's root.
 struct StripeMedians<const N: usize> {
     by_root: Vec<[f64; N]>,
 }
 
 impl<const N: usize> StripeMedians<N> {
+    /// Drops the values of the stripes that do not cross a colour mosaic's phases. Through a
+    /// mosaic the laser's colour is sampled on a 2 px pitch, and interpolating it shapes each
+    /// profile's top by where the stripe lies between the samples: the same all along a stripe
+    /// that runs with the mosaic's rows or columns, averaged out of the median of one that
+    /// crosses them. A stripe crosses them where its centres' places across it, modulo 2 px
+    /// (along the normal's larger axis), are spread around the period: the mean of their unit
+    /// phasors is shorter than [`MOSAIC_PHASE_RESULTANT`]. `points`: (index, u, v, normal).
+    fn keep_where_the_mosaic_averages_out(
+        &mut self,
+        stripes: &mut Stripes,
+        points: impl Iterator<Item = (usize, f64, f64, (f64, f64))>,
+    ) {
+        let mut phasors = vec![(0.0f64, 0.0f64, 0usize); self.by_root.len()];
+        for (i, u, v, (nx, ny)) in points {
+            let across = if nx.abs() >= ny.abs() { u } else { v };
+            let (s, c) = (std::f64::consts::PI * across).sin_cos();
+            let p = &mut phasors[stripes.find(i).0];
+            *p = (p.0 + c, p.1 + s, p.2 + 1);
+        }
+        for (values, (c, s, n)) in self.by_root.iter_mut().zip(phasors) {
+            if n > 0 && c.hypot(s) > MOSAIC_PHASE_RESULTANT * n as f64 {
+                *values = [0.0; N];
+            }
+        }
+    }
+
     /// The values of centre `i`'s stripe, as seen along its own normal.
     fn of(&self, stripes: &mut Stripes, i: usize) -> [f64; N] {
         let (root, flip) = stripes.find(i);
@@ -1496,6 +1536,27 @@ mod tests {
 
     /// A curved stripe is not pulled towards its centre of curvature, whatever the lens's blur,
     /// which the detector is not told: the pull σ²κ/2 is estimated from the frame's own profiles.
+    #[test]
+    fn a_mosaics_shape_of_the_top_counts_only_on_stripes_that_cross_its_phases() {
+        // Two stripes of 20 points with the same top shape: one along a column, its centres
+        // all 0.3 px past a red column; one oblique, across 7 px of columns.
+        let mut stripes = super::Stripes::new(40);
+        for i in 1..20 {
+            stripes.join(0, i, false);
+            stripes.join(20, 20 + i, false);
+        }
+        let shapes: Vec<(usize, [f64; 2])> = (0..40).map(|i| (i, [0.1, 0.2])).collect();
+        let mut medians = stripes.medians(&shapes, super::STEADY_MIN_POINTS);
+        let placed = (0..40).map(|i| {
+            let k = (i % 20) as f64;
+            let u = if i < 20 { 10.3 } else { 10.0 + 0.37 * k };
+            (i, u, k, (1.0, 0.0))
+        });
+        medians.keep_where_the_mosaic_averages_out(&mut stripes, placed);
+        assert_eq!(medians.of(&mut stripes, 5), [0.0, 0.0]);
+        assert_eq!(medians.of(&mut stripes, 25), [0.1, 0.2]);
+    }
+
     #[test]
     fn curved_stripes_keep_their_centre_for_any_blur() {
         let (w, h) = (160u32, 160u32);

@@ -54,6 +54,11 @@ pub const SEED_NORMAL_SIGMA_PX: f64 = 1.0;
 const DUPLICATE_PX: f64 = 0.7;
 /// Neighbours on the same stripe: normals within 30°.
 const SAME_STRIPE_COS: f64 = 0.866;
+/// Points of a walk across a coarse stripe's gap that met no point on the far side lie at the
+/// stripe's end: those within this many half-maximum widths of where the walk stopped (at
+/// least [`END_PX`]) are dropped. A surface's edge that crosses a wide stripe obliquely cuts
+/// its profiles over a stretch about as long as the stripe is wide.
+const TRACK_END_WIDTHS: f64 = 0.25;
 /// A point needs the stripe to go on this far (px) on both sides: where a stripe ends (a
 /// silhouette, a shadow, the sheet's edge) the blur mixes the end into the last profiles.
 pub const END_PX: f64 = 1.5;
@@ -282,7 +287,8 @@ impl RidgeDetector {
     /// Follows re-measured stripes across the gaps the coarse scale left (speckle, a dark
     /// square): from each point, a profile 1 px further along the stripe where no point is, on
     /// the same normal, up to [`super::scales::TRACK_PX`] px, as long as the profile finds the
-    /// stripe within its reach.
+    /// stripe within its reach. A walk that meets no point has gone past the stripe's end,
+    /// whose last profiles are cut ([`TRACK_END_WIDTHS`]).
     fn track_gaps<P: Pixel>(
         &self,
         frame: &Frame<'_, P>,
@@ -296,9 +302,12 @@ impl RidgeDetector {
             let (nx, ny) = first.normal;
             for dir in [-1.0, 1.0] {
                 let mut at = first.point;
+                let mut walk: Vec<Linked> = Vec::new();
+                let mut bridged = false;
                 for _ in 0..super::scales::TRACK_PX {
                     let next = (at.u - dir * ny, at.v + dir * nx);
                     if taken.near(next.0, next.1, 0.7) {
+                        bridged = true;
                         break;
                     }
                     let step = Reach { far_px: 1.0, ..*reach };
@@ -307,8 +316,14 @@ impl RidgeDetector {
                     };
                     taken.insert(m.point.u, m.point.v);
                     at = m.point;
-                    out.push(m.linked());
+                    walk.push(m.linked());
                 }
+                if !bridged {
+                    let end = (at.u - dir * ny, at.v + dir * nx);
+                    let reach = (TRACK_END_WIDTHS * first.half_width).max(END_PX);
+                    walk.retain(|l| (l.point.u - end.0).hypot(l.point.v - end.1) >= reach);
+                }
+                out.extend(walk);
             }
         }
         out

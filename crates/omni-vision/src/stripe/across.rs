@@ -1549,8 +1549,6 @@ mod tests {
             * (std::f64::consts::TAU * radius / sigma.powi(2)).sqrt()
     }
 
-    /// A curved stripe is not pulled towards its centre of curvature, whatever the lens's blur,
-    /// which the detector is not told: the pull σ²κ/2 is estimated from the frame's own profiles.
     #[test]
     fn a_mosaics_shape_of_the_top_counts_only_on_stripes_that_cross_its_phases() {
         // Two stripes of 20 points with the same top shape: one along a column, its centres
@@ -1572,6 +1570,8 @@ mod tests {
         assert_eq!(medians.of(&mut stripes, 25), [0.1, 0.2]);
     }
 
+    /// A curved stripe is not pulled towards its centre of curvature, whatever the lens's blur,
+    /// which the detector is not told: the pull σ²κ/2 is estimated from the frame's own profiles.
     #[test]
     fn curved_stripes_keep_their_centre_for_any_blur() {
         let (w, h) = (160u32, 160u32);

@@ -111,7 +111,9 @@ fn image_of(w: usize, h: usize, bit_depth: u8, data: Vec<u16>, what: &str) -> Py
 /// either type (OpenCV's BGR images reversed: `img[..., ::-1]`). Colour is read as `channel`
 /// ("luma", the default, "red", "green", "blue") or as a laser's colour contrast (`laser`="red":
 /// R − (G+B)/2, rising into saturated cores, as omni-ridge --laser); a 2-D raw Bayer mosaic is
-/// demosaiced first with `bayer` ("rggb", "bggr", "grbg", "gbrg"). With `camera`, the frame must
+/// demosaiced first with `bayer` ("rggb", "bggr", "grbg", "gbrg"; red and blue are sampled one
+/// pixel in four, so a stripe's centre moves by up to about 0.1 px with where it falls between
+/// their columns). With `camera`, the frame must
 /// have the camera's size and is searched within its mirror annulus; without, over the whole
 /// image (omni-ridge without --camera). `ambient`, a laser-off frame of the same size, depth and
 /// kind, read the same way, is subtracted first. `max_scale` (1–16) is the coarsest scale at

@@ -59,6 +59,7 @@ mod rowscan;
 mod sampling;
 mod scales;
 mod steger;
+mod stripes;
 
 pub use along::{ShortStripes, refuse_short_stripes};
 pub use estimators::Segment;

@@ -1,6 +1,6 @@
 //! Removes the gradient-orthogonality refinement's pull on curved edges.
 //!
-//! [`saddle::refine_corner`] solves Σ w·g·gᵀ·(q − p) = 0 over a window: exact when the two edges
+//! [`super::saddle::refine_corner`] solves Σ w·g·gᵀ·(q − p) = 0 over a window: exact when the two edges
 //! through the corner are straight. A mirror images the board's straight lines as arcs, and on
 //! an arc of curvature vector K (pointing to its concave side) a gradient sample at arc length d
 //! from the corner has gᵀ(q − p) = −|g|·κ·d²/2 instead of 0 (the point lies κd²/2 off the

@@ -110,7 +110,7 @@ pub struct ShortStripes {
 
 /// Removes the points of stripes that span less than `window_px` end to end, which a fit along
 /// the stripe over that window cannot be made on. A stripe is a chain of points each within
-/// [`STRIPE_LINK_PX`] of the next; its span is the distance between its two farthest points
+/// `STRIPE_LINK_PX` of the next; its span is the distance between its two farthest points
 /// (the chord, shorter than the arc on a curved stripe). Order and attributes are kept.
 pub fn refuse_short_stripes(points: Vec<StripePoint>, window_px: f64) -> ShortStripes {
     let labels = stripe_labels(&points);

@@ -58,20 +58,20 @@ impl Stripes {
         points: &[(usize, [f64; N])],
         min_points: usize,
     ) -> StripeMedians<N> {
-        let mut oriented: Vec<(usize, [f64; N])> = points
+        let oriented: Vec<(usize, [f64; N])> = points
             .iter()
             .map(|&(i, values)| {
                 let (root, flip) = self.find(i);
                 (root, if flip { values.map(|v| -v) } else { values })
             })
             .collect();
-        oriented.sort_unstable_by_key(|p| p.0);
+        let grouped = ByRoot::new(self.parent.len(), &oriented);
         let mut by_root = vec![[0.0; N]; self.parent.len()];
         let mut values = Vec::new();
-        for run in oriented.chunk_by(|a, b| a.0 == b.0).filter(|run| run.len() >= min_points) {
-            for (k, median) in by_root[run[0].0].iter_mut().enumerate() {
+        for (root, run) in grouped.runs().filter(|(_, run)| run.len() >= min_points) {
+            for (k, median) in by_root[root].iter_mut().enumerate() {
                 values.clear();
-                values.extend(run.iter().map(|p| p.1[k]));
+                values.extend(run.iter().map(|v| v[k]));
                 *median = significant_median(&mut values);
             }
         }
@@ -88,17 +88,22 @@ impl Stripes {
     /// short stripes keeps it. Stripes of fewer than [`STEADY_MIN_POINTS`] have none.
     /// Returns it for every centre, as seen along its own normal.
     pub(super) fn steady(&mut self, points: &[(usize, f64)], min_points: usize) -> Vec<f64> {
-        let mut by_root: std::collections::BTreeMap<usize, Vec<f64>> = std::collections::BTreeMap::new();
-        for &(i, asymmetry) in points {
-            let (root, flip) = self.find(i);
-            by_root.entry(root).or_default().push(if flip { -asymmetry } else { asymmetry });
-        }
-        let medians: Vec<(usize, f64, usize)> = by_root
-            .into_iter()
+        let oriented: Vec<(usize, f64)> = points
+            .iter()
+            .map(|&(i, asymmetry)| {
+                let (root, flip) = self.find(i);
+                (root, if flip { -asymmetry } else { asymmetry })
+            })
+            .collect();
+        let grouped = ByRoot::new(self.parent.len(), &oriented);
+        let mut scratch = Vec::new();
+        let medians: Vec<(usize, f64, usize)> = grouped
+            .runs()
             .filter(|(_, a)| a.len() >= STEADY_MIN_POINTS)
-            .map(|(root, mut a)| {
-                let mid = a.len() / 2;
-                (root, *a.select_nth_unstable_by(mid, f64::total_cmp).1, a.len())
+            .map(|(root, a)| {
+                scratch.clear();
+                scratch.extend_from_slice(a);
+                (root, *scratch.select_nth_unstable_by(a.len() / 2, f64::total_cmp).1, a.len())
             })
             .collect();
         let mut sizes: Vec<(f64, usize)> = medians.iter().map(|&(_, m, n)| (m.abs(), n)).collect();
@@ -114,15 +119,14 @@ impl Stripes {
             .map_or(0.0, |s| s.0);
         let agrees = |m: f64| m.abs() <= MAX_STEADY_ASYMMETRY && (m.abs() - typical).abs() <= MAX_ASYMMETRY;
         let support: usize = medians.iter().filter(|m| agrees(m.1)).map(|m| m.2).sum();
-        let shape: std::collections::BTreeMap<usize, f64> = medians
-            .into_iter()
-            .filter(|&(_, m, _)| support >= min_points && agrees(m))
-            .map(|(root, m, _)| (root, m))
-            .collect();
+        let mut shape = vec![0.0; self.parent.len()];
+        for (root, m, _) in medians.into_iter().filter(|&(_, m, _)| support >= min_points && agrees(m)) {
+            shape[root] = m;
+        }
         (0..self.parent.len())
             .map(|i| {
                 let (root, flip) = self.find(i);
-                let m = shape.get(&root).copied().unwrap_or(0.0);
+                let m = shape[root];
                 if flip { -m } else { m }
             })
             .collect()
@@ -133,6 +137,43 @@ impl Stripes {
 /// top's shape to count ([`StripeMedians::keep_where_the_mosaic_averages_out`]): 0 for places
 /// spread evenly over the period, 1 for one place.
 const MOSAIC_PHASE_RESULTANT: f64 = 0.5;
+
+/// Values grouped by their stripe's root, in increasing root order: a counting sort, since the
+/// roots are centre indices below `roots`.
+struct ByRoot<T> {
+    /// `values[start[r]..start[r + 1]]`: root r's values.
+    start: Vec<u32>,
+    values: Vec<T>,
+}
+
+impl<T: Copy> ByRoot<T> {
+    fn new(roots: usize, rooted: &[(usize, T)]) -> ByRoot<T> {
+        let mut start = vec![0u32; roots + 1];
+        for &(root, _) in rooted {
+            start[root + 1] += 1;
+        }
+        for r in 1..start.len() {
+            start[r] += start[r - 1];
+        }
+        let mut fill = start.clone();
+        // As many slots as values, each then written once at its root's next place.
+        let mut values: Vec<T> = rooted.iter().map(|p| p.1).collect();
+        for &(root, value) in rooted {
+            values[fill[root] as usize] = value;
+            fill[root] += 1;
+        }
+        ByRoot { start, values }
+    }
+
+    /// Each root that has values, with them.
+    fn runs(&self) -> impl Iterator<Item = (usize, &[T])> {
+        self.start
+            .windows(2)
+            .enumerate()
+            .filter(|(_, w)| w[1] > w[0])
+            .map(|(root, w)| (root, &self.values[w[0] as usize..w[1] as usize]))
+    }
+}
 
 /// Per-stripe values ([`Stripes::medians`]), indexed by the stripe's root.
 pub(super) struct StripeMedians<const N: usize> {

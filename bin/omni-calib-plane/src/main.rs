@@ -107,8 +107,9 @@ struct FixedArgs {
     #[arg(long, default_value_t = 8, value_name = "N")]
     max_scale: u32,
     /// Stripe detector: the lens's blur (Gaussian PSF σ, px), whose pull on curved stripes is
-    /// removed and whose shift of a lopsided laser's peak is undone [default: from the camera file (its lens_blur_px, else its optics), else measured
-    /// on each frame's stripes, as omni-ridge].
+    /// removed and whose shift of a lopsided laser's peak is undone [default: from the camera
+    /// file (its lens_blur_px, else its optics), else measured on each frame's stripes, as
+    /// omni-ridge].
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     optics_blur: Option<f64>,
     /// Keep stripe points up to this far outside the printed pattern (mm; negative: inside).

@@ -39,7 +39,7 @@
 //! The measurements behind these rules: docs/DECISIONS.md.
 
 use super::estimators::{self, Segment};
-use super::stripes::Stripes;
+use super::stripes::{StripeMedians, Stripes};
 use super::{
     Frame, MAX_CENTRE_GRADIENT, Pixel, RidgeDetector, SAMPLE_STEP_PX, StripePoint, column_contrast, quality,
     row_contrast, stands_out,
@@ -236,8 +236,7 @@ impl RidgeDetector {
         let wide = measured_wide + buffers.too_wide;
         if let Some(coarse) = self.coarser_stripes(frame, threshold, scale, wide, kept.len()) {
             let mut refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
-            let mosaic = self.params.mosaic && scale == 1;
-            lean_to_the_lights_peak(&mut refined, self.peak_blur_variance(scale), mosaic);
+            lean_to_the_lights_peak(&mut refined, self.peak_blur_variance(scale), self.mosaic_at(scale));
             kept.extend(refined);
         }
         remove_steady_lean(&mut kept);
@@ -627,6 +626,13 @@ impl RidgeDetector {
         super::known_blur_variance(self.params.optics_blur_px.unwrap_or(0.0), scale)
     }
 
+    /// Whether this scale's stripes are read through a colour mosaic's interpolation
+    /// ([`super::RidgeParams::mosaic`]): binned 2 × 2 or more, each coarse pixel holds every
+    /// colour of the mosaic.
+    fn mosaic_at(&self, scale: u32) -> bool {
+        self.params.mosaic && scale == 1
+    }
+
     /// Links each centre to its neighbours on the same stripe and returns the points that
     /// survive the checks, corrected for the blur's pull and fitted along the stripe (module docs).
     fn link_and_correct(&self, centres: &[Centre], scale: u32) -> Vec<Linked> {
@@ -756,11 +762,8 @@ impl RidgeDetector {
         // at any width), where they stand out from the profiles' scatter. Per profile they are
         // noisy (a cubic's third derivative); along a bend or a step they are not the laser's.
         let shapes: Vec<(usize, [f64; 2])> = kept.iter().filter_map(|k| Some((k.0, centres[k.0].top_shape?))).collect();
-        let mut stripe_shape = stripes.medians(&shapes, STEADY_MIN_POINTS);
-        if self.params.mosaic && scale == 1 {
-            let placed = shapes.iter().map(|&(i, _)| (i, centres[i].point.u, centres[i].point.v, centres[i].normal));
-            stripe_shape.keep_where_the_mosaic_averages_out(&mut stripes, placed);
-        }
+        let placed = |i: usize| (centres[i].point.u, centres[i].point.v, centres[i].normal);
+        let stripe_shape = stripe_shapes(&mut stripes, &shapes, self.mosaic_at(scale), placed);
         let peak_blur = self.peak_blur_variance(scale);
         let mut out = Vec::with_capacity(kept.len());
         for (i, curvature, offset, local) in kept {
@@ -779,12 +782,11 @@ impl RidgeDetector {
             let mut p = c.point;
             p.u += shift * c.normal.0;
             p.v += shift * c.normal.1;
-            // From the top's centroid to the image's peak, and back by the blur's shift of a
-            // lopsided peak, −(s/2)·L‴/L″ (`Centre::top_shape`).
-            let sigma = c.half_width / FWHM_PER_SIGMA;
-            let [top_offset, skew] = stripe_shape.of(&mut stripes, i);
-            let (to_peak, deblur) = (top_offset * sigma, 0.5 * peak_blur * skew / sigma);
-            let lean = c.lean.filter(|_| c.flatness <= LEAN_MAX_FLATNESS).map(|lean| lean + to_peak - deblur);
+            let shape = stripe_shape.of(&mut stripes, i);
+            let lean = c
+                .lean
+                .filter(|_| c.flatness <= LEAN_MAX_FLATNESS)
+                .map(|lean| lean_to_peak(lean, c.half_width, shape, peak_blur));
             out.push(Linked { point: p, lean, top_shape: None, ..c.linked() });
         }
         out
@@ -863,17 +865,42 @@ fn lean_to_the_lights_peak(points: &mut [Linked], blur_variance: f64, mosaic: bo
     }
     let shapes: Vec<(usize, [f64; 2])> =
         points.iter().enumerate().filter_map(|(i, l)| Some((i, l.top_shape.filter(|_| l.lean.is_some())?))).collect();
-    let mut stripe_shape = stripes.medians(&shapes, STEADY_MIN_POINTS);
-    if mosaic {
-        let placed = shapes.iter().map(|&(i, _)| (i, points[i].point.u, points[i].point.v, points[i].normal));
-        stripe_shape.keep_where_the_mosaic_averages_out(&mut stripes, placed);
-    }
+    let stripe_shape =
+        stripe_shapes(&mut stripes, &shapes, mosaic, |i| (points[i].point.u, points[i].point.v, points[i].normal));
     for (i, l) in points.iter_mut().enumerate() {
-        let sigma = l.half_width / FWHM_PER_SIGMA;
-        let [top_offset, skew] = stripe_shape.of(&mut stripes, i);
-        l.lean = l.lean.map(|lean| lean + top_offset * sigma - 0.5 * blur_variance * skew / sigma);
+        let shape = stripe_shape.of(&mut stripes, i);
+        l.lean = l.lean.map(|lean| lean_to_peak(lean, l.half_width, shape, blur_variance));
         l.top_shape = None;
     }
+}
+
+/// Each stripe's median top shape ([`Stripes::medians`] of `shapes`), dropped where a colour
+/// mosaic's interpolation made it (`mosaic`: [`RidgeDetector::mosaic_at`]); `placed(i)`: point
+/// i's position and normal.
+fn stripe_shapes(
+    stripes: &mut Stripes,
+    shapes: &[(usize, [f64; 2])],
+    mosaic: bool,
+    placed: impl Fn(usize) -> (f64, f64, (f64, f64)),
+) -> StripeMedians<2> {
+    let mut medians = stripes.medians(shapes, STEADY_MIN_POINTS);
+    if mosaic {
+        let points = shapes.iter().map(|&(i, _)| {
+            let (u, v, normal) = placed(i);
+            (i, u, v, normal)
+        });
+        medians.keep_where_the_mosaic_averages_out(stripes, points);
+    }
+    medians
+}
+
+/// A lean from the top's centroid ([`Centre::lean`], px) carried on to the peak of the light by
+/// its stripe's top shape `[top_offset, skew]` ([`Centre::top_shape`], in the profile's σ from
+/// its half-maximum width `half_width`): to the image's peak, and back by the blur's shift of
+/// a lopsided peak, −(s/2)·L‴/L″ for the blur's variance s = `blur_variance` (px²).
+fn lean_to_peak(lean: f64, half_width: f64, [top_offset, skew]: [f64; 2], blur_variance: f64) -> f64 {
+    let sigma = half_width / FWHM_PER_SIGMA;
+    lean + top_offset * sigma - 0.5 * blur_variance * skew / sigma
 }
 
 /// The top of a profile (`q` above its background, half-maximum width `half_width` px; `top`

@@ -1031,6 +1031,10 @@ fn sheet_sigmas(
         .collect()
 }
 
+/// The largest turn (degrees) of a surface's normal over a quarter pixel that
+/// [`sheet_gradient_at`] counts as one surface.
+const SAME_SURFACE_DEG: f64 = 5.0;
+
 /// How the distance from a truth point's light plane changes across the image at its pixel: the
 /// gradient (mm per px) of the plane distance of the surface each pixel sees, pointing across
 /// the stripe towards the plane's normal side (the side of a [`SheetProfile::Tailed`] tail with
@@ -1046,13 +1050,19 @@ pub fn sheet_gradient_at(
     let lp = sensor.transmitter.light_plane(alpha_rad, facet, t.laser as usize)?;
     let camera = sensor.camera.as_ref();
     let h = 0.25;
-    let centre = Point3::from(t.xyz);
-    let seen = |dx: f64, dy: f64| -> Option<f64> {
+    let cast = |dx: f64, dy: f64| {
         let ray = camera.pixel_to_ray(&Vector2::new(t.pixel[0] + dx, t.pixel[1] + dy))?;
-        let hit = scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY)?;
-        // The same surface: the hit's tangent plane holds the truth point.
-        let off = (centre - hit.point).dot(&hit.normal).abs();
-        (off < 1e-3 * (1.0 + (hit.point - centre).norm())).then(|| lp.plane.signed_distance(&hit.point))
+        scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY)
+    };
+    // The surface the truth point lies on, seen through its own pixel.
+    let centre = Point3::from(t.xyz);
+    let own = cast(0.0, 0.0).filter(|hit| (hit.point - centre).norm() < 1e-3 * (1.0 + centre.coords.norm()))?;
+    let seen = |dx: f64, dy: f64| -> Option<f64> {
+        let hit = cast(dx, dy)?;
+        // The same surface: the same object, its normal turned by less than SAME_SURFACE_DEG
+        // over the quarter pixel (a curved surface turns by far less; an edge by far more).
+        let same = hit.object == own.object && hit.normal.dot(&own.normal) > SAME_SURFACE_DEG.to_radians().cos();
+        same.then(|| lp.plane.signed_distance(&hit.point))
     };
     let gx = (seen(h, 0.0)? - seen(-h, 0.0)?) / (2.0 * h);
     let gy = (seen(0.0, h)? - seen(0.0, -h)?) / (2.0 * h);

@@ -386,3 +386,38 @@ fn the_presets_and_the_blurred_peak_for_detector_tests() {
     let gaussian = RenderOptions::ideal_noiseless();
     assert_eq!(blurred_peak_at(&sensor, &scene, alpha, 0, &t, 0.5, &gaussian), Some(t.pixel));
 }
+
+/// A stripe width asked for in px holds on curved surfaces too: on the bench's cylinder and
+/// sphere the stripe's FWHM across it, measured on the pixels of a 3 px stretch at the middle of
+/// the stripe, is the one asked for (the sheet's width is set where its gradient is known,
+/// which a curved surface's turning normal must not hide).
+#[test]
+fn curved_surfaces_carry_the_stripe_width_asked_for() {
+    for object in [crate::BenchObject::Cylinder, crate::BenchObject::Sphere] {
+        let scene = Scene::from_file(crate::paper_bench(object)).unwrap();
+        let sensor = Sensor::paper_scaled(512);
+        let alpha = 20f64.to_radians();
+        let target = 6.0;
+        let opts = RenderOptions { stripe_fwhm_px: Some(target), ..quiet() };
+        let frame = render_laser_frame(&sensor, &scene, alpha, 0, &[0], &opts);
+        assert!(frame.sheet_fwhm_mm[0] > 1.5 * opts.beam_fwhm_mm, "{object:?}: sheet {:?} mm", frame.sheet_fwhm_mm);
+        let on_stripe: Vec<&TruthPoint> = frame.truth.iter().filter(|t| t.laser == 0).collect();
+        let t = on_stripe[on_stripe.len() / 2];
+        let g = sheet_gradient_at(&sensor, &scene, alpha, 0, t).expect("the middle point's gradient");
+        let norm = (g[0] * g[0] + g[1] * g[1]).sqrt();
+        let n = [g[0] / norm, g[1] / norm];
+        let (cx, cy) = (t.pixel[0].round() as i64, t.pixel[1].round() as i64);
+        let mut samples = vec![];
+        for y in cy - 12..=cy + 12 {
+            for x in cx - 12..=cx + 12 {
+                let (dx, dy) = (x as f64 - t.pixel[0], y as f64 - t.pixel[1]);
+                let (across, along) = (dx * n[0] + dy * n[1], dx * n[1] - dy * n[0]);
+                if along.abs() <= 1.5 && across.abs() <= 10.0 {
+                    samples.push([across, frame.image.get(x as u32, y as u32) as f64]);
+                }
+            }
+        }
+        let width = fwhm(&samples);
+        assert!((width - target).abs() <= 0.1 * target, "{object:?}: FWHM {width:.2} px, asked {target} px");
+    }
+}

@@ -753,8 +753,9 @@ impl RidgeDetector {
         let mut judged = lopsided.iter();
         kept.retain(|k| {
             let l = judged.next().expect("one judgement per kept point");
-            let s = steady[k.0];
-            (l.mean - s).abs() <= MAX_ASYMMETRY && l.own.is_none_or(|a| (a - s).abs() <= 2.0 * MAX_ASYMMETRY)
+            let [lo, hi] = steady[k.0];
+            let departure = |a: f64| (lo - a).max(a - hi).max(0.0);
+            departure(l.mean) <= MAX_ASYMMETRY && l.own.is_none_or(|a| departure(a) <= 2.0 * MAX_ASYMMETRY)
         });
         let blur_variance = self.blur_variance(kept.iter().map(|k| &centres[k.0]), scale);
         // The laser's shape, like its steady lopsidedness, is the stripe's: the medians over the

@@ -86,8 +86,12 @@ impl Stripes {
     /// [`MAX_STEADY_ASYMMETRY`], and the stripes that agree so hold `min_points` points in all:
     /// the laser's shape is the frame's evidence, not one stripe's, so a laser seen only on
     /// short stripes keeps it. Stripes of fewer than [`STEADY_MIN_POINTS`] have none.
-    /// Returns it for every centre, as seen along its own normal.
-    pub(super) fn steady(&mut self, points: &[(usize, f64)], min_points: usize) -> Vec<f64> {
+    /// Returns, for every centre and as seen along its own normal, the range its lopsidedness
+    /// departs from: the laser's shape where it counts; else from 0 to the stripe's median where
+    /// that lies within [`MAX_ASYMMETRY`] (most of the stripe passes as not lopsided, so its
+    /// median is the stripe's own baseline, and an end lopsided a little beyond 0's limit in the
+    /// same direction is no change along it); else 0.
+    pub(super) fn steady(&mut self, points: &[(usize, f64)], min_points: usize) -> Vec<[f64; 2]> {
         let oriented: Vec<(usize, f64)> = points
             .iter()
             .map(|&(i, asymmetry)| {
@@ -119,15 +123,21 @@ impl Stripes {
             .map_or(0.0, |s| s.0);
         let agrees = |m: f64| m.abs() <= MAX_STEADY_ASYMMETRY && (m.abs() - typical).abs() <= MAX_ASYMMETRY;
         let support: usize = medians.iter().filter(|m| agrees(m.1)).map(|m| m.2).sum();
-        let mut shape = vec![0.0; self.parent.len()];
-        for (root, m, _) in medians.into_iter().filter(|&(_, m, _)| support >= min_points && agrees(m)) {
-            shape[root] = m;
+        let mut baseline = vec![[0.0; 2]; self.parent.len()];
+        for (root, m, _) in medians {
+            baseline[root] = if support >= min_points && agrees(m) {
+                [m, m]
+            } else if m.abs() <= MAX_ASYMMETRY {
+                [m.min(0.0), m.max(0.0)]
+            } else {
+                [0.0, 0.0]
+            };
         }
         (0..self.parent.len())
             .map(|i| {
                 let (root, flip) = self.find(i);
-                let m = shape[root];
-                if flip { -m } else { m }
+                let [lo, hi] = baseline[root];
+                if flip { [-hi, -lo] } else { [lo, hi] }
             })
             .collect()
     }

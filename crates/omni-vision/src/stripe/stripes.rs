@@ -263,4 +263,37 @@ mod tests {
         assert_eq!(medians.of(&mut stripes, 5), [0.0, 0.0]);
         assert_eq!(medians.of(&mut stripes, 25), [0.1, 0.2]);
     }
+
+    #[test]
+    fn a_short_stripe_departs_from_the_range_between_zero_and_its_median() {
+        // Three stripes of 30 points, too few for a laser's shape (64 asked): lopsided by 0.08
+        // with ends at 0.15 (its second half's normals the other way round), by 0.3 all along
+        // (shaded or cut), and by -0.05.
+        let mut stripes = Stripes::new(90);
+        for i in 1..30 {
+            stripes.join(0, i, i >= 15);
+            stripes.join(30, 30 + i, false);
+            stripes.join(60, 60 + i, false);
+        }
+        let lopsided = |i: usize| match i {
+            0..30 => {
+                let own = if i < 3 || i >= 27 { 0.15 } else { 0.08 };
+                if i >= 15 { -own } else { own }
+            }
+            30..60 => 0.3,
+            _ => -0.05,
+        };
+        let means: Vec<(usize, f64)> = (0..90).map(|i| (i, lopsided(i))).collect();
+        let steady = stripes.steady(&means, 64);
+        assert_eq!(steady[1], [0.0, 0.08]);
+        assert_eq!(steady[20], [-0.08, 0.0], "seen along the point's own normal");
+        assert_eq!(steady[40], [0.0, 0.0]);
+        assert_eq!(steady[70], [-0.05, 0.0]);
+        // With the frame's support, the medians that agree with its typical one (0.08) are the
+        // laser's shape; 0.3 does not agree and, beyond the cut limit, is judged from 0.
+        let steady = stripes.steady(&means, 16);
+        assert_eq!(steady[1], [0.08, 0.08]);
+        assert_eq!(steady[40], [0.0, 0.0]);
+        assert_eq!(steady[70], [-0.05, -0.05]);
+    }
 }

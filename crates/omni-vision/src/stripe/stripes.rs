@@ -277,7 +277,7 @@ mod tests {
         }
         let lopsided = |i: usize| match i {
             0..30 => {
-                let own = if i < 3 || i >= 27 { 0.15 } else { 0.08 };
+                let own = if (3..27).contains(&i) { 0.08 } else { 0.15 };
                 if i >= 15 { -own } else { own }
             }
             30..60 => 0.3,

@@ -35,8 +35,11 @@ fn frame_image(obj: &Bound<'_, PyAny>, what: &str, spec: &ColourSpec) -> PyResul
         let grey = gray_image(&arr, what)?;
         return match spec.bayer {
             Some(order) => {
-                let rgb = omni_vision::colour::demosaic(&grey, order)
-                    .map_err(|m| crate::value_error(format!("{what}: bayer {}: {m}", order.name())))?;
+                let rgb = match spec.site_colour().filter(|_| spec.sites) {
+                    Some(colour) => omni_vision::colour::mosaic_sites(&grey, order, colour).map(|(sites, _)| sites),
+                    None => omni_vision::colour::demosaic(&grey, order),
+                }
+                .map_err(|m| crate::value_error(format!("{what}: bayer {}: {m}", order.name())))?;
                 Ok(rgb.channel(spec.channel))
             }
             None if spec.channel.needs_colour() => Err(crate::value_error(format!(
@@ -81,7 +84,7 @@ fn rgb_image(arr: &Bound<'_, PyAny>, what: &str) -> PyResult<RgbImage> {
 }
 
 /// The colour reading of `detect_stripe`'s keywords.
-fn colour_spec(channel: Option<&str>, laser: Option<&str>, bayer: Option<&str>) -> PyResult<ColourSpec> {
+fn colour_spec(channel: Option<&str>, laser: Option<&str>, bayer: Option<&str>, sites: bool) -> PyResult<ColourSpec> {
     let channel = match (channel, laser) {
         (Some(_), Some(_)) => return Err(crate::value_error("give channel= or laser=, not both")),
         (None, Some(c)) => Channel::Laser(c.parse().map_err(|m| crate::value_error(format!("laser: {m}")))?),
@@ -94,7 +97,9 @@ fn colour_spec(channel: Option<&str>, laser: Option<&str>, bayer: Option<&str>) 
     let bayer = bayer
         .map(|b| omni_vision::colour::BayerPattern::parse(b).map_err(|m| crate::value_error(format!("bayer: {m}"))))
         .transpose()?;
-    Ok(ColourSpec { channel, bayer })
+    let spec = ColourSpec { channel, bayer, sites };
+    spec.validate().map_err(|m| crate::value_error(m.replace("--bayer-sites", "bayer_sites").replace("--", "")))?;
+    Ok(spec)
 }
 
 fn image_of(w: usize, h: usize, bit_depth: u8, data: Vec<u16>, what: &str) -> PyResult<GrayImage> {
@@ -113,7 +118,9 @@ fn image_of(w: usize, h: usize, bit_depth: u8, data: Vec<u16>, what: &str) -> Py
 /// R − (G+B)/2, rising into saturated cores, as omni-ridge --laser); a 2-D raw Bayer mosaic is
 /// demosaiced first with `bayer` ("rggb", "bggr", "grbg", "gbrg"; red and blue are sampled one
 /// pixel in four, so a stripe's centre moves by up to about 0.1 px with where it falls between
-/// their columns). With `camera`, the frame must
+/// their columns); with `bayer_sites`=True and a red or blue `laser` or `channel`, the mosaic is
+/// read at that colour's own sites instead (half the size, no sample interpolated; the points in
+/// the frame's pixels; wide stripes about twice as precise). With `camera`, the frame must
 /// have the camera's size and is searched within its mirror annulus; without, over the whole
 /// image (omni-ridge without --camera). `ambient`, a laser-off frame of the same size, depth and
 /// kind, read the same way, is subtracted first. `max_scale` (1–16) is the coarsest scale at
@@ -128,7 +135,7 @@ fn image_of(w: usize, h: usize, bit_depth: u8, data: Vec<u16>, what: &str) -> Py
 #[pyfunction]
 #[pyo3(signature = (image, camera = None, *, ambient = None, method = None, sampling = None, threshold = None,
     min_width = None, max_width = None, hessian_sigma = None, along_stripe_px = None, optics_blur_px = None,
-    channel = None, laser = None, bayer = None, max_scale = None))]
+    channel = None, laser = None, bayer = None, bayer_sites = false, max_scale = None))]
 pub fn detect_stripe<'py>(
     py: Python<'py>,
     image: &Bound<'py, PyAny>,
@@ -145,6 +152,7 @@ pub fn detect_stripe<'py>(
     channel: Option<&str>,
     laser: Option<&str>,
     bayer: Option<&str>,
+    bayer_sites: bool,
     max_scale: Option<u32>,
 ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let mut params = RidgeParams::default();
@@ -163,7 +171,7 @@ pub fn detect_stripe<'py>(
     params.max_scale = max_scale.unwrap_or(params.max_scale);
     params.mosaic = bayer.is_some();
     params.validate().map_err(crate::value_error)?;
-    let spec = colour_spec(channel, laser, bayer)?;
+    let spec = colour_spec(channel, laser, bayer, bayer_sites)?;
 
     let mut img = frame_image(image, "image", &spec)?;
     if let Some(off) = ambient {
@@ -176,15 +184,26 @@ pub fn detect_stripe<'py>(
         }
         img.subtract_saturating(&off).map_err(|m| crate::value_error(format!("ambient: {m}")))?;
     }
+    // A mosaic read at its sites is half the frame's size; its points come back in frame pixels.
+    let origin = spec.site_origin();
+    let scale = if origin.is_some() { 2 } else { 1 };
     let (detector, what) = match camera {
         Some(cam) => {
             let (w, h) = cam.model.image_size();
             let params = params.with_lens_blur_of(&cam.file).map_err(|e| crate::value_error(format!("camera: {e}")))?;
             (RidgeDetector::new(w, h, cam.model.mirror_circle(), params), "the camera's image")
         }
-        None => (RidgeDetector::whole_frame(img.width, img.height, params), "the image"),
+        None => (RidgeDetector::whole_frame(scale * img.width, scale * img.height, params), "the image"),
     };
-    let points = py.detach(|| stripe::frame_points(&img, &detector, what)).map_err(crate::value_error)?;
+    let points = match origin {
+        Some(origin) => {
+            stripe::check_frame_size(2 * img.width, 2 * img.height, &detector, what).map_err(crate::value_error)?;
+            let at_sites = detector.for_mosaic_sites(origin);
+            let points = py.detach(|| stripe::frame_points(&img, &at_sites, what)).map_err(crate::value_error)?;
+            detector.points_from_mosaic_sites(points, origin)
+        }
+        None => py.detach(|| stripe::frame_points(&img, &detector, what)).map_err(crate::value_error)?,
+    };
     let table: Vec<[f64; 5]> = points.into_iter().map(<[f64; 5]>::from).collect();
     rows(py, &table)
 }

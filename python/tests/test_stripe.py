@@ -71,6 +71,10 @@ def test_bad_images_and_settings_are_refused(sim):
         omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), bayer="rgbg")
     with pytest.raises(ValueError, match="even sides"):
         omniscan.detect_stripe(np.zeros((21, 30), dtype=np.uint8), bayer="rggb")
+    with pytest.raises(ValueError, match="red or blue"):
+        omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), bayer="rggb", bayer_sites=True, laser="green")
+    with pytest.raises(ValueError, match="give its order with bayer"):
+        omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), bayer_sites=True, laser="red")
     with pytest.raises(ValueError, match="camera's image"):
         omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), cam)
     with pytest.raises(ValueError, match="unknown method"):
@@ -111,3 +115,12 @@ def test_colour_frames_by_laser_contrast_and_bayer_mosaic():
         assert len(demosaiced) > 100
         assert abs(demosaiced[:, 0].mean() - centre) <= mean_error, (centre, demosaiced[:, 0].mean())
         np.testing.assert_allclose(demosaiced[:, 0], centre, atol=0.2)
+        # Read at the red sites alone (every other row and column): one point per two rows, in
+        # the frame's pixels. A stripe this narrow (4 px at half maximum) is sampled every 2 px
+        # there, which moves it as much as the demosaicing did (+0.002, -0.054, -0.103, +0.085
+        # px on average at these phases); wider ones gain (tests/ridge_truth.rs).
+        sites = omniscan.detect_stripe(mosaic, bayer="rggb", bayer_sites=True, laser="red", method="gauss")
+        assert len(sites) > 50
+        assert np.all(np.abs((sites[:, 1] + 1) % 2 - 1) < 0.01), sites[:, 1]
+        assert abs(sites[:, 0].mean() - centre) <= mean_error, (centre, sites[:, 0].mean())
+        np.testing.assert_allclose(sites[:, 0], centre, atol=0.2)

@@ -431,7 +431,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         inner_rows: board.inner_rows,
         square_mm: board.square_mm,
         min_corners: a.min_corners,
-        colour: ColourSpec { channel, bayer: None },
+        colour: ColourSpec { channel, bayer: None, sites: false },
         ridge,
     };
     let frames = fixed_plane::detect_frames(&paths, &detect, given.as_deref()).map_err(|m| {

@@ -73,6 +73,9 @@ struct Detectors {
     along: AlongStripeTally,
     /// How frames are read, and whether the hint about colour read as luma was given.
     colour: ColourSpec,
+    /// For a mosaic read at its sites: the frame pixel of the first site, and the detector for
+    /// the half-size frames it reads (built from the frame's detector when first needed).
+    sites: Option<((u32, u32), OnceLock<RidgeDetector>)>,
     luma_hint: std::sync::atomic::AtomicBool,
 }
 
@@ -157,6 +160,7 @@ pub fn run(input: Input, writer: impl Write, output_name: &str, config: Config) 
         from_first_frame: OnceLock::new(),
         laser_off: stripe::LaserOffCache::new(config.colour),
         colour: config.colour,
+        sites: config.colour.site_origin().map(|origin| (origin, OnceLock::new())),
         luma_hint: std::sync::atomic::AtomicBool::new(false),
         static_ambient: config.static_ambient,
         along: AlongStripeTally::default(),
@@ -313,7 +317,17 @@ fn process_frame(
         points = short.kept;
     }
     if let (Some(dir), Some(img)) = (overlay, img) {
-        let rgb = stripe::draw_overlay(&img, &points);
+        // A mosaic read at its sites is drawn at its own half size.
+        let rgb = match &detectors.sites {
+            Some(((ox, oy), _)) => {
+                let on_sites: Vec<stripe::StripePoint> = points
+                    .iter()
+                    .map(|p| stripe::StripePoint { u: (p.u - *ox as f64) / 2.0, v: (p.v - *oy as f64) / 2.0, ..*p })
+                    .collect();
+                stripe::draw_overlay(&img, &on_sites)
+            }
+            None => stripe::draw_overlay(&img, &points),
+        };
         write_rgb_png(&dir.join(format!("{:06}.png", frame.seq)), img.width, img.height, &rgb)
             .map_err(|e| e.to_string())?;
     }
@@ -351,9 +365,18 @@ fn detect_points(
     if let (Some(ambient), None) = (&detectors.static_ambient, &frame.ambient_path) {
         img.subtract_saturating(ambient).map_err(|m| format!("{}: static ambient's {m}", path.display()))?;
     }
-    let (detector, what) = detectors.for_size(img.width, img.height)?;
-    let points = stripe::frame_points(&img, detector, what).map_err(|m| format!("{}: {m}", path.display()))?;
-    Ok((points, Some(img)))
+    let Some((origin, at_sites)) = &detectors.sites else {
+        let (detector, what) = detectors.for_size(img.width, img.height)?;
+        let points = stripe::frame_points(&img, detector, what).map_err(|m| format!("{}: {m}", path.display()))?;
+        return Ok((points, Some(img)));
+    };
+    // Read at the mosaic's sites: a frame of half the size, its points mapped back.
+    let (detector, what) = detectors.for_size(2 * img.width, 2 * img.height)?;
+    stripe::check_frame_size(2 * img.width, 2 * img.height, detector, what)
+        .map_err(|m| format!("{}: {m}", path.display()))?;
+    let half = at_sites.get_or_init(|| detector.for_mosaic_sites(*origin));
+    let points = stripe::frame_points(&img, half, what).map_err(|m| format!("{}: {m}", path.display()))?;
+    Ok((detector.points_from_mosaic_sites(points, *origin), Some(img)))
 }
 
 /// Colour frames read as luma lose a coloured laser on lit surfaces: says so once, naming the

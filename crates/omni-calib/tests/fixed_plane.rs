@@ -202,6 +202,7 @@ fn real_frames_give_one_plane_that_no_frame_pulls() {
         colour: omni_vision::colour::ColourSpec {
             channel: omni_vision::colour::Channel::Laser(omni_vision::colour::Colour::Red),
             bayer: None,
+            sites: false,
         },
         ridge: omni_vision::stripe::RidgeParams::default(),
     };
@@ -238,8 +239,11 @@ fn real_frames_give_one_plane_that_no_frame_pulls() {
 fn column_centroids(path: &std::path::Path) -> Vec<[f64; 2]> {
     use omni_vision::colour::{Channel, Colour, ColourSpec};
     let read = |c| {
-        omni_vision::image_io::load_frame_channel(path, &ColourSpec { channel: Channel::Single(c), bayer: None })
-            .unwrap()
+        omni_vision::image_io::load_frame_channel(
+            path,
+            &ColourSpec { channel: Channel::Single(c), bayer: None, sites: false },
+        )
+        .unwrap()
     };
     let (r, g, b) = (read(Colour::Red), read(Colour::Green), read(Colour::Blue));
     let (w, h) = (r.width as usize, r.height as usize);

@@ -104,6 +104,7 @@ fn render_and_fit(
         colour: omni_vision::colour::ColourSpec {
             channel: omni_vision::colour::Channel::Laser(omni_vision::colour::Colour::Red),
             bayer: None,
+            sites: false,
         },
         // The lens's blur known, as `omni-calib-plane fixed` takes it from the camera's optics.
         ridge: omni_vision::stripe::RidgeParams {

@@ -107,6 +107,9 @@ pub use omni_model::BayerPattern;
 pub struct ColourSpec {
     pub channel: Channel,
     pub bayer: Option<BayerPattern>,
+    /// With `bayer`: the mosaic is read at the channel colour's own sites, at half the frame's
+    /// size ([`mosaic_sites`]), instead of demosaiced.
+    pub sites: bool,
 }
 
 impl ColourSpec {
@@ -118,7 +121,46 @@ impl ColourSpec {
             Channel::Laser(c) => Some(format!("--laser {}", c.name())),
         };
         let bayer = self.bayer.map(|b| format!("--bayer {}", b.name()));
-        [bayer, channel].into_iter().flatten().collect::<Vec<_>>().join(" ")
+        let sites = self.sites.then(|| "--bayer-sites".to_string());
+        [bayer, sites, channel].into_iter().flatten().collect::<Vec<_>>().join(" ")
+    }
+
+    /// Checks that a reading at the mosaic's sites has a mosaic and one colour with one site per
+    /// cell (red or blue); the message names the options.
+    pub fn validate(&self) -> Result<(), String> {
+        if !self.sites {
+            return Ok(());
+        }
+        if self.bayer.is_none() {
+            return Err("--bayer-sites reads a raw Bayer mosaic: give its order with --bayer".into());
+        }
+        match self.site_colour() {
+            Some(_) => Ok(()),
+            None => Err(format!(
+                "--bayer-sites reads the sites of one colour with one site per 2x2 cell: --laser or --channel red or blue, not {}",
+                match self.channel {
+                    Channel::Luma => "luma".to_string(),
+                    Channel::Single(c) => format!("--channel {}", c.name()),
+                    Channel::Laser(c) => format!("--laser {}", c.name()),
+                }
+            )),
+        }
+    }
+
+    /// The colour whose sites are read: red or blue, from `channel`.
+    pub fn site_colour(&self) -> Option<Colour> {
+        match self.channel {
+            Channel::Single(c) | Channel::Laser(c) if c != Colour::Green => Some(c),
+            _ => None,
+        }
+    }
+
+    /// For a mosaic read at its sites, the frame pixel (x, y) of the first site: site (i, j)
+    /// of the frame as read is frame pixel (x + 2i, y + 2j). `None` for any other reading.
+    pub fn site_origin(&self) -> Option<(u32, u32)> {
+        let (order, colour) = (self.bayer?, self.site_colour().filter(|_| self.sites)?);
+        let own = colour.index();
+        [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().find(|&(x, y)| order.channel(x as usize, y as usize) == own)
     }
 }
 
@@ -236,6 +278,55 @@ fn contrast_pass_avx2<const STRIDE: usize, const L: usize, const A: usize, const
 fn contrast_lanes<const STRIDE: usize, const L: usize, const A: usize, const B: usize>(samples: &[u8]) -> Vec<u16> {
     let (pixels, _) = samples.as_chunks::<STRIDE>();
     pixels.iter().map(|p| laser_contrast8(p[L] as u32, p[A] as u32 + p[B] as u32)).collect()
+}
+
+/// A raw mosaic read at `colour`'s own sites (red or blue: one per 2 × 2 cell) as an RGB image
+/// of half the frame's size: each site's own sample, green the mean of its four row and column
+/// neighbours, the third colour the mean of its four diagonal ones; with the frame pixel (x, y)
+/// of the first site, so that site (i, j) is frame pixel (x + 2i, y + 2j). A laser of that
+/// colour is then sampled on one regular 2 px grid, none of its samples interpolated: a
+/// demosaiced frame mixes measured and interpolated samples whose share changes with the
+/// stripe's place across the mosaic's phases.
+pub fn mosaic_sites(raw: &GrayImage, order: BayerPattern, colour: Colour) -> Result<(RgbImage, (u32, u32)), String> {
+    let (w, h) = (raw.width as usize, raw.height as usize);
+    if w % 2 != 0 || h % 2 != 0 || w < 2 || h < 2 {
+        return Err(format!(
+            "a {}x{} px frame is not a Bayer mosaic of whole 2x2 cells ({} needs even sides)",
+            w,
+            h,
+            order.name()
+        ));
+    }
+    if colour == Colour::Green {
+        return Err(
+            "green has two sites in each 2x2 cell of a Bayer mosaic: only red and blue are read at their sites".into(),
+        );
+    }
+    let own = colour.index();
+    let spec = ColourSpec { channel: Channel::Single(colour), bayer: Some(order), sites: true };
+    let (x0, y0) = spec.site_origin().expect("every Bayer order has one red and one blue site per cell");
+    let (x0, y0) = (x0 as usize, y0 as usize);
+    let opposite = 2 - own;
+    let at = |x: i64, y: i64| {
+        let (x, y) = (x.clamp(0, w as i64 - 1) as usize, y.clamp(0, h as i64 - 1) as usize);
+        raw.data[y * w + x] as u32
+    };
+    let (hw, hh) = (w / 2, h / 2);
+    let mut data = Vec::with_capacity(hw * hh);
+    for j in 0..hh {
+        for i in 0..hw {
+            let (x, y) = ((x0 + 2 * i) as i64, (y0 + 2 * j) as i64);
+            let cross = at(x - 1, y) + at(x + 1, y) + at(x, y - 1) + at(x, y + 1);
+            let diagonal = at(x - 1, y - 1) + at(x + 1, y - 1) + at(x - 1, y + 1) + at(x + 1, y + 1);
+            let mut px = [0u16; 3];
+            px[own] = at(x, y) as u16;
+            px[1] = ((cross + 2) / 4) as u16;
+            px[opposite] = ((diagonal + 2) / 4) as u16;
+            data.push(px);
+        }
+    }
+    let image = RgbImage { width: hw as u32, height: hh as u32, bit_depth: raw.bit_depth, data };
+    Ok((image, (x0 as u32, y0 as u32)))
 }
 
 /// Demosaics a raw Bayer frame with Malvar, He and Cutler's gradient-corrected linear filters
@@ -415,6 +506,38 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_mosaic_is_read_at_its_red_and_blue_sites_without_interpolating_them() {
+        // A ramp in every channel: each site keeps its own sample, its row and column neighbours
+        // (green) and its diagonal ones (the third colour) average to their values at the site.
+        for order in BayerPattern::ALL {
+            let (w, h) = (10usize, 8usize);
+            let mut raw = GrayImage::new(w as u32, h as u32, 16);
+            let value = |x: usize, y: usize, c: usize| (1000 + 100 * x + 10 * y + 1000 * c) as u16;
+            for y in 0..h {
+                for x in 0..w {
+                    raw.data[y * w + x] = value(x, y, order.channel(x, y));
+                }
+            }
+            for colour in [Colour::Red, Colour::Blue] {
+                let (sites, (x0, y0)) = mosaic_sites(&raw, order, colour).unwrap();
+                assert_eq!((sites.width, sites.height), (5, 4));
+                assert_eq!(order.channel(x0 as usize, y0 as usize), colour.index(), "{order:?} {colour:?}");
+                for j in 1..3 {
+                    for i in 1..4 {
+                        let (x, y) = (x0 as usize + 2 * i, y0 as usize + 2 * j);
+                        let want = [0, 1, 2].map(|c| value(x, y, c));
+                        assert_eq!(sites.data[j * 5 + i], want, "{order:?} {colour:?} site {i} {j}");
+                    }
+                }
+            }
+        }
+        let e = mosaic_sites(&GrayImage::new(8, 6, 8), BayerPattern::Rggb, Colour::Green).unwrap_err();
+        assert!(e.contains("green has two sites"), "{e}");
+        let e = mosaic_sites(&GrayImage::new(7, 6, 8), BayerPattern::Rggb, Colour::Red).unwrap_err();
+        assert!(e.contains("7x6") && e.contains("even sides"), "{e}");
     }
 
     #[test]

@@ -168,7 +168,13 @@ pub fn decode_frame_channel(bytes: &[u8], name: &str, spec: &ColourSpec) -> Resu
                     format!("{}: the frame is a colour image, not a raw Bayer mosaic (drop --bayer)", spec.describe()),
                 ));
             }
-            crate::colour::demosaic(&from_dynamic(dynamic), order)
+            let raw = from_dynamic(dynamic);
+            if let Some(colour) = spec.site_colour().filter(|_| spec.sites) {
+                let (sites, _) = crate::colour::mosaic_sites(&raw, order, colour)
+                    .map_err(|m| Error::new(name, "", format!("--bayer {} --bayer-sites: {m}", order.name())))?;
+                return Ok(sites.channel(spec.channel));
+            }
+            crate::colour::demosaic(&raw, order)
                 .map_err(|m| Error::new(name, "", format!("--bayer {}: {m}", order.name())))?
         }
         None => {

@@ -654,6 +654,47 @@ impl RidgeDetector {
         Ok(self)
     }
 
+    /// The detector for this one's frames read at one colour's mosaic sites, the first at this
+    /// detector's frame pixel `origin` ([`crate::colour::mosaic_sites`]): half the image size,
+    /// the annulus and the settings in px halved, no search region (the points are judged in
+    /// frame pixels by [`Self::points_from_mosaic_sites`]). The sites are samples, not 2 × 2
+    /// bins: a stripe keeps its own sharpness and the lens's blur halves with the pixel.
+    pub fn for_mosaic_sites(&self, origin: (u32, u32)) -> RidgeDetector {
+        let p = self.params;
+        let params = RidgeParams {
+            min_width: p.min_width / 2.0,
+            max_width: p.max_width / 2.0,
+            hessian_sigma: (p.hessian_sigma / 2.0).max(0.5),
+            along_stripe_px: p.along_stripe_px / 2.0,
+            optics_blur_px: p.optics_blur_px.map(|s| s / 2.0),
+            max_scale: (p.max_scale / 2).max(1),
+            mosaic: false,
+            ..p
+        };
+        let circle = MirrorCircle {
+            centre: omni_geom::Vector2::new((self.cx - origin.0 as f64) / 2.0, (self.cy - origin.1 as f64) / 2.0),
+            inner_radius: self.r_in / 2.0,
+            outer_radius: self.r_out / 2.0,
+        };
+        let mut sites = RidgeDetector::new(self.width / 2, self.height / 2, circle, params);
+        sites.r_in = self.r_in / 2.0;
+        sites
+    }
+
+    /// Points that [`Self::for_mosaic_sites`]`(origin)`'s detector found, in this detector's frame
+    /// pixels (positions and widths), those outside its search region dropped.
+    pub fn points_from_mosaic_sites(&self, points: Vec<StripePoint>, origin: (u32, u32)) -> Vec<StripePoint> {
+        let (ox, oy) = (origin.0 as f64, origin.1 as f64);
+        let mut points: Vec<StripePoint> = points
+            .into_iter()
+            .map(|p| StripePoint { u: ox + 2.0 * p.u, v: oy + 2.0 * p.v, width: 2.0 * p.width, ..p })
+            .collect();
+        if let Some(region) = &self.region {
+            points.retain(|p| region.contains(p.u, p.v, self.width));
+        }
+        points
+    }
+
     /// A detector sampling from the image centre, over the largest circle inside the image.
     pub fn for_image_centre(width: u32, height: u32, params: RidgeParams) -> Self {
         let centre = omni_geom::Vector2::new((width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0);

@@ -158,9 +158,18 @@ impl ColourSpec {
     /// For a mosaic read at its sites, the frame pixel (x, y) of the first site: site (i, j)
     /// of the frame as read is frame pixel (x + 2i, y + 2j). `None` for any other reading.
     pub fn site_origin(&self) -> Option<(u32, u32)> {
-        let (order, colour) = (self.bayer?, self.site_colour().filter(|_| self.sites)?);
-        let own = colour.index();
-        [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().find(|&(x, y)| order.channel(x as usize, y as usize) == own)
+        first_site(self.bayer?, self.site_colour().filter(|_| self.sites)?)
+    }
+}
+
+/// The frame pixel (x, y) of `colour`'s site in the first 2 × 2 cell of a mosaic: `None` for
+/// green, which has two.
+fn first_site(order: BayerPattern, colour: Colour) -> Option<(u32, u32)> {
+    let own = colour.index();
+    let mut sites = [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().filter(|&(x, y)| order.channel(x, y) == own);
+    match (sites.next(), sites.next()) {
+        (Some((x, y)), None) => Some((x as u32, y as u32)),
+        _ => None,
     }
 }
 
@@ -297,15 +306,12 @@ pub fn mosaic_sites(raw: &GrayImage, order: BayerPattern, colour: Colour) -> Res
             order.name()
         ));
     }
-    if colour == Colour::Green {
+    let Some((x0, y0)) = first_site(order, colour) else {
         return Err(
             "green has two sites in each 2x2 cell of a Bayer mosaic: only red and blue are read at their sites".into(),
         );
-    }
-    let own = colour.index();
-    let spec = ColourSpec { channel: Channel::Single(colour), bayer: Some(order), sites: true };
-    let (x0, y0) = spec.site_origin().expect("every Bayer order has one red and one blue site per cell");
-    let (x0, y0) = (x0 as usize, y0 as usize);
+    };
+    let (own, x0, y0) = (colour.index(), x0 as usize, y0 as usize);
     let opposite = 2 - own;
     let at = |x: i64, y: i64| {
         let (x, y) = (x.clamp(0, w as i64 - 1) as usize, y.clamp(0, h as i64 - 1) as usize);

@@ -35,7 +35,7 @@ fn frame_image(obj: &Bound<'_, PyAny>, what: &str, spec: &ColourSpec) -> PyResul
         let grey = gray_image(&arr, what)?;
         return match spec.bayer {
             Some(order) => {
-                let rgb = match spec.site_colour().filter(|_| spec.sites) {
+                let rgb = match spec.site_colour() {
                     Some(colour) => omni_vision::colour::mosaic_sites(&grey, order, colour).map(|(sites, _)| sites),
                     None => omni_vision::colour::demosaic(&grey, order),
                 }
@@ -195,15 +195,14 @@ pub fn detect_stripe<'py>(
         }
         None => (RidgeDetector::whole_frame(scale * img.width, scale * img.height, params), "the image"),
     };
-    let points = match origin {
-        Some(origin) => {
-            stripe::check_frame_size(2 * img.width, 2 * img.height, &detector, what).map_err(crate::value_error)?;
-            let at_sites = detector.for_mosaic_sites(origin);
-            let points = py.detach(|| stripe::frame_points(&img, &at_sites, what)).map_err(crate::value_error)?;
-            detector.points_from_mosaic_sites(points, origin)
-        }
-        None => py.detach(|| stripe::frame_points(&img, &detector, what)).map_err(crate::value_error)?,
-    };
+    let points = py
+        .detach(|| match origin {
+            Some(origin) => {
+                stripe::mosaic_site_points(&img, &detector, &detector.for_mosaic_sites(origin), origin, what)
+            }
+            None => stripe::frame_points(&img, &detector, what),
+        })
+        .map_err(crate::value_error)?;
     let table: Vec<[f64; 5]> = points.into_iter().map(<[f64; 5]>::from).collect();
     rows(py, &table)
 }

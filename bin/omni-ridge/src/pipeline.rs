@@ -319,13 +319,7 @@ fn process_frame(
     if let (Some(dir), Some(img)) = (overlay, img) {
         // A mosaic read at its sites is drawn at its own half size.
         let rgb = match &detectors.sites {
-            Some(((ox, oy), _)) => {
-                let on_sites: Vec<stripe::StripePoint> = points
-                    .iter()
-                    .map(|p| stripe::StripePoint { u: (p.u - *ox as f64) / 2.0, v: (p.v - *oy as f64) / 2.0, ..*p })
-                    .collect();
-                stripe::draw_overlay(&img, &on_sites)
-            }
+            Some((origin, _)) => stripe::draw_overlay(&img, &RidgeDetector::points_on_mosaic_sites(&points, *origin)),
             None => stripe::draw_overlay(&img, &points),
         };
         write_rgb_png(&dir.join(format!("{:06}.png", frame.seq)), img.width, img.height, &rgb)
@@ -372,11 +366,10 @@ fn detect_points(
     };
     // Read at the mosaic's sites: a frame of half the size, its points mapped back.
     let (detector, what) = detectors.for_size(2 * img.width, 2 * img.height)?;
-    stripe::check_frame_size(2 * img.width, 2 * img.height, detector, what)
-        .map_err(|m| format!("{}: {m}", path.display()))?;
     let half = at_sites.get_or_init(|| detector.for_mosaic_sites(*origin));
-    let points = stripe::frame_points(&img, half, what).map_err(|m| format!("{}: {m}", path.display()))?;
-    Ok((detector.points_from_mosaic_sites(points, *origin), Some(img)))
+    let points = stripe::mosaic_site_points(&img, detector, half, *origin, what)
+        .map_err(|m| format!("{}: {m}", path.display()))?;
+    Ok((points, Some(img)))
 }
 
 /// Colour frames read as luma lose a coloured laser on lit surfaces: says so once, naming the

@@ -147,10 +147,10 @@ impl ColourSpec {
         }
     }
 
-    /// The colour whose sites are read: red or blue, from `channel`.
+    /// The colour whose mosaic sites are read: with `sites`, red or blue from `channel`.
     pub fn site_colour(&self) -> Option<Colour> {
         match self.channel {
-            Channel::Single(c) | Channel::Laser(c) if c != Colour::Green => Some(c),
+            Channel::Single(c) | Channel::Laser(c) if self.sites && c != Colour::Green => Some(c),
             _ => None,
         }
     }
@@ -158,7 +158,7 @@ impl ColourSpec {
     /// For a mosaic read at its sites, the frame pixel (x, y) of the first site: site (i, j)
     /// of the frame as read is frame pixel (x + 2i, y + 2j). `None` for any other reading.
     pub fn site_origin(&self) -> Option<(u32, u32)> {
-        first_site(self.bayer?, self.site_colour().filter(|_| self.sites)?)
+        first_site(self.bayer?, self.site_colour()?)
     }
 }
 

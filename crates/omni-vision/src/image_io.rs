@@ -169,7 +169,7 @@ pub fn decode_frame_channel(bytes: &[u8], name: &str, spec: &ColourSpec) -> Resu
                 ));
             }
             let raw = from_dynamic(dynamic);
-            if let Some(colour) = spec.site_colour().filter(|_| spec.sites) {
+            if let Some(colour) = spec.site_colour() {
                 let (sites, _) = crate::colour::mosaic_sites(&raw, order, colour)
                     .map_err(|m| Error::new(name, "", format!("--bayer {} --bayer-sites: {m}", order.name())))?;
                 return Ok(sites.channel(spec.channel));

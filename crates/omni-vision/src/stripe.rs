@@ -65,7 +65,7 @@ pub use along::{ShortStripes, refuse_short_stripes};
 pub use estimators::Segment;
 pub use frames::{
     LaserOffCache, STATIC_AMBIENT_MAX_FRAMES, STATIC_AMBIENT_MIN_FRAMES, check_frame_size, check_size, frame_points,
-    load_frame_image, load_frame_image_cached, static_ambient, static_ambient_frames,
+    load_frame_image, load_frame_image_cached, mosaic_site_points, static_ambient, static_ambient_frames,
 };
 pub use omni_formats::stream::{StripePoint, quality};
 pub use overlay::draw_overlay;
@@ -671,14 +671,32 @@ impl RidgeDetector {
             mosaic: false,
             ..p
         };
+        self.halved((origin.0 as f64, origin.1 as f64), params)
+    }
+
+    /// Frame points (this detector's pixels) placed on the image read at a mosaic's sites whose
+    /// first is frame pixel `origin`: the inverse of [`Self::points_from_mosaic_sites`], for
+    /// drawing them on that image.
+    pub fn points_on_mosaic_sites(points: &[StripePoint], origin: (u32, u32)) -> Vec<StripePoint> {
+        let (ox, oy) = (origin.0 as f64, origin.1 as f64);
+        points
+            .iter()
+            .map(|p| StripePoint { u: (p.u - ox) / 2.0, v: (p.v - oy) / 2.0, width: p.width / 2.0, ..*p })
+            .collect()
+    }
+
+    /// A detector for images of half this one's size whose pixel (i, j) lies at this one's
+    /// (`first.0` + 2i, `first.1` + 2j), with `params`: the annulus as this detector clipped it,
+    /// halved (not widened again by `new`'s corner rule).
+    fn halved(&self, first: (f64, f64), params: RidgeParams) -> RidgeDetector {
         let circle = MirrorCircle {
-            centre: omni_geom::Vector2::new((self.cx - origin.0 as f64) / 2.0, (self.cy - origin.1 as f64) / 2.0),
+            centre: omni_geom::Vector2::new((self.cx - first.0) / 2.0, (self.cy - first.1) / 2.0),
             inner_radius: self.r_in / 2.0,
             outer_radius: self.r_out / 2.0,
         };
-        let mut sites = RidgeDetector::new(self.width / 2, self.height / 2, circle, params);
-        sites.r_in = self.r_in / 2.0;
-        sites
+        let mut half = RidgeDetector::new(self.width / 2, self.height / 2, circle, params);
+        half.r_in = self.r_in / 2.0;
+        half
     }
 
     /// Points that [`Self::for_mosaic_sites`]`(origin)`'s detector found, in this detector's frame

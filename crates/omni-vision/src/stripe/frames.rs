@@ -151,6 +151,21 @@ pub fn frame_points(img: &GrayImage, detector: &RidgeDetector, what: &str) -> Re
     Ok(detector.detect(img))
 }
 
+/// [`frame_points`] of an image read at a colour mosaic's sites whose first is frame pixel
+/// `origin` ([`crate::colour::mosaic_sites`]: half the size of `detector`'s frames), found by
+/// `at_sites` (`detector.for_mosaic_sites(origin)`, built once for many frames) and given in
+/// `detector`'s frame pixels.
+pub fn mosaic_site_points(
+    img: &GrayImage,
+    detector: &RidgeDetector,
+    at_sites: &RidgeDetector,
+    origin: (u32, u32),
+    what: &str,
+) -> Result<Vec<StripePoint>, String> {
+    check_frame_size(2 * img.width, 2 * img.height, detector, what)?;
+    Ok(detector.points_from_mosaic_sites(at_sites.detect(img), origin))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -15,7 +15,6 @@
 
 use super::across::Linked;
 use super::{Frame, Pixel, RidgeDetector};
-use omni_model::MirrorCircle;
 
 /// Half-maximum width (px) above which a profile is better measured one scale coarser.
 pub const NARROW_HALF_WIDTH_PX: f64 = 4.5;
@@ -66,18 +65,8 @@ impl RidgeDetector {
 
     /// The detector for this one's frames binned 2 × 2 (built once).
     fn coarser(&self) -> &RidgeDetector {
-        self.coarser.get_or_init(|| {
-            // Coarse pixel i covers fine pixels 2i and 2i + 1: its centre is at 2i + 0.5.
-            let circle = MirrorCircle {
-                centre: omni_geom::Vector2::new((self.cx - 0.5) / 2.0, (self.cy - 0.5) / 2.0),
-                inner_radius: self.r_in / 2.0,
-                outer_radius: self.r_out / 2.0,
-            };
-            let mut coarse = RidgeDetector::new(self.width / 2, self.height / 2, circle, self.params);
-            // The annulus as this detector clipped it, not widened again by `new`'s corner rule.
-            coarse.r_in = self.r_in / 2.0;
-            Box::new(coarse)
-        })
+        // Coarse pixel i covers fine pixels 2i and 2i + 1: its centre is at 2i + 0.5.
+        self.coarser.get_or_init(|| Box::new(self.halved((0.5, 0.5), self.params)))
     }
 }
 

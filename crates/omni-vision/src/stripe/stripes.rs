@@ -40,6 +40,19 @@ impl Stripes {
         (root, flip)
     }
 
+    /// The points' `(index, value)` grouped by stripe, each value along its stripe's orientation
+    /// (`negate`d where the point's normal points against it).
+    fn grouped<T: Copy>(&mut self, points: &[(usize, T)], negate: impl Fn(T) -> T) -> ByRoot<T> {
+        let oriented: Vec<(usize, T)> = points
+            .iter()
+            .map(|&(i, value)| {
+                let (root, flip) = self.find(i);
+                (root, if flip { negate(value) } else { value })
+            })
+            .collect();
+        ByRoot::new(self.parent.len(), &oriented)
+    }
+
     /// Joins the stripes of `a` and `b`, whose normals point against each other if `opposite`.
     pub(super) fn join(&mut self, a: usize, b: usize, opposite: bool) {
         let ((ra, fa), (rb, fb)) = (self.find(a), self.find(b));
@@ -58,14 +71,7 @@ impl Stripes {
         points: &[(usize, [f64; N])],
         min_points: usize,
     ) -> StripeMedians<N> {
-        let oriented: Vec<(usize, [f64; N])> = points
-            .iter()
-            .map(|&(i, values)| {
-                let (root, flip) = self.find(i);
-                (root, if flip { values.map(|v| -v) } else { values })
-            })
-            .collect();
-        let grouped = ByRoot::new(self.parent.len(), &oriented);
+        let grouped = self.grouped(points, |values| values.map(|v| -v));
         let mut by_root = vec![[0.0; N]; self.parent.len()];
         let mut values = Vec::new();
         for (root, run) in grouped.runs().filter(|(_, run)| run.len() >= min_points) {
@@ -92,14 +98,7 @@ impl Stripes {
     /// median is the stripe's own baseline, and an end lopsided a little beyond 0's limit in the
     /// same direction is no change along it); else 0.
     pub(super) fn steady(&mut self, points: &[(usize, f64)], min_points: usize) -> Vec<[f64; 2]> {
-        let oriented: Vec<(usize, f64)> = points
-            .iter()
-            .map(|&(i, asymmetry)| {
-                let (root, flip) = self.find(i);
-                (root, if flip { -asymmetry } else { asymmetry })
-            })
-            .collect();
-        let grouped = ByRoot::new(self.parent.len(), &oriented);
+        let grouped = self.grouped(points, |asymmetry| -asymmetry);
         let mut scratch = Vec::new();
         let medians: Vec<(usize, f64, usize)> = grouped
             .runs()

@@ -198,7 +198,9 @@ fn options() -> RenderOptions {
 /// 0.073 mm here, 0.006-0.033° and 0.060-0.101 mm over seeds 1-5. What is left is the detector's
 /// offset towards the real profile's tail, 0.05 px at 1.9 mm per px: the board's squares cut the
 /// stripe into pieces too short for their top's shape to be told from noise, so only the
-/// profiles' tops, not the light's peak under the blur, are found (docs/DECISIONS.md). Without the 3 px
+/// profiles' tops, not the light's peak under the blur, are found; the colour camera's clipped
+/// red and its noisier laser contrast keep the offset even on a plain board (0.04-0.07 mm there
+/// against 0.02-0.035 mm through a grey camera; docs/DECISIONS.md). Without the 3 px
 /// clearance from the squares' edges (where the stripe's profile falls on white and black at
 /// once, its centres scatter by 0.35-0.76 px) the seeds spread over 0.018-0.17° and 0.021-0.35
 /// mm. The bounds on the detected stripe guard the figure measured here.

@@ -744,8 +744,8 @@ fn the_room_scene_is_covered_as_captured_and_with_laser_off_frames() {
 /// asserted ≤ 0.1. 10 and 20 px wide, found at coarser scales (the frame's own scale sees
 /// their profiles still falling where their reach ends), their lopsidedness kept as the
 /// laser's shape, the walks across the coarse stripes' gaps stopped short of the stripes' cut
-/// ends: 10 px covered 97.9 %, no false point, offset +0.014 px (blur known +0.007), spread
-/// 0.031 px; 20 px covered 91.9 %, no false point, offset +0.032 px (+0.027), spread 0.042 px.
+/// ends: 10 px covered 97.9 %, no false point, offset +0.010 px (blur known +0.002), spread
+/// 0.032 px; 20 px covered 91.9 %, no false point, offset +0.015 px (+0.009), spread 0.042 px.
 /// Asserted: ≥ 90 %, none false, offset ≤ 0.025 px (20 px: 0.05), spread ≤ 0.05 px (0.07).
 #[test]
 fn real_shaped_stripes_2_to_20_px_wide() {
@@ -784,8 +784,9 @@ fn real_shaped_stripes_2_to_20_px_wide() {
 /// camera's RGB frame saved as JPEG of quality 90 with 4:2:0 chroma. The camera's colour matrix
 /// and white balance are [`omni_model::CameraColour`]'s defaults. Both sample the laser's colour
 /// at a 2 px pitch, so the spread grows well past the grey stripes' 0.03 px: measured (windowed)
-/// spread 0.216 / 0.063 px (mosaic, 2 / 5 px), 0.137 / 0.130 px (JPEG), offsets +0.04 to +0.21 px,
-/// coverage 90–98 %, false points ≤ 0.45 %. Asserted with a margin, a guard on what the colour
+/// spread 0.216 / 0.063 px (mosaic, 2 / 5 px), 0.143 / 0.130 px (JPEG), offsets +0.03 to +0.25 px
+/// (2 px JPEG: +0.247), coverage 90–98 %, false points ≤ 0.45 %. Asserted with a margin (offset
+/// ≤ 0.3 px), a guard on what the colour
 /// costs (docs/DECISIONS.md); the 0.015 px is not met through a mosaic or JPEG. The
 /// mosaic is read as `--bayer` reads it (`RidgeParams::mosaic`).
 #[test]
@@ -816,7 +817,7 @@ fn real_shaped_stripes_through_a_bayer_mosaic_and_jpeg_read_by_their_colour() {
             assert!(t.coverage(8).unwrap() >= 0.85, "{fwhm} px {name}: coverage {:?}", t.coverage(8));
             assert!(t.false_points as f64 <= 0.005 * t.errors.len() as f64, "{fwhm} px {name}: false points");
             assert!(spread <= 0.25, "{fwhm} px {name}: spread {spread:.4} px");
-            assert!((0.0..=0.25).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
+            assert!((0.0..=0.3).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
         }
     }
 }
@@ -860,9 +861,9 @@ fn wide_curved_stripes_keep_their_centre_with_the_lens_blur_known() {
 /// A raw mosaic read at the red sites alone (`--bayer-sites`: half the frame's size, no red
 /// sample interpolated, green and blue averaged around each site for the laser contrast)
 /// against the demosaiced frame, real-shaped stripes on the bench plane, ideal optics, the lens's
-/// blur known, 8 positions: 5 px RMS 0.038 px (offset +0.017) against 0.073 (+0.029); 10 px,
-/// beyond the default `--max-width` and measured at the coarser scales, 0.071 (+0.003) against
-/// 0.117 (+0.035) (with `--max-width 24`, at the frame's own scale: 0.041 against 0.056); 2 px,
+/// blur known, 8 positions: 5 px RMS 0.038 px (offset +0.017) against 0.070 (+0.022); 10 px,
+/// beyond the default `--max-width` and measured at the coarser scales, 0.071 (−0.000) against
+/// 0.116 (+0.025) (with `--max-width 24`, at the frame's own scale: 0.041 against 0.056); 2 px,
 /// sampled every 2 px, about the same (0.214 and 0.221). Asserted: no false point, 5 px RMS ≤
 /// 0.05 px and ≤ 0.6 × the demosaiced frame's, 10 px ≤ 0.7 × it.
 #[test]

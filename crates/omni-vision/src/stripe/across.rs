@@ -107,10 +107,12 @@ pub const TOP_LEVEL: f32 = 0.8;
 /// half-maximum half-widths: wide enough for a third derivative, narrow enough that a one-sided
 /// tail's slope below the top does not bend the cubic (docs/DECISIONS.md).
 const TOP_HALF_WINDOW: f64 = 0.75;
-/// The largest skew of a profile's top (L‴/L″ × the profile's σ, [`Centre::top_shape`]) a
-/// laser's shape makes: a one-sided tail holding a third of the light gives 0.17; speckle on a
-/// wide, flat top gives more (docs/DECISIONS.md).
-const MAX_TOP_SKEW: f64 = 0.3;
+/// The largest skew of a profile's top (L‴/L″ × the profile's σ, [`Centre::top_shape`]) that
+/// counts: a one-sided tail holding a third of the light gives 0.17, speckle on a wide, flat top
+/// more. Only stripes' medians are used, so the limit refuses wild fits but must lie well beyond
+/// the tops' noise: a limit inside it cuts one side of the noise around a laser's skew and pulls
+/// the median towards 0 (docs/DECISIONS.md).
+const MAX_TOP_SKEW: f64 = 0.7;
 /// A profile's coarse samples must still fall by this fraction of the threshold per px at both
 /// ends of its reach to count as a stripe too wide for the scale: a laser's flanks are steep
 /// there, a lit surface's shading is not (docs/DECISIONS.md).

@@ -195,7 +195,7 @@ fn options() -> RenderOptions {
 /// up to the stripe: with the detected corners and the true stripe pixels the plane comes back
 /// within 0.006° and 0.020 mm (measured 2026-12-04, docs/DECISIONS.md). With omni-ridge's
 /// stripe points (the lens's blur known, as from a camera file's optics) it is not: 0.013° and
-/// 0.073 mm here, 0.006-0.033° and 0.060-0.101 mm over seeds 1-5. What is left is the detector's
+/// 0.073 mm here, 0.005-0.034° and 0.060-0.102 mm over seeds 1-5. What is left is the detector's
 /// offset towards the real profile's tail, 0.05 px at 1.9 mm per px: the board's squares cut the
 /// stripe into pieces too short for their top's shape to be told from noise, so only the
 /// profiles' tops, not the light's peak under the blur, are found; the colour camera's clipped

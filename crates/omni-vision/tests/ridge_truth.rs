@@ -786,9 +786,8 @@ fn real_shaped_stripes_2_to_20_px_wide() {
 /// at a 2 px pitch, so the spread grows well past the grey stripes' 0.03 px: measured (windowed)
 /// spread 0.216 / 0.063 px (mosaic, 2 / 5 px), 0.143 / 0.130 px (JPEG), offsets +0.03 to +0.25 px
 /// (2 px JPEG: +0.247), coverage 90–98 %, false points ≤ 0.45 %. Asserted with a margin (offset
-/// ≤ 0.3 px), a guard on what the colour
-/// costs (docs/DECISIONS.md); the 0.015 px is not met through a mosaic or JPEG. The
-/// mosaic is read as `--bayer` reads it (`RidgeParams::mosaic`).
+/// ≤ 0.3 px), a guard on what the colour costs (docs/DECISIONS.md); the 0.015 px is not
+/// met through a mosaic or JPEG. The mosaic is read as `--bayer` reads it (`RidgeParams::mosaic`).
 #[test]
 fn real_shaped_stripes_through_a_bayer_mosaic_and_jpeg_read_by_their_colour() {
     use omni_simulator::{BayerPattern, ColourOutput, SheetProfile};

@@ -1289,6 +1289,42 @@ mod pull_tests {
         assert!((local.alpha - 0.1).abs() < 1e-9, "alpha {}", local.alpha);
     }
 
+    /// A stripe's median skew ([`Centre::top_shape`]) of noisy lopsided tops stays at the
+    /// noise-free top's skew: per profile the skew scatters widely (a third derivative), and a
+    /// limit on it inside that scatter cuts more of the noise on the far side of the laser's
+    /// skew than on the near one, pulling the median towards 0 (the earlier limit, 0.3, does).
+    #[test]
+    fn the_median_skew_of_noisy_lopsided_tops_keeps_the_lasers_skew() {
+        // A Gaussian core with a wider, offset component on one side: a lopsided top, σ ≈ 3
+        // samples (1.5 px), peak 150, noise σ 2 (the tops' skews scatter by 0.18 MAD).
+        let light = |x: f64| 150.0 * (0.8 * (-x * x / 18.0).exp() + 0.2 * (-(x - 3.0).powi(2) / 72.0).exp());
+        let skew_of = |q: &[f32]| -> Option<f64> {
+            let peak = (0..q.len()).max_by(|&a, &b| q[a].total_cmp(&q[b]))?;
+            let seg = super::super::segment_at(q, peak, 10.0)?;
+            let (ha, hb) = estimators::crossings(q, &seg, 0.5 * q[seg.peak])?;
+            let half_width = (hb - ha) * SAMPLE_STEP_PX;
+            let (_, top) = estimators::top_centroid(q, &seg, TOP_LEVEL * q[seg.peak])?;
+            let (_, skew) = stripe_top(q, &top, half_width)?;
+            Some(skew * half_width / FWHM_PER_SIGMA / SAMPLE_STEP_PX)
+        };
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let mut rng = omni_geom::rng::SplitMix64::new(7);
+        let (mut exact, mut noisy) = (Vec::new(), Vec::new());
+        for _ in 0..2000 {
+            let c = 24.0 + rng.uniform();
+            let clean: Vec<f32> = (0..48).map(|i| light(i as f64 - c) as f32).collect();
+            exact.extend(skew_of(&clean));
+            noisy.extend(skew_of(&clean.iter().map(|&v| v + (2.0 * rng.normal()) as f32).collect::<Vec<_>>()));
+        }
+        let within_old_limit = median(noisy.iter().copied().filter(|s| s.abs() <= 0.3).collect());
+        let (exact, noisy) = (median(exact), median(noisy));
+        assert!((noisy - exact).abs() <= 0.01, "median skew {noisy:.4} against {exact:.4} without noise");
+        assert!((within_old_limit - exact).abs() >= 0.05, "within 0.3: {within_old_limit:.4} against {exact:.4}");
+    }
+
     /// The shared LDLᵀ factors solve the parabola's and the cubic's normal equations as a
     /// general LU solve does, on random neighbourhoods; points at three distinct t give a
     /// parabola and no cubic.

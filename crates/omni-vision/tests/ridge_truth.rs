@@ -784,10 +784,10 @@ fn real_shaped_stripes_2_to_20_px_wide() {
 /// camera's RGB frame saved as JPEG of quality 90 with 4:2:0 chroma. The camera's colour matrix
 /// and white balance are [`omni_model::CameraColour`]'s defaults. Both sample the laser's colour
 /// at a 2 px pitch, so the spread grows well past the grey stripes' 0.03 px: measured (windowed)
-/// spread 0.216 / 0.063 px (mosaic, 2 / 5 px), 0.143 / 0.130 px (JPEG), offsets +0.03 to +0.25 px
-/// (2 px JPEG: +0.247), coverage 90–98 %, false points ≤ 0.45 %. Asserted with a margin (offset
-/// ≤ 0.3 px), a guard on what the colour costs (docs/DECISIONS.md); the 0.015 px is not
-/// met through a mosaic or JPEG. The mosaic is read as `--bayer` reads it (`RidgeParams::mosaic`).
+/// spread 0.216 / 0.063 px (mosaic, 2 / 5 px), 0.140 / 0.130 px (JPEG), offsets +0.03 to +0.23 px,
+/// coverage 90–98 %, false points ≤ 0.45 %. Asserted with a margin, a guard on what the colour
+/// costs (docs/DECISIONS.md); the 0.015 px is not met through a mosaic or JPEG. The
+/// mosaic is read as `--bayer` reads it (`RidgeParams::mosaic`).
 #[test]
 fn real_shaped_stripes_through_a_bayer_mosaic_and_jpeg_read_by_their_colour() {
     use omni_simulator::{BayerPattern, ColourOutput, SheetProfile};
@@ -816,7 +816,7 @@ fn real_shaped_stripes_through_a_bayer_mosaic_and_jpeg_read_by_their_colour() {
             assert!(t.coverage(8).unwrap() >= 0.85, "{fwhm} px {name}: coverage {:?}", t.coverage(8));
             assert!(t.false_points as f64 <= 0.005 * t.errors.len() as f64, "{fwhm} px {name}: false points");
             assert!(spread <= 0.25, "{fwhm} px {name}: spread {spread:.4} px");
-            assert!((0.0..=0.3).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
+            assert!((0.0..=0.25).contains(&bias), "{fwhm} px {name}: offset {bias:+.4} px (towards the tail)");
         }
     }
 }

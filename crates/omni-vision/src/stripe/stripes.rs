@@ -216,6 +216,15 @@ impl<const N: usize> StripeMedians<N> {
         }
     }
 
+    /// Drops the values of the stripes for which `beyond` holds.
+    pub(super) fn drop_where(&mut self, beyond: impl Fn([f64; N]) -> bool) {
+        for values in &mut self.by_root {
+            if beyond(*values) {
+                *values = [0.0; N];
+            }
+        }
+    }
+
     /// The values of centre `i`'s stripe, as seen along its own normal.
     pub(super) fn of(&self, stripes: &mut Stripes, i: usize) -> [f64; N] {
         let (root, flip) = stripes.find(i);

@@ -877,9 +877,9 @@ fn lean_to_the_lights_peak(points: &mut [Linked], blur_variance: f64, mosaic: bo
     }
 }
 
-/// Each stripe's median top shape ([`Stripes::medians`] of `shapes`), dropped where a colour
-/// mosaic's interpolation made it (`mosaic`: [`RidgeDetector::mosaic_at`]); `placed(i)`: point
-/// i's position and normal.
+/// Each stripe's median top shape ([`Stripes::medians`] of `shapes`), dropped where its skew is
+/// beyond a laser's ([`MAX_TOP_SKEW`]) and where a colour mosaic's interpolation made it
+/// (`mosaic`: [`RidgeDetector::mosaic_at`]); `placed(i)`: point i's position and normal.
 fn stripe_shapes(
     stripes: &mut Stripes,
     shapes: &[(usize, [f64; 2])],

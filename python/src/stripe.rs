@@ -35,11 +35,9 @@ fn frame_image(obj: &Bound<'_, PyAny>, what: &str, spec: &ColourSpec) -> PyResul
         let grey = gray_image(&arr, what)?;
         return match spec.bayer {
             Some(order) => {
-                let rgb = match spec.site_colour() {
-                    Some(colour) => omni_vision::colour::mosaic_sites(&grey, order, colour).map(|(sites, _)| sites),
-                    None => omni_vision::colour::demosaic(&grey, order),
-                }
-                .map_err(|m| crate::value_error(format!("{what}: bayer {}: {m}", order.name())))?;
+                let rgb = spec
+                    .read_mosaic(&grey, order)
+                    .map_err(|m| crate::value_error(format!("{what}: bayer {}: {m}", order.name())))?;
                 Ok(rgb.channel(spec.channel))
             }
             None if spec.channel.needs_colour() => Err(crate::value_error(format!(

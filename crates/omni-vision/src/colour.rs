@@ -115,11 +115,7 @@ pub struct ColourSpec {
 impl ColourSpec {
     /// The options as a user wrote them, for error messages.
     pub fn describe(&self) -> String {
-        let channel = match self.channel {
-            Channel::Luma => None,
-            Channel::Single(c) => Some(format!("--channel {}", c.name())),
-            Channel::Laser(c) => Some(format!("--laser {}", c.name())),
-        };
+        let channel = self.channel_option();
         let bayer = self.bayer.map(|b| format!("--bayer {}", b.name()));
         let sites = self.sites.then(|| "--bayer-sites".to_string());
         [bayer, sites, channel].into_iter().flatten().collect::<Vec<_>>().join(" ")
@@ -138,12 +134,27 @@ impl ColourSpec {
             Some(_) => Ok(()),
             None => Err(format!(
                 "--bayer-sites reads the sites of one colour with one site per 2x2 cell: --laser or --channel red or blue, not {}",
-                match self.channel {
-                    Channel::Luma => "luma".to_string(),
-                    Channel::Single(c) => format!("--channel {}", c.name()),
-                    Channel::Laser(c) => format!("--laser {}", c.name()),
-                }
+                self.channel_option().unwrap_or_else(|| "luma".into())
             )),
+        }
+    }
+
+    /// The channel's option as a user writes it; `None` for luma, the default.
+    fn channel_option(&self) -> Option<String> {
+        match self.channel {
+            Channel::Luma => None,
+            Channel::Single(c) => Some(format!("--channel {}", c.name())),
+            Channel::Laser(c) => Some(format!("--laser {}", c.name())),
+        }
+    }
+
+    /// A raw mosaic of this spec's `order` as an RGB image: read at the channel colour's sites
+    /// (half size, [`mosaic_sites`]) where the spec asks for them, else demosaiced
+    /// ([`demosaic`]).
+    pub fn read_mosaic(&self, raw: &GrayImage, order: BayerPattern) -> Result<RgbImage, String> {
+        match self.site_colour() {
+            Some(colour) => mosaic_sites(raw, order, colour).map(|(sites, _)| sites),
+            None => demosaic(raw, order),
         }
     }
 

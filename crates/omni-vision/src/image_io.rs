@@ -168,14 +168,9 @@ pub fn decode_frame_channel(bytes: &[u8], name: &str, spec: &ColourSpec) -> Resu
                     format!("{}: the frame is a colour image, not a raw Bayer mosaic (drop --bayer)", spec.describe()),
                 ));
             }
-            let raw = from_dynamic(dynamic);
-            if let Some(colour) = spec.site_colour() {
-                let (sites, _) = crate::colour::mosaic_sites(&raw, order, colour)
-                    .map_err(|m| Error::new(name, "", format!("--bayer {} --bayer-sites: {m}", order.name())))?;
-                return Ok(sites.channel(spec.channel));
-            }
-            crate::colour::demosaic(&raw, order)
-                .map_err(|m| Error::new(name, "", format!("--bayer {}: {m}", order.name())))?
+            let sites = if spec.sites { " --bayer-sites" } else { "" };
+            spec.read_mosaic(&from_dynamic(dynamic), order)
+                .map_err(|m| Error::new(name, "", format!("--bayer {}{sites}: {m}", order.name())))?
         }
         None => {
             if grey {

@@ -1362,10 +1362,13 @@ mod pull_tests {
     }
 }
 
-/// Centres bucketed in square cells (a counting sort into a dense table of cells), for
-/// neighbour queries within `reach` px.
+/// Centres bucketed in square cells (a counting sort into a dense table of cells over the
+/// centres' bounding box: a frame with one short stripe needs a small table), for neighbour
+/// queries within `reach` px.
 struct Grid {
     cell: f64,
+    /// The table's first cell row and column (cells from the frame's origin).
+    first: (usize, usize),
     columns: usize,
     rows: usize,
     /// `order[start[k]..start[k + 1]]`: the centres in cell k (row-major), in index order.
@@ -1384,9 +1387,19 @@ impl Grid {
     fn from_placed(points: impl Iterator<Item = [f64; 4]>, reach: f64) -> Grid {
         let points: Vec<[f64; 4]> = points.collect();
         let cell = reach.max(1.0);
-        let key = |p: &[f64; 4]| ((p[1] / cell).max(0.0) as usize, (p[0] / cell).max(0.0) as usize);
-        let rows = points.iter().map(|p| key(p).0 + 1).max().unwrap_or(0);
-        let columns = points.iter().map(|p| key(p).1 + 1).max().unwrap_or(0);
+        let absolute = |p: &[f64; 4]| ((p[1] / cell).max(0.0) as usize, (p[0] / cell).max(0.0) as usize);
+        let (mut first, mut end) = ((usize::MAX, usize::MAX), (0, 0));
+        for p in &points {
+            let (r, q) = absolute(p);
+            first = (first.0.min(r), first.1.min(q));
+            end = (end.0.max(r + 1), end.1.max(q + 1));
+        }
+        let first = if points.is_empty() { (0, 0) } else { first };
+        let (rows, columns) = (end.0.saturating_sub(first.0), end.1.saturating_sub(first.1));
+        let key = |p: &[f64; 4]| {
+            let (r, q) = absolute(p);
+            (r - first.0, q - first.1)
+        };
         let mut start = vec![0u32; rows * columns + 1];
         for p in &points {
             let (r, q) = key(p);
@@ -1404,15 +1417,20 @@ impl Grid {
             *slot += 1;
         }
         let placed = order.iter().map(|&i| points[i as usize]).collect();
-        Grid { cell, columns, rows, start, order, placed }
+        Grid { cell, first, columns, rows, start, order, placed }
     }
 
     /// Calls `f` with the index, position and normal of every centre in the cells within one
     /// cell of (x, y), in index order per cell.
     fn visit(&self, x: f64, y: f64, mut f: impl FnMut(usize, &[f64; 4])) {
-        let (cx, cy) = ((x / self.cell).max(0.0) as usize, (y / self.cell).max(0.0) as usize);
-        for r in cy.saturating_sub(1)..(cy + 2).min(self.rows) {
-            let (q0, q1) = (cx.saturating_sub(1), (cx + 2).min(self.columns));
+        // The table's cells within one of (x, y)'s: [lo, hi) in each axis.
+        let span = |v: f64, first: usize, count: usize| {
+            let at = (v / self.cell).max(0.0) as usize;
+            (at.saturating_sub(first + 1), (at + 2).saturating_sub(first).min(count))
+        };
+        let (r0, r1) = span(y, self.first.0, self.rows);
+        let (q0, q1) = span(x, self.first.1, self.columns);
+        for r in r0..r1 {
             if q0 >= q1 {
                 continue;
             }

@@ -73,11 +73,14 @@ impl RidgeDetector {
 /// About how many samples of the frame are at its saturation level, from every
 /// [`SATURATION_ROW_STEP`]th row: a core wide enough to matter spans several of them.
 fn saturated_pixels<P: Pixel>(frame: &Frame<'_, P>) -> usize {
-    let (full, w) = (frame.max_value as u32, frame.width as usize);
+    let (full, w) = (P::from_threshold(frame.max_value), frame.width as usize);
     let rows = frame.data.chunks_exact(w).step_by(SATURATION_ROW_STEP);
-    // Compare-and-add without branches into a 32-bit count per row: vectorised.
-    let sampled: usize = rows.map(|row| row.iter().map(|v| u32::from(v.to_u32() >= full)).sum::<u32>() as usize).sum();
-    sampled * SATURATION_ROW_STEP
+    // Compared in the samples' own width and counted in bytes (255 samples at most per count),
+    // without branches: vectorised at a byte per lane for 8-bit frames.
+    let count = |row: &[P]| -> usize {
+        row.chunks(255).map(|c| c.iter().fold(0u8, |n, &v| n + u8::from(v >= full)) as usize).sum()
+    };
+    rows.map(count).sum::<usize>() * SATURATION_ROW_STEP
 }
 
 /// A frame binned 2 × 2: sums while they fit 16 bits (exact, and a sum saturates only where

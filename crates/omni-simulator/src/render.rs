@@ -348,12 +348,17 @@ struct Shader<'a> {
     slices: &'a [Slice],
     /// The tailed profile's shape; `None`: the Gaussian sheet.
     shape: Option<Shape>,
-    /// Whether the fan's 1/r spreading and the incidence are taken where the sheet's plane
-    /// crosses the surface rather than at each point across the stripe, and smooth wide sheets
-    /// are sampled 2 × 2 (or at the coherent imager's rate) instead of n × n. On for the tailed
-    /// profile and for widths set in px: a sheet many mm wide would otherwise lean its stripe's
-    /// peak off the plane by σ² · ∂ln(1/r)/∂d (0.2 px for a 20 px stripe on a 256 px sensor),
-    /// and the plain Gaussian's default rendering stays as it was, bit for bit.
+    /// Whether the fan's 1/r spreading and the incidence are taken on the stripe's centre line
+    /// rather than at each point across the stripe, and smooth wide sheets are sampled 2 × 2
+    /// (or at the coherent imager's rate) instead of n × n. On for the tailed profile and for
+    /// widths set in px, which stand for a stripe widened by the optics (defocus, a beam's
+    /// image), not for a sheet tens of mm thick: such a sheet would lean its stripe's peak off
+    /// the plane by σ² · ∂ln(1/r)/∂d (0.2 px for a 20 px stripe on a 256 px sensor). The centre
+    /// line's point is the one across the stripe *in the image* ([`Spread::centre_line`]): a
+    /// surface seen obliquely maps the image's perpendicular onto a slant across the stripe,
+    /// along which the fan's light changes as it does along the stripe (a 7 px stripe on a wall
+    /// grazed by the fan leaned 0.25 px). The plain Gaussian's default rendering stays as it
+    /// was, bit for bit.
     flat_across: bool,
     opts: &'a RenderOptions,
 }
@@ -413,7 +418,7 @@ impl Shader<'_> {
         let (value, laser) = if near {
             (0.0, 0.0)
         } else {
-            let signal = self.shade(&hit, &ray.dir, |_| 0.0);
+            let signal = self.shade(&hit, &ray.dir, |_| Spread::default());
             (signal.total(), signal.laser)
         };
         CornerKey {
@@ -428,28 +433,28 @@ impl Shader<'_> {
         }
     }
 
-    /// Electrons collected at a hit seen along `view`, ambient and laser apart; `footprint[i]`
-    /// is the spread (mm rms) of slice i's plane distance over the sample's own footprint (0 for
-    /// a point sample).
-    fn shade(&self, hit: &Hit, view: &Vector3<f64>, footprint: impl Fn(usize) -> f64) -> Signal {
+    /// Electrons collected at a hit seen along `view`, ambient and laser apart; `spread(i)` is
+    /// slice i's [`Spread`] at the sample (the default for a point sample).
+    fn shade(&self, hit: &Hit, view: &Vector3<f64>, spread: impl Fn(usize) -> Spread) -> Signal {
         let mut laser = 0.0;
         for (i, s) in self.slices.iter().enumerate() {
-            laser += s.weight * self.laser_irradiance(s, &hit.point, &hit.normal, view, footprint(i));
+            laser += s.weight * self.laser_irradiance(s, &hit.point, &hit.normal, view, spread(i));
         }
         let ambient = self.opts.ambient_e * self.scene.ambient_factor(&hit.point);
         Signal { ambient: hit.albedo * ambient, laser: hit.albedo * laser }
     }
 
     /// Laser signal (e⁻ for albedo 1) of one light plane at a surface point seen along `view`,
-    /// with the sheet profile widened by the sample's footprint (σ `footprint`, mm).
+    /// with the sheet profile widened by the sample's footprint ([`Spread`]).
     fn laser_irradiance(
         &self,
         slice: &Slice,
         p: &Point3<f64>,
         n: &Vector3<f64>,
         view: &Vector3<f64>,
-        footprint: f64,
+        spread: Spread,
     ) -> f64 {
+        let footprint = spread.footprint_mm;
         let lp = &slice.lp;
         let d = lp.plane.signed_distance(p);
         let profile = match &self.shape {
@@ -482,13 +487,14 @@ impl Shader<'_> {
             return 0.0;
         }
         if self.flat_across {
-            // The fan's spreading and the incidence where the sheet's plane crosses the surface
-            // (along its tangent plane), not at p: across the stripe the light follows the
+            // The fan's spreading and the incidence on the stripe's centre line across the
+            // stripe in the image from p (else where the sheet's plane crosses the surface's
+            // tangent plane, along it), not at p: across the stripe the light follows the
             // sheet's profile alone, however wide the sheet (see `Shader::flat_across`).
             let normal = lp.plane.normal.into_inner();
             let t = normal - n * normal.dot(n);
             let t2 = t.norm_squared();
-            let p0 = if t2 > 0.01 { p - t * (d / t2) } else { *p };
+            let p0 = spread.centre_line.unwrap_or(if t2 > 0.01 { p - t * (d / t2) } else { *p });
             let to_p0 = p0 - lp.virtual_source;
             let r0 = to_p0.norm();
             let cos0 = (to_p0 / r0).dot(n).abs();
@@ -503,6 +509,22 @@ impl Shader<'_> {
         let start = facet_exit(lp, u);
         !self.scene.occluded(&start, p, 1e-5)
     }
+}
+
+/// The farthest (in steps between neighbouring samples) that a sample's [`Spread::centre_line`]
+/// is linearised: 6 σ of a 20 px stripe sampled 2 × 2 is about 100.
+const CENTRE_LINE_MAX_STEPS: f64 = 200.0;
+
+/// What a sample's patch of the pixel adds to a light plane's profile at its surface point.
+#[derive(Debug, Clone, Copy, Default)]
+struct Spread {
+    /// σ (mm) of the plane distance over the patch.
+    footprint_mm: f64,
+    /// Where the stripe's centre line lies across the stripe *in the image* from the sample:
+    /// the surface point at the foot of the image's perpendicular from the sample to the line
+    /// where the plane distance is 0 (linearised from the neighbouring samples); `None` where
+    /// the neighbours do not tell.
+    centre_line: Option<Point3<f64>>,
 }
 
 /// Electrons of one sample: the incoherent ambient light and the laser light.
@@ -893,15 +915,24 @@ fn pixel_samples(shader: &Shader, camera: &dyn omni_model::CameraModel, x: f64, 
         };
         let nx = along(1, i + 1 < n, i > 0);
         let ny = along(n, j + 1 < n, j > 0);
-        let footprint = |s: usize| {
+        let spread = |s: usize| {
             let plane = &shader.slices[s].lp.plane;
             let d0 = plane.signed_distance(&hit.point);
-            let grad = |m: Option<usize>| {
-                m.and_then(|m| hits[m].as_ref()).map_or(0.0, |(h, _)| plane.signed_distance(&h.point) - d0)
+            // Each neighbour's step in plane distance and on the surface (the same pixel step).
+            let step = |m: Option<usize>| {
+                m.and_then(|m| hits[m].as_ref()).map_or((0.0, Vector3::zeros()), |(h, _)| {
+                    (plane.signed_distance(&h.point) - d0, h.point - hit.point)
+                })
             };
-            ((grad(nx).powi(2) + grad(ny).powi(2)) / 12.0).sqrt()
+            let ((gx, px), (gy, py)) = (step(nx), step(ny));
+            let g2 = gx * gx + gy * gy;
+            // Not where the plane distance barely changes across the image (a surface along the
+            // sheet): the foot would lie farther than the linearisation holds.
+            let near = d0 * d0 <= (CENTRE_LINE_MAX_STEPS * CENTRE_LINE_MAX_STEPS) * g2;
+            let centre_line = (g2 > 0.0 && near).then(|| hit.point - (px * gx + py * gy) * (d0 / g2));
+            Spread { footprint_mm: (g2 / 12.0).sqrt(), centre_line }
         };
-        values[k] = shader.shade(hit, dir, footprint);
+        values[k] = shader.shade(hit, dir, spread);
     }
     values
 }

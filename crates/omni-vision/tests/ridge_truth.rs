@@ -354,10 +354,10 @@ fn stripes_at_every_angle_to_the_rays_are_covered() {
 /// frame, a blob more than a line: 73.3 / 54.0 % (70–90°), offset −0.040 px, guarded at 50 %
 /// (docs/DECISIONS.md). On the walls of `corridor`, where these stripes are
 /// 7 px wide and lopsided by 0.18–0.25 (the tail and the wall's slant together), kept as the
-/// laser's steady shape: 85 mm wall 96.8 % at 20–30°, 200 mm wall 99.7 / 96.9 / 98.2 % at
-/// 40–70°, 300 mm wall 99.0 / 98.8 / 92.3 % at 50–80°, asserted ≥ 90 %, false points ≤ 1 % (0 /
-/// 0.83 / 0 %). Not met: the 85 mm wall at 30–40°, 68.3 % (guarded at 60 %), and the walls'
-/// offsets, +0.31 / +0.11 / +0.08 px (docs/DECISIONS.md).
+/// laser's steady shape: 85 mm wall 97.1 % at 20–30°, 200 mm wall 99.4 / 97.8 / 99.9 % at
+/// 40–70°, 300 mm wall 99.0 / 98.7 / 92.2 % at 50–80°, asserted ≥ 90 %, false points ≤ 1 % (0.75
+/// / 0.52 / 0 %); offsets +0.099 / +0.016 / +0.024 px, asserted ≤ 0.15 / 0.05 / 0.05. Not met:
+/// the 85 mm wall at 30–40°, 75.2 % (guarded at 70 %; docs/DECISIONS.md).
 #[test]
 fn real_shaped_stripes_on_curved_objects_are_covered() {
     use omni_simulator::SheetProfile;
@@ -387,8 +387,11 @@ fn real_shaped_stripes_on_curved_objects_are_covered() {
         eprintln!("{}\n{}", t.line(&format!("real 4 px, {half_gap} mm walls, laser-off")), t.visible_line());
         let false_share = t.false_points as f64 / (t.false_points + t.errors.len()) as f64;
         assert!(false_share <= 0.01, "{half_gap} mm walls: false points {}", t.false_points);
+        let (_, bias) = t.rms_bias();
+        let most = if half_gap == 85.0 { 0.15 } else { 0.05 };
+        assert!(bias.abs() <= most, "{half_gap} mm walls: offset {bias:+.4} px");
         for band in 2..9 {
-            let least = if half_gap == 85.0 && band == 3 { 0.6 } else { 0.9 };
+            let least = if half_gap == 85.0 && band == 3 { 0.7 } else { 0.9 };
             if let Some(c) = t.visible_coverage(band) {
                 assert!(c >= least, "{half_gap} mm walls, band {}–{}°: {c:.3}", 10 * band, 10 * band + 10);
             }
@@ -744,9 +747,10 @@ fn the_room_scene_is_covered_as_captured_and_with_laser_off_frames() {
 /// asserted ≤ 0.1. 10 and 20 px wide, found at coarser scales (the frame's own scale sees
 /// their profiles still falling where their reach ends), their lopsidedness kept as the
 /// laser's shape, the walks across the coarse stripes' gaps stopped short of the stripes' cut
-/// ends: 10 px covered 97.9 %, no false point, offset +0.010 px (blur known +0.002), spread
-/// 0.032 px; 20 px covered 91.9 %, no false point, offset +0.015 px (+0.009), spread 0.042 px.
-/// Asserted: ≥ 90 %, none false, offset ≤ 0.025 px (20 px: 0.05), spread ≤ 0.05 px (0.07).
+/// ends: 10 px covered 97.9 %, no false point, offset +0.009 px (blur known −0.001), spread
+/// 0.030 px; 20 px covered 93.8 %, no false point, offset +0.008 px (+0.002), spread 0.039 px.
+/// Asserted: ≥ 90 %, none false, offset ≤ 0.025 px (20 px: 0.05; with the blur known 0.005, the
+/// issue's ideal-optics bias), spread ≤ 0.05 px (0.07).
 #[test]
 fn real_shaped_stripes_2_to_20_px_wide() {
     use omni_simulator::SheetProfile;
@@ -767,7 +771,9 @@ fn real_shaped_stripes_2_to_20_px_wide() {
                 w if w <= 2.0 && name == "blur known" => (0.04, 0.04, 0.0),
                 w if w <= 5.0 && name == "blur known" => (0.04, 0.005, 0.0),
                 w if w <= 5.0 => (0.04, 0.1, 0.0),
+                w if w <= 10.0 && name == "blur known" => (0.05, 0.005, 0.0),
                 w if w <= 10.0 => (0.05, 0.025, 0.0),
+                _ if name == "blur known" => (0.07, 0.005, 0.0),
                 _ => (0.07, 0.05, 0.0),
             };
             assert!(t.coverage(8).unwrap() >= 0.9, "{fwhm} px {name}: coverage {:?}", t.coverage(8));

@@ -25,9 +25,14 @@ struct Tally {
     /// Truth stripe length (px) per 10° band of stripe-to-ray angle, and how much is covered.
     band_total: [f64; 9],
     band_covered: [f64; 9],
-    /// The same for the visible stripe only ([`Visibility`]); empty when not judged.
+    /// The same for the visible stripe only ([`Visibility`], its light whole on one surface
+    /// over [`WHOLE_PX`]); empty when not judged.
     visible_total: [f64; 9],
     visible_covered: [f64; 9],
+    /// The same where the stripe's light is whole on one surface over its own reach
+    /// ([`Visibility::light_reach`]): a stricter judge for stripes wider than the optics' blur.
+    whole_total: [f64; 9],
+    whole_covered: [f64; 9],
 }
 
 impl Tally {
@@ -42,16 +47,25 @@ impl Tally {
     fn visible_coverage(&self, band: usize) -> Option<f64> {
         band_share(&self.visible_covered, &self.visible_total, band)
     }
+    fn whole_coverage(&self, band: usize) -> Option<f64> {
+        band_share(&self.whole_covered, &self.whole_total, band)
+    }
     /// The share of the visible stripe covered, over every band.
     fn visible_covered_share(&self) -> f64 {
         self.visible_covered.iter().sum::<f64>() / self.visible_total.iter().sum::<f64>().max(1e-9)
     }
+    /// The visible stripe's coverage by band, judged over [`WHOLE_PX`] and (second line) over
+    /// the stripe's own reach.
     fn visible_line(&self) -> String {
-        let total: f64 = self.visible_total.iter().sum();
+        let all = self.band_total.iter().sum::<f64>().max(1.0);
+        let (total, whole): (f64, f64) = (self.visible_total.iter().sum(), self.whole_total.iter().sum());
         format!(
-            "  visible stripe {total:6.0} px ({:.1} % of it) | coverage by 10° band: {}",
-            100.0 * total / self.band_total.iter().sum::<f64>().max(1.0),
-            band_columns(|b| self.visible_coverage(b))
+            "  visible stripe {total:6.0} px ({:.1} % of it) | coverage by 10° band: {}\n  \
+             light whole   {whole:6.0} px ({:.1} % of it) | coverage by 10° band: {}",
+            100.0 * total / all,
+            band_columns(|b| self.visible_coverage(b)),
+            100.0 * whole / all,
+            band_columns(|b| self.whole_coverage(b))
         )
     }
     /// Adds `other`'s stripe lengths, all and visible, covered or not.
@@ -61,6 +75,8 @@ impl Tally {
             self.band_covered[band] += other.band_covered[band];
             self.visible_total[band] += other.visible_total[band];
             self.visible_covered[band] += other.visible_covered[band];
+            self.whole_total[band] += other.whole_total[band];
+            self.whole_covered[band] += other.whole_covered[band];
         }
     }
     fn line(&self, name: &str) -> String {
@@ -140,9 +156,14 @@ fn add_judged(
             let covered = points.iter().any(|p| (p.u - q[0]).hypot(p.v - q[1]) <= COVER_PX);
             t.band_total[band] += length;
             t.band_covered[band] += if covered { length } else { 0.0 };
-            if visible.is_some_and(|v| v.sees(line, i)) {
+            let Some(seen) = visible.map(|v| v.sees(line, i)) else { continue };
+            if seen.whole_px {
                 t.visible_total[band] += length;
                 t.visible_covered[band] += if covered { length } else { 0.0 };
+            }
+            if seen.whole_light {
+                t.whole_total[band] += length;
+                t.whole_covered[band] += if covered { length } else { 0.0 };
             }
         }
     }
@@ -153,7 +174,9 @@ fn add_judged(
 /// surface (every camera ray within [`WHOLE_PX`] across the stripe meets the same object, with a
 /// normal within 45° and an albedo within 20 % of the centre's), so no silhouette, crease or
 /// albedo edge cuts its profile, and the stripe goes on over that surface for [`END_PX`] along
-/// it both ways (the issue counts a stripe "up to the last 2 px before a silhouette").
+/// it both ways (the issue counts a stripe "up to the last 2 px before a silhouette"). A
+/// stripe wider than the optics' blur is judged a second way too ([`Seen::whole_light`]): its
+/// light must fall on that surface as far as it reaches ([`Visibility::light_reach`]).
 struct Visibility<'a> {
     sensor: &'a Sensor,
     scene: &'a Scene,
@@ -170,6 +193,20 @@ const VISIBLE_CONTRAST: f64 = 2.0;
 const WHOLE_PX: f64 = 2.5;
 /// Length (px) of stripe before a silhouette along it that is not counted.
 const END_PX: f64 = 2.0;
+/// The level, as a fraction of the light at the stripe's centre, down to which a stripe wider
+/// than the optics' blur must fall on one surface to count as whole ([`Visibility::light_reach`]):
+/// [`WHOLE_PX`] generalised, which reaches 0.4 % of a narrow stripe's peak (3.3 σ).
+const WHOLE_LIGHT_LEVEL: f64 = 0.01;
+/// The farthest (px) across a stripe that its light is followed.
+const WHOLE_LIGHT_MAX_PX: f64 = 20.0;
+
+/// Whether a truth sample is visible, its stripe's light judged whole on one surface over
+/// [`WHOLE_PX`] and over the stripe's own reach ([`Visibility::light_reach`]).
+#[derive(Clone, Copy)]
+struct Seen {
+    whole_px: bool,
+    whole_light: bool,
+}
 
 impl<'a> Visibility<'a> {
     fn new(sensor: &'a Sensor, scene: &'a Scene, alpha_rad: f64, opts: &RenderOptions) -> Self {
@@ -196,17 +233,37 @@ impl<'a> Visibility<'a> {
         self.scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY)
     }
 
-    /// Whether sample `i` of the truth curve `line` (not its first or last) is visible.
-    fn sees(&self, line: &[TruthPoint], i: usize) -> bool {
+    /// How far (px) across the stripe at `q` along unit `n` its light reaches: the farther of
+    /// the two sides where the laser's light falls to [`WHOLE_LIGHT_LEVEL`] of its level at
+    /// `q` (or leaves the frame), at least [`WHOLE_PX`], at most [`WHOLE_LIGHT_MAX_PX`].
+    fn light_reach(&self, q: [f64; 2], (nx, ny): (f64, f64)) -> f64 {
+        let level = WHOLE_LIGHT_LEVEL * self.light(q[0], q[1]);
+        let height = self.laser_only.len() / self.width;
+        let reach = |sign: f64| {
+            let steps = (2.0 * WHOLE_LIGHT_MAX_PX) as usize;
+            (1..=steps).map(|k| 0.5 * k as f64).find(|&s| {
+                let (u, v) = (q[0] + sign * s * nx, q[1] + sign * s * ny);
+                let inside = u >= 0.0 && v >= 0.0 && (u as usize) + 1 < self.width && (v as usize) + 1 < height;
+                !inside || self.light(u, v) <= level
+            })
+        };
+        let farther = reach(-1.0).unwrap_or(WHOLE_LIGHT_MAX_PX).max(reach(1.0).unwrap_or(WHOLE_LIGHT_MAX_PX));
+        farther.max(WHOLE_PX)
+    }
+
+    /// Whether sample `i` of the truth curve `line` (not its first or last) is visible, judged
+    /// across the stripe over [`WHOLE_PX`] and over the stripe's own light ([`Self::light_reach`]).
+    fn sees(&self, line: &[TruthPoint], i: usize) -> Seen {
+        let none = Seen { whole_px: false, whole_light: false };
         let q = line[i].pixel;
         if self.light(q[0], q[1]) < self.min_contrast {
-            return false;
+            return none;
         }
         let (a, b) = (line[i - 1].pixel, line[i + 1].pixel);
         let (tx, ty) = (b[0] - a[0], b[1] - a[1]);
         let len = tx.hypot(ty).max(1e-12);
         let (nx, ny) = (-ty / len, tx / len);
-        let Some(own) = self.hit(q[0], q[1]) else { return false };
+        let Some(own) = self.hit(q[0], q[1]) else { return none };
         let same_surface = |u: f64, v: f64| {
             self.hit(u, v).is_some_and(|h| {
                 h.object == own.object
@@ -214,9 +271,17 @@ impl<'a> Visibility<'a> {
                     && (h.albedo - own.albedo).abs() <= 0.2 * own.albedo
             })
         };
-        let steps = |reach: f64| (1..=5).flat_map(move |k| [-1.0, 1.0].map(|s| s * reach * k as f64 / 5.0));
-        steps(WHOLE_PX).all(|d| same_surface(q[0] + d * nx, q[1] + d * ny))
-            && steps(END_PX).all(|d| same_surface(q[0] - d * ny, q[1] + d * nx))
+        // Samples every ≤ ½ px out to `reach` on both sides.
+        let steps = |reach: f64| {
+            let n = ((2.0 * reach).ceil() as usize).max(5);
+            (1..=n).flat_map(move |k| [-1.0, 1.0].map(|s| s * reach * k as f64 / n as f64))
+        };
+        if !steps(END_PX).all(|d| same_surface(q[0] - d * ny, q[1] + d * nx)) {
+            return none;
+        }
+        let whole_over = |reach: f64| steps(reach).all(|d| same_surface(q[0] + d * nx, q[1] + d * ny));
+        let whole_px = whole_over(WHOLE_PX);
+        Seen { whole_px, whole_light: whole_px && whole_over(self.light_reach(q, (nx, ny))) }
     }
 }
 
@@ -357,7 +422,12 @@ fn stripes_at_every_angle_to_the_rays_are_covered() {
 /// laser's steady shape: 85 mm wall 97.1 % at 20–30°, 200 mm wall 99.4 / 97.8 / 99.9 % at
 /// 40–70°, 300 mm wall 99.0 / 98.7 / 92.2 % at 50–80°, asserted ≥ 90 %, false points ≤ 1 % (0.75
 /// / 0.52 / 0 %); offsets +0.099 / +0.016 / +0.024 px, asserted ≤ 0.15 / 0.05 / 0.05. Not met:
-/// the 85 mm wall at 30–40°, 75.2 % (guarded at 70 %; docs/DECISIONS.md).
+/// the 85 mm wall at 30–40°, 75.2 % (guarded at 70 %), and the sphere (guarded at 50 %), where
+/// the 7–10 px profiles of the visible stripe reach past a silhouette or the wall's end. Judged
+/// by the stripes' own light instead (whole on one surface down to 1 % of its level, the 2.5 px
+/// of narrow stripes generalised; `Visibility::light_reach`), every object's and wall's stripe is
+/// covered ≥ 97 % in every band (85 mm wall 97.5 / 100 %, sphere 100 %), asserted ≥ 90 %; that
+/// judge keeps 25–85 % of the stripe (docs/DECISIONS.md).
 #[test]
 fn real_shaped_stripes_on_curved_objects_are_covered() {
     use omni_simulator::SheetProfile;
@@ -378,6 +448,9 @@ fn real_shaped_stripes_on_curved_objects_are_covered() {
             if let Some(c) = t.visible_coverage(band) {
                 assert!(c >= least, "{object:?}, band {}–{}°: {c:.3}", 10 * band, 10 * band + 10);
             }
+            if let Some(c) = t.whole_coverage(band) {
+                assert!(c >= 0.9, "{object:?}, light whole, band {}–{}°: {c:.3}", 10 * band, 10 * band + 10);
+            }
         }
     }
     for half_gap in [85.0, 200.0, 300.0] {
@@ -394,6 +467,9 @@ fn real_shaped_stripes_on_curved_objects_are_covered() {
             let least = if half_gap == 85.0 && band == 3 { 0.7 } else { 0.9 };
             if let Some(c) = t.visible_coverage(band) {
                 assert!(c >= least, "{half_gap} mm walls, band {}–{}°: {c:.3}", 10 * band, 10 * band + 10);
+            }
+            if let Some(c) = t.whole_coverage(band) {
+                assert!(c >= 0.9, "{half_gap} mm walls, light whole, band {}–{}°: {c:.3}", 10 * band, 10 * band + 10);
             }
         }
     }

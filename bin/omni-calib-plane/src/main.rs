@@ -485,6 +485,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
     let mut out = ScannerFile::new(params);
     out.report = Some(report);
     write_doc(&a.output, &out)?;
+    warn_saturated(&fit.report);
     let table = fixed_table(&fit.report);
     use std::io::Write;
     if a.output == Path::new("-") {
@@ -495,6 +496,39 @@ fn fixed(a: &FixedArgs) -> CliResult {
         stdout.flush()?;
     }
     Ok(())
+}
+
+/// More than this share of a frame's stripe points on the board saturated draws a warning.
+const SATURATED_WARNING_SHARE: f64 = 0.25;
+
+/// Warns, in one line, of the frames whose stripe on the board is largely saturated: a clipped
+/// stripe is read at its plateau's middle, which lies towards a lopsided laser's tail (in the
+/// simulator 0.06-0.4 px for a real-shaped 4 px stripe clipped at 1/2 to 1/10 of its peak;
+/// docs/DECISIONS.md).
+fn warn_saturated(r: &omni_calib::fixed_plane::FixedPlaneReport) {
+    let saturated: Vec<String> = r
+        .frames
+        .iter()
+        .filter_map(|f| {
+            let share = f.saturated_points? as f64 / f.board_points.max(1) as f64;
+            let short = Path::new(&f.name).file_name().map_or(f.name.clone(), |n| n.to_string_lossy().into_owned());
+            (share > SATURATED_WARNING_SHARE).then(|| format!("{short} {:.0} %", 100.0 * share))
+        })
+        .collect();
+    if !saturated.is_empty() {
+        omni_cli::warn(
+            "omni-calib-plane",
+            &format!(
+                "{} of {} frames have more than {:.0} % of the stripe's points on the board saturated ({}); a \
+                 clipped stripe is read towards a lopsided laser's tail, by up to a few tenths of a px: for the \
+                 best plane lower the exposure or the laser's power",
+                saturated.len(),
+                r.frames.len(),
+                100.0 * SATURATED_WARNING_SHARE,
+                saturated.join(", ")
+            ),
+        );
+    }
 }
 
 /// The human table of a fixed-plane fit.

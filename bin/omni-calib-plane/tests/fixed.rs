@@ -59,6 +59,22 @@ fn frames_without_a_board_are_named_and_skipped_and_scanner_json_is_fixed_planes
         serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
     assert_eq!(report["format"], "omniscan.fixed_plane_report");
     assert_eq!(report["report"]["frames"].as_array().unwrap().len(), 3);
+    // Each frame's saturated stripe points on the board are counted, and the frames where they
+    // are more than a quarter are named in one warning (im3 and im12 here: 27 and 38 %).
+    let mut saturated = Vec::new();
+    for f in report["report"]["frames"].as_array().unwrap() {
+        let (n, on_board) = (f["saturated_points"].as_u64().unwrap(), f["board_points"].as_u64().unwrap());
+        assert!(n <= on_board, "{f}");
+        if 4 * n > on_board {
+            saturated.push(f["name"].as_str().unwrap().rsplit('/').next().unwrap().to_string());
+        }
+    }
+    let warnings: Vec<&str> = se.lines().filter(|l| l.contains("saturated")).collect();
+    assert_eq!(warnings.len(), usize::from(!saturated.is_empty()), "{se}");
+    for name in &saturated {
+        assert!(warnings[0].contains(&format!("{name} ")), "{name} not in {se}");
+    }
+    assert!(!saturated.is_empty(), "no frame with its stripe largely saturated: {report}");
     // The table of a polygon tool refuses the fixed plane in one line naming the kind.
     let t = Command::new(BIN).current_dir(dir.path()).args(["table", "--scanner", "scanner.json"]).output().unwrap();
     assert_eq!(t.status.code(), Some(1));

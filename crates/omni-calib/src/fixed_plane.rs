@@ -58,6 +58,9 @@ pub struct FrameInput {
     pub corners: Result<Observation, String>,
     /// Stripe centres (px).
     pub stripe: Vec<[f64; 2]>,
+    /// Which of `stripe` the detector found saturated (its `SATURATED` quality flag); empty
+    /// where not known (centres from another detector).
+    pub saturated: Vec<bool>,
     /// The frame's size (px), if known: it must be the camera model's.
     pub size: Option<(u32, u32)>,
 }
@@ -81,6 +84,9 @@ pub struct FrameReport {
     /// Stripe points found in the frame, and those on the board.
     pub stripe_points: usize,
     pub board_points: usize,
+    /// How many of the board's points are saturated; `None` where not known. A clipped stripe
+    /// is read at its plateau's middle, towards a lopsided laser's tail.
+    pub saturated_points: Option<usize>,
     /// Board points within the robust fit's inlier band.
     pub inliers: usize,
     /// RMS and mean signed distance of the inliers from the plane (mm).
@@ -159,6 +165,8 @@ struct OnBoard {
     stripe_points: usize,
     points: Vec<Point3<f64>>,
     pixels: Vec<[f64; 2]>,
+    /// How many of `points` are saturated, where known ([`FrameInput::saturated`]).
+    saturated: Option<usize>,
 }
 
 fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptions) -> Result<OnBoard, String> {
@@ -208,7 +216,9 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
     };
     let mut points = Vec::new();
     let mut pixels = Vec::new();
-    for px in &f.stripe {
+    let flags_known = f.saturated.len() == f.stripe.len();
+    let mut saturated = 0;
+    for (k, px) in f.stripe.iter().enumerate() {
         let Some(p) = on_board(px[0], px[1]) else { continue };
         let local = inverse * p;
         if !(local.x >= x0 && local.x <= x1 && local.y >= y0 && local.y <= y1) {
@@ -226,6 +236,7 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         }
         points.push(p);
         pixels.push(*px);
+        saturated += usize::from(flags_known && f.saturated[k]);
     }
     if points.len() < opts.min_points {
         return Err(format!(
@@ -243,6 +254,7 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         stripe_points: f.stripe.len(),
         points,
         pixels,
+        saturated: flags_known.then_some(saturated),
     })
 }
 
@@ -366,6 +378,7 @@ pub fn fit_fixed_plane(
             board_distance_mm: (f.pose * Point3::origin()).coords.norm(),
             stripe_points: f.stripe_points,
             board_points: f.points.len(),
+            saturated_points: f.saturated,
             inliers: r.len(),
             residual_rms_mm: (ss / n).sqrt(),
             residual_mean_mm: r.iter().sum::<f64>() / n,
@@ -472,12 +485,12 @@ pub fn detect_frames(
                 Ok(b) => Ok(Observation::from_corners(&name, &b, opts.square_mm)),
                 Err(why) => Err(format!("board not found: {why}")),
             };
-            let stripe = match given {
-                Some(g) => g[k].clone(),
+            let (stripe, saturated) = match given {
+                Some(g) => (g[k].clone(), Vec::new()),
                 None => detect_stripe(path, &opts.colour, &opts.ridge)?,
             };
             let size = Some((grey.width as u32, grey.height as u32));
-            Ok((FrameInput { name, corners, stripe, size }, entry, larger))
+            Ok((FrameInput { name, corners, stripe, saturated, size }, entry, larger))
         })
         .collect();
     let mut frames = Vec::new();
@@ -509,13 +522,16 @@ pub fn detect_frames(
     Ok(frames)
 }
 
-/// The stripe centres of one frame (px), the whole frame searched.
+/// The stripe centres of one frame (px), the whole frame searched, and which of them are
+/// saturated.
 pub fn detect_stripe(
     path: &Path,
     colour: &omni_vision::colour::ColourSpec,
     ridge: &omni_vision::stripe::RidgeParams,
-) -> Result<Vec<[f64; 2]>, String> {
+) -> Result<(Vec<[f64; 2]>, Vec<bool>), String> {
     let img = omni_vision::image_io::load_frame_channel(path, colour).map_err(|e| e.to_string())?;
     let detector = omni_vision::stripe::RidgeDetector::whole_frame(img.width, img.height, *ridge);
-    Ok(detector.detect(&img).iter().map(|p| [p.u, p.v]).collect())
+    let points = detector.detect(&img);
+    let saturated = points.iter().map(|p| p.quality & omni_vision::stripe::quality::SATURATED != 0).collect();
+    Ok((points.iter().map(|p| [p.u, p.v]).collect(), saturated))
 }

@@ -63,7 +63,10 @@ RMS and mean about the plane (mm), the straightness of the frame's stripe (RMS d
 3-D, in mm and as imaged in px), and the leave-one-out RMS (the frame's points against the plane fitted without \
 that frame, mm); then the plane (unit normal, distance from the camera in mm) with its σ from the fit (points \
 taken as independent) and from a jackknife over the frames (the honest one when frames carry their own pose \
-errors). --report writes all of it as JSON, with each frame's saturated stripe points on the board; scanner.json's report holds it too. Frames where more than a quarter of them are saturated are named in one warning: a clipped stripe is read at its plateau's middle, towards a lopsided laser's tail, so lower the exposure or the laser's power for calibration.
+errors). --report writes all of it as JSON, with each frame's saturated stripe points on the board; \
+scanner.json's report holds it too. Frames where more than a quarter of them are saturated are named in one \
+warning: a clipped stripe is read at its plateau's middle, towards a lopsided laser's tail, so lower the exposure \
+or the laser's power for calibration.
 
 Frames whose board is not found, or whose board does not carry the stripe (fewer than --min-points points on it), \
 are named and skipped; fewer than two usable frames is an error (exit 1). A board file whose size most frames \

@@ -11,7 +11,9 @@
 //! Besides criterion's report, one line per method starts with `SUMMARY`: the wall-clock median
 //! of 30 runs, and the thread's CPU time per run (nanosecond thread clock), fastest and median
 //! of 200 runs, which other processes on a busy machine do not inflate (a virtual machine's
-//! host can: the fastest run is the figure to compare).
+//! host can: the fastest run is the figure to compare), each beside a copy of the frame; and the
+//! same for the frame read from memory, [`RING_FRAMES`] copies of it taken in turn, beside a copy
+//! of each from memory (the floor).
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use omni_formats::scene::{SceneFile, SceneObject, Shape};

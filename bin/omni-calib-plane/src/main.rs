@@ -514,8 +514,7 @@ fn warn_saturated(r: &omni_calib::fixed_plane::FixedPlaneReport) {
         .iter()
         .filter_map(|f| {
             let share = f.saturated_points? as f64 / f.board_points.max(1) as f64;
-            let short = Path::new(&f.name).file_name().map_or(f.name.clone(), |n| n.to_string_lossy().into_owned());
-            (share > SATURATED_WARNING_SHARE).then(|| format!("{short} {:.0} %", 100.0 * share))
+            (share > SATURATED_WARNING_SHARE).then(|| format!("{} {:.0} %", file_name(&f.name), 100.0 * share))
         })
         .collect();
     if !saturated.is_empty() {
@@ -532,6 +531,11 @@ fn warn_saturated(r: &omni_calib::fixed_plane::FixedPlaneReport) {
             ),
         );
     }
+}
+
+/// A frame's file name without its directories, for the table and warnings.
+fn file_name(path: &str) -> String {
+    Path::new(path).file_name().map_or(path.to_string(), |n| n.to_string_lossy().into_owned())
 }
 
 /// The human table of a fixed-plane fit.
@@ -552,7 +556,7 @@ fn fixed_table(r: &omni_calib::fixed_plane::FixedPlaneReport) -> String {
         "loo_mm"
     ));
     for f in &r.frames {
-        let short = Path::new(&f.name).file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or(f.name.clone());
+        let short = file_name(&f.name);
         t.push_str(&format!(
             "{:<24} {:>7} {:>9.3} {:>8.1} {:>8} {:>8} {:>9.4} {:>9.4} {:>9.4} {:>9.3} {:>9.4}\n",
             short,

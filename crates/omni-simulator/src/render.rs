@@ -491,10 +491,12 @@ impl Shader<'_> {
             // stripe in the image from p (else where the sheet's plane crosses the surface's
             // tangent plane, along it), not at p: across the stripe the light follows the
             // sheet's profile alone, however wide the sheet (see `Shader::flat_across`).
-            let normal = lp.plane.normal.into_inner();
-            let t = normal - n * normal.dot(n);
-            let t2 = t.norm_squared();
-            let p0 = spread.centre_line.unwrap_or(if t2 > 0.01 { p - t * (d / t2) } else { *p });
+            let p0 = spread.centre_line.unwrap_or_else(|| {
+                let normal = lp.plane.normal.into_inner();
+                let t = normal - n * normal.dot(n);
+                let t2 = t.norm_squared();
+                if t2 > 0.01 { p - t * (d / t2) } else { *p }
+            });
             let to_p0 = p0 - lp.virtual_source;
             let r0 = to_p0.norm();
             let cos0 = (to_p0 / r0).dot(n).abs();
@@ -523,7 +525,8 @@ struct Spread {
     /// Where the stripe's centre line lies across the stripe *in the image* from the sample:
     /// the surface point at the foot of the image's perpendicular from the sample to the line
     /// where the plane distance is 0 (linearised from the neighbouring samples); `None` where
-    /// the neighbours do not tell.
+    /// the neighbours do not tell, or the light is not taken on the centre line
+    /// ([`Shader::flat_across`]).
     centre_line: Option<Point3<f64>>,
 }
 
@@ -929,7 +932,8 @@ fn pixel_samples(shader: &Shader, camera: &dyn omni_model::CameraModel, x: f64, 
             // Not where the plane distance barely changes across the image (a surface along the
             // sheet): the foot would lie farther than the linearisation holds.
             let near = d0 * d0 <= (CENTRE_LINE_MAX_STEPS * CENTRE_LINE_MAX_STEPS) * g2;
-            let centre_line = (g2 > 0.0 && near).then(|| hit.point - (px * gx + py * gy) * (d0 / g2));
+            let centre_line =
+                (shader.flat_across && g2 > 0.0 && near).then(|| hit.point - (px * gx + py * gy) * (d0 / g2));
             Spread { footprint_mm: (g2 / 12.0).sqrt(), centre_line }
         };
         values[k] = shader.shade(hit, dir, spread);

@@ -108,7 +108,7 @@ fn ridge(c: &mut Criterion) {
                 .collect();
             cpu.sort_by(f64::total_cmp);
             let per_mp = |s: f64| 1e3 * s / megapixels;
-            let ring = FrameRing::new(&f.pixels);
+            let ring = FrameRing::new(&f.pixels, RING_FRAMES);
             let from_memory = ring
                 .fastest_copy()
                 .zip(ring.fastest(|data| {
@@ -128,7 +128,7 @@ fn ridge(c: &mut Criterion) {
                 label,
                 f.name,
                 per_mp(times[times.len() / 2]),
-                match (cpu.first(), cpu.get(cpu.len() / 2), fastest_copy(&f.pixels)) {
+                match (cpu.first(), cpu.get(cpu.len() / 2), FrameRing::new(&f.pixels, 1).fastest_copy()) {
                     (Some(&fastest), Some(&median), Some(copy)) => format!(
                         ", thread CPU time fastest {:.3} ms/MP, median {:.3} ms/MP; a copy of the frame in cache \
                          {:.3} ms/MP, fastest run / copy {:.1}",
@@ -185,41 +185,30 @@ fn rgb_contrast(c: &mut Criterion) {
     );
 }
 
-/// The memory floor beside a detection: this thread's CPU time of one copy of the frame into a
-/// buffer already in place (fastest of 200, seconds).
-fn fastest_copy(pixels: &[u8]) -> Option<f64> {
-    let mut dst = pixels.to_vec();
-    (0..200)
-        .map(|_| {
-            let t0 = thread_cpu_seconds()?;
-            dst.copy_from_slice(std::hint::black_box(pixels));
-            std::hint::black_box(&mut dst);
-            Some(thread_cpu_seconds()? - t0)
-        })
-        .try_fold(f64::INFINITY, |best, t| Some(best.min(t?)))
-}
-
 /// Copies of a bench frame taken in turn, more of them than any cache holds: each run reads its
 /// frame from memory, as a camera's frames arrive (the issue's floor: one read of the frame
 /// from memory), where a frame run again and again stays in cache.
 const RING_FRAMES: usize = 96;
+/// Runs timed per figure, the fastest kept.
+const TIMED_RUNS: usize = 200;
 
+/// Copies of a frame, run on in turn: one copy stays in cache, [`RING_FRAMES`] come from memory.
 struct FrameRing {
     frames: Vec<Vec<u8>>,
 }
 
 impl FrameRing {
-    fn new(pixels: &[u8]) -> FrameRing {
-        FrameRing { frames: (0..RING_FRAMES).map(|_| pixels.to_vec()).collect() }
+    fn new(pixels: &[u8], copies: usize) -> FrameRing {
+        FrameRing { frames: (0..copies).map(|_| pixels.to_vec()).collect() }
     }
 
-    /// This thread's CPU time of `run` on each frame in turn, twice round the ring: the fastest
-    /// (seconds).
+    /// This thread's CPU time of `run` on each frame in turn, [`TIMED_RUNS`] runs or twice round
+    /// the ring: the fastest (seconds).
     fn fastest(&self, mut run: impl FnMut(&[u8])) -> Option<f64> {
         self.frames
             .iter()
             .cycle()
-            .take(2 * RING_FRAMES)
+            .take(TIMED_RUNS.max(2 * self.frames.len()))
             .map(|data| {
                 let t0 = thread_cpu_seconds()?;
                 run(data);
@@ -228,7 +217,8 @@ impl FrameRing {
             .try_fold(f64::INFINITY, |best, t| Some(best.min(t?)))
     }
 
-    /// The memory floor: one copy of each frame in turn into a buffer in cache.
+    /// The memory floor beside a detection: one copy of each frame in turn into a buffer
+    /// already in place.
     fn fastest_copy(&self) -> Option<f64> {
         let mut dst = self.frames[0].clone();
         self.fastest(|data| {

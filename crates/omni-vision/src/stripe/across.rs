@@ -34,7 +34,7 @@
 //!   ([`Centre::top_shape`]; the lens's blur where known, else the pixel's and the kernel's);
 //! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): a
 //!   line through the neighbours once a wider parabola's curvature is taken out, so that a curved
-//!   stripe keeps its centre.
+//!   stripe keeps its centre; wide stripes' points, re-measured from a coarser scale, as well.
 //!
 //! The measurements behind these rules: docs/DECISIONS.md.
 
@@ -239,6 +239,7 @@ impl RidgeDetector {
         if let Some(coarse) = self.coarser_stripes(frame, threshold, scale, wide, kept.len()) {
             let mut refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
             lean_to_the_lights_peak(&mut refined, self.peak_blur_variance(scale), self.mosaic_at(scale));
+            fit_along_stripe(&mut refined, self.params.along_stripe_px);
             kept.extend(refined);
         }
         remove_steady_lean(&mut kept);
@@ -815,26 +816,19 @@ impl Centre {
 fn remove_steady_lean(points: &mut [Linked]) {
     let placed = points.iter().map(|l| [l.point.u, l.point.v, l.normal.0, l.normal.1]);
     let grid = Grid::from_placed(placed, LEAN_HALF_ARC_PX);
-    let reach2 = LEAN_HALF_ARC_PX * LEAN_HALF_ARC_PX;
     let shifts: Vec<f64> = points
         .iter()
         .map(|l| {
             if l.point.quality & quality::SATURATED != 0 {
                 return 0.0;
             }
-            let (px, py, (nx, ny)) = (l.point.u, l.point.v, l.normal);
+            let here = (l.point.u, l.point.v, l.normal.0, l.normal.1);
             let (mut sum, mut count) = (0.0, 0usize);
-            grid.visit(px, py, |j, &[ou, ov, onx, ony]| {
-                let (ex, ey) = (ou - px, ov - py);
-                let cos = onx * nx + ony * ny;
-                if ex * ex + ey * ey > reach2 || cos.abs() < SAME_STRIPE_COS {
-                    return;
-                }
-                let (t, d) = (-ny * ex + nx * ey, nx * ex + ny * ey);
+            grid.visit(here.0, here.1, |j, other| {
                 if let Some(lean) = points[j].lean
-                    && d.abs() <= 0.5 + 0.25 * t.abs()
+                    && let Some((_, _, same_way)) = on_the_stripe(here, other, LEAN_HALF_ARC_PX)
                 {
-                    sum += if cos > 0.0 { lean } else { -lean };
+                    sum += if same_way { lean } else { -lean };
                     count += 1;
                 }
             });
@@ -845,6 +839,63 @@ fn remove_steady_lean(points: &mut [Linked]) {
         l.point.u -= shift * l.normal.0;
         l.point.v -= shift * l.normal.1;
     }
+}
+
+/// The along-stripe fit ([`super::RidgeParams::along_stripe_px`], `along` px) of points
+/// re-measured from a coarser scale, which [`RidgeDetector::link_and_correct`] never sees: as
+/// there, each point moves to the line fitted to its stripe's neighbours within ±`along` once
+/// the curvature of a parabola over the wider arc is taken out. A wide stripe's points carry
+/// the most noise (it grows with the width), so they need the fit most. A point whose fit
+/// would move it more than [`MAX_MOVE_PX`] stays where it is.
+fn fit_along_stripe(points: &mut [Linked], along: f64) {
+    if !(along > 0.0) {
+        return;
+    }
+    let shape_half_arc = SHAPE_HALF_ARC_PX.max(2.0 * along);
+    let reach = shape_half_arc + 1.0;
+    let grid = Grid::from_placed(points.iter().map(|l| [l.point.u, l.point.v, l.normal.0, l.normal.1]), reach);
+    let mut neighbours: Vec<Neighbour> = Vec::new();
+    let shifts: Vec<f64> = points
+        .iter()
+        .map(|l| {
+            let (px, py, (nx, ny)) = (l.point.u, l.point.v, l.normal);
+            neighbours.clear();
+            grid.visit(px, py, |_, other| {
+                if let Some((t, d, _)) = on_the_stripe((px, py, nx, ny), other, reach) {
+                    neighbours.push((t, d, 0.0, 0.0, 0.0));
+                }
+            });
+            let mut sums = ShapeSums::default();
+            neighbours.iter().filter(|n| n.0.abs() <= shape_half_arc).for_each(|n| sums.add(n));
+            let Some([_, _, bend]) = sums.parabola(&sums.factors()) else {
+                return 0.0;
+            };
+            let offset = fit_line(&neighbours, along, |n| n.1 - bend * n.0 * n.0).map_or(0.0, |f| f.0);
+            if offset.abs() > MAX_MOVE_PX { 0.0 } else { offset }
+        })
+        .collect();
+    for (l, shift) in points.iter_mut().zip(shifts) {
+        l.point.u += shift * l.normal.0;
+        l.point.v += shift * l.normal.1;
+    }
+}
+
+/// Where a point at `[u, v]` with unit normal `[nx, ny]` lies from the point (`px`, `py`) of
+/// normal (`nx0`, `ny0`), if on the same stripe (within `reach` px, its normal within 30°
+/// either way, and within 0.5 + 0.25·|t| px of the point's tangent): arc t and offset d along
+/// the normal (px), and whether the two normals point the same way.
+fn on_the_stripe(
+    (px, py, nx0, ny0): (f64, f64, f64, f64),
+    &[u, v, nx, ny]: &[f64; 4],
+    reach: f64,
+) -> Option<(f64, f64, bool)> {
+    let (ex, ey) = (u - px, v - py);
+    let cos = nx * nx0 + ny * ny0;
+    if ex * ex + ey * ey > reach * reach || cos.abs() < SAME_STRIPE_COS {
+        return None;
+    }
+    let (t, d) = (-ny0 * ex + nx0 * ey, nx0 * ex + ny0 * ey);
+    (d.abs() <= 0.5 + 0.25 * t.abs()).then_some((t, d, cos > 0.0))
 }
 
 /// Adds to each point's lean (from its top's centroid) its stripe's median top shape, as

@@ -124,8 +124,13 @@ pub enum DecodedGray {
     Wide(GrayImage),
 }
 
-/// [`load_gray`], keeping an 8-bit grey frame's bytes as they are.
+/// [`load_gray`], keeping an 8-bit grey frame's bytes as they are. A plain 8-bit binary PGM
+/// (what `omni-trigger` captures) is read straight into the frame's buffer: one copy out of the
+/// page cache, where the decoder adds a zeroed buffer and a second copy.
 pub fn load_gray_decoded(path: &Path) -> Result<DecodedGray, Error> {
+    if let Some(frame) = read_plain_pgm8(path) {
+        return Ok(frame);
+    }
     let bytes = std::fs::read(path).map_err(|e| Error::io(path.display().to_string(), &e))?;
     Ok(match decode_checked(&bytes, &path.display().to_string())? {
         image::DynamicImage::ImageLuma8(g) => {
@@ -133,6 +138,59 @@ pub fn load_gray_decoded(path: &Path) -> Result<DecodedGray, Error> {
         }
         other => DecodedGray::Wide(from_dynamic(other)),
     })
+}
+
+/// An 8-bit binary PGM without comments whose file is exactly its header and width × height
+/// samples, read without a decoder; `None` for anything else, which the decoder then reads or
+/// names the fault of (a file that changes while it is read included).
+fn read_plain_pgm8(path: &Path) -> Option<DecodedGray> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path).ok()?;
+    let size = file.metadata().ok()?.len();
+    let mut head = [0u8; 64];
+    let mut filled = 0;
+    while filled < head.len() {
+        match file.read(&mut head[filled..]).ok()? {
+            0 => break,
+            n => filled += n,
+        }
+    }
+    let (width, height, header_len) = plain_pgm8_header(&head[..filled])?;
+    let max = omni_model::limits::MAX_IMAGE_SIDE_PX;
+    if width == 0 || height == 0 || width > max || height > max {
+        return None;
+    }
+    let samples = u64::from(width) * u64::from(height);
+    if size != header_len as u64 + samples {
+        return None;
+    }
+    let mut data = Vec::with_capacity(samples as usize);
+    data.extend_from_slice(&head[header_len..filled.min(header_len + samples as usize)]);
+    file.take(samples - data.len() as u64).read_to_end(&mut data).ok()?;
+    (data.len() as u64 == samples).then_some(DecodedGray::Eight { width, height, data })
+}
+
+/// Width, height and length (bytes) of a binary PGM header (`P5`, width, height and maxval as
+/// decimal text after whitespace, one whitespace byte after the maxval) whose maxval is 255
+/// and which holds no comment.
+fn plain_pgm8_header(bytes: &[u8]) -> Option<(u32, u32, usize)> {
+    let mut at = b"P5".len();
+    if !bytes.starts_with(b"P5") {
+        return None;
+    }
+    let mut fields = [0u32; 3];
+    for field in &mut fields {
+        let spaces = bytes[at..].iter().take_while(|b| b.is_ascii_whitespace()).count();
+        let digits = bytes[at + spaces..].iter().take_while(|b| b.is_ascii_digit()).count();
+        if spaces == 0 || digits == 0 || digits > 9 {
+            return None;
+        }
+        at += spaces;
+        *field = std::str::from_utf8(&bytes[at..at + digits]).ok()?.parse().ok()?;
+        at += digits;
+    }
+    let [width, height, maxval] = fields;
+    (maxval == 255 && bytes.get(at)?.is_ascii_whitespace()).then_some((width, height, at + 1))
 }
 
 /// Whether the image file at `path` holds colour (from its header alone); `None` if it cannot be
@@ -404,6 +462,40 @@ mod tests {
         assert!(e.starts_with("cut.pgm: ") && e.contains("truncated"), "{e}");
         let e = decode_gray(b"P5\n100000 8\n255\n", "huge.pgm").unwrap_err().to_string();
         assert!(e.contains("100000x8"), "{e}");
+    }
+
+    /// The plain 8-bit PGM read without the decoder gives what the decoder gives; headers it does
+    /// not take (a comment, maxval 1000, a sample too many or too few) go to the decoder.
+    #[test]
+    fn plain_8_bit_pgm_is_read_as_the_decoder_reads_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let samples: Vec<u8> = (0..70u32 * 3).map(|i| (i * 37 % 256) as u8).collect();
+        let eight = |d: DecodedGray| match d {
+            DecodedGray::Eight { width, height, data } => (width, height, data),
+            DecodedGray::Wide(_) => panic!("a wide frame"),
+        };
+        for header in ["P5\n70 3\n255\n", "P5 70 3 255 ", "P5\n70\t3\r\n255\n", "P5\n# a comment\n70 3\n255\n"] {
+            let path = dir.path().join("f.pgm");
+            let mut bytes = header.as_bytes().to_vec();
+            bytes.extend(&samples);
+            std::fs::write(&path, &bytes).unwrap();
+            let direct = read_plain_pgm8(&path);
+            assert_eq!(direct.is_some(), !header.contains('#'), "{header:?}");
+            let decoded = decode_gray(&bytes, "f.pgm").unwrap();
+            assert_eq!((decoded.width, decoded.height), (70, 3));
+            assert_eq!(eight(load_gray_decoded(&path).unwrap()), (70, 3, samples.clone()), "{header:?}");
+        }
+        let path = dir.path().join("g.pgm");
+        for (header, extra) in [("P5\n70 3\n255\n", 1), ("P5\n70 3\n255\n", -1), ("P5\n70 3\n1000\n", 0)] {
+            let mut bytes = header.as_bytes().to_vec();
+            bytes.extend(&samples[..(samples.len() as i64 + extra.min(0)) as usize]);
+            bytes.extend(std::iter::repeat_n(9u8, extra.max(0) as usize));
+            std::fs::write(&path, &bytes).unwrap();
+            assert!(read_plain_pgm8(&path).is_none(), "{header:?} {extra}");
+        }
+        // The last: 16-bit samples, too few of them: the decoder names the file and the fault.
+        let e = load_gray_decoded(&path).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(e.contains("g.pgm") && e.contains("truncated"), "{e}");
     }
 
     #[test]

@@ -58,9 +58,9 @@ pub struct FrameInput {
     pub corners: Result<Observation, String>,
     /// Stripe centres (px).
     pub stripe: Vec<[f64; 2]>,
-    /// Which of `stripe` the detector found saturated (its `SATURATED` quality flag); empty
+    /// Which of `stripe` the detector found saturated (its `SATURATED` quality flag); `None`
     /// where not known (centres from another detector).
-    pub saturated: Vec<bool>,
+    pub saturated: Option<Vec<bool>>,
     /// The frame's size (px), if known: it must be the camera model's.
     pub size: Option<(u32, u32)>,
 }
@@ -216,7 +216,7 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
     };
     let mut points = Vec::new();
     let mut pixels = Vec::new();
-    let flags_known = f.saturated.len() == f.stripe.len();
+    let flags = f.saturated.as_deref().filter(|s| s.len() == f.stripe.len());
     let mut saturated = 0;
     for (k, px) in f.stripe.iter().enumerate() {
         let Some(p) = on_board(px[0], px[1]) else { continue };
@@ -236,7 +236,7 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         }
         points.push(p);
         pixels.push(*px);
-        saturated += usize::from(flags_known && f.saturated[k]);
+        saturated += usize::from(flags.is_some_and(|s| s[k]));
     }
     if points.len() < opts.min_points {
         return Err(format!(
@@ -254,7 +254,7 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         stripe_points: f.stripe.len(),
         points,
         pixels,
-        saturated: flags_known.then_some(saturated),
+        saturated: flags.map(|_| saturated),
     })
 }
 
@@ -486,8 +486,8 @@ pub fn detect_frames(
                 Err(why) => Err(format!("board not found: {why}")),
             };
             let (stripe, saturated) = match given {
-                Some(g) => (g[k].clone(), Vec::new()),
-                None => detect_stripe(path, &opts.colour, &opts.ridge)?,
+                Some(g) => (g[k].clone(), None),
+                None => detect_stripe(path, &opts.colour, &opts.ridge).map(|(stripe, flags)| (stripe, Some(flags)))?,
             };
             let size = Some((grey.width as u32, grey.height as u32));
             Ok((FrameInput { name, corners, stripe, saturated, size }, entry, larger))

@@ -84,7 +84,7 @@ fn synth_frame(
         name: name.into(),
         corners: Ok(Observation { name: name.into(), board_mm, pixels }),
         stripe,
-        saturated: Vec::new(),
+        saturated: None,
         size: Some((1280, 720)),
     }
 }

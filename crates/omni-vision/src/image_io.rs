@@ -128,10 +128,10 @@ pub enum DecodedGray {
 /// (what `omni-trigger` captures) is read straight into the frame's buffer: one copy out of the
 /// page cache, where the decoder adds a zeroed buffer and a second copy.
 pub fn load_gray_decoded(path: &Path) -> Result<DecodedGray, Error> {
-    if let Some(frame) = read_plain_pgm8(path) {
-        return Ok(frame);
-    }
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path.display().to_string(), &e))?;
+    let bytes = match read_frame_file(path)? {
+        FrameFile::PlainPgm8(frame) => return Ok(frame),
+        FrameFile::Encoded(bytes) => bytes,
+    };
     Ok(match decode_checked(&bytes, &path.display().to_string())? {
         image::DynamicImage::ImageLuma8(g) => {
             DecodedGray::Eight { width: g.width(), height: g.height(), data: g.into_raw() }
@@ -140,34 +140,46 @@ pub fn load_gray_decoded(path: &Path) -> Result<DecodedGray, Error> {
     })
 }
 
-/// An 8-bit binary PGM without comments whose file is exactly its header and width × height
-/// samples, read without a decoder; `None` for anything else, which the decoder then reads or
-/// names the fault of (a file that changes while it is read included).
-fn read_plain_pgm8(path: &Path) -> Option<DecodedGray> {
+/// A frame file as read once: a plain 8-bit binary PGM's samples, or the file's bytes for the
+/// decoder.
+enum FrameFile {
+    PlainPgm8(DecodedGray),
+    Encoded(Vec<u8>),
+}
+
+/// Reads the frame file at `path` once. An 8-bit binary PGM without comments whose file is
+/// exactly its header and width × height samples goes straight into the frame's buffer;
+/// anything else (a file that changed while it was read included) is left to the decoder, to
+/// read or to name the fault of.
+fn read_frame_file(path: &Path) -> Result<FrameFile, Error> {
     use std::io::Read;
-    let mut file = std::fs::File::open(path).ok()?;
-    let size = file.metadata().ok()?.len();
-    let mut head = [0u8; 64];
-    let mut filled = 0;
-    while filled < head.len() {
-        match file.read(&mut head[filled..]).ok()? {
-            0 => break,
-            n => filled += n,
-        }
+    /// Longer than any plain PGM header of a frame within the size limit.
+    const HEAD_BYTES: u64 = 64;
+    let io = |e: std::io::Error| Error::io(path.display().to_string(), &e);
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let size = file.metadata().map_err(io)?.len();
+    let mut head = Vec::with_capacity(HEAD_BYTES as usize);
+    (&mut file).take(HEAD_BYTES).read_to_end(&mut head).map_err(io)?;
+    let max = u64::from(omni_model::limits::MAX_IMAGE_SIDE_PX);
+    let plain = plain_pgm8_header(&head).filter(|&(w, h, header)| {
+        (1..=max).contains(&u64::from(w))
+            && (1..=max).contains(&u64::from(h))
+            && size == header as u64 + u64::from(w) * u64::from(h)
+    });
+    let Some((width, height, header)) = plain else {
+        file.read_to_end(&mut head).map_err(io)?;
+        return Ok(FrameFile::Encoded(head));
+    };
+    let samples = width as usize * height as usize;
+    let mut data = Vec::with_capacity(samples);
+    data.extend_from_slice(&head[header..]);
+    file.read_to_end(&mut data).map_err(io)?;
+    if data.len() == samples {
+        return Ok(FrameFile::PlainPgm8(DecodedGray::Eight { width, height, data }));
     }
-    let (width, height, header_len) = plain_pgm8_header(&head[..filled])?;
-    let max = omni_model::limits::MAX_IMAGE_SIDE_PX;
-    if width == 0 || height == 0 || width > max || height > max {
-        return None;
-    }
-    let samples = u64::from(width) * u64::from(height);
-    if size != header_len as u64 + samples {
-        return None;
-    }
-    let mut data = Vec::with_capacity(samples as usize);
-    data.extend_from_slice(&head[header_len..filled.min(header_len + samples as usize)]);
-    file.take(samples - data.len() as u64).read_to_end(&mut data).ok()?;
-    (data.len() as u64 == samples).then_some(DecodedGray::Eight { width, height, data })
+    head.truncate(header);
+    head.extend(data);
+    Ok(FrameFile::Encoded(head))
 }
 
 /// Width, height and length (bytes) of a binary PGM header (`P5`, width, height and maxval as
@@ -479,8 +491,8 @@ mod tests {
             let mut bytes = header.as_bytes().to_vec();
             bytes.extend(&samples);
             std::fs::write(&path, &bytes).unwrap();
-            let direct = read_plain_pgm8(&path);
-            assert_eq!(direct.is_some(), !header.contains('#'), "{header:?}");
+            let direct = matches!(read_frame_file(&path), Ok(FrameFile::PlainPgm8(_)));
+            assert_eq!(direct, !header.contains('#'), "{header:?}");
             let decoded = decode_gray(&bytes, "f.pgm").unwrap();
             assert_eq!((decoded.width, decoded.height), (70, 3));
             assert_eq!(eight(load_gray_decoded(&path).unwrap()), (70, 3, samples.clone()), "{header:?}");
@@ -491,7 +503,7 @@ mod tests {
             bytes.extend(&samples[..(samples.len() as i64 + extra.min(0)) as usize]);
             bytes.extend(std::iter::repeat_n(9u8, extra.max(0) as usize));
             std::fs::write(&path, &bytes).unwrap();
-            assert!(read_plain_pgm8(&path).is_none(), "{header:?} {extra}");
+            assert!(matches!(read_frame_file(&path), Ok(FrameFile::Encoded(b)) if b == bytes), "{header:?} {extra}");
         }
         // The last: 16-bit samples, too few of them: the decoder names the file and the fault.
         let e = load_gray_decoded(&path).err().map(|e| e.to_string()).unwrap_or_default();

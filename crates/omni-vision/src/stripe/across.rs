@@ -741,7 +741,7 @@ impl RidgeDetector {
                 Lopsided { mean: asymmetry_sum / count as f64, own: curvature.is_none().then_some(c.asymmetry) };
             // The offset at t = 0 once the wider parabola's curvature is taken out.
             let offset = match curvature {
-                Some(c) if along > 0.0 => fit_line(&neighbours, along, |n| n.1 - c * n.0 * n.0).map_or(0.0, |f| f.0),
+                Some(c) if along > 0.0 => along_offset(&neighbours, c, along),
                 _ => 0.0,
             };
             let local = sums.local_stripe(&factors);
@@ -797,6 +797,13 @@ impl RidgeDetector {
     }
 }
 
+impl Linked {
+    /// Position and normal (u, v, nx, ny), as [`Grid`] places points.
+    fn placed(&self) -> [f64; 4] {
+        [self.point.u, self.point.v, self.normal.0, self.normal.1]
+    }
+}
+
 impl Centre {
     fn linked(&self) -> Linked {
         Linked {
@@ -814,19 +821,18 @@ impl Centre {
 /// lies on the same side of its stripe all along it, so the mean keeps the tail's pull and
 /// averages away each profile's noise, which at the top alone is 1.5–3 times the estimator's.
 fn remove_steady_lean(points: &mut [Linked]) {
-    let placed = points.iter().map(|l| [l.point.u, l.point.v, l.normal.0, l.normal.1]);
-    let grid = Grid::from_placed(placed, LEAN_HALF_ARC_PX);
+    let grid = Grid::from_placed(points.iter().map(Linked::placed), LEAN_HALF_ARC_PX);
     let shifts: Vec<f64> = points
         .iter()
         .map(|l| {
             if l.point.quality & quality::SATURATED != 0 {
                 return 0.0;
             }
-            let here = (l.point.u, l.point.v, l.normal.0, l.normal.1);
+            let here = l.placed();
             let (mut sum, mut count) = (0.0, 0usize);
-            grid.visit(here.0, here.1, |j, other| {
+            grid.visit(here[0], here[1], |j, other| {
                 if let Some(lean) = points[j].lean
-                    && let Some((_, _, same_way)) = on_the_stripe(here, other, LEAN_HALF_ARC_PX)
+                    && let Some((_, _, same_way)) = on_the_stripe(&here, other, LEAN_HALF_ARC_PX)
                 {
                     sum += if same_way { lean } else { -lean };
                     count += 1;
@@ -853,15 +859,15 @@ fn fit_along_stripe(points: &mut [Linked], along: f64) {
     }
     let shape_half_arc = SHAPE_HALF_ARC_PX.max(2.0 * along);
     let reach = shape_half_arc + 1.0;
-    let grid = Grid::from_placed(points.iter().map(|l| [l.point.u, l.point.v, l.normal.0, l.normal.1]), reach);
+    let grid = Grid::from_placed(points.iter().map(Linked::placed), reach);
     let mut neighbours: Vec<Neighbour> = Vec::new();
     let shifts: Vec<f64> = points
         .iter()
         .map(|l| {
-            let (px, py, (nx, ny)) = (l.point.u, l.point.v, l.normal);
+            let here = l.placed();
             neighbours.clear();
-            grid.visit(px, py, |_, other| {
-                if let Some((t, d, _)) = on_the_stripe((px, py, nx, ny), other, reach) {
+            grid.visit(here[0], here[1], |_, other| {
+                if let Some((t, d, _)) = on_the_stripe(&here, other, reach) {
                     neighbours.push((t, d, 0.0, 0.0, 0.0));
                 }
             });
@@ -870,7 +876,7 @@ fn fit_along_stripe(points: &mut [Linked], along: f64) {
             let Some([_, _, bend]) = sums.parabola(&sums.factors()) else {
                 return 0.0;
             };
-            let offset = fit_line(&neighbours, along, |n| n.1 - bend * n.0 * n.0).map_or(0.0, |f| f.0);
+            let offset = along_offset(&neighbours, bend, along);
             if offset.abs() > MAX_MOVE_PX { 0.0 } else { offset }
         })
         .collect();
@@ -880,15 +886,11 @@ fn fit_along_stripe(points: &mut [Linked], along: f64) {
     }
 }
 
-/// Where a point at `[u, v]` with unit normal `[nx, ny]` lies from the point (`px`, `py`) of
-/// normal (`nx0`, `ny0`), if on the same stripe (within `reach` px, its normal within 30°
-/// either way, and within 0.5 + 0.25·|t| px of the point's tangent): arc t and offset d along
-/// the normal (px), and whether the two normals point the same way.
-fn on_the_stripe(
-    (px, py, nx0, ny0): (f64, f64, f64, f64),
-    &[u, v, nx, ny]: &[f64; 4],
-    reach: f64,
-) -> Option<(f64, f64, bool)> {
+/// Where the point `other` lies from the point `here` (both placed as (u, v, nx, ny), px), if
+/// on the same stripe (within `reach` px, its normal within 30° either way, and within
+/// 0.5 + 0.25·|t| px of `here`'s tangent): arc t and offset d along `here`'s normal (px), and
+/// whether the two normals point the same way.
+fn on_the_stripe(&[px, py, nx0, ny0]: &[f64; 4], &[u, v, nx, ny]: &[f64; 4], reach: f64) -> Option<(f64, f64, bool)> {
     let (ex, ey) = (u - px, v - py);
     let cos = nx * nx0 + ny * ny0;
     if ex * ex + ey * ey > reach * reach || cos.abs() < SAME_STRIPE_COS {
@@ -904,8 +906,7 @@ fn on_the_stripe(
 /// re-measured from a coarser scale, whose stripes are the chains of points within
 /// [`super::along::STRIPE_LINK_PX`] of each other with nearly parallel normals.
 fn lean_to_the_lights_peak(points: &mut [Linked], blur_variance: f64, mosaic: bool) {
-    let placed = points.iter().map(|l| [l.point.u, l.point.v, l.normal.0, l.normal.1]);
-    let grid = Grid::from_placed(placed, super::along::STRIPE_LINK_PX);
+    let grid = Grid::from_placed(points.iter().map(Linked::placed), super::along::STRIPE_LINK_PX);
     let mut stripes = Stripes::new(points.len());
     for (i, l) in points.iter().enumerate() {
         let (px, py, (nx, ny)) = (l.point.u, l.point.v, l.normal);
@@ -1286,6 +1287,12 @@ impl LineSums {
         let det = s0 * s2 - s1 * s1;
         (before >= 2 && after >= 2 && det > 1e-9).then(|| ((r0 * s2 - r1 * s1) / det, (s0 * r1 - s1 * r0) / det))
     }
+}
+
+/// The along-stripe fit's offset (px) at t = 0: the line through the neighbours' offsets within
+/// ±`along` px once the wider parabola's bend c (d = c·t²) is taken out.
+fn along_offset(neighbours: &[Neighbour], bend: f64, along: f64) -> f64 {
+    fit_line(neighbours, along, |n| n.1 - bend * n.0 * n.0).map_or(0.0, |f| f.0)
 }
 
 /// Least-squares line y = a + b·t through `value` of the neighbours within ±`half_arc`:

@@ -75,13 +75,15 @@ struct Args {
     /// Scale (px) of the Gaussian derivatives of the hessian method.
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     hessian_sigma: f64,
-    /// Fit each point along the stripe through the stripe's points within this many px of arc on
-    /// either side (0 = off): a parabola across the normal (a line along rays). Averages speckle
-    /// and noise at the price of lateral resolution: a step along the stripe rises 10-90 % over
-    /// 1.6 × PX (5 px at 3; 2 px without the fit). Up to 3 keeps curved stripes unbiased; longer
-    /// fits suit flat surfaces only (at 6, `make demo`'s 50 mm sphere comes out 1.2 mm small).
-    /// Stripes shorter than the window (2 × PX end to end) are refused: their points are dropped
-    /// with a warning, and a run in which no stripe is that long fails.
+    /// Fit each point along the stripe through the stripe's points within up to this many px of
+    /// arc on either side (0 = off). Across the normal: a line through them once a parabola's
+    /// bend is taken out, over arcs growing from 3 px for as long as a longer arc agrees with
+    /// the shorter ones within their noise, so tight curves, steps and stripe ends keep a short
+    /// arc (with --sampling rays: a line over the whole arc). Averages speckle and noise at the
+    /// price of lateral resolution: a step along the stripe rises 10-90 % over about 5 px (2 px
+    /// without the fit). Stripes shorter than the shortest arc's window (2 × PX end to end, at
+    /// most 6 px; 2 × PX along rays) are refused: their points are dropped with a warning, and a
+    /// run in which no stripe is that long fails.
     #[arg(long, default_value_t = 0.0, value_name = "PX", allow_negative_numbers = true)]
     along_stripe: f64,
     /// The lens's blur (Gaussian PSF σ, px; pixel area not included), whose pull on curved

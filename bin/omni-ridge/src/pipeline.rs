@@ -89,15 +89,15 @@ struct AlongStripeTally {
 }
 
 impl AlongStripeTally {
-    /// The fit's window is 2L; refusing stripes shorter than it is the user's business to hear
-    /// about, and a run where it refused everything is an error.
-    fn verdict(&self, along_px: f64) -> CliResult {
+    /// The fit needs `window` px of stripe ([`RidgeParams::along_stripe_window_px`]); refusing
+    /// stripes shorter than it is the user's business to hear about, and a run where it refused
+    /// everything is an error.
+    fn verdict(&self, along_px: f64, window: f64) -> CliResult {
         let (kept, refused) = (self.kept.load(Ordering::Relaxed), self.refused.load(Ordering::Relaxed));
         if refused == 0 {
             return Ok(());
         }
         let longest = f64::from_bits(self.longest_bits.load(Ordering::Relaxed));
-        let window = 2.0 * along_px;
         if kept == 0 {
             return Err(CliError::new(format!(
                 "--along-stripe {along_px} px fits over {window} px of stripe, longer than every stripe found \
@@ -192,7 +192,7 @@ pub fn run(input: Input, writer: impl Write, output_name: &str, config: Config) 
     drop(out_tx);
     let out = StreamWriter::new(writer, output_name).binary(config.binary);
     write_in_order(out_rx, token_tx, out, config.keep_going, &read_error)?;
-    detectors.along.verdict(config.params.along_stripe_px)
+    detectors.along.verdict(config.params.along_stripe_px, config.params.along_stripe_window_px())
 }
 
 /// What the reader thread does with the stream besides reading it.
@@ -309,7 +309,7 @@ fn process_frame(
     let (mut points, img) = detect_points(frame, frames_dir, &path, detectors, overlay.is_some())?;
     let along = detectors.params.along_stripe_px;
     if along > 0.0 {
-        let short = stripe::refuse_short_stripes(points, 2.0 * along);
+        let short = stripe::refuse_short_stripes(points, detectors.params.along_stripe_window_px());
         let tally = &detectors.along;
         tally.kept.fetch_add(short.kept.len(), Ordering::Relaxed);
         tally.refused.fetch_add(short.refused, Ordering::Relaxed);

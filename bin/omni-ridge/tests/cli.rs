@@ -396,11 +396,16 @@ fn an_along_stripe_fit_longer_than_the_stripe_is_refused() {
     assert!(out.status.success(), "{}", stderr(&out));
     let Record::Frame(f) = &records(&out.stdout)[1] else { panic!("no frame") };
     assert!(f.stripe.as_ref().unwrap().len() >= 5, "{:?}", f.stripe);
-    // ±10 px does not: the run fails, names the option and says what would fit; the output
-    // file is not written.
+    // Up to ±10 px across the normal too: its longer arcs stop where the stripe ends.
+    let out = run(&["--along-stripe", "10"], &only_short);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let Record::Frame(f) = &records(&out.stdout)[1] else { panic!("no frame") };
+    assert!(f.stripe.as_ref().unwrap().len() >= 5, "{:?}", f.stripe);
+    // Along rays ±10 px is one arc, which the stripe is too short for: the run fails, names
+    // the option and says what would fit; the output file is not written.
     let path = dir.path().join("out.jsonl");
     let mut child = Command::new(BIN)
-        .args(["--along-stripe", "10", "-o", path.to_str().unwrap()])
+        .args(["--sampling", "rays", "--along-stripe", "10", "-o", path.to_str().unwrap()])
         .stdin(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -415,7 +420,7 @@ fn an_along_stripe_fit_longer_than_the_stripe_is_refused() {
     assert!(!path.exists());
     // With a long stripe in the stream the short one's points are dropped, with a warning.
     let mixed = stream_text(&[header(dir.path()), frame(0, "ring.png"), frame(1, "short.png"), status(2)]);
-    let out = run(&["--along-stripe", "10"], &mixed);
+    let out = run(&["--sampling", "rays", "--along-stripe", "10"], &mixed);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(stderr(&out).contains("points refused, on stripes shorter than its 20 px window"), "{}", stderr(&out));
     let recs = records(&out.stdout);

@@ -168,11 +168,13 @@ pub struct RidgeParams {
     pub max_width: f64,
     /// Scale (px) of the Gaussian derivatives of [`Method::Hessian`].
     pub hessian_sigma: f64,
-    /// Fit along the stripe over this many px of arc on either side (0 = off): across the normal,
-    /// a line through the neighbours' offsets once a wider parabola's curvature is taken out;
-    /// along rays, each point's radius from a line through the same stripe's points (`along`).
-    /// Averages speckle and noise (±3 px: about 35 % lower RMS under speckle) at the price of
-    /// lateral resolution.
+    /// Fit along the stripe over up to this many px of arc on either side (0 = off): across the
+    /// normal, a line through the neighbours' offsets once a wider parabola's curvature is taken
+    /// out, over arcs growing from ±3 px as far as the stripe's shape allows (a longer arc is
+    /// taken while it agrees with the shorter ones within their noise, so tight curves, steps
+    /// and ends keep a short one); along rays, each point's radius from a line through the same
+    /// stripe's points over the whole arc (`along`). Averages speckle and noise (±3 px: about
+    /// 35 % lower RMS under speckle) at the price of lateral resolution.
     pub along_stripe_px: f64,
     /// The lens's blur (Gaussian PSF σ, px of the frame), pixel integration not included, whose
     /// pull on curved stripes is removed (with the pixel's area and the sampling kernel on top).
@@ -222,6 +224,16 @@ impl RidgeParams {
     }
 
     /// Checks the settings; the message names the bad one.
+    /// The shortest stretch of stripe (px, end to end) the along-stripe fit works on: its
+    /// shortest arc's window, 2 × min(`along_stripe_px`, 3 px) across the normal (longer arcs
+    /// stop where the stripe ends), 2 × `along_stripe_px` along rays.
+    pub fn along_stripe_window_px(&self) -> f64 {
+        match self.sampling {
+            Sampling::Normal => 2.0 * self.along_stripe_px.min(across::SHAPE_HALF_ARC_PX),
+            Sampling::Rays => 2.0 * self.along_stripe_px,
+        }
+    }
+
     pub fn validate(&self) -> Result<(), String> {
         if let Some(t) = self.threshold
             && !(t.is_finite() && t >= 0.0)

@@ -436,13 +436,34 @@ fn bench_scene(
 
 /// Ideal optics (Gaussian blur 0.7 px, no speckle), the room lit: the stripe centre within
 /// 0.015 px RMS and 0.005 px of bias on plane, cylinder and sphere over 48 stripe positions,
-/// the plane's stripe covered.
+/// the plane's stripe covered. The along-stripe fit up to ±10 px takes its longer arcs only
+/// where the stripe's shape allows them: on the plane 0.0087 px RMS (±3: 0.0095, alone 0.0114),
+/// on the cylinder and sphere what ±3 gives (0.0263 / 0.0226 against 0.0257 / 0.0225 px; a
+/// single arc of ±10 px gave 0.10 px). Asserted: ±10 within 1.1 × ±3's RMS, the plane's ≤ 0.8 ×
+/// its RMS alone.
 #[test]
 fn ideal_optics_accuracy_on_the_bench() {
     for object in [BenchObject::Plane, BenchObject::Cylinder, BenchObject::Sphere] {
-        let t =
-            bench_at(object, &RenderOptions::ideal(), &[RidgeParams::default()], &positions(48), false).pop().unwrap();
-        eprintln!("{}", t.line(&format!("ideal {object:?}")));
+        let params = [0.0, 3.0, 10.0].map(|l| RidgeParams { along_stripe_px: l, ..Default::default() });
+        let [t, along, longer] =
+            <[Tally; 3]>::try_from(bench_at(object, &RenderOptions::ideal(), &params, &positions(48), false))
+                .ok()
+                .unwrap();
+        eprintln!(
+            "{}\n{}\n{}",
+            t.line(&format!("ideal {object:?}")),
+            along.line("  along ±3"),
+            longer.line("  along ±10")
+        );
+        // The fit's longer arcs are taken only where the stripe's shape allows them.
+        let ((rms3, _), (rms10, bias10)) = (along.rms_bias(), longer.rms_bias());
+        assert!(
+            rms10 <= 1.1 * rms3 && bias10.abs() <= 0.01,
+            "{object:?}, along ±10: rms {rms10:.4} bias {bias10:+.4} px"
+        );
+        if object == BenchObject::Plane {
+            assert!(rms10 <= 0.8 * t.rms_bias().0, "plane, along ±10: rms {rms10:.4} px");
+        }
         let (rms, bias) = t.rms_bias();
         assert!(t.errors.len() > 400, "{object:?}: {} points", t.errors.len());
         assert!(rms <= 0.015 && bias.abs() <= 0.005, "{object:?}: rms {rms:.4} bias {bias:+.4} px");
@@ -614,15 +635,24 @@ fn lit_tapering_faces_are_not_stripes() {
 }
 
 /// Speckle of contrast 0.5 and 0.25 (4 and 16 independent patterns: a rougher, more
-/// depolarising or partially coherent case): the along-stripe fit over ±3 px of arc.
+/// depolarising or partially coherent case): the along-stripe fit over ±3 px of arc, and up to
+/// ±10 px, which on this flat stripe takes its long arcs (RMS 0.0385 / 0.0314 px against
+/// 0.0477 / 0.0386 at ±3; asserted ≤ 0.85 ×).
 #[test]
 fn weaker_speckle_with_the_along_stripe_fit() {
     for (patterns, rms_max, coverage_min) in [(4u32, 0.10, 0.75), (16, 0.05, 0.85)] {
         let optics = omni_simulator::Optics { speckle_patterns: patterns, ..omni_simulator::Optics::paper() };
         let opts = RenderOptions::default().with_optics(optics);
-        let along = bench(BenchObject::Plane, &opts, RidgeParams { along_stripe_px: 3.0, ..Default::default() });
+        let params = [3.0, 10.0].map(|l| RidgeParams { along_stripe_px: l, ..Default::default() });
+        let [along, longer] = <[Tally; 2]>::try_from(bench_each(BenchObject::Plane, &opts, &params)).ok().unwrap();
         eprintln!("{}", along.line(&format!("C {:.2}, along ±3", 1.0 / (patterns as f64).sqrt())));
+        eprintln!("{}", longer.line("  along ±10"));
         let (rms, bias) = along.rms_bias();
+        let (rms10, bias10) = longer.rms_bias();
+        assert!(
+            rms10 <= 0.85 * rms && bias10.abs() <= 0.01,
+            "{patterns} patterns, along ±10: rms {rms10:.4} bias {bias10:+.4}"
+        );
         assert!(rms <= rms_max && bias.abs() <= 0.01, "{patterns} patterns: rms {rms:.4} bias {bias:+.4}");
         assert!(along.coverage(8).unwrap() >= coverage_min, "{patterns} patterns: coverage {:?}", along.coverage(8));
     }
@@ -787,16 +817,24 @@ fn the_along_stripe_fit_adds_no_bias_on_curved_stripes_under_speckle() {
 /// over many positions of the stripe (mirror angles 15–27.5°; one frame's mean scatters by 0.013
 /// px on the cylinder, 0.02 on the sphere's shorter stripes). C = 0.25 (16 speckle patterns),
 /// laser-off frames, along-stripe fit ±3 px; the visible stripe ([`Visibility`]; a dark
-/// speckle grain is not visible) covered ≥ 85 %.
+/// speckle grain is not visible) covered ≥ 85 %. Up to ±10 px the fit's longer arcs, taken where
+/// the stripe's shape allows, lower the RMS further (cylinder 0.0388 → 0.0327 px, sphere 0.0384 →
+/// 0.0323; a single ±10 px arc gave 0.085 / 0.088 px on 12 positions): asserted ≤ 1.05 × ±3's.
 #[test]
 fn curved_stripes_under_speckle_keep_their_centre_over_many_stripe_positions() {
     for (object, positions) in [(BenchObject::Cylinder, 24), (BenchObject::Sphere, 48)] {
-        let [alone, along] = speckled_positions(object, positions);
+        let [alone, along, longer] = speckled_positions(object, positions);
         eprintln!(
-            "{}\n{}\n{}",
+            "{}\n{}\n{}\n{}",
             alone.line(&format!("C 0.25 {object:?}, {positions} positions")),
             along.line("  along ±3"),
+            longer.line("  along ±10"),
             along.visible_line()
+        );
+        let (rms10, bias10) = longer.rms_bias();
+        assert!(
+            rms10 <= 1.05 * along.rms_bias().0 && bias10.abs() <= 0.01,
+            "{object:?}, along ±10: rms {rms10:.4} bias {bias10:+.4} px"
         );
         let visible = along.visible_covered_share();
         assert!(visible >= 0.85, "{object:?}: {:.1} % of the visible stripe covered", 100.0 * visible);
@@ -808,14 +846,14 @@ fn curved_stripes_under_speckle_keep_their_centre_over_many_stripe_positions() {
     }
 }
 
-/// Tallies without and with the ±3 px along-stripe fit over `count` [`positions`], speckle
-/// C = 0.25, each frame with its laser-off frame subtracted.
-fn speckled_positions(object: BenchObject, count: usize) -> [Tally; 2] {
+/// Tallies without the along-stripe fit, with it over ±3 px and up to ±10 px, over `count`
+/// [`positions`], speckle C = 0.25, each frame with its laser-off frame subtracted.
+fn speckled_positions(object: BenchObject, count: usize) -> [Tally; 3] {
     let optics = omni_simulator::Optics { speckle_patterns: 16, ..omni_simulator::Optics::paper() };
     let opts = RenderOptions::default().with_optics(optics);
-    let params = [RidgeParams::default(), RidgeParams { along_stripe_px: 3.0, ..Default::default() }];
+    let params = [0.0, 3.0, 10.0].map(|l| RidgeParams { along_stripe_px: l, ..Default::default() });
     let scene = Scene::from_file(paper_bench(object)).unwrap();
-    <[Tally; 2]>::try_from(bench_scene(&scene, &opts, &params, &positions(count), true, true, &grey)).ok().unwrap()
+    <[Tally; 3]>::try_from(bench_scene(&scene, &opts, &params, &positions(count), true, true, &grey)).ok().unwrap()
 }
 
 /// Two matte walls parallel to the x axis, `half_gap` mm either side of the sensor, from 100 to

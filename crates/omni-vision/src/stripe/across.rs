@@ -32,9 +32,11 @@
 //!   top shape from there to the image's peak and back by the blur's shift of a lopsided peak,
 //!   −(s/2)·L‴/L″ for a blur of variance s and L the profile's logarithm
 //!   ([`Centre::top_shape`]; the lens's blur where known, else the pixel's and the kernel's);
-//! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): a
-//!   line through the neighbours once a wider parabola's curvature is taken out, so that a curved
-//!   stripe keeps its centre; wide stripes' points, re-measured from a coarser scale, as well.
+//! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): over
+//!   ±3 px a line through the neighbours once a wider parabola's curvature is taken out, so that
+//!   a curved stripe keeps its centre, and over longer arcs a parabola, each taken only while it
+//!   agrees with the shorter ones within their noise (a tight curve, a step or an end keeps the
+//!   short arc); wide stripes' points, re-measured from a coarser scale, as well.
 //!
 //! The measurements behind these rules: docs/DECISIONS.md.
 
@@ -64,7 +66,7 @@ const TRACK_END_WIDTHS: f64 = 0.25;
 /// silhouette, a shadow, the sheet's edge) the blur mixes the end into the last profiles.
 pub const END_PX: f64 = 1.5;
 /// Half the arc (px) of the parabola that gives a point's curvature.
-const SHAPE_HALF_ARC_PX: f64 = 3.0;
+pub(super) const SHAPE_HALF_ARC_PX: f64 = 3.0;
 /// A stripe whose profiles' two flanks (each from the half maximum down to [`ASYMMETRY_LEVEL`]
 /// of the peak) differ, on average over the point's neighbours within ±3 px, by more than this
 /// fraction of their sum beyond what they differ along the whole stripe (its median, the
@@ -654,6 +656,8 @@ impl RidgeDetector {
         let mut lopsided: Vec<Lopsided> = Vec::with_capacity(centres.len());
         let mut stripes = Stripes::new(centres.len());
         let mut neighbours = Vec::new();
+        // Each kept point's neighbours, for the along-stripe fit once the frame's noise is known.
+        let mut along_fits = AlongFits::default();
         for (i, c) in centres.iter().enumerate() {
             let (px, py) = (c.point.u, c.point.v);
             let (nx, ny) = c.normal;
@@ -739,14 +743,31 @@ impl RidgeDetector {
             // profile's own lopsidedness either: it is judged alone too, at twice the limit.
             let lopsidedness =
                 Lopsided { mean: asymmetry_sum / count as f64, own: curvature.is_none().then_some(c.asymmetry) };
-            // The offset at t = 0 once the wider parabola's curvature is taken out.
-            let offset = match curvature {
-                Some(c) if along > 0.0 => along_offset(&neighbours, c, along),
-                _ => 0.0,
-            };
+            if along > 0.0 {
+                along_fits.push(&neighbours);
+            }
             let local = sums.local_stripe(&factors);
-            kept.push((i, curvature, offset, local));
+            kept.push((i, curvature, 0.0, local));
             lopsided.push(lopsidedness);
+        }
+        if along > 0.0 {
+            // The blur's pull follows the stripe's shape over twice the arc the fit took: where
+            // the stripe bends too fast for the longer arcs, their shape is not its shape here.
+            for (k, (offset, arc)) in along_fits.offsets(along).into_iter().enumerate() {
+                let (_, curvature, kept_offset, local) = &mut kept[k];
+                if curvature.is_none() {
+                    continue;
+                }
+                *kept_offset = offset;
+                if 2.0 * arc < shape_half_arc {
+                    let mut sums = ShapeSums::default();
+                    let half_arc = SHAPE_HALF_ARC_PX.max(2.0 * arc);
+                    along_fits.of(k).iter().filter(|n| n.0.abs() <= half_arc).for_each(|n| sums.add(n));
+                    let factors = sums.factors();
+                    *curvature = sums.parabola(&factors).map(|f| f[2]).or(*curvature);
+                    *local = sums.local_stripe(&factors);
+                }
+            }
         }
         // A cut leaves the profiles along it lopsided; speckle and noise lopsided at random, so
         // the neighbours' mean tells the two apart. A laser's own shape leaves its whole stripe
@@ -857,28 +878,24 @@ fn fit_along_stripe(points: &mut [Linked], along: f64) {
     if !(along > 0.0) {
         return;
     }
-    let shape_half_arc = SHAPE_HALF_ARC_PX.max(2.0 * along);
-    let reach = shape_half_arc + 1.0;
+    let reach = SHAPE_HALF_ARC_PX.max(2.0 * along) + 1.0;
     let grid = Grid::from_placed(points.iter().map(Linked::placed), reach);
     let mut neighbours: Vec<Neighbour> = Vec::new();
-    let shifts: Vec<f64> = points
-        .iter()
-        .map(|l| {
-            let here = l.placed();
-            neighbours.clear();
-            grid.visit(here[0], here[1], |_, other| {
-                if let Some((t, d, _)) = on_the_stripe(&here, other, reach) {
-                    neighbours.push((t, d, 0.0, 0.0, 0.0));
-                }
-            });
-            let mut sums = ShapeSums::default();
-            neighbours.iter().filter(|n| n.0.abs() <= shape_half_arc).for_each(|n| sums.add(n));
-            let Some([_, _, bend]) = sums.parabola(&sums.factors()) else {
-                return 0.0;
-            };
-            let offset = along_offset(&neighbours, bend, along);
-            if offset.abs() > MAX_MOVE_PX { 0.0 } else { offset }
-        })
+    let mut along_fits = AlongFits::default();
+    for l in points.iter() {
+        let here = l.placed();
+        neighbours.clear();
+        grid.visit(here[0], here[1], |_, other| {
+            if let Some((t, d, _)) = on_the_stripe(&here, other, reach) {
+                neighbours.push((t, d, 0.0, 0.0, 0.0));
+            }
+        });
+        along_fits.push(&neighbours);
+    }
+    let shifts: Vec<f64> = along_fits
+        .offsets(along)
+        .into_iter()
+        .map(|(offset, _)| if offset.abs() > MAX_MOVE_PX { 0.0 } else { offset })
         .collect();
     for (l, shift) in points.iter_mut().zip(shifts) {
         l.point.u += shift * l.normal.0;
@@ -1287,22 +1304,137 @@ impl LineSums {
         let det = s0 * s2 - s1 * s1;
         (before >= 2 && after >= 2 && det > 1e-9).then(|| ((r0 * s2 - r1 * s1) / det, (s0 * r1 - s1 * r0) / det))
     }
-}
 
-/// The along-stripe fit's offset (px) at t = 0: the line through the neighbours' offsets within
-/// ±`along` px once the wider parabola's bend c (d = c·t²) is taken out.
-fn along_offset(neighbours: &[Neighbour], bend: f64, along: f64) -> f64 {
-    fit_line(neighbours, along, |n| n.1 - bend * n.0 * n.0).map_or(0.0, |f| f.0)
-}
-
-/// Least-squares line y = a + b·t through `value` of the neighbours within ±`half_arc`:
-/// `(a, b)`, or `None` unless two neighbours lie on each side of t = 0.
-fn fit_line(neighbours: &[Neighbour], half_arc: f64, value: impl Fn(&Neighbour) -> f64) -> Option<(f64, f64)> {
-    let mut sums = LineSums::default();
-    for n in neighbours.iter().filter(|n| n.0.abs() <= half_arc) {
-        sums.add(n.0, value(n));
+    /// The standard error of the fit's `a` per unit of the points' independent noise.
+    fn intercept_spread(&self) -> f64 {
+        (self.s2 / (self.s0 * self.s2 - self.s1 * self.s1)).sqrt()
     }
-    sums.fit()
+}
+
+/// The along-stripe fit's offset at t = 0 (px) over ±`arc` px, and its standard error per unit
+/// of the points' noise; `None` where the fit has too few points. Over the shortest arc (±3 px
+/// or less): the line through the neighbours' offsets once the bend c (d = c·t²) of a parabola
+/// over ±max([`SHAPE_HALF_ARC_PX`], 2·`arc`) is taken out, a bend better determined than over
+/// the arc itself. Over longer arcs: the parabola through the arc itself, and only where the
+/// stripe reaches both of its ends (to within [`ARC_END_PX`]): there a bend from twice the arc,
+/// or a window the stripe's end cuts short, moves the offset wherever the stripe's curvature
+/// changes along it (an ellipse's flanks, near a silhouette).
+fn arc_offset(neighbours: &[Neighbour], arc: f64) -> Option<(f64, f64)> {
+    let within = || neighbours.iter().filter(move |n| n.0.abs() <= arc);
+    if arc > SHAPE_HALF_ARC_PX {
+        let (first, last) = within().fold((0.0f64, 0.0f64), |(lo, hi), n| (lo.min(n.0), hi.max(n.0)));
+        if last < arc - ARC_END_PX || -first < arc - ARC_END_PX {
+            return None;
+        }
+        let mut sums = ShapeSums::default();
+        within().for_each(|n| sums.add(n));
+        let factors = sums.factors();
+        let [offset, _, _] = sums.parabola(&factors)?;
+        // The offset's variance per unit noise: the first diagonal entry of the inverse moment matrix.
+        let [spread2, _, _] = factors.solve::<3>(&[1.0, 0.0, 0.0, 0.0])?;
+        return Some((offset, spread2.max(0.0).sqrt()));
+    }
+    let shape_half_arc = SHAPE_HALF_ARC_PX.max(2.0 * arc);
+    let mut sums = ShapeSums::default();
+    neighbours.iter().filter(|n| n.0.abs() <= shape_half_arc).for_each(|n| sums.add(n));
+    let [_, _, bend] = sums.parabola(&sums.factors())?;
+    let mut line = LineSums::default();
+    within().for_each(|n| line.add(n.0, n.1 - bend * n.0 * n.0));
+    let (offset, _) = line.fit()?;
+    Some((offset, line.intercept_spread()))
+}
+
+/// How far short of a longer arc's ends (px) the stripe may stop for that arc to be fitted
+/// ([`arc_offset`]): about one point's spacing along the stripe, with a gap.
+const ARC_END_PX: f64 = 1.5;
+/// How far the along-stripe fit's arcs grow from one to the next ([`AlongFits::offsets`]).
+const ARC_GROWTH: f64 = 1.5;
+/// Standard errors by which a longer arc's offset may differ from a shorter one's
+/// ([`AlongFits::offsets`]).
+const ARC_AGREEMENT: f64 = 3.0;
+
+/// The neighbours of each of a frame's points that the along-stripe fit uses, kept until the
+/// fits over every arc are known.
+#[derive(Default)]
+struct AlongFits {
+    neighbours: Vec<Neighbour>,
+    ends: Vec<usize>,
+}
+
+impl AlongFits {
+    fn push(&mut self, neighbours: &[Neighbour]) {
+        self.neighbours.extend_from_slice(neighbours);
+        self.ends.push(self.neighbours.len());
+    }
+
+    /// The neighbours of the `k`-th point pushed.
+    fn of(&self, k: usize) -> &[Neighbour] {
+        let start = if k == 0 { 0 } else { self.ends[k - 1] };
+        &self.neighbours[start..self.ends[k]]
+    }
+
+    /// Each point's along-stripe offset (px) at t = 0, over the longest arc up to ±`along` px
+    /// that its stripe's shape allows; 0 where even the shortest arc has too few points. The
+    /// arcs grow from ±[`SHAPE_HALF_ARC_PX`] (or ±`along` if shorter) by [`ARC_GROWTH`]
+    /// ([`arc_offset`] on each). A longer arc is taken while its offset lies within
+    /// [`ARC_AGREEMENT`] standard errors of every shorter arc's (Lepski's rule) and the stripe
+    /// reaches both of its ends: where the stripe bends faster than a parabola follows over the
+    /// arc (a tight curve, a step), the longer fit moves by more than its noise allows.
+    fn offsets(&self, along: f64) -> Vec<(f64, f64)> {
+        let mut arcs = vec![along.min(SHAPE_HALF_ARC_PX)];
+        while let Some(&last) = arcs.last().filter(|&&a| a < along) {
+            arcs.push((last * ARC_GROWTH).min(along));
+        }
+        let noise = self.noise();
+        (0..self.ends.len())
+            .map(|k| {
+                let mut shorter: Vec<(f64, f64)> = Vec::with_capacity(arcs.len());
+                let mut taken = (0.0, arcs[0]);
+                for &arc in &arcs {
+                    let Some((offset, spread)) = arc_offset(self.of(k), arc) else { break };
+                    if shorter.iter().any(|&(o, se)| (offset - o).abs() > ARC_AGREEMENT * se) {
+                        break;
+                    }
+                    shorter.push((offset, noise * spread));
+                    taken = (offset, arc);
+                }
+                taken
+            })
+            .collect()
+    }
+
+    /// The noise of one point's offset across its stripe (px), as it counts in a fit along the
+    /// stripe: the median over the frame of the points' scatter about their stripes' parabolas
+    /// over ±[`SHAPE_HALF_ARC_PX`], times [`CORRELATED_NOISE`].
+    fn noise(&self) -> f64 {
+        let mut scatter: Vec<f64> = (0..self.ends.len()).filter_map(|k| short_arc_scatter(self.of(k))).collect();
+        if scatter.is_empty() {
+            return 0.0;
+        }
+        let middle = scatter.len() / 2;
+        CORRELATED_NOISE * *scatter.select_nth_unstable_by(middle, f64::total_cmp).1
+    }
+}
+
+/// Neighbouring points' errors are correlated (the sampling kernel and the optics share
+/// pixels between them, speckle grains span several), so a fit's offset varies by more than
+/// independent noise would give, and the scatter about a short parabola, which follows part of
+/// that correlated noise, is less than the noise.
+const CORRELATED_NOISE: f64 = 2.0;
+
+/// The RMS residual (px) of a point's neighbours within ±[`SHAPE_HALF_ARC_PX`] about their
+/// parabola, over its degrees of freedom; `None` with fewer than six of them.
+fn short_arc_scatter(neighbours: &[Neighbour]) -> Option<f64> {
+    let near = || neighbours.iter().filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX);
+    let mut sums = ShapeSums::default();
+    near().for_each(|n| sums.add(n));
+    let count = sums.t[0];
+    if count < 6.0 {
+        return None;
+    }
+    let [a, b, c] = sums.parabola(&sums.factors())?;
+    let squares: f64 = near().map(|n| (n.1 - a - b * n.0 - c * n.0 * n.0).powi(2)).sum();
+    Some((squares / (count - 3.0)).sqrt())
 }
 
 #[cfg(test)]
@@ -1699,8 +1831,10 @@ mod direction_tests {
     }
 
     /// The lateral resolution the along-stripe fit costs: a step of 0.3 px across a straight
-    /// stripe (16-bit, noiseless) rises 10–90 % over 1.6 L, as through a moving average over the
-    /// fit's window 2L; alone it rises over the blur's reach only.
+    /// stripe (16-bit, noiseless) rises 10–90 % over 1.6 × 3 px with the fit over ±3 px, as
+    /// through a moving average over the shortest arc; alone it rises over the blur's reach
+    /// only. Longer arcs stop at the step, which moves their fit by far more than the noise
+    /// allows, so it rises no more with ±6 or ±10 px than with ±3.
     #[test]
     fn along_stripe_fit_spreads_a_step_over_its_window() {
         const STEP_X: f64 = 121.0;
@@ -1721,11 +1855,14 @@ mod direction_tests {
         let alone = rise(0.0);
         eprintln!("10-90 % rise of a 0.3 px step: alone {alone:.2} px");
         assert!(alone <= 2.5, "alone: {alone:.2} px");
-        for l in [3.0, 6.0] {
+        let shortest = rise(3.0);
+        eprintln!("  along ±3 px: {shortest:.2} px");
+        // A moving average over ±3 px rises 10–90 % in 1.6 × 3 px.
+        assert!((4.2..=5.8).contains(&shortest), "along ±3: rise {shortest:.2} px");
+        for l in [6.0, 10.0] {
             let r = rise(l);
             eprintln!("  along ±{l} px: {r:.2} px");
-            // A moving average over 2L rises 10–90 % in 1.6 L.
-            assert!(r >= 1.4 * l && r <= 1.6 * l + 1.0, "along ±{l}: rise {r:.2} px");
+            assert!(r <= shortest + 0.1, "along ±{l}: rise {r:.2} px, ±3: {shortest:.2} px");
         }
     }
 

@@ -743,14 +743,20 @@ impl RidgeDetector {
             // profile's own lopsidedness either: it is judged alone too, at twice the limit.
             let lopsidedness =
                 Lopsided { mean: asymmetry_sum / count as f64, own: curvature.is_none().then_some(c.asymmetry) };
-            if along > 0.0 {
+            // One arc (±3 px or less) uses the wider parabola's bend at hand; longer ones wait
+            // for the frame's noise.
+            let offset = match curvature {
+                Some(c) if along > 0.0 && along <= SHAPE_HALF_ARC_PX => bent_line_offset(&neighbours, c, along),
+                _ => 0.0,
+            };
+            if along > SHAPE_HALF_ARC_PX {
                 along_fits.push(&neighbours);
             }
             let local = sums.local_stripe(&factors);
-            kept.push((i, curvature, 0.0, local));
+            kept.push((i, curvature, offset, local));
             lopsided.push(lopsidedness);
         }
-        if along > 0.0 {
+        if along > SHAPE_HALF_ARC_PX {
             // The blur's pull follows the stripe's shape over twice the arc the fit took: where
             // the stripe bends too fast for the longer arcs, their shape is not its shape here.
             for (k, (offset, arc)) in along_fits.offsets(along).into_iter().enumerate() {
@@ -1338,10 +1344,21 @@ fn arc_offset(neighbours: &[Neighbour], arc: f64) -> Option<(f64, f64)> {
     let mut sums = ShapeSums::default();
     neighbours.iter().filter(|n| n.0.abs() <= shape_half_arc).for_each(|n| sums.add(n));
     let [_, _, bend] = sums.parabola(&sums.factors())?;
-    let mut line = LineSums::default();
-    within().for_each(|n| line.add(n.0, n.1 - bend * n.0 * n.0));
+    let line = bent_line(neighbours, bend, arc);
     let (offset, _) = line.fit()?;
     Some((offset, line.intercept_spread()))
+}
+
+/// The offset at t = 0 (px) of the line through the neighbours' offsets within ±`arc` px once
+/// the bend c (d = c·t²) is taken out; 0 where the line has too few points.
+fn bent_line_offset(neighbours: &[Neighbour], bend: f64, arc: f64) -> f64 {
+    bent_line(neighbours, bend, arc).fit().map_or(0.0, |f| f.0)
+}
+
+fn bent_line(neighbours: &[Neighbour], bend: f64, arc: f64) -> LineSums {
+    let mut line = LineSums::default();
+    neighbours.iter().filter(|n| n.0.abs() <= arc).for_each(|n| line.add(n.0, n.1 - bend * n.0 * n.0));
+    line
 }
 
 /// How far short of a longer arc's ends (px) the stripe may stop for that arc to be fitted

@@ -1402,7 +1402,8 @@ impl AlongFits {
         while let Some(&last) = arcs.last().filter(|&&a| a < along) {
             arcs.push((last * ARC_GROWTH).min(along));
         }
-        let noise = self.noise();
+        // A single arc is taken as it is: no noise needed to judge it.
+        let noise = if arcs.len() > 1 { self.noise() } else { 0.0 };
         (0..self.ends.len())
             .map(|k| {
                 let mut shorter: Vec<(f64, f64)> = Vec::with_capacity(arcs.len());

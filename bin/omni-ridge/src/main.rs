@@ -79,9 +79,10 @@ struct Args {
     /// arc on either side (0 = off). Across the normal: a line through them once a parabola's
     /// bend is taken out, over arcs growing from 3 px for as long as a longer arc agrees with
     /// the shorter ones within their noise, so tight curves, steps and stripe ends keep a short
-    /// arc (with --sampling rays: a line over the whole arc). Averages speckle and noise at the
-    /// price of lateral resolution: a step along the stripe rises 10-90 % over about 5 px (2 px
-    /// without the fit). Stripes shorter than the shortest arc's window (2 × PX end to end, at
+    /// arc (with --sampling rays: a line over the whole arc). Averages speckle and noise (the
+    /// simulator's cylinder under speckle of contrast 0.25: 0.057 px RMS alone, 0.039 at 3, 0.033
+    /// at 10) at the price of lateral resolution: a step along the stripe rises 10-90 % over
+    /// about 5 px (2 px without the fit). Stripes shorter than the shortest arc's window (2 × PX end to end, at
     /// most 6 px; 2 × PX along rays) are refused: their points are dropped with a warning, and a
     /// run in which no stripe is that long fails.
     #[arg(long, default_value_t = 0.0, value_name = "PX", allow_negative_numbers = true)]

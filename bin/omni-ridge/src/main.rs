@@ -82,9 +82,9 @@ struct Args {
     /// arc (with --sampling rays: a line over the whole arc). Averages speckle and noise (the
     /// simulator's cylinder under speckle of contrast 0.25: 0.057 px RMS alone, 0.039 at 3, 0.033
     /// at 10) at the price of lateral resolution: a step along the stripe rises 10-90 % over
-    /// about 5 px (2 px without the fit). Stripes shorter than the shortest arc's window (2 × PX end to end, at
-    /// most 6 px; 2 × PX along rays) are refused: their points are dropped with a warning, and a
-    /// run in which no stripe is that long fails.
+    /// about 5 px (2 px without the fit). Stripes shorter than the shortest arc's window (2 × PX
+    /// end to end, at most 6 px; 2 × PX along rays) are refused: their points are dropped with a
+    /// warning, and a run in which no stripe is that long fails.
     #[arg(long, default_value_t = 0.0, value_name = "PX", allow_negative_numbers = true)]
     along_stripe: f64,
     /// The lens's blur (Gaussian PSF σ, px; pixel area not included), whose pull on curved

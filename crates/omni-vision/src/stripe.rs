@@ -223,7 +223,6 @@ impl RidgeParams {
         self.threshold.unwrap_or(0.04 * max_value)
     }
 
-    /// Checks the settings; the message names the bad one.
     /// The shortest stretch of stripe (px, end to end) the along-stripe fit works on: its
     /// shortest arc's window, 2 × min(`along_stripe_px`, 3 px) across the normal (longer arcs
     /// stop where the stripe ends), 2 × `along_stripe_px` along rays.
@@ -234,6 +233,7 @@ impl RidgeParams {
         }
     }
 
+    /// Checks the settings; the message names the bad one.
     pub fn validate(&self) -> Result<(), String> {
         if let Some(t) = self.threshold
             && !(t.is_finite() && t >= 0.0)

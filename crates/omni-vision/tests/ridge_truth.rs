@@ -437,10 +437,10 @@ fn bench_scene(
 /// Ideal optics (Gaussian blur 0.7 px, no speckle), the room lit: the stripe centre within
 /// 0.015 px RMS and 0.005 px of bias on plane, cylinder and sphere over 48 stripe positions,
 /// the plane's stripe covered. The along-stripe fit up to ±10 px takes its longer arcs only
-/// where the stripe's shape allows them: on the plane 0.0087 px RMS (±3: 0.0095, alone 0.0114),
-/// on the cylinder and sphere what ±3 gives (0.0263 / 0.0226 against 0.0257 / 0.0225 px; a
-/// single arc of ±10 px gave 0.10 px). Asserted: ±10 within 1.1 × ±3's RMS, the plane's ≤ 0.8 ×
-/// its RMS alone.
+/// where the stripe's shape allows them: on the plane 0.0087 px RMS (±3: 0.0095, alone
+/// 0.0114), on the cylinder and sphere what ±3 gives (0.0263 / 0.0226 against 0.0257 / 0.0225
+/// px; a single arc of ±10 px gave 0.10 px). Asserted: ±10 within 1.1 × ±3's RMS, the plane's
+/// ≤ 0.8 × its RMS alone.
 #[test]
 fn ideal_optics_accuracy_on_the_bench() {
     for object in [BenchObject::Plane, BenchObject::Cylinder, BenchObject::Sphere] {
@@ -817,9 +817,10 @@ fn the_along_stripe_fit_adds_no_bias_on_curved_stripes_under_speckle() {
 /// over many positions of the stripe (mirror angles 15–27.5°; one frame's mean scatters by 0.013
 /// px on the cylinder, 0.02 on the sphere's shorter stripes). C = 0.25 (16 speckle patterns),
 /// laser-off frames, along-stripe fit ±3 px; the visible stripe ([`Visibility`]; a dark
-/// speckle grain is not visible) covered ≥ 85 %. Up to ±10 px the fit's longer arcs, taken where
-/// the stripe's shape allows, lower the RMS further (cylinder 0.0388 → 0.0327 px, sphere 0.0384 →
-/// 0.0323; a single ±10 px arc gave 0.085 / 0.088 px on 12 positions): asserted ≤ 1.05 × ±3's.
+/// speckle grain is not visible) covered ≥ 85 %. Up to ±10 px the fit's longer arcs, taken
+/// where the stripe's shape allows, lower the RMS further (cylinder 0.0388 → 0.0327 px, sphere
+/// 0.0384 → 0.0323; a single ±10 px arc gave 0.085 / 0.088 px on 12 positions): asserted ≤
+/// 1.05 × ±3's.
 #[test]
 fn curved_stripes_under_speckle_keep_their_centre_over_many_stripe_positions() {
     for (object, positions) in [(BenchObject::Cylinder, 24), (BenchObject::Sphere, 48)] {

@@ -1336,7 +1336,7 @@ fn arc_offset(neighbours: &[Neighbour], arc: f64) -> Option<(f64, f64)> {
         within().for_each(|n| sums.add(n));
         let factors = sums.factors();
         let [offset, _, _] = sums.parabola(&factors)?;
-        // The offset's variance per unit noise: the first diagonal entry of the inverse moment matrix.
+        // The offset's variance per unit noise: the inverse moment matrix's first diagonal entry.
         let [spread2, _, _] = factors.solve::<3>(&[1.0, 0.0, 0.0, 0.0])?;
         return Some((offset, spread2.max(0.0).sqrt()));
     }

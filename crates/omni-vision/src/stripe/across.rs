@@ -766,9 +766,7 @@ impl RidgeDetector {
                 }
                 *kept_offset = offset;
                 if 2.0 * arc < shape_half_arc {
-                    let mut sums = ShapeSums::default();
-                    let half_arc = SHAPE_HALF_ARC_PX.max(2.0 * arc);
-                    along_fits.of(k).iter().filter(|n| n.0.abs() <= half_arc).for_each(|n| sums.add(n));
+                    let sums = ShapeSums::new(along_fits.of(k), SHAPE_HALF_ARC_PX.max(2.0 * arc));
                     let factors = sums.factors();
                     *curvature = sums.parabola(&factors).map(|f| f[2]).or(*curvature);
                     *local = sums.local_stripe(&factors);
@@ -1142,7 +1140,7 @@ struct ShapeSums {
 }
 
 impl ShapeSums {
-    #[cfg(test)]
+    /// The sums over the neighbours within ±`half_arc` px of arc.
     fn new(neighbours: &[Neighbour], half_arc: f64) -> ShapeSums {
         let mut sums = ShapeSums::default();
         neighbours.iter().filter(|n| n.0.abs() <= half_arc).for_each(|n| sums.add(n));
@@ -1326,23 +1324,20 @@ impl LineSums {
 /// or a window the stripe's end cuts short, moves the offset wherever the stripe's curvature
 /// changes along it (an ellipse's flanks, near a silhouette).
 fn arc_offset(neighbours: &[Neighbour], arc: f64) -> Option<(f64, f64)> {
-    let within = || neighbours.iter().filter(move |n| n.0.abs() <= arc);
     if arc > SHAPE_HALF_ARC_PX {
-        let (first, last) = within().fold((0.0f64, 0.0f64), |(lo, hi), n| (lo.min(n.0), hi.max(n.0)));
+        let within = neighbours.iter().filter(|n| n.0.abs() <= arc);
+        let (first, last) = within.fold((0.0f64, 0.0f64), |(lo, hi), n| (lo.min(n.0), hi.max(n.0)));
         if last < arc - ARC_END_PX || -first < arc - ARC_END_PX {
             return None;
         }
-        let mut sums = ShapeSums::default();
-        within().for_each(|n| sums.add(n));
+        let sums = ShapeSums::new(neighbours, arc);
         let factors = sums.factors();
         let [offset, _, _] = sums.parabola(&factors)?;
         // The offset's variance per unit noise: the inverse moment matrix's first diagonal entry.
         let [spread2, _, _] = factors.solve::<3>(&[1.0, 0.0, 0.0, 0.0])?;
         return Some((offset, spread2.max(0.0).sqrt()));
     }
-    let shape_half_arc = SHAPE_HALF_ARC_PX.max(2.0 * arc);
-    let mut sums = ShapeSums::default();
-    neighbours.iter().filter(|n| n.0.abs() <= shape_half_arc).for_each(|n| sums.add(n));
+    let sums = ShapeSums::new(neighbours, SHAPE_HALF_ARC_PX.max(2.0 * arc));
     let [_, _, bend] = sums.parabola(&sums.factors())?;
     let line = bent_line(neighbours, bend, arc);
     let (offset, _) = line.fit()?;
@@ -1443,15 +1438,14 @@ const CORRELATED_NOISE: f64 = 2.0;
 /// The RMS residual (px) of a point's neighbours within ±[`SHAPE_HALF_ARC_PX`] about their
 /// parabola, over its degrees of freedom; `None` with fewer than six of them.
 fn short_arc_scatter(neighbours: &[Neighbour]) -> Option<f64> {
-    let near = || neighbours.iter().filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX);
-    let mut sums = ShapeSums::default();
-    near().for_each(|n| sums.add(n));
+    let sums = ShapeSums::new(neighbours, SHAPE_HALF_ARC_PX);
     let count = sums.t[0];
     if count < 6.0 {
         return None;
     }
     let [a, b, c] = sums.parabola(&sums.factors())?;
-    let squares: f64 = near().map(|n| (n.1 - a - b * n.0 - c * n.0 * n.0).powi(2)).sum();
+    let near = neighbours.iter().filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX);
+    let squares: f64 = near.map(|n| (n.1 - a - b * n.0 - c * n.0 * n.0).powi(2)).sum();
     Some((squares / (count - 3.0)).sqrt())
 }
 

@@ -646,156 +646,106 @@ impl RidgeDetector {
         let along = self.params.along_stripe_px;
         let reach = SHAPE_HALF_ARC_PX.max(2.0 * along).max(super::MIN_STRIPE_ARC_PX) + 1.0;
         let grid = Grid::new(centres, reach);
-        let reach2 = reach * reach;
-        let shape_half_arc = SHAPE_HALF_ARC_PX.max(2.0 * along);
-        // The stripe's points: (centre, the bend c of d = c·t², the along-stripe fit's offset,
-        // the stripe's local shape and contrast for the blur's pull).
-        let mut kept: Vec<(usize, Option<f64>, f64, Option<LocalStripe>)> = Vec::with_capacity(centres.len());
-        // The lopsidedness of each point's stretch of stripe (its neighbours' mean), judged once
-        // the stripes' own steady lopsidedness is known.
-        let mut lopsided: Vec<Lopsided> = Vec::with_capacity(centres.len());
+        let mut kept: Vec<OnStripe> = Vec::with_capacity(centres.len());
         let mut stripes = Stripes::new(centres.len());
         let mut neighbours = Vec::new();
         // Each kept point's neighbours, for the along-stripe fit once the frame's noise is known.
         let mut along_fits = AlongFits::default();
-        for (i, c) in centres.iter().enumerate() {
-            let (px, py) = (c.point.u, c.point.v);
-            let (nx, ny) = c.normal;
-            neighbours.clear();
-            let mut duplicate = false;
-            grid.visit(px, py, |j, &[ou, ov, onx, ony]| {
-                let (ex, ey) = (ou - px, ov - py);
-                let distance2 = ex * ex + ey * ey;
-                if distance2 > reach2 {
-                    return;
-                }
-                let cos = onx * nx + ony * ny;
-                if cos.abs() < SAME_STRIPE_COS {
-                    return;
-                }
-                let o = &centres[j];
-                // Two seeds of one crossing (a run broken by speckle, a stripe at 45° seen from a
-                // row and a column): the brighter (then the first) is kept.
-                if distance2 < DUPLICATE_PX * DUPLICATE_PX
-                    && j != i
-                    && (o.point.intensity, std::cmp::Reverse(j)) > (c.point.intensity, std::cmp::Reverse(i))
-                {
-                    duplicate = true;
-                }
-                let (t, d) = (-ny * ex + nx * ey, nx * ex + ny * ey);
-                if d.abs() <= 0.5 + 0.25 * t.abs() {
-                    // The asymmetry as seen along this point's normal.
-                    let asymmetry = if cos > 0.0 { o.asymmetry } else { -o.asymmetry };
-                    neighbours.push((t, d, o.half_width, asymmetry, o.point.intensity));
-                    if t.abs() <= SHAPE_HALF_ARC_PX {
-                        stripes.join(i, j, cos < 0.0);
-                    }
-                }
-            });
-            if duplicate {
+        for i in 0..centres.len() {
+            if !neighbours_on_the_stripe(&grid, centres, i, reach, &mut stripes, &mut neighbours) {
                 continue;
             }
-            // Everything the checks below need from the neighbours, in one pass.
-            let mut sums = ShapeSums::default();
-            let mut width_line = LineSums::default();
-            let (mut first, mut last, mut asymmetry_sum) = (0.0f64, 0.0f64, 0.0);
-            // How many neighbours (within the shape's arc) there are, and how many of them are
-            // narrow enough that this profile is not too narrow beside them.
-            let (mut count, mut not_wider) = (0usize, 0usize);
-            for n in &neighbours {
-                (first, last) = (first.min(n.0), last.max(n.0));
-                if n.0.abs() <= shape_half_arc {
-                    sums.add(n);
-                }
-                if n.0.abs() <= SHAPE_HALF_ARC_PX {
-                    asymmetry_sum += n.3;
-                    count += 1;
-                    not_wider += usize::from(MIN_WIDTH_RATIO * n.2 <= c.half_width);
-                    width_line.add(n.0, n.2);
-                }
-            }
-            if !(last >= super::MIN_STRIPE_ARC_PX || -first >= super::MIN_STRIPE_ARC_PX) {
-                continue;
-            }
-            if !(last >= END_PX && -first >= END_PX) {
-                continue;
-            }
-            // Narrower than MIN_WIDTH_RATIO of the neighbours' median width (the upper median:
-            // sorted index count / 2): as many as that index or fewer are narrow enough.
-            if not_wider <= count / 2 {
-                continue;
-            }
-            // Lit areas of the ambient image (a face's tapering tip, a sliver between shadows)
-            // are wider than the laser's line, whose width the lens sets, and their width
-            // changes along them.
-            if c.half_width > widest && c.point.quality & quality::SATURATED == 0 {
-                continue;
-            }
-            // d(half-maximum width)/dt along the stripe.
-            if let Some((_, slope)) = width_line.fit()
-                && slope.abs() > MAX_WIDTH_SLOPE
-            {
-                continue;
-            }
-            let factors = sums.factors();
-            let curvature = sums.parabola(&factors).map(|f| f[2]);
-            // Too few neighbours on one side for the stripe's shape are too few to outvote a
-            // profile's own lopsidedness either: it is judged alone too, at twice the limit.
-            let lopsidedness =
-                Lopsided { mean: asymmetry_sum / count as f64, own: curvature.is_none().then_some(c.asymmetry) };
-            // One arc (±3 px or less) uses the wider parabola's bend at hand; longer ones wait
-            // for the frame's noise.
-            let offset = match curvature {
-                Some(c) if along > 0.0 && along <= SHAPE_HALF_ARC_PX => bent_line_offset(&neighbours, c, along),
-                _ => 0.0,
-            };
+            let Some(point) = self.on_its_stripe(i, &centres[i], &neighbours, widest) else { continue };
             if along > SHAPE_HALF_ARC_PX {
                 along_fits.push(&neighbours);
             }
-            let local = sums.local_stripe(&factors);
-            kept.push((i, curvature, offset, local));
-            lopsided.push(lopsidedness);
+            kept.push(point);
         }
         if along > SHAPE_HALF_ARC_PX {
-            // The blur's pull follows the stripe's shape over twice the arc the fit took: where
-            // the stripe bends too fast for the longer arcs, their shape is not its shape here.
-            for (k, (offset, arc)) in along_fits.offsets(along).into_iter().enumerate() {
-                let (_, curvature, kept_offset, local) = &mut kept[k];
-                if curvature.is_none() {
-                    continue;
-                }
-                *kept_offset = offset;
-                if 2.0 * arc < shape_half_arc {
-                    let sums = ShapeSums::new(along_fits.of(k), SHAPE_HALF_ARC_PX.max(2.0 * arc));
-                    let factors = sums.factors();
-                    *curvature = sums.parabola(&factors).map(|f| f[2]).or(*curvature);
-                    *local = sums.local_stripe(&factors);
-                }
+            fit_longer_arcs(&mut kept, &along_fits, along);
+        }
+        keep_steadily_lopsided(&mut kept, &mut stripes, scale);
+        self.corrected(centres, kept, &mut stripes, scale)
+    }
+
+    /// The stripe's point at `centre` (index `i`) with its `neighbours` on the stripe, if it
+    /// passes the checks that need them: a stripe long enough, going on past it, a width like
+    /// its neighbours' and not a lit area's; with the stripe's bend, shape and lopsidedness
+    /// there, and the along-stripe fit's offset where one arc does.
+    fn on_its_stripe(&self, i: usize, c: &Centre, neighbours: &[Neighbour], widest: f64) -> Option<OnStripe> {
+        let along = self.params.along_stripe_px;
+        let shape_half_arc = SHAPE_HALF_ARC_PX.max(2.0 * along);
+        // Everything the checks below need from the neighbours, in one pass.
+        let mut sums = ShapeSums::default();
+        let mut width_line = LineSums::default();
+        let (mut first, mut last, mut asymmetry_sum) = (0.0f64, 0.0f64, 0.0);
+        // How many neighbours (within the shape's arc) there are, and how many of them are
+        // narrow enough that this profile is not too narrow beside them.
+        let (mut count, mut not_wider) = (0usize, 0usize);
+        for n in neighbours {
+            (first, last) = (first.min(n.0), last.max(n.0));
+            if n.0.abs() <= shape_half_arc {
+                sums.add(n);
+            }
+            if n.0.abs() <= SHAPE_HALF_ARC_PX {
+                asymmetry_sum += n.3;
+                count += 1;
+                not_wider += usize::from(MIN_WIDTH_RATIO * n.2 <= c.half_width);
+                width_line.add(n.0, n.2);
             }
         }
-        // A cut leaves the profiles along it lopsided; speckle and noise lopsided at random, so
-        // the neighbours' mean tells the two apart. A laser's own shape leaves its whole stripe
-        // lopsided the same way: a cut is a departure from the stripe's steady lopsidedness.
-        let means: Vec<(usize, f64)> = kept.iter().zip(&lopsided).map(|(k, l)| (k.0, l.mean)).collect();
-        let steady = stripes.steady(&means, (STEADY_MIN_PX / scale as usize).max(STEADY_MIN_POINTS));
-        let mut judged = lopsided.iter();
-        kept.retain(|k| {
-            let l = judged.next().expect("one judgement per kept point");
-            let [lo, hi] = steady[k.0];
-            let departure = |a: f64| (lo - a).max(a - hi).max(0.0);
-            departure(l.mean) <= MAX_ASYMMETRY && l.own.is_none_or(|a| departure(a) <= 2.0 * MAX_ASYMMETRY)
-        });
-        let blur_variance = self.blur_variance(kept.iter().map(|k| &centres[k.0]), scale);
+        if !(last >= super::MIN_STRIPE_ARC_PX || -first >= super::MIN_STRIPE_ARC_PX) {
+            return None;
+        }
+        if !(last >= END_PX && -first >= END_PX) {
+            return None;
+        }
+        // Narrower than MIN_WIDTH_RATIO of the neighbours' median width (the upper median:
+        // sorted index count / 2): as many as that index or fewer are narrow enough.
+        if not_wider <= count / 2 {
+            return None;
+        }
+        // Lit areas of the ambient image (a face's tapering tip, a sliver between shadows)
+        // are wider than the laser's line, whose width the lens sets, and their width
+        // changes along them.
+        if c.half_width > widest && c.point.quality & quality::SATURATED == 0 {
+            return None;
+        }
+        // d(half-maximum width)/dt along the stripe.
+        if let Some((_, slope)) = width_line.fit()
+            && slope.abs() > MAX_WIDTH_SLOPE
+        {
+            return None;
+        }
+        let factors = sums.factors();
+        let curvature = sums.parabola(&factors).map(|f| f[2]);
+        // Too few neighbours on one side for the stripe's shape are too few to outvote a
+        // profile's own lopsidedness either: it is judged alone too, at twice the limit.
+        let lopsided = Lopsided { mean: asymmetry_sum / count as f64, own: curvature.is_none().then_some(c.asymmetry) };
+        // One arc (±3 px or less) uses the wider parabola's bend at hand; longer ones wait
+        // for the frame's noise.
+        let offset = match curvature {
+            Some(c) if along > 0.0 && along <= SHAPE_HALF_ARC_PX => bent_line_offset(neighbours, c, along),
+            _ => 0.0,
+        };
+        Some(OnStripe { index: i, curvature, offset, local: sums.local_stripe(&factors), lopsided })
+    }
+
+    /// The stripe's points as measured, moved by the along-stripe fit's offset less the blur's
+    /// pull (the points it moves too far are dropped) and given their leans to the light's peak.
+    fn corrected(&self, centres: &[Centre], kept: Vec<OnStripe>, stripes: &mut Stripes, scale: u32) -> Vec<Linked> {
+        let blur_variance = self.blur_variance(kept.iter().map(|k| &centres[k.index]), scale);
         // The laser's shape, like its steady lopsidedness, is the stripe's: the medians over the
         // stripe of its tops' shapes, in units of each profile's σ (alike for a laser's shape
         // at any width), where they stand out from the profiles' scatter. Per profile they are
         // noisy (a cubic's third derivative); along a bend or a step they are not the laser's.
-        let shapes: Vec<(usize, [f64; 2])> = kept.iter().filter_map(|k| Some((k.0, centres[k.0].top_shape?))).collect();
+        let shapes: Vec<(usize, [f64; 2])> =
+            kept.iter().filter_map(|k| Some((k.index, centres[k.index].top_shape?))).collect();
         let placed = |i: usize| (centres[i].point.u, centres[i].point.v, centres[i].normal);
-        let stripe_shape = stripe_shapes(&mut stripes, &shapes, self.mosaic_at(scale), placed);
+        let stripe_shape = stripe_shapes(stripes, &shapes, self.mosaic_at(scale), placed);
         let peak_blur = self.peak_blur_variance(scale);
         let mut out = Vec::with_capacity(kept.len());
-        for (i, curvature, offset, local) in kept {
+        for OnStripe { index: i, curvature, offset, local, .. } in kept {
             let c = &centres[i];
             // A parabola d = c·t² has its centre of curvature on the +n side for c > 0; the blur
             // pulls the centre that way by σ²κ/2 = σ²·c (more where the stripe bends, brightens
@@ -811,7 +761,7 @@ impl RidgeDetector {
             let mut p = c.point;
             p.u += shift * c.normal.0;
             p.v += shift * c.normal.1;
-            let shape = stripe_shape.of(&mut stripes, i);
+            let shape = stripe_shape.of(stripes, i);
             let lean = c
                 .lean
                 .filter(|_| c.flatness <= LEAN_MAX_FLATNESS)
@@ -820,6 +770,102 @@ impl RidgeDetector {
         }
         out
     }
+}
+
+/// A centre that passed the link's checks: its index, its stripe's bend c of d = c·t² (1/px),
+/// the along-stripe fit's offset (px), the stripe's local shape and contrast for the blur's
+/// pull, and the lopsidedness of its stretch of stripe, judged once the stripes' own steady
+/// lopsidedness is known.
+struct OnStripe {
+    index: usize,
+    curvature: Option<f64>,
+    offset: f64,
+    local: Option<LocalStripe>,
+    lopsided: Lopsided,
+}
+
+/// Fills `out` with centre `i`'s neighbours on its stripe within `reach` px and joins it to
+/// those within [`SHAPE_HALF_ARC_PX`] in `stripes`; `false` where another centre measured the
+/// same crossing and is kept instead (two seeds of one crossing: a run broken by speckle, a
+/// stripe at 45° seen from a row and a column; the brighter, then the first, is kept).
+fn neighbours_on_the_stripe(
+    grid: &Grid,
+    centres: &[Centre],
+    i: usize,
+    reach: f64,
+    stripes: &mut Stripes,
+    out: &mut Vec<Neighbour>,
+) -> bool {
+    let c = &centres[i];
+    let (px, py) = (c.point.u, c.point.v);
+    let (nx, ny) = c.normal;
+    let reach2 = reach * reach;
+    out.clear();
+    let mut duplicate = false;
+    grid.visit(px, py, |j, &[ou, ov, onx, ony]| {
+        let (ex, ey) = (ou - px, ov - py);
+        let distance2 = ex * ex + ey * ey;
+        if distance2 > reach2 {
+            return;
+        }
+        let cos = onx * nx + ony * ny;
+        if cos.abs() < SAME_STRIPE_COS {
+            return;
+        }
+        let o = &centres[j];
+        if distance2 < DUPLICATE_PX * DUPLICATE_PX
+            && j != i
+            && (o.point.intensity, std::cmp::Reverse(j)) > (c.point.intensity, std::cmp::Reverse(i))
+        {
+            duplicate = true;
+        }
+        let (t, d) = (-ny * ex + nx * ey, nx * ex + ny * ey);
+        if d.abs() <= 0.5 + 0.25 * t.abs() {
+            // The asymmetry as seen along this point's normal.
+            let asymmetry = if cos > 0.0 { o.asymmetry } else { -o.asymmetry };
+            out.push((t, d, o.half_width, asymmetry, o.point.intensity));
+            if t.abs() <= SHAPE_HALF_ARC_PX {
+                stripes.join(i, j, cos < 0.0);
+            }
+        }
+    });
+    !duplicate
+}
+
+/// The along-stripe fit over arcs longer than ±[`SHAPE_HALF_ARC_PX`] (`along` px at most), once
+/// the frame's noise is known from every kept point's neighbours (`along_fits`, one entry per
+/// point of `kept`). The blur's pull follows the stripe's shape over twice the arc the fit
+/// took: where the stripe bends too fast for the longer arcs, their shape is not its shape here.
+fn fit_longer_arcs(kept: &mut [OnStripe], along_fits: &AlongFits, along: f64) {
+    let shape_half_arc = SHAPE_HALF_ARC_PX.max(2.0 * along);
+    for (k, (offset, arc)) in along_fits.offsets(along).into_iter().enumerate() {
+        let point = &mut kept[k];
+        if point.curvature.is_none() {
+            continue;
+        }
+        point.offset = offset;
+        if 2.0 * arc < shape_half_arc {
+            let sums = ShapeSums::new(along_fits.of(k), SHAPE_HALF_ARC_PX.max(2.0 * arc));
+            let factors = sums.factors();
+            point.curvature = sums.parabola(&factors).map(|f| f[2]).or(point.curvature);
+            point.local = sums.local_stripe(&factors);
+        }
+    }
+}
+
+/// Drops the points whose stretch of stripe is lopsided unlike their stripe. A cut leaves the
+/// profiles along it lopsided; speckle and noise lopsided at random, so the neighbours' mean
+/// tells the two apart. A laser's own shape leaves its whole stripe lopsided the same way: a
+/// cut is a departure from the stripe's steady lopsidedness.
+fn keep_steadily_lopsided(kept: &mut Vec<OnStripe>, stripes: &mut Stripes, scale: u32) {
+    let means: Vec<(usize, f64)> = kept.iter().map(|k| (k.index, k.lopsided.mean)).collect();
+    let steady = stripes.steady(&means, (STEADY_MIN_PX / scale as usize).max(STEADY_MIN_POINTS));
+    kept.retain(|k| {
+        let [lo, hi] = steady[k.index];
+        let departure = |a: f64| (lo - a).max(a - hi).max(0.0);
+        departure(k.lopsided.mean) <= MAX_ASYMMETRY
+            && k.lopsided.own.is_none_or(|a| departure(a) <= 2.0 * MAX_ASYMMETRY)
+    });
 }
 
 impl Linked {

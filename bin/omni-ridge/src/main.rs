@@ -226,6 +226,8 @@ fn main() -> ExitCode {
         let (camera, params) = match &args.camera {
             Some(path) => {
                 let (file, model) = omni_formats::CameraFile::load(path)?;
+                let (w, h) = model.image_size();
+                model.mirror_circle().check_in_frame(w, h).map_err(|e| format!("{}: {e}", path.display()))?;
                 (Some(model), params.with_lens_blur_of(&file).map_err(|e| format!("{}: {e}", path.display()))?)
             }
             None => (None, params),

@@ -227,6 +227,29 @@ fn frames_of_another_size_than_the_camera_are_refused() {
     assert!(err.contains("frame 0") && err.contains("128x128") && err.contains("160x128"), "{err}");
 }
 
+/// A camera file whose focal length puts the mirror's annulus far beyond the frame (a typo, a
+/// unit mix-up) is refused before any frame is read, naming the file; it once sized the
+/// search for that imaginary image and ran out of memory.
+#[test]
+fn a_camera_whose_mirror_misses_the_frame_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = scene(dir.path());
+    for fx in [1e6, 1e12, 1e20] {
+        let mut file = small_camera(128);
+        let omni_formats::CameraSpec::Hyperbolic(p) = &mut file.model else { unreachable!() };
+        (p.fx_px, p.fy_px) = (fx, fx);
+        let cam = dir.path().join("far.json");
+        omni_formats::write_doc(&cam, &file).unwrap();
+        let out_path = dir.path().join("out.jsonl");
+        let out = run(&["--camera", cam.to_str().unwrap(), "-o", out_path.to_str().unwrap()], &text);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "fx {fx}: {err}");
+        assert!(err.contains("far.json") && err.contains("does not reach the 128 × 128 frame"), "{err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(!out_path.exists());
+    }
+}
+
 #[test]
 fn empty_and_malformed_streams_are_errors() {
     let out = run(&[], "");

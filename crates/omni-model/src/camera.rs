@@ -17,7 +17,41 @@ impl MirrorCircle {
         let r = (px - self.centre).norm();
         r >= self.inner_radius && r <= self.outer_radius
     }
+
+    /// Checks that the annulus can be searched in a `width` × `height` frame (px): finite, its
+    /// centre within [`MAX_CENTRE_DIAGONALS`] frame diagonals of the frame, and some of it on
+    /// the frame. A camera file whose numbers put the mirror far off the image would otherwise
+    /// size the search for an image that does not exist.
+    pub fn check_in_frame(&self, width: u32, height: u32) -> Result<(), String> {
+        let (w, h) = (width as f64, height as f64);
+        let describe = || {
+            format!(
+                "the mirror's annulus (centre ({:.1}, {:.1}) px, radii {:.1}–{:.1} px)",
+                self.centre.x, self.centre.y, self.inner_radius, self.outer_radius
+            )
+        };
+        let values = [self.centre.x, self.centre.y, self.inner_radius, self.outer_radius];
+        if !values.iter().all(|v| v.is_finite()) || self.inner_radius < 0.0 || self.outer_radius <= self.inner_radius {
+            return Err(format!("{}: not finite radii with 0 ≤ inner < outer", describe()));
+        }
+        let diagonal = w.hypot(h);
+        let (dx, dy) = (self.centre.x - 0.5 * w, self.centre.y - 0.5 * h);
+        if dx.hypot(dy) > MAX_CENTRE_DIAGONALS * diagonal {
+            return Err(format!("{} lies far off the {width} × {height} frame", describe()));
+        }
+        // The frame's nearest and farthest points from the centre.
+        let nearest = (self.centre.x.clamp(0.0, w) - self.centre.x).hypot(self.centre.y.clamp(0.0, h) - self.centre.y);
+        let (x, y) = (self.centre.x, self.centre.y);
+        let farthest = x.abs().max((x - w).abs()).hypot(y.abs().max((y - h).abs()));
+        if self.outer_radius < nearest || self.inner_radius > farthest {
+            return Err(format!("{} does not reach the {width} × {height} frame", describe()));
+        }
+        Ok(())
+    }
 }
+
+/// How far (in frame diagonals from the frame's centre) a mirror's centre may lie.
+pub const MAX_CENTRE_DIAGONALS: f64 = 10.0;
 
 /// A calibrated (or ideal) receiver: pixels ↔ world rays.
 ///
@@ -110,5 +144,34 @@ impl<P: CentralParams> CameraModel for CentralCamera<P> {
         // A model fitted without a known rim is valid over the whole image.
         let outer = if outer > 0.0 { outer } else { (w as f64).hypot(h as f64) };
         MirrorCircle { centre: Vector2::new(centre[0], centre[1]), inner_radius: inner, outer_radius: outer }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn circle(x: f64, y: f64, inner: f64, outer: f64) -> MirrorCircle {
+        MirrorCircle { centre: Vector2::new(x, y), inner_radius: inner, outer_radius: outer }
+    }
+
+    /// An annulus on the frame passes, whether it fits inside, spills over the edges or has its
+    /// centre off the frame; one beyond the frame, far off it or not an annulus is refused.
+    #[test]
+    fn an_annulus_is_searchable_only_where_it_meets_the_frame() {
+        for ok in [circle(50.0, 50.0, 10.0, 40.0), circle(50.0, 50.0, 0.0, 500.0), circle(-30.0, 50.0, 0.0, 40.0)] {
+            assert_eq!(ok.check_in_frame(100, 100), Ok(()), "{ok:?}");
+        }
+        let refused = [
+            (circle(50.0, 50.0, 80.0, 90.0), "does not reach"),
+            (circle(-60.0, 50.0, 0.0, 50.0), "does not reach"),
+            (circle(5e3, 50.0, 0.0, 6e3), "far off"),
+            (circle(50.0, 50.0, 40.0, 10.0), "0 ≤ inner < outer"),
+            (circle(f64::NAN, 50.0, 0.0, 10.0), "not finite"),
+        ];
+        for (bad, why) in refused {
+            let err = bad.check_in_frame(100, 100).unwrap_err();
+            assert!(err.contains(why) && err.starts_with("the mirror's annulus"), "{bad:?}: {err}");
+        }
     }
 }

@@ -615,6 +615,9 @@ impl RidgeDetector {
             .iter()
             .map(|&(x, y)| (x - cx).hypot(y - cy))
             .fold(0.0, f64::max);
+        // An annulus beyond the frame has nothing to search (`MirrorCircle::check_in_frame`
+        // refuses such cameras); the tables stay the frame's size.
+        let r_in = r_in.min(corner);
         let r_out = circle.outer_radius.min(corner).max(r_in + 1.0);
         let n_rays = ((TAU * r_out / MAX_RAY_STEP as f64).ceil().max(1.0) as usize) * MAX_RAY_STEP;
         let dirs = (0..n_rays).map(|i| (TAU * i as f64 / n_rays as f64).sin_cos()).map(|(s, c)| (c, s)).collect();

@@ -384,11 +384,23 @@ impl BoardFile {
     /// Checks the board is usable; the message names the field.
     pub fn validate(&self) -> std::result::Result<(), String> {
         check_board_corners("", self.inner_cols, self.inner_rows)?;
+        use omni_model::limits::{MAX_BOARD_EXTENT_MM, MIN_BOARD_SQUARE_MM, shown};
         if !(self.square_mm.is_finite() && self.square_mm > 0.0) {
-            return Err(format!("square_mm must be positive, got {}", self.square_mm));
+            return Err(format!("square_mm must be positive, got {}", shown(self.square_mm)));
+        }
+        if self.square_mm < MIN_BOARD_SQUARE_MM {
+            return Err(format!("square_mm must be at least {MIN_BOARD_SQUARE_MM} mm, got {}", shown(self.square_mm)));
         }
         if !(self.margin_mm.is_finite() && self.margin_mm >= 0.0) {
-            return Err(format!("margin_mm must be non-negative, got {}", self.margin_mm));
+            return Err(format!("margin_mm must be non-negative, got {}", shown(self.margin_mm)));
+        }
+        let squares = f64::from(self.inner_cols.max(self.inner_rows) + 1);
+        let extent = squares * self.square_mm + 2.0 * self.margin_mm;
+        if extent > MAX_BOARD_EXTENT_MM {
+            return Err(format!(
+                "square_mm / margin_mm: the board would be {} mm across, more than {MAX_BOARD_EXTENT_MM} mm",
+                shown(extent)
+            ));
         }
         Ok(())
     }
@@ -537,6 +549,17 @@ mod tests {
         v["inner_cols"] = 100_000.into();
         let e = parse_doc::<BoardFile>(&serde_json::to_vec(&v).unwrap(), "board.json").unwrap_err().to_string();
         assert_eq!(e, "board.json: field inner_cols: must be in 2..=1000, got 100000");
+        // Squares and margins: a micrometre at least, the whole board 100 m at most.
+        for (field, value, expected) in [
+            ("square_mm", 1e-300, "square_mm must be at least 0.001 mm, got 1e-300"),
+            ("square_mm", 1e306, "the board would be 1e307 mm across"),
+            ("margin_mm", 1e308, "the board would be inf mm across"),
+        ] {
+            let mut v = serde_json::to_value(BoardFile::new(9, 6, 30.0)).unwrap();
+            v[field] = value.into();
+            let e = parse_doc::<BoardFile>(&serde_json::to_vec(&v).unwrap(), "board.json").unwrap_err().to_string();
+            assert!(e.starts_with("board.json: ") && e.contains(expected), "{field} {value}: {e}");
+        }
     }
 
     #[test]

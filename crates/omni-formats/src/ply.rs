@@ -210,7 +210,8 @@ impl PointCloud {
         for (i, p) in self.positions.iter().enumerate() {
             if let Some(k) = p.iter().position(|c| !finite(*c)) {
                 let range = if ty == ScalarType::F64 { "" } else { " within float range" };
-                return Err(format!("point {i}: {} = {} is not a finite number{range}", ["x", "y", "z"][k], p[k]));
+                let value = omni_model::limits::shown(p[k]);
+                return Err(format!("point {i}: {} = {value} is not a finite number{range}", ["x", "y", "z"][k]));
             }
         }
         Ok(())

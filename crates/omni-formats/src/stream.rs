@@ -74,7 +74,7 @@ impl Header {
 /// intensity is the peak (0–255 for 8-bit frames, 0–65535 for 16-bit); width in px;
 /// quality is a bit set of [`quality`] flags (0 = good).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(from = "[f64; 5]", into = "[f64; 5]")]
+#[serde(try_from = "[f64; 5]", into = "[f64; 5]")]
 pub struct StripePoint {
     pub u: f64,
     pub v: f64,
@@ -93,9 +93,19 @@ pub mod quality {
     pub const WIDTH_MARGINAL: u32 = 4;
 }
 
-impl From<[f64; 5]> for StripePoint {
-    fn from(a: [f64; 5]) -> Self {
-        StripePoint { u: a[0], v: a[1], intensity: a[2], width: a[3], quality: a[4] as u32 }
+/// A whole number ≥ 0 carried as a JSON or binary array's f64 (`field` names it).
+fn whole(value: f64, field: &str) -> std::result::Result<u32, String> {
+    if value.fract() == 0.0 && (0.0..=f64::from(u32::MAX)).contains(&value) {
+        Ok(value as u32)
+    } else {
+        Err(format!("{field} must be a whole number from 0 to {}, got {}", u32::MAX, omni_model::limits::shown(value)))
+    }
+}
+
+impl TryFrom<[f64; 5]> for StripePoint {
+    type Error = String;
+    fn try_from(a: [f64; 5]) -> std::result::Result<Self, String> {
+        Ok(StripePoint { u: a[0], v: a[1], intensity: a[2], width: a[3], quality: whole(a[4], "quality")? })
     }
 }
 impl From<StripePoint> for [f64; 5] {
@@ -107,7 +117,7 @@ impl From<StripePoint> for [f64; 5] {
 /// A triangulated point: serialised as `[x, y, z, laser, range, stripe_index]` (mm, world
 /// frame; range = distance from the viewpoint; stripe_index indexes the frame's `stripe`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(from = "[f64; 6]", into = "[f64; 6]")]
+#[serde(try_from = "[f64; 6]", into = "[f64; 6]")]
 pub struct Point {
     pub xyz: [f64; 3],
     pub laser: u32,
@@ -115,9 +125,11 @@ pub struct Point {
     pub stripe_index: u32,
 }
 
-impl From<[f64; 6]> for Point {
-    fn from(a: [f64; 6]) -> Self {
-        Point { xyz: [a[0], a[1], a[2]], laser: a[3] as u32, range: a[4], stripe_index: a[5] as u32 }
+impl TryFrom<[f64; 6]> for Point {
+    type Error = String;
+    fn try_from(a: [f64; 6]) -> std::result::Result<Self, String> {
+        let (laser, stripe_index) = (whole(a[3], "laser")?, whole(a[5], "stripe_index")?);
+        Ok(Point { xyz: [a[0], a[1], a[2]], laser, range: a[4], stripe_index })
     }
 }
 impl From<Point> for [f64; 6] {
@@ -211,6 +223,13 @@ impl Frame {
             for (i, p) in pts.iter().enumerate() {
                 if !(p.xyz.iter().all(|x| x.is_finite()) && p.range.is_finite()) {
                     return Err(format!("field points[{i}]: not a finite number"));
+                }
+                let max = omni_model::limits::MAX_COORDINATE_MM;
+                if let Some(x) = p.xyz.iter().chain([&p.range]).find(|x| x.abs() > max) {
+                    return Err(format!(
+                        "field points[{i}]: {} mm is beyond ±{max:e} mm",
+                        omni_model::limits::shown(*x)
+                    ));
                 }
             }
         }
@@ -440,11 +459,19 @@ impl<R: BufRead> StreamReader<R> {
         let (stripe, points) = (count("stripe")?, count("points")?);
         if let Some(n) = stripe {
             let v = self.read_f64s::<5>(n).map_err(|e| format!("binary stripe ({n} points): {e}"))?;
-            f.stripe = Some(v.into_iter().map(StripePoint::from).collect());
+            let stripe = v
+                .into_iter()
+                .enumerate()
+                .map(|(i, a)| StripePoint::try_from(a).map_err(|e| format!("binary stripe[{i}]: {e}")));
+            f.stripe = Some(stripe.collect::<std::result::Result<_, _>>()?);
         }
         if let Some(n) = points {
             let v = self.read_f64s::<6>(n).map_err(|e| format!("binary points ({n} points): {e}"))?;
-            f.points = Some(v.into_iter().map(Point::from).collect());
+            let points = v
+                .into_iter()
+                .enumerate()
+                .map(|(i, a)| Point::try_from(a).map_err(|e| format!("binary points[{i}]: {e}")));
+            f.points = Some(points.collect::<std::result::Result<_, _>>()?);
         }
         Ok(())
     }
@@ -675,7 +702,8 @@ mod tests {
                 .map(|i| StripePoint { u: 0.1 * i as f64, v: 1.0 / 3.0, intensity: 1e-300, width: 2.5, quality: 5 })
                 .collect(),
         );
-        f.points = Some(vec![Point { xyz: [1.0 / 7.0, -2.5, 1e10], laser: 1, range: 3.25, stripe_index: 6 }]);
+        f.points =
+            Some(vec![Point { xyz: [1.0 / 7.0, -2.5, 1e8 + 1.0 / 3.0], laser: 1, range: 3.25, stripe_index: 6 }]);
         f
     }
 
@@ -687,6 +715,34 @@ mod tests {
         }
         w.write(&Record::Status(Status::complete(frames.len() as u64))).unwrap();
         w.into_inner()
+    }
+
+    /// A point's whole-number fields must be whole numbers ≥ 0 and its coordinates within
+    /// ±1e9 mm, in JSON and in the binary arrays alike: a reader never rounds -1 or 0.5 to 0.
+    #[test]
+    fn points_with_wrong_indices_or_coordinates_beyond_reach_are_named() {
+        let frame = |points: &str| {
+            "{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":1}\n".to_string()
+                + &format!(
+                    "{{\"type\":\"frame\",\"seq\":0,\"path\":\"a\",\"alpha_deg\":0,\"facet\":0,\"points\":[{points}]}}\n"
+                )
+        };
+        let cases = [
+            ("[1,2,3,-1,4,0]", "points[0]: laser must be a whole number"),
+            ("[1,2,3,0,4,0.5]", "points[0]: stripe_index must be a whole number"),
+            ("[1,2,3e300,0,4,0]", "points[0]: 3e300 mm is beyond"),
+        ];
+        for (points, expected) in cases {
+            let text = frame(points);
+            let err =
+                StreamReader::new(text.as_bytes(), "p.jsonl").collect::<Result<Vec<_>>>().unwrap_err().to_string();
+            assert!(err.contains("p.jsonl: line 2") && err.contains(expected), "{points}: {err}");
+        }
+        let mut f = measured_frame(0);
+        f.points.as_mut().unwrap()[0].xyz[0] = -2e9;
+        let bytes = binary_stream(&[f]);
+        let err = StreamReader::new(std::io::Cursor::new(&bytes), "b").collect::<Result<Vec<_>>>().unwrap_err();
+        assert!(err.to_string().contains("points[0]: -2e9 mm is beyond"), "{err}");
     }
 
     #[test]

@@ -10,6 +10,24 @@ pub const MAX_FACETS: u32 = 360;
 pub const MAX_BOARD_CORNERS: u32 = 1000;
 /// Largest number of planes of a fixed-plane transmitter.
 pub const MAX_FIXED_PLANES: usize = 256;
+/// The smallest checkerboard square (mm): a micrometre, a microscope's target.
+pub const MIN_BOARD_SQUARE_MM: f64 = 1e-3;
+/// The largest extent of a checkerboard (mm), squares and margins: 100 m.
+pub const MAX_BOARD_EXTENT_MM: f64 = 1e5;
+
+/// The largest coordinate (mm) of a measured point: 1000 km, far beyond any scan; a point beyond
+/// it is a wrong number, which a 32-bit cloud could not even hold.
+pub const MAX_COORDINATE_MM: f64 = 1e9;
+
+/// A number as a message shows it: plain where that is short, else in exponent form (a value
+/// of 1e-300 read from a file is not printed with 300 digits).
+pub fn shown(value: f64) -> String {
+    if value == 0.0 || (1e-3..1e7).contains(&value.abs()) || !value.is_finite() {
+        format!("{value}")
+    } else {
+        format!("{value:e}")
+    }
+}
 
 /// Checks an image size `width` × `height` against [`MAX_IMAGE_SIDE_PX`] (and for zero); the
 /// message names the fields.
@@ -32,5 +50,14 @@ mod tests {
         assert!(check_image_size(1024, 768).is_ok());
         assert!(check_image_size(0, 768).unwrap_err().contains("positive"));
         assert!(check_image_size(100_000, 768).unwrap_err().contains("at most 16384"));
+    }
+
+    #[test]
+    fn numbers_in_messages_stay_short() {
+        assert_eq!(shown(30.0), "30");
+        assert_eq!(shown(0.0), "0");
+        assert_eq!(shown(1e-300), "1e-300");
+        assert_eq!(shown(-2.5e12), "-2.5e12");
+        assert_eq!(shown(f64::NAN), "NaN");
     }
 }

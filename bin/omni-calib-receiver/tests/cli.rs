@@ -135,6 +135,23 @@ fn wrong_board_size_and_unreadable_files_fail_without_output() {
     assert_eq!(out.status.code(), Some(1));
     assert!(stderr(&out).contains("9 × 6 board"), "{}", stderr(&out));
 
+    // An output in a missing directory is refused before any image is read, and the other
+    // outputs are not written either (every output is put in place only once all succeed).
+    let saved = dir.path().join("saved.json");
+    let out = bin()
+        .arg("--board")
+        .arg(&board)
+        .arg("-o")
+        .arg(dir.path().join("nodir/camera.json"))
+        .arg("--save-corners")
+        .arg(&saved)
+        .arg(&broken)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("nodir") && stderr(&out).lines().count() == 1, "{}", stderr(&out));
+    assert!(!saved.exists());
+
     // Usage errors: exports that do not match the model; missing images.
     let out = bin().arg("--board").arg(&board).arg("--export-ocam").arg("x.txt").arg(&broken).output().unwrap();
     assert_eq!(out.status.code(), Some(2));

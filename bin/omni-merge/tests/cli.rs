@@ -210,15 +210,36 @@ fn negative_numbers_reach_the_option_check() {
     }
 }
 
+/// A point beyond ±1e9 mm (here beyond a 32-bit cloud's range as well) is refused where it is
+/// read, naming the stream's line, not written as inf.
 #[test]
-fn a_point_beyond_float_range_is_refused_not_written_as_inf() {
+fn a_point_beyond_reach_is_refused_where_it_is_read() {
     let dir = tempfile::tempdir().unwrap();
     write_stream(&dir.path().join("a.jsonl"), &[(vec![[1.0, 2.0, 3.0], [1e40, 0.0, 500.0]], None)]);
     let out = run(dir.path(), &["a.jsonl", "-o", "c.ply", "--ascii"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(err.contains("c.ply") && err.contains("point 1: x"), "{err}");
+    assert!(err.contains("a.jsonl: line 2") && err.contains("points[1]: 1e40 mm is beyond"), "{err}");
     assert!(!dir.path().join("c.ply").exists());
+}
+
+/// The cloud and the bag are put in place together: a bag that cannot be written leaves no
+/// cloud either.
+#[test]
+fn a_bag_that_fails_leaves_no_cloud() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write_stream(&d.join("a.jsonl"), &[(vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]], Some(10))]);
+    std::fs::create_dir(d.join("taken")).unwrap();
+    for bag in ["taken", "nodir/bag"] {
+        let out = run(d, &["a.jsonl", "-o", "c.ply", "--rosbag", bag]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains(bag) && err.lines().count() == 1, "{err}");
+        assert!(!d.join("c.ply").exists() && temporaries(d).is_empty(), "{bag}: {:?}", temporaries(d));
+    }
+    ok(&run(d, &["a.jsonl", "-o", "c.ply", "--rosbag", "bag"]));
+    assert!(d.join("c.ply").is_file() && d.join("bag/metadata.yaml").is_file());
 }
 
 #[test]

@@ -125,6 +125,10 @@ fn main() -> std::process::ExitCode {
         if let Some(path) = &cloud_out {
             args.cloud_out.format_for(path).map_err(CliError::usage)?;
         }
+        let stdout = |p: &Option<PathBuf>| p.as_deref() == Some(std::path::Path::new("-"));
+        if stdout(&stream_out) && stdout(&cloud_out) {
+            return Err(CliError::usage("the stream and the cloud cannot both go to stdout (-)"));
+        }
         let mut cloud = (cloud_out.is_some() || bag).then(empty_point_cloud);
         let input = omni_formats::io::open_input(&args.input)?;
         let name = omni_formats::io::display_name(&args.input, "stdin");
@@ -145,12 +149,15 @@ fn main() -> std::process::ExitCode {
             frames: 0,
             spans: Vec::new(),
         };
+        // Every output is written in full first and put in place together at the end: a run
+        // that fails on one of them leaves none.
+        let mut staged = Vec::new();
         match &stream_out {
             Some(path) => {
-                // The closure's error only aborts the atomic write; the message is kept here.
+                // The closure's error only aborts the write; the message is kept here.
                 let mut failure = None;
                 let out_name = omni_formats::io::display_name(path, "stdout");
-                let written = omni_formats::io::write_atomic(path, |w| {
+                let written = omni_formats::io::write_staged(path, |w| {
                     run.process(input, &name, Some((w, &out_name))).map_err(|m| {
                         failure = Some(m);
                         std::io::Error::other("aborted")
@@ -159,7 +166,7 @@ fn main() -> std::process::ExitCode {
                 if let Some(m) = failure {
                     return Err(CliError::new(m));
                 }
-                written?;
+                staged.push(written?);
             }
             None => run.process(input, &name, None).map_err(CliError::new)?,
         }
@@ -186,14 +193,15 @@ fn main() -> std::process::ExitCode {
                 }),
                 false => None,
             };
-            args.cloud_out.write_with_images(
+            staged.extend(args.cloud_out.stage(
                 &cloud,
                 cloud_out.take().as_deref(),
                 &messages,
                 images.as_mut(),
                 "omniscan",
-            )?;
+            )?);
         }
+        omni_formats::io::commit_all(staged)?;
         Ok(())
     })
 }

@@ -311,6 +311,34 @@ fn rosbag_images_need_the_bag_and_every_frame_image() {
     assert!(fx.path("bag/metadata.yaml").exists());
 }
 
+/// The stream, the cloud and the bag are put in place together: where one of them fails (a bag
+/// directory that exists, a cloud in a missing directory, a frame image the bag cannot read)
+/// none is left, not even a complete stream. Both to stdout is a usage error.
+#[test]
+fn a_run_that_fails_on_one_output_leaves_none() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    std::fs::create_dir(fx.path("taken")).unwrap();
+    let base = ["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "-o", "out.jsonl"];
+    let failing: [&[&str]; 3] = [
+        &["--rosbag", "taken", "--stamp-period-ms", "5"],
+        &["--cloud", "nodir/c.ply"],
+        &["--cloud", "c.ply", "--rosbag", "bag", "--rosbag-images", "--stamp-period-ms", "5"],
+    ];
+    for extra in failing {
+        let out = run(d, &[&base[..], extra].concat());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{extra:?}: {err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(!fx.path("out.jsonl").exists() && !fx.path("c.ply").exists() && !fx.path("bag").exists(), "{extra:?}");
+        assert!(temp_files(d).is_empty(), "{extra:?}: {:?}", temp_files(d));
+    }
+    let out =
+        run(d, &["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "-o", "-", "--cloud", "-"]);
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.stdout.is_empty());
+}
+
 /// A fixed-plane scanner (kind fixed_planes): every frame's rays meet the one plane, whatever the
 /// frame's mirror angle; a frame naming a laser without a plane is an error naming the field.
 #[test]

@@ -2,9 +2,10 @@
 //! type and unit, normals, ROS 2 bag), and the grouping of frames into bag messages.
 
 use crate::normals::{Viewpoints, add_normals_seen_from};
-use omni_formats::export::{CloudFormat, CloudOptions, Units, write_cloud};
+use omni_formats::export::{CloudFormat, CloudOptions, Units, write_cloud_staged};
+use omni_formats::io::Staged;
 use omni_formats::ply::PointCloud;
-use omni_formats::rosbag::{BagImages, BagMessage, BagOptions, write_rosbag_with_images};
+use omni_formats::rosbag::{BagImages, BagMessage, BagOptions, write_rosbag_staged};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -123,15 +124,30 @@ impl CloudOutputArgs {
         images: Option<&mut BagImages>,
         default_frame_id: &str,
     ) -> Result<(), String> {
+        let staged = self.stage(cloud, path, messages, images, default_frame_id)?;
+        omni_formats::io::commit_all(staged).map_err(|e| e.to_string())
+    }
+
+    /// [`CloudOutputArgs::write_with_images`] up to putting the outputs in place: each written
+    /// in full, to be committed with the tool's other outputs once all of them succeeded.
+    pub fn stage(
+        &self,
+        cloud: &PointCloud,
+        path: Option<&Path>,
+        messages: &[BagMessage],
+        images: Option<&mut BagImages>,
+        default_frame_id: &str,
+    ) -> Result<Vec<Staged>, String> {
+        let mut staged = Vec::new();
         if let Some(path) = path {
             let format = self.format_for(path)?;
-            write_cloud(path, cloud, format, &self.cloud_options()).map_err(|e| e.to_string())?;
+            staged.push(write_cloud_staged(path, cloud, format, &self.cloud_options()).map_err(|e| e.to_string())?);
         }
         if let Some(dir) = &self.rosbag {
-            write_rosbag_with_images(dir, cloud, messages, images, &self.bag_options(default_frame_id))
-                .map_err(|e| e.to_string())?;
+            let bag = write_rosbag_staged(dir, cloud, messages, images, &self.bag_options(default_frame_id));
+            staged.push(bag.map_err(|e| e.to_string())?);
         }
-        Ok(())
+        Ok(staged)
     }
 }
 

@@ -482,7 +482,12 @@ pub fn read_doc<T: DeserializeOwned + Versioned>(path: &Path) -> Result<T> {
 
 /// Writes a document as pretty JSON, atomically (`-` = stdout).
 pub fn write_doc<T: Serialize>(path: &Path, doc: &T) -> Result<()> {
-    crate::io::write_atomic(path, |w| {
+    stage_doc(path, doc)?.commit()
+}
+
+/// [`write_doc`] up to the rename ([`crate::io::write_staged`]).
+pub fn stage_doc<T: Serialize>(path: &Path, doc: &T) -> Result<crate::io::Staged> {
+    crate::io::write_staged(path, |w| {
         serde_json::to_writer_pretty(&mut *w, doc).map_err(std::io::Error::other)?;
         w.write_all(b"\n")
     })

@@ -120,13 +120,23 @@ impl CloudOptions {
 
 /// Writes `cloud` to `path` in `format`, atomically (`-` = stdout); errors name the file.
 pub fn write_cloud(path: &Path, cloud: &PointCloud, format: CloudFormat, opts: &CloudOptions) -> Result<()> {
+    write_cloud_staged(path, cloud, format, opts)?.commit()
+}
+
+/// [`write_cloud`] up to the rename ([`crate::io::write_staged`]).
+pub fn write_cloud_staged(
+    path: &Path,
+    cloud: &PointCloud,
+    format: CloudFormat,
+    opts: &CloudOptions,
+) -> Result<crate::io::Staged> {
     let name = crate::io::display_name(path, "stdout");
     match format {
-        CloudFormat::Ply => crate::io::write_atomic(path, |w| crate::ply::write_ply_with(w, cloud, opts)),
-        CloudFormat::Pcd => crate::io::write_atomic(path, |w| crate::pcd::write_pcd_to(w, cloud, opts)),
+        CloudFormat::Ply => crate::io::write_staged(path, |w| crate::ply::write_ply_with(w, cloud, opts)),
+        CloudFormat::Pcd => crate::io::write_staged(path, |w| crate::pcd::write_pcd_to(w, cloud, opts)),
         CloudFormat::Las => {
             let bytes = crate::las::las_bytes(cloud, opts).map_err(|m| Error::new(&name, "", m))?;
-            crate::io::write_atomic(path, |w| w.write_all(&bytes))
+            crate::io::write_staged(path, |w| w.write_all(&bytes))
         }
     }
 }

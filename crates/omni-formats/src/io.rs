@@ -37,10 +37,22 @@ pub fn write_atomic<F>(path: &Path, write: F) -> Result<()>
 where
     F: FnOnce(&mut dyn Write) -> std::io::Result<()>,
 {
+    write_staged(path, write)?.commit()
+}
+
+/// [`write_atomic`] up to the rename: the file is written in full beside `path` and put in
+/// place by [`Staged::commit`]. A tool with several outputs stages each and commits them once
+/// all of them succeeded, so that a run that fails leaves none of them (stdout and devices are
+/// written straight into, as [`write_atomic`] does).
+pub fn write_staged<F>(path: &Path, write: F) -> Result<Staged>
+where
+    F: FnOnce(&mut dyn Write) -> std::io::Result<()>,
+{
     if path == Path::new("-") {
         let stdout = std::io::stdout();
         let mut w = BufWriter::with_capacity(1 << 16, stdout.lock());
-        return write(&mut w).and_then(|_| w.flush()).map_err(|e| Error::io("stdout", &e));
+        write(&mut w).and_then(|_| w.flush()).map_err(|e| Error::io("stdout", &e))?;
+        return Ok(Staged::written("stdout"));
     }
     let name = path.display().to_string();
     match std::fs::metadata(path) {
@@ -53,7 +65,8 @@ where
                 write(&mut w)?;
                 w.flush()
             })();
-            return result.map_err(|e| Error::io(name, &e));
+            result.map_err(|e| Error::io(&name, &e))?;
+            return Ok(Staged::written(name));
         }
         _ => {}
     }
@@ -67,9 +80,69 @@ where
         write(&mut w)?;
         w.flush()?;
         drop(w);
-        tmp.commit()
+        Ok(tmp)
     })();
-    result.map_err(|e| Error::io(name, &e))
+    let tmp = result.map_err(|e| Error::io(&name, &e))?;
+    Ok(Staged { name, pending: Some(Pending::File(tmp)) })
+}
+
+/// An output written in full and not yet in place ([`write_staged`]); removed if dropped
+/// before [`Staged::commit`].
+pub struct Staged {
+    name: String,
+    pending: Option<Pending>,
+}
+
+enum Pending {
+    File(TempFile),
+    Dir(TempDir),
+}
+
+impl Staged {
+    /// An output already written where it goes (stdout, a device): nothing to commit.
+    fn written(name: impl Into<String>) -> Staged {
+        Staged { name: name.into(), pending: None }
+    }
+
+    /// A directory built in full in `tmp`, for `name`.
+    pub fn dir(name: impl Into<String>, tmp: TempDir) -> Staged {
+        Staged { name: name.into(), pending: Some(Pending::Dir(tmp)) }
+    }
+
+    /// Puts the output in place. A directory's target that appeared meanwhile is an error.
+    pub fn commit(self) -> Result<()> {
+        let result = match self.pending {
+            None => Ok(()),
+            Some(Pending::File(f)) => f.commit(),
+            Some(Pending::Dir(d)) => d.commit(),
+        };
+        result.map_err(|e| match e.kind() {
+            std::io::ErrorKind::AlreadyExists => Error::new(&self.name, "", DIRECTORY_EXISTS),
+            _ => Error::io(&self.name, &e),
+        })
+    }
+}
+
+/// Why a directory output (a bag) is refused where its target exists.
+pub const DIRECTORY_EXISTS: &str = "already exists (a directory is never overwritten; remove it or choose another)";
+
+/// Checks, before any work, that an output `path` can be created: its directory exists (`-`
+/// and existing files or devices pass; whether the directory is writable shows when written).
+pub fn check_output_dir(path: &Path) -> Result<()> {
+    if path == Path::new("-") || path.exists() {
+        return Ok(());
+    }
+    let dir = parent_dir(path);
+    match std::fs::metadata(dir) {
+        Ok(m) if m.is_dir() => Ok(()),
+        Ok(_) => Err(Error::new(path.display().to_string(), "", format!("{} is not a directory", dir.display()))),
+        Err(e) => Err(Error::new(path.display().to_string(), "", format!("directory {}: {e}", dir.display()))),
+    }
+}
+
+/// Commits every staged output, in order.
+pub fn commit_all(staged: impl IntoIterator<Item = Staged>) -> Result<()> {
+    staged.into_iter().try_for_each(Staged::commit)
 }
 
 /// The marker in every temporary file name: `.NAME.omniscan-tmp-PID`.
@@ -348,6 +421,32 @@ mod tests {
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
         write_atomic(&path, |w| w.write_all(b"ok")).unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), b"ok");
+    }
+
+    /// A staged output is nowhere to be seen until committed, and dropped uncommitted it leaves
+    /// nothing; an existing file keeps its content until the commit.
+    #[test]
+    fn staged_outputs_appear_only_when_committed() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.txt"), dir.path().join("b.txt"));
+        std::fs::write(&b, b"old").unwrap();
+        let staged = [
+            write_staged(&a, |w| w.write_all(b"new a")).unwrap(),
+            write_staged(&b, |w| w.write_all(b"new b")).unwrap(),
+        ];
+        assert!(!a.exists() && std::fs::read(&b).unwrap() == b"old");
+        drop(staged);
+        assert!(!a.exists() && std::fs::read(&b).unwrap() == b"old");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "temporary files left");
+        let staged = [
+            write_staged(&a, |w| w.write_all(b"new a")).unwrap(),
+            write_staged(&b, |w| w.write_all(b"new b")).unwrap(),
+        ];
+        commit_all(staged).unwrap();
+        assert_eq!((std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap()), (b"new a".to_vec(), b"new b".to_vec()));
+        assert!(check_output_dir(&dir.path().join("c.txt")).is_ok());
+        let err = check_output_dir(&dir.path().join("nodir/c.txt")).unwrap_err().to_string();
+        assert!(err.contains("nodir/c.txt") && err.contains("directory"), "{err}");
     }
 
     #[test]

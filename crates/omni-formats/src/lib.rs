@@ -29,7 +29,8 @@ pub mod stream;
 pub mod transform;
 
 pub use docs::{
-    BoardFile, CameraFile, CameraSpec, ScannerFile, TransmitterSpec, not_polygon, parse_doc, read_doc, write_doc,
+    BoardFile, CameraFile, CameraSpec, ScannerFile, TransmitterSpec, not_polygon, parse_doc, read_doc, stage_doc,
+    write_doc,
 };
 pub use error::{Error, Result};
 

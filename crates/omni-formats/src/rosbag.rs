@@ -401,6 +401,17 @@ pub fn write_rosbag_with_images(
     images: Option<&mut BagImages>,
     opts: &BagOptions,
 ) -> Result<()> {
+    write_rosbag_staged(dir, cloud, messages, images, opts)?.commit()
+}
+
+/// [`write_rosbag_with_images`] up to the rename ([`crate::io::write_staged`]).
+pub fn write_rosbag_staged(
+    dir: &Path,
+    cloud: &PointCloud,
+    messages: &[BagMessage],
+    images: Option<&mut BagImages>,
+    opts: &BagOptions,
+) -> Result<crate::io::Staged> {
     let name = dir.display().to_string();
     cloud
         .validate_for(&CloudOptions { double: opts.double, ..Default::default() })
@@ -432,11 +443,7 @@ pub fn write_rosbag_with_images(
         }
     }
     if dir.exists() || dir.symlink_metadata().is_ok() {
-        return Err(Error::new(
-            &name,
-            "",
-            "already exists (a bag directory is never overwritten; remove it or choose another)",
-        ));
+        return Err(Error::new(&name, "", crate::io::DIRECTORY_EXISTS));
     }
     let base = dir.file_name().map(|s| s.to_string_lossy().into_owned()).filter(|s| !s.is_empty() && s != "..");
     let base = base.ok_or_else(|| Error::new(&name, "", "is not a directory name"))?;
@@ -446,15 +453,7 @@ pub fn write_rosbag_with_images(
         BagFailure::Io(e) => Error::io(&name, &e),
         BagFailure::Input(e) => e,
     })?;
-    match tmp.commit() {
-        Ok(()) => Ok(()),
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(Error::new(
-            &name,
-            "",
-            "already exists (a bag directory is never overwritten; remove it or choose another)",
-        )),
-        Err(e) => Err(Error::io(name, &e)),
-    }
+    Ok(crate::io::Staged::dir(name, tmp))
 }
 
 /// Why writing the bag's files stopped: the bag's own I/O, or an input (an image) at fault.

@@ -17,7 +17,8 @@ pub use files::{import_opencv, query};
 use super::corners_file::{CornersFile, ImageCorners};
 use super::validate::{self, HeldOut};
 use super::{Calibration, ModelKind, Observation, Options, export};
-use omni_formats::{BoardFile, CameraFile, CameraSpec, read_doc, write_doc};
+use omni_formats::io::Staged;
+use omni_formats::{BoardFile, CameraFile, CameraSpec, read_doc, stage_doc};
 use omni_model::HyperbolicParams;
 use omni_vision::corners::{DetectorOptions, GrayF32, detect_board, edge_blur, load_gray, overlay};
 use omni_vision::image_io::expand_image_paths;
@@ -168,6 +169,10 @@ fn check_options(opts: &CalibrateOptions) -> Result<Checked<'_>, Error> {
     }
     if !(opts.huber_px.is_finite() && opts.huber_px > 0.0) {
         return Err(Error::Usage("--huber-px must be a positive number".into()));
+    }
+    let outputs = [&opts.save_corners, &opts.export_ocam, &opts.export_kalibr, &opts.export_opencv];
+    for path in std::iter::once(&opts.output).chain(outputs.into_iter().flatten()) {
+        omni_formats::io::check_output_dir(path)?;
     }
     Ok(Checked {
         viewpoint_mm: parse_viewpoint(&opts.viewpoint_mm)?,
@@ -339,8 +344,10 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
         )));
     }
     let annulus = annulus.map(|a| a.annulus);
+    // Every output is staged and put in place at the end, once all of them succeeded.
+    let mut staged = Vec::new();
     if let Some(path) = &opts.save_corners {
-        write_doc(path, &detected.corners)?;
+        staged.push(stage_doc(path, &detected.corners)?);
     }
     let corners = &detected.corners;
     let obs = corners.observations(board.square_mm);
@@ -392,7 +399,7 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     if let Some(dir) = &opts.overlay {
         write_overlays(dir, &cal, &obs, &detected.images)?;
     }
-    write_exports(opts, &cal, out)?;
+    staged.extend(stage_exports(opts, &cal, out)?);
     let mut spec = cal.spec.clone();
     set_viewpoint(&mut spec, checked.viewpoint_mm);
     let mut file = CameraFile::new(spec);
@@ -402,7 +409,8 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
         r["lens_blur"] = b.json();
     }
     file.report = Some(r);
-    write_doc(&opts.output, &file)?;
+    staged.push(stage_doc(&opts.output, &file)?);
+    omni_formats::io::commit_all(staged)?;
     Ok(())
 }
 
@@ -475,10 +483,9 @@ fn write_overlays(dir: &Path, cal: &Calibration, obs: &[Observation], images: &[
     Ok(())
 }
 
-/// Writes `text` to `path` (`-` = stdout) atomically.
-fn write_text(path: &Path, text: &str) -> Result<(), Error> {
-    omni_formats::io::write_atomic(path, |w| w.write_all(text.as_bytes()))?;
-    Ok(())
+/// Writes `text` to `path` (`-` = stdout), staged ([`omni_formats::io::write_staged`]).
+fn stage_text(path: &Path, text: &str) -> Result<Staged, Error> {
+    Ok(omni_formats::io::write_staged(path, |w| w.write_all(text.as_bytes()))?)
 }
 
 /// The line reporting how well OCamCalib's inverse polynomial follows the direct one.
@@ -489,26 +496,27 @@ fn inverse_fit_line(fit: &omni_model::ocam::InverseFit) -> String {
     )
 }
 
-/// The exports asked for that the fitted model allows.
-fn write_exports(opts: &CalibrateOptions, cal: &Calibration, out: &dyn Reporter) -> Result<(), Error> {
+/// The exports asked for that the fitted model allows, staged.
+fn stage_exports(opts: &CalibrateOptions, cal: &Calibration, out: &dyn Reporter) -> Result<Vec<Staged>, Error> {
+    let mut staged = Vec::new();
     match &cal.spec {
         CameraSpec::Ocam(p) => {
             if let Some(path) = &opts.export_ocam {
                 let (text, fit) = export::ocam_calib_results(p);
                 out.say(&inverse_fit_line(&fit));
-                write_text(path, &text)?;
+                staged.push(stage_text(path, &text)?);
             }
         }
         spec => {
             if let Some(path) = &opts.export_kalibr {
-                write_text(path, &export::kalibr_camchain_of(spec, &opts.rostopic)?)?;
+                staged.push(stage_text(path, &export::kalibr_camchain_of(spec, &opts.rostopic)?)?);
             }
             if let Some(path) = &opts.export_opencv {
-                write_text(path, &export::opencv_yaml_of(spec)?)?;
+                staged.push(stage_text(path, &export::opencv_yaml_of(spec)?)?);
             }
         }
     }
-    Ok(())
+    Ok(staged)
 }
 
 #[cfg(test)]

@@ -1,7 +1,7 @@
 //! camera.json to and from other tools' files (OCamCalib, Kalibr, OpenCV), into another model
 //! ([`convert`]), and the question-and-answer loop ([`query`]).
 
-use super::{Error, Reporter, inverse_fit_line, read_mirror, write_text};
+use super::{Error, Reporter, inverse_fit_line, read_mirror, stage_text};
 use crate::receiver::{ModelKind, convert as conversion, export, query as questions};
 use omni_formats::{CameraFile, CameraSpec, read_doc, write_doc};
 use omni_model::HyperbolicParams;
@@ -90,7 +90,7 @@ pub fn export_camera(opts: &ExportOptions, out: &dyn Reporter) -> Result<(), Err
         ("kalibr", model) => export::kalibr_camchain_of(model, &opts.rostopic).map_err(refused)?,
         (_, model) => export::opencv_yaml_of(model).map_err(refused)?,
     };
-    write_text(&opts.output, &text)
+    Ok(stage_text(&opts.output, &text)?.commit()?)
 }
 
 /// `omni-calib-receiver convert`: a calibration into another model, fitted to its rays.

@@ -5,6 +5,7 @@ use super::*;
 use crate::receiver::ImageReport;
 use crate::receiver::query::{answer, parse_query};
 use crate::receiver::tests::synthetic_boards;
+use omni_formats::write_doc;
 use omni_model::{HyperbolicCamera, HyperbolicParams};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};

@@ -142,6 +142,7 @@ fn bad_inputs_fail_cleanly_without_output() {
     // Stripes that miss the boards (all pixels in the blind centre): too few points everywhere.
     let paths = dataset(dir.path(), None);
     let mut w = StreamWriter::new(Vec::new(), "mem");
+    w.write(&Record::Header(Header::new("test"))).unwrap();
     for i in 0..5u64 {
         let mut f = Frame::new(i, "f.png", 10.0, 0);
         f.stripe = Some(vec![StripePoint { u: 511.5, v: 511.5, intensity: 9.0, width: 2.0, quality: 0 }; 30]);
@@ -217,6 +218,7 @@ fn fit_finds_the_boards_in_a_rendered_pose_image() {
     let truth = Transmitter::new(TransmitterParams::paper()).unwrap();
     let mut rng = SplitMix64::new(3);
     let mut w = StreamWriter::new(Vec::new(), "mem");
+    w.write(&Record::Header(Header::new("test"))).unwrap();
     for i in 0..=16u64 {
         let a = 8.0 + i as f64;
         let s = stripe_frame(&camera, &truth, &placed, i, a, 0, 0.1, 2.0, &mut rng);

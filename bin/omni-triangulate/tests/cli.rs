@@ -63,6 +63,9 @@ fn fixture() -> Fixture {
     Fixture { dir, truth }
 }
 
+/// A stream's header line.
+const HEADER: &str = "{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":1}\n";
+
 fn run(dir: &Path, args: &[&str]) -> Output {
     Command::new(BIN).current_dir(dir).args(args).output().unwrap()
 }
@@ -119,12 +122,18 @@ fn writes_ply_with_scalar_fields() {
 fn bad_input_fails_with_one_line_and_leaves_no_output() {
     let fx = fixture();
     let frame_without_stripe = "{\"type\":\"frame\",\"seq\":7,\"path\":\"a.png\",\"alpha_deg\":3,\"facet\":0}\n";
-    std::fs::write(fx.path("nostripe.jsonl"), frame_without_stripe).unwrap();
+    std::fs::write(fx.path("nostripe.jsonl"), format!("{HEADER}{frame_without_stripe}")).unwrap();
     let nan =
         "{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"alpha_deg\":3,\"facet\":0,\"stripe\":[[NaN,1,1,1,0]]}\n";
-    std::fs::write(fx.path("nan.jsonl"), nan).unwrap();
-    for (input, expect) in [("nostripe.jsonl", "frame 7"), ("nan.jsonl", "line 1"), ("missing.jsonl", "missing.jsonl")]
-    {
+    std::fs::write(fx.path("nan.jsonl"), format!("{HEADER}{nan}")).unwrap();
+    // A stream is its header first: frames alone are refused.
+    std::fs::write(fx.path("headless.jsonl"), frame_without_stripe).unwrap();
+    for (input, expect) in [
+        ("nostripe.jsonl", "frame 7"),
+        ("nan.jsonl", "line 2"),
+        ("missing.jsonl", "missing.jsonl"),
+        ("headless.jsonl", "line 1: the stream starts with a frame record, not its header"),
+    ] {
         let out = run(
             fx.dir.path(),
             &["--camera", "camera.json", "--scanner", "scanner.json", input, "-o", "out.jsonl", "--ply", "c.ply"],
@@ -171,7 +180,7 @@ fn facets_off_the_polygon_and_angles_far_outside_the_facet_are_refused() {
     for (name, text, expect) in
         [("facet.jsonl", frame("15", "12"), "field facet"), ("alpha.jsonl", frame("95", "0"), "field alpha_deg")]
     {
-        std::fs::write(d.join(name), text).unwrap();
+        std::fs::write(d.join(name), format!("{HEADER}{text}")).unwrap();
         let out = run(d, &["--camera", "camera.json", "--scanner", "scanner.json", name, "-o", "out.jsonl"]);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(1), "{err}");

@@ -314,6 +314,7 @@ pub struct StreamReader<R> {
     name: String,
     line_no: usize,
     buf: String,
+    saw_header: bool,
     saw_status: bool,
     at_end: bool,
     base_dir: Option<std::path::PathBuf>,
@@ -357,6 +358,7 @@ impl<R: BufRead> StreamReader<R> {
             name: name.into(),
             line_no: 0,
             buf: String::new(),
+            saw_header: false,
             saw_status: false,
             at_end: false,
             base_dir: None,
@@ -399,7 +401,8 @@ impl<R: BufRead> StreamReader<R> {
     }
 
     /// The next record, `Ok(None)` at the end. Blank lines are skipped. A header with another
-    /// format or an unknown version is refused.
+    /// format or an unknown version is refused, and so is a stream out of order: one header
+    /// first, then frames (and `--keep-going`'s error records), then at most one status.
     pub fn next_record(&mut self) -> Result<Option<Record>> {
         loop {
             self.buf.clear();
@@ -419,6 +422,7 @@ impl<R: BufRead> StreamReader<R> {
                 Ok(Record::Header(_)) | Err(_) => Self::parse_checked(line, &self.name, &loc)?,
                 Ok(record) => record,
             };
+            self.check_order(&record).map_err(|m| Error::new(&self.name, &loc, m))?;
             match &mut record {
                 Record::Header(h) => self.binary_allowed = h.version >= STREAM_BINARY_VERSION,
                 Record::Frame(f) => {
@@ -440,6 +444,28 @@ impl<R: BufRead> StreamReader<R> {
 }
 
 impl<R: BufRead> StreamReader<R> {
+    /// Checks that `record` may come next: the header first and once, nothing after the status.
+    fn check_order(&mut self, record: &Record) -> std::result::Result<(), String> {
+        let kind = match record {
+            Record::Header(_) => "header",
+            Record::Frame(_) => "frame",
+            Record::Status(_) => "status",
+            Record::Error(_) => "error",
+        };
+        if self.saw_status {
+            return Err(format!("a {kind} record after the stream's status record (its last)"));
+        }
+        match (record, self.saw_header) {
+            (Record::Header(_), true) => Err("a second header record".into()),
+            (Record::Header(_), false) => {
+                self.saw_header = true;
+                Ok(())
+            }
+            (_, false) => Err(format!("the stream starts with a {kind} record, not its header")),
+            (_, true) => Ok(()),
+        }
+    }
+
     /// Reads the arrays a binary frame announces (`"binary": {"stripe": N, "points": M}`, either
     /// key absent when the array is): N stripe points of 5 and M points of 6 little-endian f64,
     /// right after the record's line.
@@ -715,6 +741,28 @@ mod tests {
         }
         w.write(&Record::Status(Status::complete(frames.len() as u64))).unwrap();
         w.into_inner()
+    }
+
+    /// A stream is one header, then frames and error records, then at most one status: a
+    /// stream out of that order is refused at the line that breaks it.
+    #[test]
+    fn records_out_of_order_are_named() {
+        let header = "{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":1}\n";
+        let frame = "{\"type\":\"frame\",\"seq\":0,\"path\":\"a\",\"alpha_deg\":0,\"facet\":0}\n";
+        let status = "{\"type\":\"status\",\"frames\":1,\"complete\":true}\n";
+        let cases = [
+            (format!("{frame}"), "line 1: the stream starts with a frame record, not its header"),
+            (format!("{status}"), "line 1: the stream starts with a status record"),
+            (format!("{header}{frame}{header}"), "line 3: a second header record"),
+            (format!("{header}{status}{frame}"), "line 3: a frame record after the stream's status record"),
+            (format!("{header}{frame}{status}{status}"), "line 4: a status record after"),
+        ];
+        for (text, expected) in cases {
+            let err = StreamReader::new(text.as_bytes(), "s").collect::<Result<Vec<_>>>().unwrap_err().to_string();
+            assert!(err.contains(expected), "{text:?}: {err}");
+        }
+        let fine = format!("{header}{frame}{frame}{status}");
+        assert_eq!(StreamReader::new(fine.as_bytes(), "s").collect::<Result<Vec<_>>>().unwrap().len(), 4);
     }
 
     /// A point's whole-number fields must be whole numbers ≥ 0 and its coordinates within

@@ -751,8 +751,8 @@ mod tests {
         let frame = "{\"type\":\"frame\",\"seq\":0,\"path\":\"a\",\"alpha_deg\":0,\"facet\":0}\n";
         let status = "{\"type\":\"status\",\"frames\":1,\"complete\":true}\n";
         let cases = [
-            (format!("{frame}"), "line 1: the stream starts with a frame record, not its header"),
-            (format!("{status}"), "line 1: the stream starts with a status record"),
+            (frame.to_string(), "line 1: the stream starts with a frame record, not its header"),
+            (status.to_string(), "line 1: the stream starts with a status record"),
             (format!("{header}{frame}{header}"), "line 3: a second header record"),
             (format!("{header}{status}{frame}"), "line 3: a frame record after the stream's status record"),
             (format!("{header}{frame}{status}{status}"), "line 4: a status record after"),

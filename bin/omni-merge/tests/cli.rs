@@ -156,9 +156,8 @@ fn bad_inputs_fail_cleanly_without_output() {
     std::fs::write(d.join("nan.ply"), "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\nnan 1 2\n").unwrap();
     std::fs::write(
         d.join("nopoints.jsonl"),
-        format!(
-            "{{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":1}}\n{{\"type\":\"frame\",\"seq\":4,\"path\":\"a.png\",\"alpha_deg\":3,\"facet\":0,\"stripe\":[]}}\n"
-        ),
+        "{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":1}\n\
+         {\"type\":\"frame\",\"seq\":4,\"path\":\"a.png\",\"alpha_deg\":3,\"facet\":0,\"stripe\":[]}\n",
     )
     .unwrap();
     let cases: [(&[&str], &str); 6] = [

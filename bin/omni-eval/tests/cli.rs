@@ -130,6 +130,20 @@ fn bad_inputs() {
     assert_eq!(run(d, &["fit", "--shape", "plane", "--crop", "1,2", "c.ply"]).status.code(), Some(2));
     let out = run(d, &["fit", "--shape", "sphere", "--crop", "0,0,0,1,1,1", "c.ply"]);
     assert_eq!(out.status.code(), Some(1));
+    // Numbers that cannot be a threshold, a radius or a count are usage errors naming the option.
+    let usage: [&[&str]; 5] = [
+        &["fit", "--shape", "sphere", "--radius", "NaN", "c.ply"],
+        &["fit", "--shape", "plane", "--iterations", "0", "c.ply"],
+        &["fit", "--shape", "plane", "--inlier-mm", "-1", "c.ply"],
+        &["compare", "--scene", "bad.json", "--max-distance-mm", "NaN", "c.ply"],
+        &["compare", "--scene", "bad.json", "--inlier-mm", "0", "c.ply"],
+    ];
+    for args in usage {
+        let out = run(d, args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        let option = args.iter().find(|a| a.starts_with("--") && **a != "--shape" && **a != "--scene").unwrap();
+        assert!(out.status.code() == Some(2) && err.contains(option), "{args:?}: {err}");
+    }
 }
 
 #[test]

@@ -165,6 +165,26 @@ fn sample_size(kind: ShapeKind) -> usize {
     }
 }
 
+/// Why `points` determine no surface, if they do not: all at one place, or along one line
+/// (their spread across the main direction is below 1e-6 of their spread along it).
+fn degenerate(points: &[Point3<f64>]) -> Option<&'static str> {
+    let n = points.len() as f64;
+    let mean = points.iter().fold(nalgebra::Vector3::zeros(), |m, p| m + p.coords) / n;
+    let cov = points.iter().fold(nalgebra::Matrix3::zeros(), |c, p| {
+        let d = p.coords - mean;
+        c + d * d.transpose()
+    }) / n;
+    let mut spread = cov.symmetric_eigenvalues();
+    spread.as_mut_slice().sort_by(|a, b| b.total_cmp(a));
+    if !(spread[0] > 0.0) {
+        Some("all lie at one place")
+    } else if spread[1] <= 1e-12 * spread[0] {
+        Some("all lie on one line")
+    } else {
+        None
+    }
+}
+
 /// RANSAC then least squares on the inliers (twice, re-selecting inliers in between).
 pub fn fit_shape(kind: ShapeKind, points: &[Point3<f64>], opts: &FitOptions) -> Result<FitResult, String> {
     let need = sample_size(kind).max(6);
@@ -173,6 +193,9 @@ pub fn fit_shape(kind: ShapeKind, points: &[Point3<f64>], opts: &FitOptions) -> 
     }
     if !(opts.inlier_mm > 0.0) {
         return Err("inlier threshold must be positive".into());
+    }
+    if let Some(why) = degenerate(points) {
+        return Err(format!("the points {why}: no {kind:?} is determined by them"));
     }
     let count_inliers = |s: &Shape| points.iter().filter(|p| s.signed_distance(p).abs() <= opts.inlier_mm).count();
     let mut best: Option<(usize, Shape)> = None;
@@ -375,6 +398,20 @@ mod tests {
             pts.push(c + Vector3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, rng.uniform() - 0.5) * 300.0);
         }
         pts
+    }
+
+    /// Points at one place or along one line determine no surface: every kind refuses them
+    /// by name instead of "fitting" one.
+    #[test]
+    fn degenerate_clouds_are_refused() {
+        let same = vec![Point3::new(1.0, 2.0, 3.0); 100];
+        let line: Vec<Point3<f64>> = (0..100).map(|i| Point3::new(i as f64, 2.0 * i as f64, 5.0)).collect();
+        for kind in [ShapeKind::Plane, ShapeKind::Sphere, ShapeKind::Cylinder, ShapeKind::Cone] {
+            for (pts, why) in [(&same, "one place"), (&line, "one line")] {
+                let err = fit_shape(kind, pts, &FitOptions::default()).err().unwrap();
+                assert!(err.contains(why), "{kind:?}: {err}");
+            }
+        }
     }
 
     #[test]

@@ -145,6 +145,10 @@ pub struct BoardPosesFile {
 impl Versioned for BoardPosesFile {
     const FORMAT: &'static str = "omniscan.board_poses";
     const VERSION: u32 = 1;
+
+    fn check(&self) -> Result<(), String> {
+        self.validate()
+    }
 }
 
 impl BoardPosesFile {
@@ -152,10 +156,13 @@ impl BoardPosesFile {
         BoardPosesFile { format: Self::FORMAT.into(), version: Self::VERSION, poses }
     }
 
-    /// Checks every pose; the message names the entry at fault.
+    /// Checks every pose, and that no board has two; the message names the entry at fault.
     pub fn validate(&self) -> Result<(), String> {
         for (i, p) in self.poses.iter().enumerate() {
             p.validate().map_err(|m| format!("field poses[{i}] (board \"{}\"): {m}", p.board))?;
+            if self.poses[..i].iter().any(|q| q.board == p.board) {
+                return Err(format!("field poses[{i}]: board \"{}\" has a pose already", p.board));
+            }
         }
         Ok(())
     }
@@ -195,6 +202,29 @@ impl BoardCornersFile {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every reader of board poses refuses a rotation that is not one and a board posed twice,
+    /// naming the entry.
+    #[test]
+    fn board_poses_are_rotations_one_per_board() {
+        let pose = |board: &str, r00: f64| BoardPose {
+            board: board.into(),
+            rotation: [[r00, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            translation_mm: [0.0, 0.0, 500.0],
+        };
+        let parse = |poses: Vec<BoardPose>| {
+            let text = serde_json::to_vec(&BoardPosesFile::new(poses)).unwrap();
+            crate::parse_doc::<BoardPosesFile>(&text, "poses.json").map_err(|e| e.to_string())
+        };
+        assert!(parse(vec![pose("a", 1.0), pose("b", 1.0)]).is_ok());
+        let err = parse(vec![pose("a", 1.0), pose("b", 2.0)]).unwrap_err();
+        assert!(
+            err.contains("poses.json") && err.contains("poses[1] (board \"b\"): rotation is not orthonormal"),
+            "{err}"
+        );
+        let err = parse(vec![pose("a", 1.0), pose("a", 1.0)]).unwrap_err();
+        assert!(err.contains("poses[1]: board \"a\" has a pose already"), "{err}");
+    }
 
     fn rig() -> RigFile {
         let b = |name: &str| RigBoard {

@@ -242,11 +242,27 @@ impl Shape {
         let finite = |name: &str, v: &[f64; 3]| {
             if v.iter().all(|x| x.is_finite()) { Ok(()) } else { Err(format!("{name} must be finite")) }
         };
+        let length = |v: &[f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let direction = |name: &str, v: &[f64; 3]| {
+            finite(name, v)?;
+            if length(v) > 1e-12 { Ok(()) } else { Err(format!("{name} must be a non-zero direction")) }
+        };
+        // A face's `up` fixes its turn about `normal`: it must not run along it.
+        let face = |normal: &[f64; 3], up: &[f64; 3]| {
+            direction("normal", normal)?;
+            direction("up", up)?;
+            let [a, b] = [normal, up];
+            let cross = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+            if length(&cross) > 1e-9 * length(a) * length(b) {
+                Ok(())
+            } else {
+                Err("up must not be parallel to normal".to_string())
+            }
+        };
         match self {
             Shape::Rectangle { centre_mm, normal, up, width_mm, height_mm } => {
                 finite("centre_mm", centre_mm)?;
-                finite("normal", normal)?;
-                finite("up", up)?;
+                face(normal, up)?;
                 positive("width_mm", *width_mm)?;
                 positive("height_mm", *height_mm)
             }
@@ -266,7 +282,7 @@ impl Shape {
             Shape::Cylinder { base_mm: p, axis, radius_mm, height_mm }
             | Shape::Cone { apex_mm: p, axis, radius_mm, height_mm } => {
                 finite(if matches!(self, Shape::Cone { .. }) { "apex_mm" } else { "base_mm" }, p)?;
-                finite("axis", axis)?;
+                direction("axis", axis)?;
                 positive("radius_mm", *radius_mm)?;
                 positive("height_mm", *height_mm)
             }
@@ -279,8 +295,7 @@ impl Shape {
             }
             Shape::Checkerboard { centre_mm, normal, up, square_mm, inner_cols, inner_rows, margin_mm, .. } => {
                 finite("centre_mm", centre_mm)?;
-                finite("normal", normal)?;
-                finite("up", up)?;
+                face(normal, up)?;
                 positive("square_mm", *square_mm)?;
                 let max = omni_model::limits::MAX_BOARD_CORNERS;
                 for (name, v) in [("inner_cols", *inner_cols), ("inner_rows", *inner_rows)] {
@@ -316,6 +331,25 @@ impl Shape {
 mod tests {
     use super::*;
     use crate::docs::parse_doc;
+
+    /// A face needs a direction for its normal and an `up` off it; an axis must be a direction:
+    /// every reader of scene.json refuses them (omni-eval compare once counted every point stray).
+    #[test]
+    fn directions_must_be_directions() {
+        let rectangle = |normal: [f64; 3], up: [f64; 3]| Shape::Rectangle {
+            centre_mm: [500.0, 0.0, 0.0],
+            normal,
+            up,
+            width_mm: 100.0,
+            height_mm: 100.0,
+        };
+        let z = [0.0, 0.0, 1.0];
+        assert!(rectangle([-1.0, 0.0, 0.0], z).validate().is_ok());
+        assert!(rectangle([0.0; 3], z).validate().unwrap_err().contains("normal must be a non-zero direction"));
+        assert!(rectangle([0.0, 0.0, -2.0], z).validate().unwrap_err().contains("up must not be parallel"));
+        let cylinder = Shape::Cylinder { base_mm: [0.0; 3], axis: [0.0; 3], radius_mm: 5.0, height_mm: 5.0 };
+        assert!(cylinder.validate().unwrap_err().contains("axis must be a non-zero direction"));
+    }
 
     #[test]
     fn scene_round_trips_and_names_unknown_primitives() {

@@ -953,6 +953,13 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
         intrinsic_std_devs(&fit.model, &used, &x, opts.huber_px)
     };
     let (names, params, std_devs, mut spec) = describe(&fit.model, &std_free, width, height, opts);
+    // Corners that do not constrain a parameter (all at one pixel, one board seen edge-on)
+    // leave it, or its uncertainty, undefined: that is no calibration.
+    if let Some(((n, v), sd)) =
+        names.iter().zip(&params).zip(&std_devs).find(|((_, v), sd)| !(v.is_finite() && sd.is_finite()))
+    {
+        return Err(format!("the corners do not determine the model: {n} = {v} ± {sd}"));
+    }
     let used: Vec<usize> = (0..sub.len()).filter(|&k| fit.reasons[k].is_none() && fit.poses[k].is_some()).collect();
     // Without an annulus' inner circle the mirror's blind centre may not refuse an observed corner.
     if let CameraSpec::Hyperbolic(p) = &mut spec

@@ -370,7 +370,10 @@ pub fn read_header(r: &mut dyn BufRead, name: &str) -> Result<(Vec<u8>, Option<V
         let t: Vec<&str> = l.split_whitespace().collect();
         match t.as_slice() {
             ["end_header"] => break,
-            ["format", f, _] => {
+            ["format", f, version] => {
+                if *version != "1.0" {
+                    return Err(bad(format!("PLY version {version}: this build reads PLY 1.0")));
+                }
                 format = Some(match *f {
                     "ascii" => PlyFormat::Ascii,
                     "binary_little_endian" => PlyFormat::BinaryLittleEndian,
@@ -599,6 +602,10 @@ fn read_ply_general(r: &mut dyn Read, name: &str) -> Result<PointCloud> {
     let parser = Parser::<Vertex>::new();
     let mut raw = ply_rs_bw::parser::Reader::new(&mut reader);
     let header = parser.read_header(&mut raw).map_err(|e| Error::new(name, "header", e.to_string()))?;
+    let ply_rs_bw::ply::Version { major, minor } = header.version;
+    if (major, minor) != (1, 0) {
+        return Err(Error::new(name, "header", format!("PLY version {major}.{minor}: this build reads PLY 1.0")));
+    }
     let vertex_def =
         header.elements.get("vertex").ok_or_else(|| Error::new(name, "header", "no `vertex` element"))?.clone();
     let mm_per_unit = if header.comments.iter().any(|c| c.trim() == "units m") { 1000.0 } else { 1.0 };
@@ -661,6 +668,19 @@ mod tests {
                 ScalarField::new("intensity", (0..100).map(|i| i as f32).collect()),
                 ScalarField::new("scalar_frame", (0..100).map(|i| (i / 10) as f32).collect()),
             ],
+        }
+    }
+
+    /// PLY has one version: a header naming another is refused by both readers.
+    #[test]
+    fn other_ply_versions_are_refused() {
+        for encoding in ["ascii", "binary_little_endian"] {
+            let text = format!("ply\nformat {encoding} 9.0\nelement vertex 0\nproperty float x\nend_header\n");
+            let err = read_ply_from(&mut text.as_bytes(), "v9.ply").unwrap_err().to_string();
+            assert!(err.contains("v9.ply") && err.contains("PLY version 9.0"), "{err}");
+            let mut input = text.as_bytes();
+            let err = read_header(&mut input, "v9.ply").err().expect("refused").to_string();
+            assert!(err.contains("PLY version 9.0"), "{err}");
         }
     }
 

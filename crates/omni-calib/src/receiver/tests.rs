@@ -101,6 +101,22 @@ fn truth_rms(cam: &dyn CameraModel, obs: &[Observation]) -> f64 {
     (sq / n as f64).sqrt()
 }
 
+/// Corners that all sit on one pixel determine no model: the fit fails naming the parameter
+/// left undefined, instead of reporting it as ± NaN.
+#[test]
+fn corners_on_one_pixel_are_no_calibration() {
+    let truth = HyperbolicCamera::new(HyperbolicParams::paper()).unwrap();
+    let obs: Vec<Observation> = synthetic_boards(&truth, 10, 0.05, 3)
+        .into_iter()
+        .map(|(mut o, _)| {
+            o.pixels.iter_mut().for_each(|p| *p = [100.0, 100.0]);
+            o
+        })
+        .collect();
+    let err = calibrate(1024, 1024, &obs, &Options::default()).err().expect("no calibration");
+    assert!(err.contains("do not determine the model") || err.contains("too few"), "{err}");
+}
+
 #[test]
 fn mei_fit_on_exact_hyperbolic_corners_matches_truth() {
     let truth = HyperbolicCamera::new(HyperbolicParams::paper()).unwrap();

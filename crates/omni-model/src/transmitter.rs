@@ -116,14 +116,20 @@ impl TransmitterParams {
         let finite3 = |name: &str, v: &[f64; 3]| {
             if v.iter().all(|x| x.is_finite()) { Ok(()) } else { Err(format!("{name} must be finite")) }
         };
-        finite3("polygon.axis_point_mm", &p.axis_point_mm)?;
+        // Positions (mm) within reach of a measurement: a wrong number, not a place.
+        let max = crate::limits::MAX_COORDINATE_MM;
+        let position = |name: &str, v: &[f64; 3]| match v.iter().all(|x| x.is_finite() && x.abs() <= max) {
+            true => Ok(()),
+            false => Err(format!("{name} must be finite and within ±{max:e} mm")),
+        };
+        position("polygon.axis_point_mm", &p.axis_point_mm)?;
         finite3("polygon.axis_dir", &p.axis_dir)?;
         finite3("polygon.zero_dir", &p.zero_dir)?;
         if !(3..=crate::limits::MAX_FACETS).contains(&p.facets) {
             return Err(format!("polygon.facets must be in 3..={}, got {}", crate::limits::MAX_FACETS, p.facets));
         }
-        if !(p.circumradius_mm.is_finite() && p.circumradius_mm > 0.0) {
-            return Err("polygon.circumradius_mm must be positive".into());
+        if !(p.circumradius_mm.is_finite() && p.circumradius_mm > 0.0 && p.circumradius_mm <= max) {
+            return Err(format!("polygon.circumradius_mm must be positive, at most {max:e} mm"));
         }
         if !p.encoder_zero_deg.is_finite() {
             return Err("polygon.encoder_zero_deg must be finite".into());
@@ -149,7 +155,7 @@ impl TransmitterParams {
             return Err("lasers must not be empty".into());
         }
         for (j, l) in self.lasers.iter().enumerate() {
-            finite3(&format!("lasers[{j}].source_mm"), &l.source_mm)?;
+            position(&format!("lasers[{j}].source_mm"), &l.source_mm)?;
             let d = Vector3::from(l.direction);
             let w = Vector3::from(l.fan_axis);
             if d.norm() < 1e-9 || w.norm() < 1e-9 || !d.iter().chain(w.iter()).all(|x| x.is_finite()) {
@@ -384,5 +390,12 @@ mod tests {
         p.lasers[1].facet_offset = 12;
         let e = Transmitter::new(p).unwrap_err();
         assert!(e.contains("lasers[1].facet_offset"), "{e}");
+        // Places beyond any measurement are wrong numbers (a start for a fit once kept 1e308).
+        let mut p = TransmitterParams::paper();
+        p.polygon.axis_point_mm[0] = 1e308;
+        assert!(Transmitter::new(p).unwrap_err().contains("polygon.axis_point_mm must be finite and within"));
+        let mut p = TransmitterParams::paper();
+        p.lasers[0].source_mm[2] = -2e9;
+        assert!(Transmitter::new(p).unwrap_err().contains("lasers[0].source_mm"));
     }
 }

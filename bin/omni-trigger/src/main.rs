@@ -503,7 +503,7 @@ fn emulate(a: EmulateArgs) -> CliResult {
     };
     let mut camera =
         VirtualCamera::start(&a.frames, renderer, Duration::from_millis(a.slow_camera_ms), a.truth.clone())
-            .map_err(|e| CliError::new(format!("{}: {e}", a.frames.display())))?;
+            .map_err(CliError::new)?;
     camera.set_buffered(a.buffered_camera);
     let (mut master, slave) =
         serialport::TTYPort::pair().map_err(|e| CliError::new(format!("cannot create a pseudo-terminal: {e}")))?;

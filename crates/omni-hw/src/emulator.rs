@@ -89,10 +89,16 @@ impl VirtualCamera {
         mut renderer: Box<dyn FrameRenderer>,
         extra_delay: Duration,
         truth: Option<PathBuf>,
-    ) -> std::io::Result<VirtualCamera> {
-        std::fs::create_dir_all(dir)?;
+    ) -> Result<VirtualCamera, String> {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         let mut truth_file = match truth {
-            Some(p) => Some(std::fs::OpenOptions::new().create(true).append(true).open(p)?),
+            Some(p) => Some(
+                std::fs::OpenOptions::new()
+                    .create(true)
+                    .append(true)
+                    .open(&p)
+                    .map_err(|e| format!("{}: {e}", p.display()))?,
+            ),
             None => None,
         };
         let (tx, rx) = mpsc::channel::<Shot>();

@@ -153,4 +153,16 @@ fn an_empty_input_is_an_error() {
     let o = run(&[], "");
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("stdin: empty stream"), "{}", stderr(&o));
+    // A malformed line, and frames without their header, are named once with their line.
+    let header = "{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":1}\n";
+    let frame = "{\"type\":\"frame\",\"seq\":0,\"path\":\"a.png\",\"alpha_deg\":0,\"facet\":0}\n";
+    for (input, expected) in [
+        (format!("{header}{{\"type\":"), "stdin: line 2: invalid JSON"),
+        (frame.to_string(), "stdin: line 1: the stream starts"),
+    ] {
+        let o = run(&[], &input);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{e}");
+        assert!(e.contains(expected) && e.matches("stdin").count() == 1, "{e}");
+    }
 }

@@ -235,15 +235,16 @@ pub fn run<R: BufRead + Send + 'static>(
     }
     let stopped = stop.load(Ordering::Relaxed);
     if !saw_header && summary.frames == 0 && failure.is_none() && !stopped {
-        failure = Some("empty stream (no header, no frames)".into());
+        failure = Some(format!("{name}: empty stream (no header, no frames)"));
     }
     summary.cut_short = summary.input_status.is_none() && failure.is_none() && !stopped;
     // The reader may still block on a read that never ends (SIGINT with a silent input).
     if reader.is_finished() {
         let _ = reader.join();
     }
+    // The reader's errors name the input already.
     match failure {
-        Some(e) => Err(format!("{name}: {e}")),
+        Some(e) => Err(e),
         None => Ok(summary),
     }
 }

@@ -329,9 +329,7 @@ fn table(a: &TableArgs) -> CliResult {
     }
     use std::io::Write;
     let mut stdout = std::io::stdout().lock();
-    stdout.write_all(out.as_bytes())?;
-    stdout.flush()?;
-    Ok(())
+    stdout.write_all(out.as_bytes()).and_then(|_| stdout.flush()).map_err(omni_cli::stdout_error)
 }
 
 /// Each frame's stripe centres (px).
@@ -495,8 +493,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         eprint!("{table}");
     } else {
         let mut stdout = std::io::stdout().lock();
-        stdout.write_all(table.as_bytes())?;
-        stdout.flush()?;
+        stdout.write_all(table.as_bytes()).and_then(|_| stdout.flush()).map_err(omni_cli::stdout_error)?;
     }
     Ok(())
 }

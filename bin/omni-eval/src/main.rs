@@ -229,7 +229,7 @@ fn print_budget(
     json: bool,
 ) -> Result<(), CliError> {
     let mut out = std::io::stdout().lock();
-    let io = |e: std::io::Error| CliError::from(e);
+    let io = omni_cli::stdout_error;
     if json {
         let doc = serde_json::json!({"format": "omniscan.budget", "version": 1, "optics": optics,
             "calibration": calibration, "lines": lines});
@@ -303,7 +303,8 @@ fn main() -> std::process::ExitCode {
                 (Some(c), Shape::Sphere { center, .. }) => Some((center - c).norm()),
                 _ => None,
             };
-            print_fit(&mut std::io::stdout().lock(), &fit.shape, pts.len(), &stats, radius_error, centre_error, json)?;
+            print_fit(&mut std::io::stdout().lock(), &fit.shape, pts.len(), &stats, radius_error, centre_error, json)
+                .map_err(omni_cli::stdout_error)?;
             Ok(())
         }
         Command::Compare { scene, max_distance_mm, inlier_mm, json, transform, cloud } => {
@@ -314,7 +315,8 @@ fn main() -> std::process::ExitCode {
             let opts = FitOptions { inlier_mm, ..FitOptions::default() };
             let (reports, stray) = compare_with_scene(&scene_file, &pts, max_distance_mm, &opts)
                 .map_err(|m| format!("{}: {m}", scene.display()))?;
-            print_compare(&mut std::io::stdout().lock(), &reports, pts.len(), stray, json)?;
+            print_compare(&mut std::io::stdout().lock(), &reports, pts.len(), stray, json)
+                .map_err(omni_cli::stdout_error)?;
             Ok(())
         }
         Command::Align { scanner, reference_poses, rig, output } => {

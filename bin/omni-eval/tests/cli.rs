@@ -253,3 +253,25 @@ fn budget_refuses_a_fixed_plane_scanner_naming_the_kind() {
         "omni-eval: error: scanner.json: field transmitter.kind: transmitter kind \"fixed_planes\" cannot be used here: this needs kind \"polygon\" (the rotating polygon mirror)\n"
     );
 }
+
+/// A table that cannot be written (a full disk behind `>`) fails naming stdout.
+#[test]
+fn a_full_stdout_is_an_error_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let camera =
+        omni_formats::CameraFile::new(omni_formats::CameraSpec::Hyperbolic(omni_model::HyperbolicParams::paper()));
+    omni_formats::write_doc(&dir.path().join("camera.json"), &camera).unwrap();
+    let scanner = omni_formats::ScannerFile::new(omni_model::TransmitterParams::paper());
+    omni_formats::write_doc(&dir.path().join("scanner.json"), &scanner).unwrap();
+    let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+    let out = Command::new(BIN)
+        .current_dir(dir.path())
+        .args(["budget", "--camera", "camera.json", "--scanner", "scanner.json"])
+        .stdout(full)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("stdout: No space left on device"), "{err}");
+}

@@ -66,6 +66,11 @@ impl<E: std::fmt::Display> From<E> for CliError {
     }
 }
 
+/// A failed write to stdout (a full disk behind `>`, a closed pipe), naming it.
+pub fn stdout_error(e: std::io::Error) -> CliError {
+    CliError::new(format!("stdout: {e}"))
+}
+
 /// The result type of a tool's body.
 pub type CliResult<T = ()> = Result<T, CliError>;
 

@@ -441,8 +441,8 @@ fn opencv_k_d(doc: &yaml::FlatYaml) -> Result<(Vec<f64>, String, Vec<f64>, Strin
     let either = |a: &str, b: &str| if doc.has_prefix(a) { a.to_string() } else { b.to_string() };
     let k_name = either("K", "camera_matrix");
     let d_name = either("D", "distortion_coefficients");
-    let k = doc.numbers(&format!("{k_name}.data"), Some(9))?;
-    let d = doc.numbers(&format!("{d_name}.data"), None)?;
+    let k = doc.matrix(&k_name, Some(9))?;
+    let d = doc.matrix(&d_name, None)?;
     let skew_ok = k[1].abs() <= 1e-9 * k[0].abs();
     let rest_ok = k[3] == 0.0 && k[6] == 0.0 && k[7] == 0.0 && k[8] == 1.0;
     if !skew_ok || !rest_ok {
@@ -459,9 +459,9 @@ pub fn parse_opencv_omnidir(text: &str) -> Result<MeiParams, String> {
     let either = |a: &str, b: &str| if doc.has_prefix(a) { a.to_string() } else { b.to_string() };
     let k_name = either("K", "camera_matrix");
     let d_name = either("D", "distortion_coefficients");
-    let k = doc.numbers(&format!("{k_name}.data"), Some(9))?;
-    let d = doc.numbers(&format!("{d_name}.data"), Some(4))?;
-    let xi = if doc.has_prefix("xi.data") { doc.numbers("xi.data", Some(1))?[0] } else { doc.number("xi")? };
+    let k = doc.matrix(&k_name, Some(9))?;
+    let d = doc.matrix(&d_name, Some(4))?;
+    let xi = if doc.has_prefix("xi.data") { doc.matrix("xi", Some(1))?[0] } else { doc.number("xi")? };
     let skew_ok = k[1].abs() <= 1e-9 * k[0].abs();
     let rest_ok = k[3] == 0.0 && k[6] == 0.0 && k[7] == 0.0 && k[8] == 1.0;
     if !skew_ok || !rest_ok {

@@ -40,6 +40,14 @@ impl FlatYaml {
                 }
                 continue;
             }
+            if let Some(version) = content.strip_prefix("%YAML").map(|v| v.trim_start_matches([':', ' ']))
+                && !version.starts_with("1.")
+            {
+                return Err(format!(
+                    "line {}: %YAML {version}: this build reads YAML 1.x (OpenCV's FileStorage)",
+                    n + 1
+                ));
+            }
             if content.is_empty() || content.starts_with('%') || content.starts_with("---") {
                 continue;
             }
@@ -116,6 +124,24 @@ impl FlatYaml {
         parse_number(v).ok_or_else(|| format!("line {line}: {key}: {v:?} is not a finite number"))
     }
 
+    /// The numbers of an OpenCV matrix `name` (its `data`, of `len` entries if given), checked
+    /// against its `rows` × `cols` and its element type `dt` (floating point) where written.
+    pub fn matrix(&self, name: &str, len: Option<usize>) -> Result<Vec<f64>, String> {
+        let data = self.numbers(&format!("{name}.data"), len)?;
+        if let (Ok(rows), Ok(cols)) = (self.number(&format!("{name}.rows")), self.number(&format!("{name}.cols"))) {
+            let whole = |v: f64| v.fract() == 0.0 && (0.0..=1e6).contains(&v);
+            if !(whole(rows) && whole(cols) && rows * cols == data.len() as f64) {
+                return Err(format!("{name}: rows × cols = {rows} × {cols}, but its data has {} numbers", data.len()));
+            }
+        }
+        if let Ok(dt) = self.scalar(&format!("{name}.dt"))
+            && !matches!(dt.as_str(), "d" | "f")
+        {
+            return Err(format!("{name}.dt: {dt:?} is not a floating-point element type (d or f)"));
+        }
+        Ok(data)
+    }
+
     /// A `[a, b, …]` list of finite numbers, of `len` entries if given.
     pub fn numbers(&self, key: &str, len: Option<usize>) -> Result<Vec<f64>, String> {
         let (_, v, line) = self.get(key)?;
@@ -147,6 +173,25 @@ fn parse_number(t: &str) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A matrix's rows × cols must match its data and its type be floating point; a YAML
+    /// version other than 1.x is refused at its line.
+    #[test]
+    fn matrices_agree_with_their_headers() {
+        let doc = |rows: &str, dt: &str| {
+            format!(
+                "%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: {rows}\n   cols: 2\n   dt: {dt}\n   data: [ 1., 2., 3., 4. ]\n"
+            )
+        };
+        let ok = FlatYaml::parse(&doc("2", "d")).unwrap();
+        assert_eq!(ok.matrix("K", Some(4)).unwrap(), vec![1.0, 2.0, 3.0, 4.0]);
+        let err = FlatYaml::parse(&doc("3", "d")).unwrap().matrix("K", None).unwrap_err();
+        assert!(err.contains("rows × cols = 3 × 2") && err.contains("4 numbers"), "{err}");
+        let err = FlatYaml::parse(&doc("2", "q")).unwrap().matrix("K", None).unwrap_err();
+        assert!(err.contains("K.dt: \"q\""), "{err}");
+        let err = FlatYaml::parse("%YAML:9.9\nx: 1\n").err().unwrap();
+        assert!(err.contains("line 1") && err.contains("9.9"), "{err}");
+    }
 
     #[test]
     fn reads_nested_keys_lists_over_lines_and_skips_the_rest() {

@@ -125,8 +125,8 @@ impl MeiParams {
     /// Checks that the parameters are finite and meaningful; names the field at fault.
     pub fn validate(&self) -> Result<(), String> {
         crate::fields::check_positive(&[("fx_px", self.fx_px), ("fy_px", self.fy_px)])?;
-        if !(self.xi.is_finite() && self.xi >= 0.0) {
-            return Err(format!("xi must be a non-negative number, got {}", self.xi));
+        if !(self.xi.is_finite() && (0.0..=MAX_XI).contains(&self.xi)) {
+            return Err(format!("xi must be a number from 0 to {MAX_XI}, got {}", crate::limits::shown(self.xi)));
         }
         crate::fields::check_finite(&[
             ("cx_px", self.cx_px),
@@ -148,6 +148,10 @@ impl MeiParams {
         Ok(())
     }
 }
+
+/// The largest ξ read: a mirror's is below 1, a wide fisheye fitted as Mei's a few; beyond this
+/// the number is a mistake, not a lens.
+pub const MAX_XI: f64 = 100.0;
 
 /// Projects a world direction (from the viewpoint, any length) with intrinsics `p`
 /// ([`MeiParams::to_vector`] order). `None` where the sphere point is not imaged (ξ + z_s ≤ 0).
@@ -248,6 +252,16 @@ impl CentralParams for MeiParams {
 mod tests {
     use super::*;
     use crate::{CameraModel, HyperbolicCamera};
+
+    #[test]
+    fn xi_is_bounded() {
+        let mut p = MeiParams::from_hyperbolic(&HyperbolicParams::paper());
+        assert!(p.validate().is_ok());
+        p.xi = 1e308;
+        assert_eq!(p.validate().unwrap_err(), "xi must be a number from 0 to 100, got 1e308");
+        p.xi = -0.5;
+        assert!(p.validate().is_err());
+    }
 
     #[test]
     fn hyperbolic_camera_is_a_mei_model() {

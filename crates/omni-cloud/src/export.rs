@@ -104,7 +104,8 @@ impl CloudOutputArgs {
         add_normals_seen_from(cloud, self.normal_neighbours, views)
     }
 
-    /// Writes the cloud file (if `path`) and the bag (if --rosbag) with `messages`.
+    /// Writes the cloud file (if `path`) and the bag (if --rosbag) with `messages`, both put
+    /// in place only once both are written.
     pub fn write(
         &self,
         cloud: &PointCloud,
@@ -112,24 +113,13 @@ impl CloudOutputArgs {
         messages: &[BagMessage],
         default_frame_id: &str,
     ) -> Result<(), String> {
-        self.write_with_images(cloud, path, messages, None, default_frame_id)
-    }
-
-    /// [`CloudOutputArgs::write`], with the camera frames in the bag if `images` is given.
-    pub fn write_with_images(
-        &self,
-        cloud: &PointCloud,
-        path: Option<&Path>,
-        messages: &[BagMessage],
-        images: Option<&mut BagImages>,
-        default_frame_id: &str,
-    ) -> Result<(), String> {
-        let staged = self.stage(cloud, path, messages, images, default_frame_id)?;
+        let staged = self.stage(cloud, path, messages, None, default_frame_id)?;
         omni_formats::io::commit_all(staged).map_err(|e| e.to_string())
     }
 
-    /// [`CloudOutputArgs::write_with_images`] up to putting the outputs in place: each written
-    /// in full, to be committed with the tool's other outputs once all of them succeeded.
+    /// [`CloudOutputArgs::write`] up to putting the outputs in place, with the camera frames in
+    /// the bag if `images` is given: each written in full, to be committed with the tool's other
+    /// outputs once all of them succeeded.
     pub fn stage(
         &self,
         cloud: &PointCloud,

@@ -265,14 +265,6 @@ fn print_budget(
     Ok(())
 }
 
-/// A usage error unless `value` (of option `name`) is a positive, finite number.
-fn positive(name: &str, value: f64) -> Result<(), CliError> {
-    match value.is_finite() && value > 0.0 {
-        true => Ok(()),
-        false => Err(CliError::usage(format!("{name} must be a positive number, got {value}"))),
-    }
-}
-
 fn main() -> std::process::ExitCode {
     omni_cli::main("omni-eval", || match Args::parse().command {
         Command::Fit { shape, crop, inlier_mm, iterations, seed, radius, centre, json, transform, cloud } => {
@@ -284,12 +276,12 @@ fn main() -> std::process::ExitCode {
                 None => None,
             };
             let centre = centre.map(|s| numbers("centre", &s, 3)).transpose()?.map(|v| Point3::new(v[0], v[1], v[2]));
-            positive("--inlier-mm", inlier_mm)?;
+            omni_cli::positive("--inlier-mm", inlier_mm)?;
             if iterations == 0 {
                 return Err(CliError::usage("--iterations must be at least 1"));
             }
             if let Some(r) = radius {
-                positive("--radius", r)?;
+                omni_cli::positive("--radius", r)?;
             }
             let pts = load_points(&cloud, crop.as_ref(), transform.as_deref())?;
             let name = omni_formats::io::display_name(&cloud, "stdin");
@@ -308,8 +300,8 @@ fn main() -> std::process::ExitCode {
             Ok(())
         }
         Command::Compare { scene, max_distance_mm, inlier_mm, json, transform, cloud } => {
-            positive("--max-distance-mm", max_distance_mm)?;
-            positive("--inlier-mm", inlier_mm)?;
+            omni_cli::positive("--max-distance-mm", max_distance_mm)?;
+            omni_cli::positive("--inlier-mm", inlier_mm)?;
             let scene_file: SceneFile = read_doc(&scene)?;
             let pts = load_points(&cloud, None, transform.as_deref())?;
             let opts = FitOptions { inlier_mm, ..FitOptions::default() };
@@ -335,12 +327,12 @@ fn main() -> std::process::ExitCode {
                         .collect()
                 })
                 .unwrap_or_default();
-            let used: Vec<omni_formats::rig::BoardPose> = serde_json::from_value(serde_json::Value::Array(poses))
-                .map_err(|e| format!("{}: field report.boards: {e}", scanner.display()))?;
-            BoardPosesFile::new(used.clone())
-                .validate()
-                .map_err(|m| format!("{}: report.boards: {m}", scanner.display()))?;
-            let (iso, rms) = omni_cloud::align::register_rig(&rig_file, &used, &reference.poses)
+            let used = BoardPosesFile::new(
+                serde_json::from_value(serde_json::Value::Array(poses))
+                    .map_err(|e| format!("{}: field report.boards: {e}", scanner.display()))?,
+            );
+            used.validate().map_err(|m| format!("{}: report.boards: {m}", scanner.display()))?;
+            let (iso, rms) = omni_cloud::align::register_rig(&rig_file, &used.poses, &reference.poses)
                 .map_err(|m| format!("{}: {m}", reference_poses.display()))?;
             let doc = TransformFile::from_isometry(
                 &iso,
@@ -348,7 +340,7 @@ fn main() -> std::process::ExitCode {
                 "calibrated sensor frame -> reference frame, through the rig boards",
             );
             omni_formats::write_doc(&output, &doc)?;
-            eprintln!("omni-eval: rig registration RMS {rms:.3} mm over {} boards", used.len());
+            eprintln!("omni-eval: rig registration RMS {rms:.3} mm over {} boards", used.poses.len());
             Ok(())
         }
         Command::Budget {

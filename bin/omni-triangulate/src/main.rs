@@ -95,10 +95,8 @@ fn main() -> std::process::ExitCode {
         let (_, transmitter) = ScannerFile::load(&args.scanner)?;
         let tri = Triangulator::new(camera.as_ref(), &transmitter, args.min_incidence_deg).map_err(CliError::usage)?;
         args.cloud_out.check().map_err(CliError::usage)?;
-        if let Some(p) = args.stamp_period_ms
-            && !(p > 0.0 && p.is_finite())
-        {
-            return Err(CliError::usage("--stamp-period-ms must be a positive number"));
+        if let Some(p) = args.stamp_period_ms {
+            omni_cli::positive("--stamp-period-ms", p)?;
         }
         let bag = args.cloud_out.rosbag.is_some();
         if args.rosbag_images && !bag {

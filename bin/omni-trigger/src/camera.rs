@@ -109,10 +109,7 @@ impl CameraArgs {
 }
 
 fn positive(flag: &str, v: Option<f64>) -> CliResult<Option<f64>> {
-    match v {
-        Some(x) if !(x > 0.0 && x.is_finite()) => Err(CliError::usage(format!("--{flag} must be positive"))),
-        v => Ok(v),
-    }
+    v.map(|x| omni_cli::positive(&format!("--{flag}"), x)).transpose()
 }
 
 fn finite(flag: &str, v: Option<f64>) -> CliResult<Option<f64>> {

@@ -66,6 +66,15 @@ impl<E: std::fmt::Display> From<E> for CliError {
     }
 }
 
+/// A usage error unless `value` of option `option` (e.g. `--inlier-mm`) is a positive, finite
+/// number; the value otherwise.
+pub fn positive(option: &str, value: f64) -> CliResult<f64> {
+    match value.is_finite() && value > 0.0 {
+        true => Ok(value),
+        false => Err(CliError::usage(format!("{option} must be positive, got {value}"))),
+    }
+}
+
 /// A failed write to stdout (a full disk behind `>`, a closed pipe), naming it.
 pub fn stdout_error(e: std::io::Error) -> CliError {
     CliError::new(format!("stdout: {e}"))

@@ -34,14 +34,12 @@ impl MirrorCircle {
         if !values.iter().all(|v| v.is_finite()) || self.inner_radius < 0.0 || self.outer_radius <= self.inner_radius {
             return Err(format!("{}: not finite radii with 0 ≤ inner < outer", describe()));
         }
-        let diagonal = w.hypot(h);
-        let (dx, dy) = (self.centre.x - 0.5 * w, self.centre.y - 0.5 * h);
-        if dx.hypot(dy) > MAX_CENTRE_DIAGONALS * diagonal {
+        let (x, y) = (self.centre.x, self.centre.y);
+        if (x - 0.5 * w).hypot(y - 0.5 * h) > MAX_CENTRE_DIAGONALS * w.hypot(h) {
             return Err(format!("{} lies far off the {width} × {height} frame", describe()));
         }
         // The frame's nearest and farthest points from the centre.
-        let nearest = (self.centre.x.clamp(0.0, w) - self.centre.x).hypot(self.centre.y.clamp(0.0, h) - self.centre.y);
-        let (x, y) = (self.centre.x, self.centre.y);
+        let nearest = (x.clamp(0.0, w) - x).hypot(y.clamp(0.0, h) - y);
         let farthest = x.abs().max((x - w).abs()).hypot(y.abs().max((y - h).abs()));
         if self.outer_radius < nearest || self.inner_radius > farthest {
             return Err(format!("{} does not reach the {width} × {height} frame", describe()));

@@ -169,11 +169,11 @@ pub struct RidgeParams {
     /// Scale (px) of the Gaussian derivatives of [`Method::Hessian`].
     pub hessian_sigma: f64,
     /// Fit along the stripe over up to this many px of arc on either side (0 = off): across the
-    /// normal, a line through the neighbours' offsets once a wider parabola's curvature is taken
-    /// out, over arcs growing from ±3 px as far as the stripe's shape allows (a longer arc is
-    /// taken while it agrees with the shorter ones within their noise, so tight curves, steps
-    /// and ends keep a short one); along rays, each point's radius from a line through the same
-    /// stripe's points over the whole arc (`along`). Averages speckle and noise (±3 px: about
+    /// normal, over ±3 px a line through the neighbours' offsets once a wider parabola's
+    /// curvature is taken out, and over longer arcs (growing from ±3 px as far as the stripe's
+    /// shape allows) a parabola, each taken while it agrees with the shorter ones within their
+    /// noise, so tight curves, steps and ends keep a short one; along rays, each point's radius
+    /// from a line through the same stripe's points over the whole arc (`along`). Averages speckle and noise (±3 px: about
     /// 35 % lower RMS under speckle) at the price of lateral resolution.
     pub along_stripe_px: f64,
     /// The lens's blur (Gaussian PSF σ, px of the frame), pixel integration not included, whose

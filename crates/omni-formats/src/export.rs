@@ -118,12 +118,8 @@ impl CloudOptions {
     }
 }
 
-/// Writes `cloud` to `path` in `format`, atomically (`-` = stdout); errors name the file.
-pub fn write_cloud(path: &Path, cloud: &PointCloud, format: CloudFormat, opts: &CloudOptions) -> Result<()> {
-    write_cloud_staged(path, cloud, format, opts)?.commit()
-}
-
-/// [`write_cloud`] up to the rename ([`crate::io::write_staged`]).
+/// Writes `cloud` to `path` in `format` (`-` = stdout), staged to be put in place with the
+/// tool's other outputs ([`crate::io::write_staged`]); errors name the file.
 pub fn write_cloud_staged(
     path: &Path,
     cloud: &PointCloud,

@@ -212,7 +212,7 @@ struct TableArgs {
 }
 
 fn main() -> std::process::ExitCode {
-    omni_cli::main("omni-calib-plane", || match Cli::parse().command {
+    omni_cli::main("omni-calib-plane", || match omni_cli::parse_args::<Cli>()?.command {
         Command::Fit(a) => fit(&a),
         Command::Table(a) => table(&a),
         Command::Fixed(a) => fixed(&a),

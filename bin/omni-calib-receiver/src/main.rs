@@ -253,7 +253,7 @@ const TOOL: &str = "omni-calib-receiver";
 
 fn main() -> std::process::ExitCode {
     omni_cli::main(TOOL, || {
-        let args = Args::parse();
+        let args = omni_cli::parse_args::<Args>()?;
         let out = Stderr::default();
         match args.command {
             Some(Command::ImportOcam { input, output }) => session::import_ocam(&input, &output),

@@ -266,7 +266,7 @@ fn print_budget(
 }
 
 fn main() -> std::process::ExitCode {
-    omni_cli::main("omni-eval", || match Args::parse().command {
+    omni_cli::main("omni-eval", || match omni_cli::parse_args::<Args>()?.command {
         Command::Fit { shape, crop, inlier_mm, iterations, seed, radius, centre, json, transform, cloud } => {
             let crop = match crop {
                 Some(s) => {

@@ -89,3 +89,31 @@ fn help_examples_stay_on_one_line() {
         }
     }
 }
+
+/// A usage error is one line on stderr, exit code 2, naming what is wrong and the help to read,
+/// in every tool and subcommand: unknown options, bad values, missing arguments and commands.
+#[test]
+fn usage_errors_are_one_line_with_exit_code_2() {
+    let exe = std::env::current_exe().unwrap();
+    let bins = exe.parent().and_then(|d| d.parent()).unwrap().to_path_buf();
+    let cases: &[(&str, &[&str], &str)] = &[
+        ("omni-calib-plane", &["fixed", "--bogus"], "'--bogus'"),
+        ("omni-calib-receiver", &["--bogus"], "'--bogus'"),
+        ("omni-eval", &[], "a command is needed: "),
+        ("omni-eval", &["compare"], "--scene"),
+        ("omni-live", &["--foxglove"], "--foxglove"),
+        ("omni-merge", &["--voxel", "x"], "'x'"),
+        ("omni-ridge", &["--threshold", "x"], "--threshold"),
+        ("omni-sim", &["scan", "--camra", "c.json"], "'--camera'"),
+        ("omni-triangulate", &["--bogus"], "'--bogus'"),
+        ("omni-trigger", &[], "a command is needed: "),
+    ];
+    for (tool, args, names) in cases {
+        let out = Command::new(bins.join(tool)).args(*args).stdin(std::process::Stdio::null()).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{tool} {args:?}: {err}");
+        assert_eq!(err.lines().count(), 1, "{tool} {args:?}: {err}");
+        assert!(err.starts_with(&format!("{tool}: error: ")) && err.contains(names), "{tool} {args:?}: {err}");
+        assert!(err.trim_end().ends_with("--help')"), "{tool} {args:?}: {err}");
+    }
+}

@@ -117,7 +117,7 @@ struct Args {
 }
 
 fn main() -> std::process::ExitCode {
-    omni_cli::main(TOOL, || run(Args::parse()))
+    omni_cli::main(TOOL, || run(omni_cli::parse_args()?))
 }
 
 fn run(a: Args) -> CliResult {

@@ -154,7 +154,7 @@ fn is_ply(p: &Path) -> bool {
 
 fn main() -> std::process::ExitCode {
     omni_cli::main("omni-merge", || {
-        let args = Args::parse();
+        let args = omni_cli::parse_args::<Args>()?;
         let opts = options(&args)?;
         args.cloud.check().map_err(CliError::usage)?;
         match &args.output {

@@ -209,7 +209,7 @@ fn load_mask(path: &std::path::Path) -> CliResult<SearchRegion> {
 
 fn main() -> ExitCode {
     omni_cli::main("omni-ridge", || {
-        let args = Args::parse();
+        let args = omni_cli::parse_args::<Args>()?;
         let params = RidgeParams {
             method: args.method,
             sampling: args.sampling,

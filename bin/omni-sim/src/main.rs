@@ -582,7 +582,7 @@ fn parse_vec<const N: usize>(s: &str) -> Result<[f64; N], String> {
 }
 
 fn main() -> ExitCode {
-    omni_cli::main("omni-sim", || match Args::parse().command {
+    omni_cli::main("omni-sim", || match omni_cli::parse_args::<Args>()?.command {
         Command::Sensor(a) => sensor(a),
         Command::Scene(a) => scene(a),
         Command::Scan(a) => scan(a),

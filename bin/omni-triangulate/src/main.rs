@@ -90,7 +90,7 @@ struct Args {
 
 fn main() -> std::process::ExitCode {
     omni_cli::main("omni-triangulate", || {
-        let args = Args::parse();
+        let args = omni_cli::parse_args::<Args>()?;
         let (camera_file, camera) = CameraFile::load(&args.camera)?;
         let (_, transmitter) = ScannerFile::load(&args.scanner)?;
         let tri = Triangulator::new(camera.as_ref(), &transmitter, args.min_incidence_deg).map_err(CliError::usage)?;

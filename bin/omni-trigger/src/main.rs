@@ -214,8 +214,7 @@ struct EmulateArgs {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    omni_cli::main(TOOL, || match cli.command {
+    omni_cli::main(TOOL, || match omni_cli::parse_args::<Cli>()?.command {
         Cmd::Info(a) => info(a),
         Cmd::Scan(a) => scan(a),
         Cmd::Emulate(a) => emulate(a),

@@ -2,8 +2,9 @@
 //!
 //! * [`main`] runs a tool's body and turns its outcome into the Unix conventions: errors are
 //!   printed once as `omni-x: error: …` (naming the file and record at fault) with exit code 1;
-//!   a closed downstream pipe (`| head`) is a clean exit 0; clap reports usage errors with
-//!   exit code 2 and handles `--help` and `--version`.
+//!   a closed downstream pipe (`| head`) is a clean exit 0.
+//! * [`parse_args`] parses the command line with clap: `--help` and `--version` as clap gives
+//!   them, a usage error as one line (what is wrong, then where the help is) with exit code 2.
 //! * [`main`] also removes the temporary files of atomic writes in progress
 //!   ([`omni_formats::io::TempFile`]) when SIGINT, SIGTERM or SIGHUP ends the tool, then dies of
 //!   that signal as it would have.
@@ -78,6 +79,60 @@ pub fn positive(option: &str, value: f64) -> CliResult<f64> {
 /// A failed write to stdout (a full disk behind `>`, a closed pipe), naming it.
 pub fn stdout_error(e: std::io::Error) -> CliError {
     CliError::new(format!("stdout: {e}"))
+}
+
+/// The command line, parsed; `--help` and `--version` print and exit 0 as clap does them. A
+/// usage error becomes one line with exit code 2 ([`EXIT_USAGE`]): clap's own report spans
+/// several (a tip, the usage, a pointer to `--help`), which scripts that read one error line per
+/// failure cannot use.
+pub fn parse_args<P: clap::Parser>() -> CliResult<P> {
+    let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    P::try_parse_from(&args).map_err(|e| usage_error(e, &P::command(), &args))
+}
+
+/// A failed parse of `args` by `command` as one line ([`parse_args`]); help and version exit.
+fn usage_error(e: clap::Error, command: &clap::Command, args: &[std::ffi::OsString]) -> CliError {
+    use clap::error::ErrorKind;
+    let named = named_command(command, args);
+    let path = named.iter().map(|c| c.get_name()).collect::<Vec<_>>().join(" ");
+    let line = match e.kind() {
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => e.exit(),
+        ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+            let last = named.last().expect("the tool itself is named");
+            let subcommands: Vec<_> = last.get_subcommands().map(|c| c.get_name()).filter(|n| *n != "help").collect();
+            format!("a command is needed: {} (see '{path} --help')", subcommands.join(", "))
+        }
+        _ => one_line_usage_error(&e.render().to_string(), &path),
+    };
+    CliError::usage(line)
+}
+
+/// The tool and the subcommands the arguments name, e.g. `omni-sim`, `scan`: the help to point to.
+fn named_command<'a>(command: &'a clap::Command, args: &[std::ffi::OsString]) -> Vec<&'a clap::Command> {
+    let mut path = vec![command];
+    for arg in args.iter().skip(1).filter_map(|a| a.to_str()) {
+        if let Some(sub) = path.last().and_then(|c| c.find_subcommand(arg)) {
+            path.push(sub);
+        }
+    }
+    path
+}
+
+/// Clap's rendered usage error as one line: the error and its details, then where the help of
+/// `command` is.
+fn one_line_usage_error(rendered: &str, command: &str) -> String {
+    let mut lines = rendered.lines().map(str::trim).filter(|l| !l.is_empty());
+    let mut message = lines.next().unwrap_or("invalid arguments").trim_start_matches("error: ").to_string();
+    // Clap ends its report with the usage and a pointer to --help; the one line ends with its own.
+    for line in lines.take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more information")) {
+        if line.starts_with("tip:") {
+            message = format!("{message}; {line}");
+        } else {
+            let separator = if message.ends_with(':') { " " } else { ", " };
+            message = format!("{message}{separator}{line}");
+        }
+    }
+    format!("{message} (see '{command} --help')")
 }
 
 /// The result type of a tool's body.
@@ -193,5 +248,55 @@ mod tests {
         let e: CliError = std::io::Error::from(std::io::ErrorKind::BrokenPipe).into();
         assert!(e.is_broken_pipe());
         assert!(!CliError::new("camera.json: field model: bad").is_broken_pipe());
+    }
+
+    #[derive(clap::Parser, Debug)]
+    #[command(name = "omni-example")]
+    struct Example {
+        #[command(subcommand)]
+        command: ExampleCommand,
+    }
+
+    #[derive(clap::Subcommand, Debug)]
+    enum ExampleCommand {
+        Fit {
+            #[arg(long)]
+            camera: String,
+            #[arg(long)]
+            scanner: String,
+            #[arg(long, default_value_t = 1.0)]
+            threshold: f64,
+        },
+    }
+
+    fn usage_line(args: &[&str]) -> String {
+        use clap::{CommandFactory, Parser};
+        let argv: Vec<std::ffi::OsString> =
+            std::iter::once("omni-example").chain(args.iter().copied()).map(Into::into).collect();
+        let e = Example::try_parse_from(&argv).unwrap_err();
+        let error = usage_error(e, &Example::command(), &argv);
+        assert_eq!(error.code, EXIT_USAGE);
+        error.message
+    }
+
+    #[test]
+    fn usage_errors_become_one_line_naming_the_argument_and_the_help() {
+        assert_eq!(
+            usage_line(&["fit", "--camera", "c.json"]),
+            "the following required arguments were not provided: --scanner <SCANNER> (see 'omni-example fit --help')"
+        );
+        assert_eq!(
+            usage_line(&["fit", "--camera", "c", "--scanner", "s", "--threshold", "x"]),
+            "invalid value 'x' for '--threshold <THRESHOLD>': invalid float literal (see 'omni-example fit --help')"
+        );
+        let unknown = usage_line(&["fit", "--camera", "c", "--scanner", "s", "--camra"]);
+        assert!(unknown.starts_with("unexpected argument '--camra' found; tip: a similar argument exists: '--camera'"));
+        assert_eq!(usage_line(&[]), "a command is needed: fit (see 'omni-example --help')");
+        let missing = usage_line(&["fit"]);
+        assert!(missing.contains("--camera <CAMERA>, --scanner <SCANNER>"), "{missing}");
+        for args in [&[][..], &["fit"], &["nope"], &["fit", "--camra"]] {
+            let line = usage_line(args);
+            assert!(!line.contains('\n') && line.ends_with("--help')"), "{args:?}: {line}");
+        }
     }
 }

@@ -57,7 +57,7 @@ receiver_args=()
 
 echo "calibrate.sh: receiver ($model) from $boards, annulus $annulus" >&2
 omni-calib-receiver --board "$board" --model "$model" --viewpoint-mm "$viewpoint" "${receiver_args[@]}" \
-  --save-corners "$out/corners.json" -o "$out/camera.json" "$boards" > "$out/receiver.txt"
+  --save-corners "$out/corners.json" -o "$out/camera.json" "$boards" 2> >(tee "$out/receiver.txt" >&2)
 
 echo "calibrate.sh: rig scan" >&2
 scan_args=(--camera "$out/camera.json" --scanner none --out "$out/rig_scan" --angles "$angles" --laser-off)
@@ -70,5 +70,5 @@ STAGES=stripes "$(dirname "$0")/scan.sh" "${scan_args[@]}"
 
 echo "calibrate.sh: light planes" >&2
 omni-calib-plane fit --camera "$out/camera.json" --rig "$rig" --pose-image "$pose" \
-  --stripes "$out/rig_scan/stripes.jsonl" -o "$out/scanner.json" > "$out/planes.txt"
+  --stripes "$out/rig_scan/stripes.jsonl" -o "$out/scanner.json" 2> >(tee "$out/planes.txt" >&2)
 echo "calibrate.sh: wrote $out/camera.json and $out/scanner.json" >&2

@@ -112,6 +112,9 @@ def test_the_batch_calibrates_scans_and_measures_every_scene(batch):
     out = batch["out"]
     for f in ("truth/camera.json", "calib/camera.json", "calib/scanner.json", "calib/to_truth.json"):
         assert (out / f).is_file(), f
+    # The calibration reports (the tools write them to stderr).
+    assert "corners" in (out / "calib/receiver.txt").read_text()
+    assert "model residual RMS" in (out / "calib/planes.txt").read_text()
     table = summary(out)
     assert sorted(table) == ["cylinder", "plane", "sphere"]
     for scan, row in table.items():

@@ -187,6 +187,10 @@ struct FitArgs {
     /// without it the tool warns and fits what it got.
     #[arg(long)]
     strict: bool,
+    /// Refuse a fit whose model residual RMS (mm) exceeds this: the stripes do not belong to
+    /// these boards (another scan's stream, the wrong poses). A sound rig gives a few tenths.
+    #[arg(long, default_value_t = 2.0, value_name = "MM")]
+    max_residual_mm: f64,
     /// Output scanner.json (`-` = stdout), written atomically.
     #[arg(short, long, default_value = "scanner.json")]
     output: PathBuf,
@@ -224,6 +228,7 @@ fn name(p: &Path) -> String {
 }
 
 fn fit(a: &FitArgs) -> CliResult {
+    omni_cli::positive("--max-residual-mm", a.max_residual_mm)?;
     let (_, camera) = CameraFile::load(&a.camera)?;
     let rig: RigFile = read_doc(&a.rig)?;
     rig.validate().map_err(|m| CliError::new(format!("{}: {m}", name(&a.rig))))?;
@@ -270,6 +275,14 @@ fn fit(a: &FitArgs) -> CliResult {
     let (placed, pose_reports): (Vec<_>, Vec<_>) = boards.into_iter().unzip();
     let cal = plane::calibrate_planes(camera.as_ref(), &placed, &frames, &initial, &opts)
         .map_err(|m| CliError::new(format!("{}: {m}", name(&a.stripes))))?;
+    let residual = cal.report.model.residual_rms_mm;
+    if !(residual <= a.max_residual_mm) {
+        return Err(CliError::new(format!(
+            "{}: the model's residual RMS is {residual:.3} mm, above --max-residual-mm {}: do these stripes belong to these boards (another scan's stream, the wrong poses)?",
+            name(&a.stripes),
+            a.max_residual_mm
+        )));
+    }
     let mut report = serde_json::to_value(&cal.report)?;
     report["boards"] = serde_json::to_value(&pose_reports)?;
     report["inputs"] = serde_json::json!({
@@ -301,8 +314,9 @@ fn fit(a: &FitArgs) -> CliResult {
 fn table(a: &TableArgs) -> CliResult {
     let alphas = plane::parse_alpha_range(&a.alpha).map_err(|m| CliError::usage(format!("--alpha: {m}")))?;
     let (_, tx) = ScannerFile::load_polygon(&a.scanner)?;
+    // Its only refusals are a --facet or --laser the model does not have: usage errors.
     let rows = plane::light_plane_table(tx.params(), &alphas, a.facet, a.laser)
-        .map_err(|m| CliError::new(format!("{}: {m}", name(&a.scanner))))?;
+        .map_err(|m| CliError::usage(format!("{}: {m}", name(&a.scanner))))?;
     let mut out = String::new();
     if a.json {
         out = serde_json::to_string_pretty(&rows)?;

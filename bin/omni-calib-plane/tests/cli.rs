@@ -320,3 +320,26 @@ fn stripes_cut_short_are_warned_about_or_refused_with_strict() {
     assert!(o.status.success(), "{err}");
     assert!(err.contains("warning:") && err.contains("without its status record"), "{err}");
 }
+
+/// A fit whose model residual exceeds `--max-residual-mm` is refused and writes nothing: the
+/// stripes do not belong to the boards (another scan's stream gave 14.7 mm, a sound rig 0.2).
+#[test]
+fn a_fit_too_far_from_its_stripes_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scanner.json");
+    let paths = dataset(dir.path(), None);
+    let mut args = fit_args(&paths, &out);
+    args.extend(["--max-residual-mm", "0.001"]);
+    let o = run(&args);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("stripes.jsonl: the model's residual RMS is") && err.contains("above --max-residual-mm 0.001")
+    );
+    let errors: Vec<_> = err.lines().filter(|l| !l.contains("warning: ")).collect();
+    assert_eq!(errors.len(), 1, "{err}");
+    assert!(!out.exists());
+    // The default limit passes a sound fit.
+    let o = run(&fit_args(&paths, &out));
+    assert!(o.status.success() && out.exists(), "{}", stderr(&o));
+}

@@ -31,7 +31,7 @@ omni-calib-receiver --board board.json --model fisheye --export-kalibr camchain.
 omni-calib-receiver --board board.json --annulus 511.5,511.5,102.5,493 boards/\n  \
 omni-calib-receiver --board board.json --annulus auto boards/\n  \
 omni-calib-receiver --board board.json --rim-image lit_room.png boards/\n  \
-omni-calib-receiver find-annulus pose.png        (prints CX,CY,R_IN,R_OUT for --annulus)\n  \
+omni-calib-receiver find-annulus lit_room.png    (prints CX,CY,R_IN,R_OUT for --annulus)\n  \
 omni-calib-receiver import-ocam calib_results.txt -o camera.json\n  \
 omni-calib-receiver export camera.json --to opencv -o omnidir.yaml\n  \
 omni-calib-receiver convert camera.json --to ocam -o ocam.json     (fits OCamCalib's model to the rays)\n  \

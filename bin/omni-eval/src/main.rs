@@ -83,6 +83,7 @@ enum Command {
         /// Move the cloud by this rigid transform first (transform.json, see `align`).
         #[arg(long)]
         transform: Option<PathBuf>,
+        /// The cloud (PLY; `-` = stdin).
         cloud: PathBuf,
     },
     /// Register a calibrated sensor's frame to a reference frame through the calibration rig:

@@ -15,6 +15,10 @@ fn readme_hardware_commands_run() {
     let log = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "README commands failed:\n{log}");
     assert!(work.path().join("calib/scanner.json").exists() && work.path().join("scan/cloud.ply").exists(), "{log}");
+    // calibrate.sh keeps the tools' reports (written to stderr) beside the calibration.
+    let report = |f: &str| std::fs::read_to_string(work.path().join("calib").join(f)).unwrap_or_default();
+    assert!(report("receiver.txt").contains("corners"), "receiver.txt: {}", report("receiver.txt"));
+    assert!(report("planes.txt").contains("model residual RMS"), "planes.txt: {}", report("planes.txt"));
 }
 
 #[test]

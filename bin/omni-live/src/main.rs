@@ -143,6 +143,9 @@ fn run(a: Args) -> CliResult {
     if let Some(addr) = &a.foxglove {
         sinks.push(Box::new(foxglove_sink(&a, addr, calibration, placement)?));
     }
+    if sinks.is_empty() {
+        omni_cli::warn(TOOL, "neither --ros2 nor --foxglove: nothing is published, the sweeps are only counted");
+    }
     let input = StreamReader::open(&a.input)?;
     let out = Arc::new(Mutex::new(std::io::stdout()));
     let (out2, stop2) = (out.clone(), stop.clone());

@@ -48,6 +48,7 @@ fn without_an_output_it_reports_each_sweep_and_a_status() {
     let lines: Vec<serde_json::Value> =
         String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     assert_eq!(lines.len(), 1, "no sinks: only the status line");
+    assert!(stderr(&o).contains("neither --ros2 nor --foxglove: nothing is published"), "{}", stderr(&o));
     assert_eq!(lines[0]["sweeps"], 4);
     assert_eq!(lines[0]["frames"], 12);
     assert_eq!(lines[0]["sweeps_incomplete"], 0);

@@ -233,7 +233,7 @@ fn main() -> ExitCode {
             None => (None, params),
         };
         if let Some(dir) = &args.overlay {
-            std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+            omni_cli::create_output_dir("--overlay", dir)?;
         }
         let threads = if args.threads == 0 {
             std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)

@@ -211,7 +211,6 @@ fn spawn_reader(
 ) {
     std::thread::spawn(move || {
         let ReaderSettings { producer, strict } = settings;
-        let name = stream.name().to_string();
         let mut frames_dir: Option<String> = None;
         let (mut index, mut frames) = (0, 0u64);
         loop {
@@ -221,11 +220,6 @@ fn spawn_reader(
             }
             let record = match stream.next_record() {
                 Ok(Some(r)) => r,
-                Ok(None) if index == 0 => {
-                    *read_error.lock().unwrap_or_else(|e| e.into_inner()) =
-                        Some((0, format!("{name}: empty stream (no header, no frames)")));
-                    return;
-                }
                 Ok(None) => {
                     if stream.cut_short() {
                         let message = stream.cut_short_message();
@@ -291,13 +285,16 @@ fn worker(jobs: &Mutex<Receiver<Job>>, out: &SyncSender<Outcome>, detectors: &De
     }
 }
 
-/// Fills `frame.stripe`; laser-off frames (no laser on) get an empty stripe.
+/// Fills `frame.stripe`; laser-off frames (no laser on) get an empty stripe. Points triangulated
+/// from an earlier stripe (a stream that went through omni-triangulate) no longer belong to it
+/// and are dropped.
 fn process_frame(
     frame: &mut omni_formats::stream::Frame,
     frames_dir: Option<&str>,
     detectors: &Detectors,
     overlay: Option<&Path>,
 ) -> Result<(), String> {
+    frame.points = None;
     if frame.lasers.is_empty() {
         frame.stripe = Some(Vec::new());
         return Ok(());

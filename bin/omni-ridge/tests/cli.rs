@@ -662,3 +662,25 @@ fn a_known_lens_blur_keeps_wide_curved_stripes_in_place() {
     let given_lens = mean_radial_error(&["--optics-blur", "1.5"], &text, radius);
     assert!((measured_lens - given_lens).abs() < 1e-9 && (measured_lens - given).abs() > 0.02, "{measured_lens:+.4}");
 }
+
+/// A stream that went through omni-triangulate carries points made from its old stripes: they
+/// are dropped with the stripes they came from, never passed on beside the new ones.
+#[test]
+fn points_of_an_earlier_stripe_are_dropped() {
+    let dir = tempfile::tempdir().unwrap();
+    let triangulated: String = scene(dir.path())
+        .lines()
+        .map(|l| match l.contains("\"type\":\"frame\"") {
+            true => l.replacen('{', "{\"points\":[[1.0,2.0,3.0,0,0,0]],", 1) + "\n",
+            false => format!("{l}\n"),
+        })
+        .collect();
+    assert!(records(triangulated.as_bytes()).iter().any(|r| matches!(r, Record::Frame(f) if f.points.is_some())));
+    let out = run(&[], &triangulated);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for r in records(&out.stdout) {
+        if let Record::Frame(f) = r {
+            assert!(f.points.is_none() && !f.stripe.unwrap().is_empty(), "frame {}", f.seq);
+        }
+    }
+}

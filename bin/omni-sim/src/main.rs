@@ -143,13 +143,14 @@ struct RenderArgs {
     /// Lens F-number (default: camera.json's optics, else the paper preset's F/4).
     #[arg(long, value_name = "N", allow_negative_numbers = true)]
     f_number: Option<f64>,
-    /// Laser wavelength (nm; default 650).
+    /// Laser wavelength (nm; default: camera.json's optics, else 650).
     #[arg(long, value_name = "NM", allow_negative_numbers = true)]
     wavelength_nm: Option<f64>,
-    /// Pixel pitch (µm; default 4.65 for a 1024-px image).
+    /// Pixel pitch (µm; default: camera.json's optics, else 4.65; `sensor` writes 4.65 at every
+    /// --width, with a focal length that keeps the field of view).
     #[arg(long, value_name = "UM", allow_negative_numbers = true)]
     pixel_pitch_um: Option<f64>,
-    /// Defocus: diameter of the blur circle (px; default 1.5).
+    /// Defocus: diameter of the blur circle (px; default: camera.json's optics, else 1.5).
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     defocus_px: Option<f64>,
     /// Override the optical blur: σ of the PSF (px, 0.4–1.5 are typical; with a lens, the
@@ -372,6 +373,13 @@ impl RenderArgs {
                  --laser-rgb, --ambient-rgb, --gamma, --format) are for laser frames: scan and rig",
             ));
         }
+        let laser_only = self.laser_gain != 1.0 || self.motion_blur != 0.0;
+        if laser_only || self.no_speckle || self.speckle_patterns.is_some() {
+            return Err(CliError::usage(
+                "--laser-gain, --motion-blur, --no-speckle and --speckle-patterns act on the laser's light: \
+                 board images are lit by the room alone",
+            ));
+        }
         let base = RenderOptions::calibration();
         let base = if self.ideal { RenderOptions { imaging: RenderOptions::ideal().imaging, ..base } } else { base };
         self.options_from(base, camera_optics)
@@ -484,7 +492,7 @@ Real-looking stripes (see docs/DECISIONS.md, \"Real stripe cross-sections\"):
 
 const RIG_AFTER_HELP: &str = "\
 Writes into DIR:
-  pose.png            ambient image of the rig, lasers off, room lit (for --pose-image)
+  pose.png            ambient image of the rig, lasers off, the boards lit (for --pose-image)
   frame_NNNNNN.png    laser frames (and ambient_NNNNNN.png, lasers off, with --laser-off)
   scan.jsonl          the manifest stream that omni-ridge reads
   rig.json            boards \"left\" and \"right\" (omniscan.rig, omni-calib-plane --rig)
@@ -591,10 +599,6 @@ fn main() -> ExitCode {
     })
 }
 
-fn create_dir(dir: &Path) -> CliResult {
-    std::fs::create_dir_all(dir).map_err(|e| CliError::new(format!("{}: {e}", dir.display())))
-}
-
 fn sensor(a: SensorArgs) -> CliResult {
     let Preset::Paper = a.preset;
     if !(16..=8192).contains(&a.width) {
@@ -609,7 +613,7 @@ fn sensor(a: SensorArgs) -> CliResult {
         seed: a.seed,
     };
     let (cam, tx) = paper_preset(a.width, &imp).map_err(CliError::usage)?;
-    create_dir(&a.output)?;
+    omni_cli::create_output_dir("--output", &a.output)?;
     // A smaller image keeps the pixel (and so its blur and speckle in pixels) with a shorter lens.
     let camera = CameraFile { optics: Some(Optics::paper()), ..CameraFile::new(CameraSpec::Hyperbolic(cam)) };
     write_doc(&a.output.join("camera.json"), &camera)?;
@@ -689,7 +693,10 @@ fn scan(a: ScanArgs) -> CliResult {
     check_lasers(&sensor, &a.lasers)?;
     let scene = Scene::load(&a.scene)?;
     check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("{}: {e}", a.scene.display())))?;
-    create_dir(&a.frames)?;
+    for output in std::iter::once(&a.output).chain(&a.truth) {
+        omni_formats::io::check_output_dir(output)?;
+    }
+    omni_cli::create_output_dir("--frames", &a.frames)?;
     let sweep = Sweep { angles_deg: &angles, facet: a.facet, lasers: &a.lasers, laser_off: a.laser_off };
     let frames = render_frames(&sensor, &scene, &sweep, &a.frames, &opts, format)?;
     if let Some(t) = &a.truth {
@@ -708,7 +715,7 @@ fn boards(a: BoardsArgs) -> CliResult {
     // The transmitter plays no part in board images; the paper's stands in.
     let sensor = Sensor { camera, transmitter: Sensor::paper().transmitter };
     let poses = random_board_poses(&sensor, &board, a.count, opts.seed).map_err(CliError::new)?;
-    create_dir(&a.out)?;
+    omni_cli::create_output_dir("--out", &a.out)?;
     let bar = omni_cli::progress(Some(poses.len() as u64), "boards");
     let images = poses
         .par_iter()
@@ -741,7 +748,7 @@ fn rig(a: RigArgs) -> CliResult {
     let scene_file = rig.scene();
     let scene = Scene::from_file(scene_file.clone()).map_err(CliError::new)?;
     check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("rig: {e}")))?;
-    create_dir(&a.out)?;
+    omni_cli::create_output_dir("--out", &a.out)?;
     let lit = RenderArgs::lit_options_for_rig(&a.render, optics)?;
     let (pose_image, corners) = render_rig_pose_image(&sensor, &rig, &lit);
     pose_image.to_png(&a.out.join("pose.png"))?;

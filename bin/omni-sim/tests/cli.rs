@@ -588,3 +588,47 @@ fn a_fixed_plane_scanner_is_refused_naming_its_kind() {
     );
     assert!(!d.join("m.jsonl").exists() && !d.join("f").exists());
 }
+
+/// Output places that cannot work are refused before anything is rendered: `-` or a file where
+/// a directory goes, a manifest or truth file in a directory that does not exist; and options
+/// that act on laser light are refused for board images, which have none.
+#[test]
+fn impossible_outputs_and_options_without_effect_are_refused_before_rendering() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    small_sensor(d);
+    std::fs::write(d.join("a_file"), "x").unwrap();
+    let scene = testdata("scenes/plane.json");
+    let scan = |frames: &str, out: &str, truth: &str| {
+        let mut args = vec!["scan", "--camera", "sensor/camera.json", "--scanner", "sensor/scanner.json"];
+        args.extend(["--scene", &scene, "--angles", "16:22:2", "--frames", frames, "-o", out]);
+        if !truth.is_empty() {
+            args.extend(["--truth", truth]);
+        }
+        sim(&args, d)
+    };
+    let board = testdata("boards/board_9x6.json");
+    let boards = |extra: &[&str]| {
+        let mut args = vec!["boards", "--camera", "sensor/camera.json", "--board", &board, "--count", "1"];
+        args.extend(["--out", "b"]);
+        args.extend(extra);
+        sim(&args, d)
+    };
+    let cases: Vec<(Output, i32, &str)> = vec![
+        (sim(&["sensor", "--preset", "paper", "-o", "-"], d), 2, "--output: names a directory, and `-`"),
+        (sim(&["sensor", "--preset", "paper", "-o", "a_file"], d), 1, "a_file: is a file, not a directory"),
+        (scan("f1", "nodir/s.jsonl", ""), 1, "nodir/s.jsonl: directory nodir"),
+        (scan("f2", "s.jsonl", "nodir/t.jsonl"), 1, "nodir/t.jsonl: directory nodir"),
+        (scan("a_file", "s.jsonl", ""), 1, "a_file: is a file, not a directory (--frames)"),
+        (boards(&["--laser-gain", "60"]), 2, "act on the laser's light"),
+        (boards(&["--no-speckle"]), 2, "act on the laser's light"),
+    ];
+    for (out, code, says) in cases {
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{err}");
+        assert!(err.contains(says) && err.lines().count() == 1, "{says}: {err}");
+    }
+    for never in ["-", "f1", "f2", "s.jsonl", "b"] {
+        assert!(!d.join(never).exists(), "{never} was made");
+    }
+}

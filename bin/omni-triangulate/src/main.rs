@@ -172,7 +172,9 @@ fn main() -> std::process::ExitCode {
         let frames = std::mem::take(&mut run.images);
         if let Some(mut cloud) = cloud {
             let period_us = args.stamp_period_ms.map(|ms| ms * 1000.0);
-            let messages = if bag { bag_messages(&spans, args.bag_per, period_us)? } else { Vec::new() };
+            let in_input = |m: String| CliError::new(format!("{name}: {m}"));
+            let messages =
+                if bag { bag_messages(&spans, args.bag_per, period_us).map_err(in_input)? } else { Vec::new() };
             args.cloud_out.finish_cloud(&mut cloud)?;
             let mut load = |i: usize| {
                 let g = omni_vision::image_io::load_gray(&frames[i].2)?;
@@ -185,7 +187,8 @@ fn main() -> std::process::ExitCode {
                     stamps_ns: frames
                         .iter()
                         .map(|(seq, ts, _)| frame_stamp_ns(*seq, *ts, period_us))
-                        .collect::<Result<_, _>>()?,
+                        .collect::<Result<_, _>>()
+                        .map_err(in_input)?,
                     load: &mut load,
                     camera_info: Some(camera_info(&camera_file.model)),
                 }),
@@ -292,8 +295,32 @@ impl Run<'_> {
                     .map_err(|e| fail(e.to_string()))?;
             }
         }
+        self.check_the_camera_fits(name)?;
         if let Some(w) = writer.as_mut() {
             w.flush().map_err(|e| fail(e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    /// Refuses a run in which no stripe pixel maps to a ray of the camera, and warns where
+    /// most do not: the frames were taken with another camera (another image size, another
+    /// sensor's mirror), which would otherwise pass as a scan that saw nothing.
+    fn check_the_camera_fits(&self, name: &str) -> Result<(), String> {
+        let no_ray = self.rejections.no_ray;
+        let pixels = self.points + self.rejections.refused();
+        let camera = self.args.camera.display();
+        if no_ray > 0 && self.points == 0 && no_ray == pixels {
+            return Err(format!(
+                "{name}: none of its {pixels} stripe pixels maps to a ray of {camera}: were the frames taken with this camera?"
+            ));
+        }
+        if 2 * no_ray > pixels {
+            omni_cli::warn(
+                "omni-triangulate",
+                &format!(
+                    "{name}: {no_ray} of {pixels} stripe pixels map to no ray of {camera}: is it the frames' camera?"
+                ),
+            );
         }
         Ok(())
     }

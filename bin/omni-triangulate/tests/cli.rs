@@ -128,7 +128,15 @@ fn bad_input_fails_with_one_line_and_leaves_no_output() {
     std::fs::write(fx.path("nan.jsonl"), format!("{HEADER}{nan}")).unwrap();
     // A stream is its header first: frames alone are refused.
     std::fs::write(fx.path("headless.jsonl"), frame_without_stripe).unwrap();
+    // What a failed tool upstream leaves: nothing.
+    std::fs::write(fx.path("empty.jsonl"), "").unwrap();
+    // Pixels no ray of this camera passes through (the frames of another camera).
+    let elsewhere = "{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"alpha_deg\":3,\"facet\":0,\"stripe\":[[5000,5000,1,1,0]]}\n";
+    let status = "{\"type\":\"status\",\"frames\":1,\"frames_missing\":0,\"complete\":true,\"errors\":[]}\n";
+    std::fs::write(fx.path("elsewhere.jsonl"), format!("{HEADER}{elsewhere}{status}")).unwrap();
     for (input, expect) in [
+        ("empty.jsonl", "empty stream"),
+        ("elsewhere.jsonl", "none of its 1 stripe pixels maps to a ray of camera.json"),
         ("nostripe.jsonl", "frame 7"),
         ("nan.jsonl", "line 2"),
         ("missing.jsonl", "missing.jsonl"),

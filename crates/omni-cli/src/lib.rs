@@ -4,7 +4,8 @@
 //!   printed once as `omni-x: error: …` (naming the file and record at fault) with exit code 1;
 //!   a closed downstream pipe (`| head`) is a clean exit 0.
 //! * [`parse_args`] parses the command line with clap: `--help` and `--version` as clap gives
-//!   them, a usage error as one line (what is wrong, then where the help is) with exit code 2.
+//!   them, a usage error as one line (what is wrong, then where the help is) with exit code 2;
+//!   the tool's own usage errors ([`CliError::usage`]) point to the same help.
 //! * [`main`] also removes the temporary files of atomic writes in progress
 //!   ([`omni_formats::io::TempFile`]) when SIGINT, SIGTERM or SIGHUP ends the tool, then dies of
 //!   that signal as it would have.
@@ -87,7 +88,21 @@ pub fn stdout_error(e: std::io::Error) -> CliError {
 /// failure cannot use.
 pub fn parse_args<P: clap::Parser>() -> CliResult<P> {
     let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
-    P::try_parse_from(&args).map_err(|e| usage_error(e, &P::command(), &args))
+    let command = P::command();
+    let path = named_command(&command, &args).iter().map(|c| c.get_name()).collect::<Vec<_>>().join(" ");
+    let _ = HELP_COMMAND.set(path);
+    P::try_parse_from(&args).map_err(|e| usage_error(e, &command, &args))
+}
+
+/// The command whose `--help` a usage error points to ([`parse_args`] sets it).
+static HELP_COMMAND: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+
+/// A usage error's line as printed: ending with the `--help` to read, as clap's own do.
+fn with_help_pointer(tool: &str, message: &str) -> String {
+    if message.ends_with("--help')") {
+        return message.to_string();
+    }
+    format!("{message} (see '{} --help')", HELP_COMMAND.get().map_or(tool, String::as_str))
 }
 
 /// A failed parse of `args` by `command` as one line ([`parse_args`]); help and version exit.
@@ -135,6 +150,18 @@ fn one_line_usage_error(rendered: &str, command: &str) -> String {
     format!("{message} (see '{command} --help')")
 }
 
+/// Creates the output directory of `option` (e.g. `--frames`) with its parents, refusing `-`
+/// (a directory of files cannot go to stdout) and a path that is already a file.
+pub fn create_output_dir(option: &str, dir: &std::path::Path) -> CliResult {
+    if dir == std::path::Path::new("-") {
+        return Err(CliError::usage(format!("{option}: names a directory, and `-` (stdout) cannot be one")));
+    }
+    if dir.exists() && !dir.is_dir() {
+        return Err(CliError::new(format!("{}: is a file, not a directory ({option})", dir.display())));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| CliError::new(format!("{}: {e}", dir.display())))
+}
+
 /// The result type of a tool's body.
 pub type CliResult<T = ()> = Result<T, CliError>;
 
@@ -146,7 +173,10 @@ pub fn main(tool: &str, body: impl FnOnce() -> CliResult) -> ExitCode {
         Ok(()) => ExitCode::from(EXIT_OK),
         Err(e) if e.is_broken_pipe() => ExitCode::from(EXIT_OK),
         Err(e) => {
-            let msg = e.message.replace('\n', " ");
+            let mut msg = e.message.replace('\n', " ");
+            if e.code == EXIT_USAGE {
+                msg = with_help_pointer(tool, &msg);
+            }
             eprintln!("{tool}: error: {msg}");
             ExitCode::from(e.code)
         }

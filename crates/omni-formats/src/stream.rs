@@ -351,6 +351,10 @@ impl StreamReader<Box<dyn BufRead + Send>> {
     }
 }
 
+/// Why an input without a single record is refused: a pipe whose upstream tool failed gives
+/// one, and passing it on as an empty scan would hide that failure.
+pub const EMPTY_STREAM: &str = "empty stream (no header, no frames: did the tool before this one fail?)";
+
 impl<R: BufRead> StreamReader<R> {
     pub fn new(reader: R, name: impl Into<String>) -> Self {
         StreamReader {
@@ -400,7 +404,8 @@ impl<R: BufRead> StreamReader<R> {
         &self.name
     }
 
-    /// The next record, `Ok(None)` at the end. Blank lines are skipped. A header with another
+    /// The next record, `Ok(None)` at the end; an input without any record is refused
+    /// ([`EMPTY_STREAM`]). Blank lines are skipped. A header with another
     /// format or an unknown version is refused, and so is a stream out of order: one header
     /// first, then frames (and `--keep-going`'s error records), then at most one status.
     pub fn next_record(&mut self) -> Result<Option<Record>> {
@@ -409,6 +414,10 @@ impl<R: BufRead> StreamReader<R> {
             let n = self.reader.read_line(&mut self.buf).map_err(|e| Error::io(&self.name, &e))?;
             if n == 0 {
                 self.at_end = true;
+                if !self.saw_header {
+                    // Nothing at all: most often the tool before this one in the pipe failed.
+                    return Err(Error::new(&self.name, "", EMPTY_STREAM));
+                }
                 return Ok(None);
             }
             self.line_no += 1;
@@ -419,7 +428,8 @@ impl<R: BufRead> StreamReader<R> {
             let loc = format!("line {}", self.line_no);
             // Straight into the record: the common case, without a JSON tree in between.
             let mut record = match serde_json::from_str::<Record>(line) {
-                Ok(Record::Header(_)) | Err(_) => Self::parse_checked(line, &self.name, &loc)?,
+                Ok(Record::Header(_)) | Err(_) => Self::parse_checked(line, &self.name, &loc)
+                    .map_err(|e| if self.saw_header { e } else { not_a_stream(e, line) })?,
                 Ok(record) => record,
             };
             self.check_order(&record).map_err(|m| Error::new(&self.name, &loc, m))?;
@@ -535,6 +545,21 @@ impl<R> StreamReader<R> {
             }
         })
     }
+}
+
+/// The error of a first line that is no stream record, saying what the input is instead
+/// where it can tell: another omniscan file (its `format`), or a JSON document spread over lines.
+fn not_a_stream(mut e: Error, first_line: &str) -> Error {
+    let format = serde_json::from_str::<serde_json::Value>(first_line)
+        .ok()
+        .and_then(|v| v.get("format").and_then(|f| f.as_str()).map(str::to_string));
+    let what = match format {
+        Some(f) if f != STREAM_FORMAT => format!("an {f} file"),
+        _ if first_line == "{" || first_line == "[" => "a JSON document over several lines".to_string(),
+        _ => return e,
+    };
+    e.message = format!("{what}, not an omniscan stream (JSON Lines starting with a header record); {}", e.message);
+    e
 }
 
 impl<R: BufRead> Iterator for StreamReader<R> {
@@ -673,6 +698,20 @@ mod tests {
             "{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"alpha_deg\":1,\"facet\":0,\"stripe\":[[1,2,3,4,0]]\n";
         let e = StreamReader::new(text.as_bytes(), "s.jsonl").next().unwrap().unwrap_err().to_string();
         assert!(e.contains("invalid JSON"), "{e}");
+    }
+
+    #[test]
+    fn an_empty_input_or_another_file_is_refused_saying_what_it_is() {
+        let first = |text: &str| StreamReader::new(text.as_bytes(), "in").next().unwrap().unwrap_err().to_string();
+        assert!(first("").contains("in: empty stream"), "{}", first(""));
+        assert!(first("\n\n").contains("in: empty stream"), "{}", first("\n\n"));
+        let camera = first("{\n  \"format\": \"omniscan.camera\"\n}\n");
+        assert!(camera.contains("line 1: a JSON document over several lines, not an omniscan stream"), "{camera}");
+        let truth = first("{\"format\":\"omniscan.sim-truth\",\"version\":1}\n");
+        assert!(truth.contains("an omniscan.sim-truth file, not an omniscan stream"), "{truth}");
+        // A frame before the header is a stream out of order, said as such.
+        let headless = first("{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"alpha_deg\":1,\"facet\":0}\n");
+        assert!(headless.contains("starts with a frame record"), "{headless}");
     }
 
     #[test]

@@ -149,7 +149,6 @@ pub fn run<R: BufRead + Send + 'static>(
     stop: Arc<AtomicBool>,
 ) -> Result<Summary, String> {
     let (tx, rx) = sync_channel::<Result<Record, String>>(1024);
-    let name = input.name().to_string();
     let reader = std::thread::spawn(move || read_records(input, tx));
     let queues: Vec<Arc<DropOldest<Arc<Queued>>>> =
         sinks.iter().map(|_| Arc::new(DropOldest::new(opts.queue))).collect();
@@ -169,7 +168,6 @@ pub fn run<R: BufRead + Send + 'static>(
     let mut deleter = FrameDeleter::default();
     let mut failure = None;
     let mut last_frame_at = Instant::now();
-    let mut saw_header = false;
     let mut delete_frames = opts.frames.deletes(false);
     let emit = |sweep: Sweep, at: Instant, frames_dir: Option<&str>, summary: &mut Summary| {
         let mut sweep = sweep;
@@ -188,7 +186,6 @@ pub fn run<R: BufRead + Send + 'static>(
     while !stop.load(Ordering::Relaxed) {
         match rx.recv_timeout(opts.sweep_timeout.min(Duration::from_millis(100))) {
             Ok(Ok(Record::Header(h))) => {
-                saw_header = true;
                 frames_dir = h.frames_dir.clone();
                 let live = h.extra.get(LIVE_HEADER_FIELD).and_then(|v| v.as_bool()).unwrap_or(false);
                 delete_frames = opts.frames.deletes(live);
@@ -234,9 +231,6 @@ pub fn run<R: BufRead + Send + 'static>(
         summary.dropped.insert(name.clone(), q.dropped());
     }
     let stopped = stop.load(Ordering::Relaxed);
-    if !saw_header && summary.frames == 0 && failure.is_none() && !stopped {
-        failure = Some(format!("{name}: empty stream (no header, no frames)"));
-    }
     summary.cut_short = summary.input_status.is_none() && failure.is_none() && !stopped;
     // The reader may still block on a read that never ends (SIGINT with a silent input).
     if reader.is_finished() {

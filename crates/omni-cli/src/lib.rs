@@ -89,9 +89,9 @@ pub fn stdout_error(e: std::io::Error) -> CliError {
 pub fn parse_args<P: clap::Parser>() -> CliResult<P> {
     let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
     let command = P::command();
-    let path = named_command(&command, &args).iter().map(|c| c.get_name()).collect::<Vec<_>>().join(" ");
-    let _ = HELP_COMMAND.set(path);
-    P::try_parse_from(&args).map_err(|e| usage_error(e, &command, &args))
+    let named = named_command(&command, &args);
+    let _ = HELP_COMMAND.set(command_path(&named));
+    P::try_parse_from(&args).map_err(|e| usage_error(e, &named))
 }
 
 /// The command whose `--help` a usage error points to ([`parse_args`] sets it).
@@ -105,11 +105,11 @@ fn with_help_pointer(tool: &str, message: &str) -> String {
     format!("{message} (see '{} --help')", HELP_COMMAND.get().map_or(tool, String::as_str))
 }
 
-/// A failed parse of `args` by `command` as one line ([`parse_args`]); help and version exit.
-fn usage_error(e: clap::Error, command: &clap::Command, args: &[std::ffi::OsString]) -> CliError {
+/// A failed parse as one line ([`parse_args`]), `named` the commands the arguments name; help
+/// and version exit.
+fn usage_error(e: clap::Error, named: &[&clap::Command]) -> CliError {
     use clap::error::ErrorKind;
-    let named = named_command(command, args);
-    let path = named.iter().map(|c| c.get_name()).collect::<Vec<_>>().join(" ");
+    let path = command_path(named);
     let line = match e.kind() {
         ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => e.exit(),
         ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
@@ -131,6 +131,11 @@ fn named_command<'a>(command: &'a clap::Command, args: &[std::ffi::OsString]) ->
         }
     }
     path
+}
+
+/// The commands as typed, e.g. `omni-sim scan`.
+fn command_path(named: &[&clap::Command]) -> String {
+    named.iter().map(|c| c.get_name()).collect::<Vec<_>>().join(" ")
 }
 
 /// Clap's rendered usage error as one line: the error and its details, then where the help of
@@ -304,7 +309,7 @@ mod tests {
         let argv: Vec<std::ffi::OsString> =
             std::iter::once("omni-example").chain(args.iter().copied()).map(Into::into).collect();
         let e = Example::try_parse_from(&argv).unwrap_err();
-        let error = usage_error(e, &Example::command(), &argv);
+        let error = usage_error(e, &named_command(&Example::command(), &argv));
         assert_eq!(error.code, EXIT_USAGE);
         error.message
     }

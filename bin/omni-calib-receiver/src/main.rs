@@ -228,6 +228,10 @@ enum Command {
         /// Which camera of the chain.
         #[arg(long, default_value = "cam0")]
         cam: String,
+        /// Where the camera's viewpoint sits in the world frame (mm); default: the one an
+        /// omniscan export keeps in the file (omniscan_viewpoint_mm), else 0,0,0.
+        #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+        viewpoint_mm: Option<String>,
         /// Output camera.json (`-` = stdout).
         #[arg(short, long, default_value = "camera.json")]
         output: PathBuf,
@@ -243,6 +247,10 @@ enum Command {
         /// ambiguous and refused), omnidir, pinhole or fisheye.
         #[arg(long, default_value = "auto")]
         model: export::OpencvModel,
+        /// Where the camera's viewpoint sits in the world frame (mm); default: the one an
+        /// omniscan export keeps in the file (omniscan_viewpoint_mm), else 0,0,0.
+        #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+        viewpoint_mm: Option<String>,
         /// Output camera.json (`-` = stdout).
         #[arg(short, long, default_value = "camera.json")]
         output: PathBuf,
@@ -267,8 +275,12 @@ fn main() -> std::process::ExitCode {
                 let opts = session::ConvertOptions { camera, to, mirror, max_ray_deg, max_pixel_px, output };
                 session::convert(&opts, &out)
             }
-            Some(Command::ImportKalibr { input, cam, output }) => session::import_kalibr(&input, &cam, &output),
-            Some(Command::ImportOpencv { input, model, output }) => session::import_opencv(&input, model, &output),
+            Some(Command::ImportKalibr { input, cam, viewpoint_mm, output }) => {
+                session::import_kalibr(&input, &cam, viewpoint_mm.as_deref(), &output)
+            }
+            Some(Command::ImportOpencv { input, model, viewpoint_mm, output }) => {
+                session::import_opencv(&input, model, viewpoint_mm.as_deref(), &output)
+            }
             Some(Command::FindAnnulus { images }) => session::find_annulus(&images, &out).and_then(|a| {
                 // Through an io error, not println!: a closed stdout is a clean exit, not a panic.
                 writeln!(std::io::stdout(), "{:.3},{:.3},{:.3},{:.3}", a[0], a[1], a[2], a[3])

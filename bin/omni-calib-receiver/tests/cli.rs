@@ -367,6 +367,12 @@ fn export_and_import_kalibr_and_opencv_round_trip() {
         for key in ["xi", "fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2", "width", "height"] {
             assert_eq!(read["model"][key], original["model"][key], "{to}: {key}");
         }
+        let viewpoint = |v: &serde_json::Value| serde_json::from_value::<[f64; 3]>(v["model"]["viewpoint_mm"].clone());
+        assert_eq!(viewpoint(&read).unwrap(), viewpoint(&original).unwrap(), "{to}: the viewpoint comes back");
+        // --viewpoint-mm places the imported camera where the user says.
+        let out = bin().arg(import).arg(&file).args(["--viewpoint-mm", "1,-2,3", "-o", "-"]).output().unwrap();
+        let read: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(read["model"]["viewpoint_mm"], serde_json::json!([1.0, -2.0, 3.0]), "{to}");
     }
     let out = bin().arg("export").arg(&cam).arg("--to").arg("ocam").arg("-o").arg("-").output().unwrap();
     assert_eq!(out.status.code(), Some(1));

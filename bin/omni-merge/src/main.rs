@@ -23,7 +23,7 @@ outliers, in that order, and writes one cloud: PLY, PCD or LAS by the output's e
 --format), optionally with normals facing the sensor (with --poses: its position when it took \
 each point's frame), and/or a ROS 2 bag (--rosbag) with the merged \
 cloud as one sensor_msgs/msg/PointCloud2 message in frame `map`, stamped with the latest frame \
-timestamp. Scalar fields keep their PLY types (uchar colours stay uchar).\n\n\
+timestamp (0 where no frame has one). Scalar fields keep their PLY types (uchar colours stay uchar).\n\n\
 Outlier removal matches Open3D: --statistical K,STD_RATIO is remove_statistical_outlier(nb_neighbors=K, \
 std_ratio): mean distance to the K nearest points counting the point itself, kept if below \
 mean + STD_RATIO·std over the cloud. --radius R,MIN_POINTS is remove_radius_outlier(nb_points=MIN_POINTS, \
@@ -199,6 +199,12 @@ fn main() -> std::process::ExitCode {
             omni_cli::warn("omni-merge", "no points left after cropping and filtering; writing an empty cloud");
         }
         args.cloud.finish_cloud_seen_from(&mut cloud, viewpoints.as_deref())?;
+        if args.cloud.rosbag.is_some() && latest_us.is_none() {
+            omni_cli::warn(
+                "omni-merge",
+                "no input frame has a timestamp_us (PLY clouds, simulated scans): the bag's cloud is stamped 0",
+            );
+        }
         let message = BagMessage { stamp_ns: latest_us.unwrap_or(0) * 1000, points: 0..cloud.len() };
         args.cloud.write(&cloud, args.output.as_deref(), &[message], "map")?;
         if args.stats {

@@ -164,16 +164,14 @@ pub struct FrameSpan {
 /// A frame's bag stamp (ns): its `timestamp_us`, else `seq × period_us` if a period is given,
 /// else an error naming the frame.
 pub fn frame_stamp_ns(seq: u64, timestamp_us: Option<u64>, period_us: Option<f64>) -> Result<u64, String> {
-    let stamp_us = match (timestamp_us, period_us) {
-        (Some(t), _) => t as f64,
-        (None, Some(p)) => seq as f64 * p,
-        (None, None) => {
-            return Err(format!(
-                "frame {seq}: no timestamp_us to stamp its bag message with (give --stamp-period-ms for streams without timestamps)"
-            ));
-        }
-    };
-    Ok((stamp_us * 1000.0).round() as u64)
+    match (timestamp_us, period_us) {
+        // In integers: an epoch time in µs has 16 digits, more than an f64 keeps below the µs.
+        (Some(t), _) => t.checked_mul(1000).ok_or_else(|| format!("frame {seq}: timestamp_us {t} is beyond 2554")),
+        (None, Some(p)) => Ok((seq as f64 * p * 1000.0).round() as u64),
+        (None, None) => Err(format!(
+            "frame {seq}: no timestamp_us to stamp its bag message with (give --stamp-period-ms for streams without timestamps)"
+        )),
+    }
 }
 
 /// The bag messages of frames (in stream order, contiguous point ranges): one per frame or per
@@ -237,5 +235,13 @@ mod tests {
         assert!(e.starts_with("frame 4: no timestamp_us"), "{e}");
         let m = bag_messages(&frames, BagGrouping::Frame, Some(5000.0)).unwrap();
         assert_eq!(m[0].stamp_ns, 20_000_000);
+    }
+
+    #[test]
+    fn epoch_timestamps_keep_their_last_microsecond() {
+        // 2024-12-05 in µs has 16 digits: through f64 nanoseconds it came out 88 ns early.
+        assert_eq!(frame_stamp_ns(0, Some(1_733_390_000_000_007), None), Ok(1_733_390_000_000_007_000));
+        assert_eq!(frame_stamp_ns(1, Some(1_733_390_000_033_340), Some(5.0)), Ok(1_733_390_000_033_340_000));
+        assert!(frame_stamp_ns(2, Some(u64::MAX / 100), None).unwrap_err().starts_with("frame 2: timestamp_us"));
     }
 }

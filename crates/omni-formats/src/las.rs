@@ -99,8 +99,21 @@ pub fn las_bytes(cloud: &PointCloud, opts: &CloudOptions) -> Result<Vec<u8>, Str
         };
         writer.write_point(point).map_err(|e| format!("point {i}: {e}"))?;
     }
-    let cursor = writer.into_inner().map_err(|e| e.to_string())?;
-    Ok(cursor.into_inner())
+    let mut bytes = writer.into_inner().map_err(|e| e.to_string())?.into_inner();
+    zero_legacy_point_counts(&mut bytes);
+    Ok(bytes)
+}
+
+/// Offsets (bytes) of the LAS 1.4 header's legacy point count (u32) and legacy counts by return
+/// (5 × u32), which follow it.
+const LEGACY_COUNTS: std::ops::Range<usize> = 107..131;
+
+/// LAS 1.4 (R15, §2.4) requires the legacy point counts to be 0 for point formats 6 and above,
+/// which only the 64-bit counts describe; the `las` crate writes them as for format 0–5.
+fn zero_legacy_point_counts(bytes: &mut [u8]) {
+    if let Some(legacy) = bytes.get_mut(LEGACY_COUNTS) {
+        legacy.fill(0);
+    }
 }
 
 #[cfg(test)]
@@ -120,6 +133,10 @@ mod tests {
         }
     }
 
+    fn bytes_of(units: Units) -> Vec<u8> {
+        las_bytes(&cloud(), &CloudOptions { units, ..Default::default() }).unwrap()
+    }
+
     #[test]
     fn millimetres_survive_in_metres_and_millimetres() {
         for units in [Units::Millimetres, Units::Metres] {
@@ -128,6 +145,11 @@ mod tests {
             let header = reader.header().clone();
             assert_eq!((header.version().major, header.version().minor), (1, 4));
             assert_eq!(header.number_of_points(), 3);
+            assert_eq!(header.number_of_points_by_return(1), Some(3));
+            let (mut count, mut by_return) = ([0u8; 4], [0u8; 20]);
+            count.copy_from_slice(&bytes_of(units)[107..111]);
+            by_return.copy_from_slice(&bytes_of(units)[111..131]);
+            assert_eq!((count, by_return), ([0; 4], [0; 20]), "LAS 1.4: legacy counts are 0 for format 6");
             let points: Vec<las::Point> = reader.read_all().unwrap().points().collect::<Result<_, _>>().unwrap();
             for (p, want) in points.iter().zip(&cloud().positions) {
                 let got = [p.x, p.y, p.z].map(|c| c / units.per_mm());

@@ -315,6 +315,8 @@ pub struct StreamReader<R> {
     line_no: usize,
     buf: String,
     saw_header: bool,
+    /// Whether any non-blank line was read: an input without one is refused once.
+    saw_line: bool,
     saw_status: bool,
     at_end: bool,
     base_dir: Option<std::path::PathBuf>,
@@ -363,6 +365,7 @@ impl<R: BufRead> StreamReader<R> {
             line_no: 0,
             buf: String::new(),
             saw_header: false,
+            saw_line: false,
             saw_status: false,
             at_end: false,
             base_dir: None,
@@ -413,8 +416,9 @@ impl<R: BufRead> StreamReader<R> {
             self.buf.clear();
             let n = self.reader.read_line(&mut self.buf).map_err(|e| Error::io(&self.name, &e))?;
             if n == 0 {
+                let first_time = !self.at_end;
                 self.at_end = true;
-                if !self.saw_header {
+                if first_time && !self.saw_line {
                     // Nothing at all: most often the tool before this one in the pipe failed.
                     return Err(Error::new(&self.name, "", EMPTY_STREAM));
                 }
@@ -425,6 +429,7 @@ impl<R: BufRead> StreamReader<R> {
             if line.is_empty() {
                 continue;
             }
+            self.saw_line = true;
             let loc = format!("line {}", self.line_no);
             // Straight into the record: the common case, without a JSON tree in between.
             let mut record = match serde_json::from_str::<Record>(line) {
@@ -594,9 +599,11 @@ impl<W: Write> StreamWriter<W> {
 
     pub fn write(&mut self, record: &Record) -> Result<()> {
         match record {
-            Record::Header(h) if self.binary => {
+            // The version says how this writer writes, whatever the stream read was: a
+            // version 1 reader reads a JSON-only stream.
+            Record::Header(h) => {
                 let mut h = h.clone();
-                h.version = h.version.max(STREAM_BINARY_VERSION);
+                h.version = if self.binary { STREAM_BINARY_VERSION } else { STREAM_VERSION };
                 self.write_line(&Record::Header(h))?;
             }
             Record::Frame(f) if self.binary && (f.stripe.is_some() || f.points.is_some()) => {
@@ -705,6 +712,9 @@ mod tests {
         let first = |text: &str| StreamReader::new(text.as_bytes(), "in").next().unwrap().unwrap_err().to_string();
         assert!(first("").contains("in: empty stream"), "{}", first(""));
         assert!(first("\n\n").contains("in: empty stream"), "{}", first("\n\n"));
+        // Refused once: a reader asked again is at the end.
+        let mut empty = StreamReader::new("".as_bytes(), "in");
+        assert!(empty.next_record().is_err() && empty.next_record().unwrap().is_none());
         let camera = first("{\n  \"format\": \"omniscan.camera\"\n}\n");
         assert!(camera.contains("line 1: a JSON document over several lines, not an omniscan stream"), "{camera}");
         let truth = first("{\"format\":\"omniscan.sim-truth\",\"version\":1}\n");
@@ -847,6 +857,12 @@ mod tests {
             assert_eq!(r, &Record::Frame(Box::new(f.clone())));
         }
         assert!(matches!(records[5], Record::Status(_)));
+        // Written again as JSON, the stream is version 1 again: every reader reads it.
+        let mut w = StreamWriter::new(Vec::new(), "mem");
+        records.iter().try_for_each(|r| w.write(r)).unwrap();
+        let text = String::from_utf8(w.into_inner()).unwrap();
+        assert!(text.starts_with("{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":1"), "{text}");
+        assert_eq!(StreamReader::new(text.as_bytes(), "json").collect::<Result<Vec<_>>>().unwrap()[1..], records[1..]);
     }
 
     #[test]

@@ -20,11 +20,44 @@ use omni_model::{FisheyeParams, MeiParams, OcamParams, PinholeParams};
 
 /// The frame change between Kalibr/OpenCV and omniscan, as written into exported files.
 pub const FRAME_NOTE: &str = "frame: this camera's unit sphere (Xs, Ys, Zs) is (x, y, -z) of the omniscan world frame \
-about the viewpoint (viewpoint_mm in camera.json); pixels: x right, y down, (0, 0) at the centre of the top-left pixel";
+about the viewpoint (omniscan_viewpoint_mm, mm, world frame; camera.json's viewpoint_mm); pixels: x right, y down, (0, 0) at the centre of the top-left pixel";
 
 /// The frame change for the ordinary (pinhole, fisheye) cameras, as written into exported files.
 pub const CAMERA_FRAME_NOTE: &str = "frame: this camera's frame (X, Y, Z), Z forward, is (x, y, -z) of the omniscan world frame \
-about the viewpoint (viewpoint_mm in camera.json); pixels: x right, y down, (0, 0) at the centre of the top-left pixel";
+about the viewpoint (omniscan_viewpoint_mm, mm, world frame; camera.json's viewpoint_mm); pixels: x right, y down, (0, 0) at the centre of the top-left pixel";
+
+/// The key an exported file keeps the camera's viewpoint under (mm, omniscan world frame), so
+/// that importing it gives back the same rays: neither OpenCV's nor Kalibr's files have one,
+/// and both readers pass over keys they do not know.
+pub const VIEWPOINT_KEY: &str = "omniscan_viewpoint_mm";
+
+/// A number as YAML 1.1 readers (PyYAML, which Kalibr uses; OpenCV) read a float: the shortest
+/// text that reads back to the same f64, with a decimal point and a signed exponent (PyYAML
+/// reads `2.4e2` as a string).
+pub fn yaml_float(x: f64) -> String {
+    let text = format!("{x:e}");
+    let (mantissa, exponent) = text.split_once('e').expect("{:e} writes an exponent");
+    let mantissa = if mantissa.contains('.') { mantissa.to_string() } else { format!("{mantissa}.0") };
+    let exponent = if exponent.starts_with('-') { exponent.to_string() } else { format!("+{exponent}") };
+    format!("{mantissa}e{exponent}")
+}
+
+/// `[a, b, c]` of [`yaml_float`]s.
+fn yaml_list(v: &[f64]) -> String {
+    v.iter().map(|x| yaml_float(*x)).collect::<Vec<_>>().join(", ")
+}
+
+/// The camera's viewpoint kept in an exported file ([`VIEWPOINT_KEY`]) where `text` has one
+/// under `prefix` (`cam0.` in Kalibr's files, nothing in OpenCV's).
+pub fn viewpoint_in(text: &str, prefix: &str) -> Result<Option<[f64; 3]>, String> {
+    let doc = yaml::FlatYaml::parse(text)?;
+    let key = format!("{prefix}{VIEWPOINT_KEY}");
+    if !doc.has_prefix(&key) {
+        return Ok(None);
+    }
+    let v = doc.numbers(&key, Some(3))?;
+    Ok(Some([v[0], v[1], v[2]]))
+}
 
 /// The centre header OCamCalib v3 writes: the values are 0-based, as its C code reads them.
 const OCAM_V3_CENTRE_HEADER: &str = "#center: \"row\" and \"column\", starting from 0 (C convention)";
@@ -78,7 +111,9 @@ pub fn ocam_calib_results(p: &OcamParams) -> (String, InverseFit) {
          #image size: \"height\" and \"width\"\n\n\
          {} {}\n\n\
          #omniscan: inverse polynomial of degree {} within {:.4} px of the direct one over radii {:.1}-{:.1} px about the centre\n\
-         #omniscan: OCamCalib's (x, y, z) is (y, x, z) of the omniscan world frame about the viewpoint (rows first)\n",
+         #omniscan: OCamCalib's (x, y, z) is (y, x, z) of the omniscan world frame about the viewpoint (rows first)\n\
+         {OCAM_KEPT} viewpoint_mm {} {} {}\n\
+         {OCAM_KEPT} annulus_px {} {}\n",
         p.poly.len(),
         list(&p.poly),
         p.inv_poly.len(),
@@ -94,6 +129,11 @@ pub fn ocam_calib_results(p: &OcamParams) -> (String, InverseFit) {
         fit.max_error_px,
         fit.rho_range_px[0],
         fit.rho_range_px[1],
+        p.viewpoint_mm[0],
+        p.viewpoint_mm[1],
+        p.viewpoint_mm[2],
+        p.inner_radius_px,
+        p.outer_radius_px,
     );
     (text, fit)
 }
@@ -168,8 +208,32 @@ pub fn parse_ocam_calib_results(text: &str) -> Result<(OcamParams, CentreOrigin)
         outer_radius_px: 0.0,
         viewpoint_mm: [0.0; 3],
     };
+    let mut p = p;
+    if let Some(v) = ocam_kept(text, "viewpoint_mm", 3)? {
+        p.viewpoint_mm = [v[0], v[1], v[2]];
+    }
+    if let Some(r) = ocam_kept(text, "annulus_px", 2)? {
+        (p.inner_radius_px, p.outer_radius_px) = (r[0], r[1]);
+    }
     p.validate()?;
     Ok((p, origin))
+}
+
+/// The comment that keeps what OCamCalib's file has no place for (the viewpoint, the annulus),
+/// so that an exported camera imports back the same.
+const OCAM_KEPT: &str = "#omniscan kept:";
+
+/// The `n` numbers of the [`OCAM_KEPT`] line named `name`, if the file has one.
+fn ocam_kept(text: &str, name: &str, n: usize) -> Result<Option<Vec<f64>>, String> {
+    let prefix = format!("{OCAM_KEPT} {name} ");
+    let Some(line) = text.lines().find_map(|l| l.trim().strip_prefix(prefix.as_str())) else {
+        return Ok(None);
+    };
+    let v: Vec<f64> = line.split_whitespace().filter_map(|t| t.parse().ok()).filter(|x: &f64| x.is_finite()).collect();
+    match v.len() == n {
+        true => Ok(Some(v)),
+        false => Err(format!("{OCAM_KEPT} {name}: expected {n} finite numbers, got {line:?}")),
+    }
 }
 
 /// Kalibr's default image topic for `rostopic` (what `--rostopic` overrides).
@@ -179,7 +243,8 @@ pub const DEFAULT_ROSTOPIC: &str = "/omni/image_raw";
 /// topic Kalibr's tools read and no overlapping cameras.
 pub fn kalibr_camchain(p: &MeiParams, rostopic: &str) -> String {
     let intrinsics = [p.xi, p.fx_px, p.fy_px, p.cx_px, p.cy_px];
-    kalibr_text("omni", &intrinsics, "radtan", &[p.k1, p.k2, p.p1, p.p2], (p.width, p.height), rostopic, FRAME_NOTE)
+    let d = [p.k1, p.k2, p.p1, p.p2];
+    kalibr_text("omni", &intrinsics, "radtan", &d, (p.width, p.height), p.viewpoint_mm, rostopic, FRAME_NOTE)
 }
 
 /// Kalibr `camchain.yaml` of any model Kalibr has: Mei (`omni` with `radtan`), pinhole
@@ -197,42 +262,60 @@ pub fn kalibr_camchain_of(spec: &CameraSpec, rostopic: &str) -> Result<String, S
             }
             let intrinsics = [p.fx_px, p.fy_px, p.cx_px, p.cy_px];
             let d = [p.k1, p.k2, p.p1, p.p2];
-            Ok(kalibr_text("pinhole", &intrinsics, "radtan", &d, (p.width, p.height), rostopic, CAMERA_FRAME_NOTE))
+            let size = (p.width, p.height);
+            Ok(kalibr_text("pinhole", &intrinsics, "radtan", &d, size, p.viewpoint_mm, rostopic, CAMERA_FRAME_NOTE))
         }
         CameraSpec::Fisheye(p) => {
             let intrinsics = [p.fx_px, p.fy_px, p.cx_px, p.cy_px];
             let d = [p.k1, p.k2, p.k3, p.k4];
-            Ok(kalibr_text("pinhole", &intrinsics, "equidistant", &d, (p.width, p.height), rostopic, CAMERA_FRAME_NOTE))
+            let size = (p.width, p.height);
+            Ok(kalibr_text(
+                "pinhole",
+                &intrinsics,
+                "equidistant",
+                &d,
+                size,
+                p.viewpoint_mm,
+                rostopic,
+                CAMERA_FRAME_NOTE,
+            ))
         }
         other => Err(format!("needs a camera of kind mei, pinhole or fisheye, this one is {}", other.kind())),
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn kalibr_text(
     model: &str,
     intrinsics: &[f64],
     distortion: &str,
     coeffs: &[f64],
     size: (u32, u32),
+    viewpoint_mm: [f64; 3],
     rostopic: &str,
     note: &str,
 ) -> String {
-    let list = |v: &[f64]| v.iter().map(|x| format!("{x:e}")).collect::<Vec<_>>().join(", ");
     format!(
         "# Kalibr camchain ({model} + {distortion}), written by omniscan.\n# {note}.\n\
          cam0:\n  camera_model: {model}\n  intrinsics: [{}]\n  distortion_model: {distortion}\n  \
-         distortion_coeffs: [{}]\n  resolution: [{}, {}]\n  cam_overlaps: []\n  rostopic: {rostopic}\n",
-        list(intrinsics),
-        list(coeffs),
+         distortion_coeffs: [{}]\n  resolution: [{}, {}]\n  cam_overlaps: []\n  rostopic: {rostopic}\n  \
+         {VIEWPOINT_KEY}: [{}]\n",
+        yaml_list(intrinsics),
+        yaml_list(coeffs),
         size.0,
-        size.1
+        size.1,
+        yaml_list(&viewpoint_mm)
     )
 }
 
 /// An OpenCV FileStorage matrix entry (`dt: d`, numbers to full precision).
 fn opencv_matrix(name: &str, rows: usize, cols: usize, v: &[f64]) -> String {
-    let data = v.iter().map(|x| if *x == 0.0 { "0.".to_string() } else { format!("{x:e}") }).collect::<Vec<_>>();
-    format!("{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: [ {} ]\n", data.join(", "))
+    format!("{name}: !!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: [ {} ]\n", yaml_list(v))
+}
+
+/// The viewpoint line of an OpenCV FileStorage file ([`VIEWPOINT_KEY`]).
+fn opencv_viewpoint(viewpoint_mm: [f64; 3]) -> String {
+    format!("{VIEWPOINT_KEY}: [ {} ]\n", yaml_list(&viewpoint_mm))
 }
 
 /// OpenCV's `calibrateCamera` parameters as a FileStorage YAML file, with the keys OpenCV's
@@ -242,11 +325,12 @@ pub fn opencv_pinhole_yaml(p: &PinholeParams) -> String {
     let k = [p.fx_px, 0.0, p.cx_px, 0.0, p.fy_px, p.cy_px, 0.0, 0.0, 1.0];
     format!(
         "%YAML:1.0\n---\n# OpenCV calibrateCamera (camera_matrix, distortion_coefficients = k1 k2 p1 p2 k3), written by omniscan.\n\
-         # {CAMERA_FRAME_NOTE}.\nimage_width: {}\nimage_height: {}\n{}{}",
+         # {CAMERA_FRAME_NOTE}.\nimage_width: {}\nimage_height: {}\n{}{}{}",
         p.width,
         p.height,
         opencv_matrix("camera_matrix", 3, 3, &k),
-        opencv_matrix("distortion_coefficients", 5, 1, &[p.k1, p.k2, p.p1, p.p2, p.k3])
+        opencv_matrix("distortion_coefficients", 5, 1, &[p.k1, p.k2, p.p1, p.p2, p.k3]),
+        opencv_viewpoint(p.viewpoint_mm)
     )
 }
 
@@ -256,11 +340,12 @@ pub fn opencv_fisheye_yaml(p: &FisheyeParams) -> String {
     let k = [p.fx_px, 0.0, p.cx_px, 0.0, p.fy_px, p.cy_px, 0.0, 0.0, 1.0];
     format!(
         "%YAML:1.0\n---\n# OpenCV cv::fisheye (K, D = k1 k2 k3 k4), written by omniscan.\n# {CAMERA_FRAME_NOTE}.\n\
-         image_width: {}\nimage_height: {}\n{}{}",
+         image_width: {}\nimage_height: {}\n{}{}{}",
         p.width,
         p.height,
         opencv_matrix("K", 3, 3, &k),
-        opencv_matrix("D", 4, 1, &[p.k1, p.k2, p.k3, p.k4])
+        opencv_matrix("D", 4, 1, &[p.k1, p.k2, p.k3, p.k4]),
+        opencv_viewpoint(p.viewpoint_mm)
     )
 }
 
@@ -276,12 +361,16 @@ pub fn opencv_yaml_of(spec: &CameraSpec) -> Result<String, String> {
 
 /// OpenCV `cv::omnidir` parameters as an OpenCV FileStorage YAML file: `K`, `D`, `xi`.
 pub fn opencv_omnidir_yaml(p: &MeiParams) -> String {
+    let k = [p.fx_px, 0.0, p.cx_px, 0.0, p.fy_px, p.cy_px, 0.0, 0.0, 1.0];
     format!(
         "%YAML:1.0\n---\n# OpenCV cv::omnidir (K, D = k1 k2 p1 p2, xi), written by omniscan.\n# {FRAME_NOTE}.\n\
-         image_width: {}\nimage_height: {}\nK: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   \
-         data: [ {:e}, 0., {:e}, 0., {:e}, {:e}, 0., 0., 1. ]\nD: !!opencv-matrix\n   rows: 1\n   cols: 4\n   dt: d\n   \
-         data: [ {:e}, {:e}, {:e}, {:e} ]\nxi: !!opencv-matrix\n   rows: 1\n   cols: 1\n   dt: d\n   data: [ {:e} ]\n",
-        p.width, p.height, p.fx_px, p.cx_px, p.fy_px, p.cy_px, p.k1, p.k2, p.p1, p.p2, p.xi
+         image_width: {}\nimage_height: {}\n{}{}{}{}",
+        p.width,
+        p.height,
+        opencv_matrix("K", 3, 3, &k),
+        opencv_matrix("D", 1, 4, &[p.k1, p.k2, p.p1, p.p2]),
+        opencv_matrix("xi", 1, 1, &[p.xi]),
+        opencv_viewpoint(p.viewpoint_mm)
     )
 }
 
@@ -610,6 +699,37 @@ mod tests {
     }
 
     #[test]
+    fn yaml_floats_are_what_pyyaml_reads_as_floats_and_read_back_exactly() {
+        for (x, text) in [(241.67485968203013, "2.4167485968203013e+2"), (80.0, "8.0e+1"), (0.0, "0.0e+0")] {
+            assert_eq!(yaml_float(x), text);
+        }
+        assert_eq!(yaml_float(-6.346596602367157e-6), "-6.346596602367157e-6");
+        // PyYAML's float pattern (YAML 1.1): a point, then an exponent with its sign.
+        for x in [1.0, -2.5e-300, 123456.789, f64::MAX, f64::MIN_POSITIVE] {
+            let t = yaml_float(x);
+            let (mantissa, exponent) = t.split_once('e').unwrap();
+            assert!(mantissa.contains('.') && exponent.starts_with(['+', '-']), "{t}");
+            assert_eq!(t.parse::<f64>().unwrap(), x);
+        }
+    }
+
+    #[test]
+    fn exports_keep_the_viewpoint_and_the_annulus_for_their_import() {
+        let p = MeiParams { viewpoint_mm: [1.5, -2.0, 80.0], ..mei_sample() };
+        assert_eq!(viewpoint_in(&opencv_omnidir_yaml(&p), "").unwrap(), Some(p.viewpoint_mm));
+        assert_eq!(viewpoint_in(&kalibr_camchain(&p, DEFAULT_ROSTOPIC), "cam0.").unwrap(), Some(p.viewpoint_mm));
+        assert_eq!(viewpoint_in("%YAML:1.0\n---\nxi: 1.0\n", "").unwrap(), None);
+        let o = OcamParams {
+            viewpoint_mm: [0.0, 0.0, 80.0],
+            inner_radius_px: 90.0,
+            outer_radius_px: 400.0,
+            ..ocam_sample()
+        };
+        let (q, _) = parse_ocam_calib_results(&ocam_calib_results(&o).0).unwrap();
+        assert_eq!((q.viewpoint_mm, q.inner_radius_px, q.outer_radius_px), ([0.0, 0.0, 80.0], 90.0, 400.0));
+    }
+
+    #[test]
     fn opencv_export_reads_back_and_skew_is_refused() {
         let p = mei_sample();
         let text = opencv_omnidir_yaml(&p);
@@ -618,7 +738,8 @@ mod tests {
         assert_eq!(q, p);
         let cam = MeiCamera::new(q).unwrap();
         assert!(cam.pixel_to_ray(&omni_geom::Vector2::new(500.0, 300.0)).is_some());
-        let skewed = text.replacen("data: [ 3.105e2, 0.,", "data: [ 3.105e2, 0.5,", 1);
+        let skewed = text.replacen("data: [ 3.105e+2, 0.0e+0,", "data: [ 3.105e+2, 0.5,", 1);
+        assert_ne!(skewed, text);
         assert!(parse_opencv_omnidir(&skewed).unwrap_err().contains("no skew"), "{skewed}");
         let no_size = text.replace("image_width: 752\n", "");
         assert_eq!(parse_opencv_omnidir(&no_size).unwrap_err(), "image_width: missing");

@@ -28,25 +28,39 @@ pub fn import_ocam(input: &Path, output: &Path) -> Result<(), Error> {
 
 /// Camera `cam` of a Kalibr camchain.yaml (`-` = stdin) to camera.json (kind mei, pinhole or
 /// fisheye, as the file's camera and distortion models say).
-pub fn import_kalibr(input: &Path, cam: &str, output: &Path) -> Result<(), Error> {
-    import_spec(input, output, "kalibr", |t| export::parse_kalibr_camera(t, cam))
+pub fn import_kalibr(input: &Path, cam: &str, viewpoint: Option<&str>, output: &Path) -> Result<(), Error> {
+    let viewpoint_prefix = format!("{cam}.");
+    import_spec(input, output, "kalibr", |t| export::parse_kalibr_camera(t, cam), (viewpoint, &viewpoint_prefix))
 }
 
 /// An OpenCV FileStorage YAML file (`-` = stdin) of the model `which` (omnidir, calibrateCamera's
 /// pinhole, fisheye; auto: see [`export::OpencvModel::Auto`]) to camera.json.
-pub fn import_opencv(input: &Path, which: export::OpencvModel, output: &Path) -> Result<(), Error> {
-    import_spec(input, output, "opencv", |t| export::parse_opencv(t, which))
+pub fn import_opencv(
+    input: &Path,
+    which: export::OpencvModel,
+    viewpoint: Option<&str>,
+    output: &Path,
+) -> Result<(), Error> {
+    import_spec(input, output, "opencv", |t| export::parse_opencv(t, which), (viewpoint, ""))
 }
 
-/// Imports a Kalibr or OpenCV file with `parse`; `source` names the source format.
+/// Imports a Kalibr or OpenCV file with `parse`; `source` names the source format. The
+/// viewpoint (mm) is `--viewpoint-mm` (`viewpoint.0`) if given, else the one an omniscan export
+/// kept in the file under `viewpoint.1` ([`export::VIEWPOINT_KEY`]), else the origin.
 fn import_spec(
     input: &Path,
     output: &Path,
     source: &str,
     parse: impl Fn(&str) -> Result<CameraSpec, String>,
+    (viewpoint, viewpoint_prefix): (Option<&str>, &str),
 ) -> Result<(), Error> {
     let (text, name) = read_text(input)?;
-    let spec = parse(&text).map_err(|e| format!("{name}: {e}"))?;
+    let mut spec = parse(&text).map_err(|e| format!("{name}: {e}"))?;
+    let kept = export::viewpoint_in(&text, viewpoint_prefix).map_err(|e| format!("{name}: {e}"))?;
+    match viewpoint {
+        Some(v) => spec.set_viewpoint_mm(super::parse_viewpoint(v)?),
+        None => spec.set_viewpoint_mm(kept.unwrap_or([0.0; 3])),
+    }
     let (format, frame) = match &spec {
         CameraSpec::Mei(_) => (format!("{source}-omni"), export::FRAME_NOTE),
         other => (format!("{source}-{}", other.kind()), export::CAMERA_FRAME_NOTE),

@@ -323,10 +323,14 @@ fn a_persistent_emulator_serves_several_tool_runs() {
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         assert!(String::from_utf8_lossy(&out.stdout).contains("36000 counts/rev"));
     }
-    let out = emu.scan(&["--angles", "0,15", "--facets", "0,6"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let (frames, status) = read_manifest(&emu.manifest_path());
-    assert_eq!((frames.len(), status.frames_missing), (4, 0), "{status:?}");
+    // Scan after scan: a controller that stays powered remembers the last session's command
+    // ids and would answer them again without running them, so each session numbers anew.
+    for run in 0..2 {
+        let out = emu.scan(&["--angles", "0,15", "--facets", "0,6"]);
+        assert!(out.status.success(), "scan {run}: {}", String::from_utf8_lossy(&out.stderr));
+        let (frames, status) = read_manifest(&emu.manifest_path());
+        assert_eq!((frames.len(), status.frames_missing), (4, 0), "scan {run}: {status:?}");
+    }
 }
 
 #[test]

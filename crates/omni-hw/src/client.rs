@@ -81,12 +81,27 @@ pub struct Client<P> {
     pub retries: u64,
 }
 
+/// The first command id of a session: new to the controller. A controller that stays powered
+/// between sessions remembers the previous session's last ids and answers them again without
+/// running them (PROTOCOL.md §3), so a session numbering from 1 again would have its `ARM`
+/// taken for an old one. The clock's nanoseconds and the process id make a start that lands
+/// within one session's few hundred ids of an earlier one's about once in ten million.
+fn session_first_id() -> u32 {
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    let mixed = (nanos as u64) ^ ((std::process::id() as u64) << 32);
+    // SplitMix64's finaliser spreads neighbouring clock values over the whole range.
+    let mut z = mixed.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    ((z ^ (z >> 31)) as u32).max(1)
+}
+
 impl<P: Read + Write> Client<P> {
     pub fn new(port: P, options: ClientOptions) -> Self {
         Client {
             port,
             reader: LineReader::new(),
-            next_id: 1,
+            next_id: session_first_id(),
             inbox: VecDeque::new(),
             options,
             unparsable: Vec::new(),

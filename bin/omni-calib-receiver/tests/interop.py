@@ -306,12 +306,14 @@ def ordinary_checks(tmp):
         Kk = np.array([[fu, 0, pu], [0, fv, pv], [0, 0, 1]])
         kal = cv_ordinary(to_cv(points, vp), Kk, c0["distortion_coeffs"], fisheye)
         check(f"kalibr pinhole-{dist} export: points -> pixels, ours vs cv2", np.abs(kal - ours).max(), 1e-6, "px")
-        # Written back by PyYAML in Kalibr's layout and imported: the same camera.
+        # Written back by PyYAML in Kalibr's layout and imported: the same camera, at the same
+        # viewpoint (the export keeps it as omniscan_viewpoint_mm; PyYAML reads it as numbers).
+        assert c0["omniscan_viewpoint_mm"] == vp, c0
         with open(chain, "w") as f:
             yaml.safe_dump({"cam0": c0}, f)
         back = os.path.join(tmp, "from_kalibr.json")
         run("import-kalibr", chain, "-o", back)
-        again = np.array([r["px"] for r in query(back, np.asarray(points) - np.asarray(vp))])
+        again = np.array([r["px"] for r in query(back, points)])
         check(f"kalibr pinhole-{dist} import: points -> pixels vs cv2", np.abs(kal - again).max(), 1e-6, "px")
     # Kalibr's radtan has no k3: a pinhole with k3 is refused, not written wrong.
     p = subprocess.run([BIN, "export", os.path.join(tmp, "pinhole.json"), "--to", "kalibr", "-o", chain],

@@ -340,7 +340,7 @@ fn scan(a: ScanArgs) -> CliResult {
     let out_name = omni_formats::io::display_name(&a.output, "stdout");
     let mut writer = StreamWriter::new(open_output(&a.output)?, out_name);
     let mut header = Header::new(&format!("{TOOL} {}", env!("CARGO_PKG_VERSION")));
-    header.frames_dir = Some(a.frames.display().to_string());
+    header.frames_dir = Some(omni_formats::stream::frames_dir_for_manifest(&a.output, &a.frames));
     header.extra.insert(
         "controller".into(),
         serde_json::json!({"port": a.port.port, "firmware": info.firmware, "protocol": info.protocol,
@@ -364,15 +364,33 @@ fn scan(a: ScanArgs) -> CliResult {
             return Err(CliError::new(msg));
         }
     };
+    let hint = match a.camera.camera {
+        Some(_) => "can the camera keep up with the trigger rate? Its counters are in the status record".to_string(),
+        None => format!(
+            "is --frames {} the directory the camera writes to, and can the camera keep up?",
+            a.frames.display()
+        ),
+    };
     let bar = omni_cli::progress(expected_triggers(&schedule, &cfg), "scan");
     let mut write_error = None;
     // Losses are warned about one by one up to this many; the status record counts them all.
     const MAX_WARNINGS: usize = 20;
     let mut warnings = 0;
+    let mut missing = 0u64;
     let mut sink = |e: &PairEvent| -> Result<(), String> {
         // Each trigger ends paired or missing exactly once.
         if matches!(e, PairEvent::Paired(_) | PairEvent::FrameMissing { .. }) {
             bar.inc(1);
+        }
+        if matches!(e, PairEvent::FrameMissing { .. }) {
+            missing += 1;
+            // A scan until stopped has no end at which to find it failed: it stops at once,
+            // instead of running on with the lasers firing for frames it never gets.
+            if a.until_stopped && missing > a.max_missing {
+                let frames =
+                    if missing == 1 { "1 triggered frame".to_string() } else { format!("{missing} triggered frames") };
+                return Err(format!("{frames} missing, more than --max-missing {} ({hint})", a.max_missing));
+            }
         }
         match e {
             PairEvent::Paired(f) => writer.write(&Record::Frame(f.clone())).map_err(|e| {
@@ -401,13 +419,6 @@ fn scan(a: ScanArgs) -> CliResult {
     }
     let mut status = outcome.status.clone();
     let too_many_missing = status.frames_missing > a.max_missing;
-    let hint = match a.camera.camera {
-        Some(_) => "can the camera keep up with the trigger rate? Its counters are in the status record".to_string(),
-        None => format!(
-            "is --frames {} the directory the camera writes to, and can the camera keep up?",
-            a.frames.display()
-        ),
-    };
     let missing_msg = format!(
         "{} of {} triggered frames missing, more than --max-missing {} ({hint})",
         status.frames_missing,

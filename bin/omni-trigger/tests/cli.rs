@@ -428,6 +428,24 @@ fn missing_frames_beyond_max_missing_fail_the_scan() {
     assert!(status.errors.iter().any(|e| e.contains("--max-missing")), "{status:?}");
 }
 
+/// A scan until stopped has no end to fail at: it stops at the first frame beyond the limit.
+#[test]
+fn a_scan_until_stopped_stops_at_once_when_frames_go_missing() {
+    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40"]);
+    let elsewhere = emu.dir.path().join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    let t0 = std::time::Instant::now();
+    let out =
+        emu.scan_command(&elsewhere, &["--angles", "0,15", "--until-stopped", "--frame-timeout-ms", "300"]).output();
+    let (out, took) = (out.unwrap(), t0.elapsed());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("1 triggered frame missing, more than --max-missing 0"), "{err}");
+    assert!(took < std::time::Duration::from_secs(20), "stopped after {took:?}");
+    let (_, status) = read_manifest(&emu.manifest_path());
+    assert!(!status.complete, "{status:?}");
+}
+
 /// The virtual camera's size is bounded before the emulator opens its pseudo-terminal.
 #[test]
 fn an_emulated_camera_width_out_of_range_is_a_usage_error() {

@@ -336,6 +336,29 @@ pub fn resolve_frames_dir(base: &std::path::Path, frames_dir: &str) -> String {
     if joined.is_dir() || !rel.is_dir() { joined.display().to_string() } else { frames_dir.to_string() }
 }
 
+/// The `frames_dir` a manifest written to `manifest` (`-` = stdout) records for the frames
+/// directory `frames` (as given, relative to the current directory): relative to the manifest's
+/// own directory, which is what readers resolve it against ([`resolve_frames_dir`]), so that the
+/// manifest reads back from anywhere and moves with its frames. Stdout and a manifest in the
+/// current directory keep the path as given.
+pub fn frames_dir_for_manifest(manifest: &std::path::Path, frames: &std::path::Path) -> String {
+    let base = manifest.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+    if manifest == std::path::Path::new("-") || base == std::path::Path::new(".") || frames.is_absolute() {
+        return frames.display().to_string();
+    }
+    let (Ok(from), Ok(to)) = (std::path::absolute(base), std::path::absolute(frames)) else {
+        return frames.display().to_string();
+    };
+    let (from, to): (Vec<_>, Vec<_>) = (from.components().collect(), to.components().collect());
+    let common = from.iter().zip(&to).take_while(|(a, b)| a == b).count();
+    let mut rel = std::path::PathBuf::new();
+    for _ in common..from.len() {
+        rel.push("..");
+    }
+    to[common..].iter().for_each(|c| rel.push(c));
+    if rel.as_os_str().is_empty() { ".".to_string() } else { rel.display().to_string() }
+}
+
 impl StreamReader<Box<dyn BufRead + Send>> {
     /// Opens a stream file (`-` = stdin). A header's relative `frames_dir` is resolved against
     /// the file's own directory (see [`StreamReader::with_base_dir`]); from stdin, against the
@@ -722,6 +745,22 @@ mod tests {
         // A frame before the header is a stream out of order, said as such.
         let headless = first("{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"alpha_deg\":1,\"facet\":0}\n");
         assert!(headless.contains("starts with a frame record"), "{headless}");
+    }
+
+    #[test]
+    fn a_manifest_records_its_frames_relative_to_itself() {
+        use std::path::Path;
+        assert_eq!(frames_dir_for_manifest(Path::new("scan.jsonl"), Path::new("fr")), "fr");
+        assert_eq!(frames_dir_for_manifest(Path::new("-"), Path::new("fr")), "fr");
+        assert_eq!(frames_dir_for_manifest(Path::new("sub/scan.jsonl"), Path::new("fr")), "../fr");
+        assert_eq!(frames_dir_for_manifest(Path::new("sub/scan.jsonl"), Path::new("sub/fr")), "fr");
+        assert_eq!(frames_dir_for_manifest(Path::new("a/b/s.jsonl"), Path::new("a/c/fr")), "../c/fr");
+        assert_eq!(frames_dir_for_manifest(Path::new("sub/s.jsonl"), Path::new("/abs/fr")), "/abs/fr");
+        assert_eq!(frames_dir_for_manifest(Path::new("sub/s.jsonl"), Path::new("sub")), ".");
+        // What a reader of sub/scan.jsonl makes of it: the frames where they are.
+        let back =
+            resolve_frames_dir(Path::new("sub"), &frames_dir_for_manifest(Path::new("sub/s.jsonl"), Path::new("fr")));
+        assert_eq!(Path::new(&back), Path::new("sub/../fr"));
     }
 
     #[test]

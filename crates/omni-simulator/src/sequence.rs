@@ -118,7 +118,7 @@ pub fn write_manifest(
     frames: &[RenderedFrame],
 ) -> omni_formats::Result<()> {
     let mut header = Header::new(producer);
-    header.frames_dir = Some(frames_dir.display().to_string());
+    header.frames_dir = Some(omni_formats::stream::frames_dir_for_manifest(path, frames_dir));
     header.camera = Some(camera.display().to_string());
     header.scanner = Some(scanner.display().to_string());
     let status = Status::complete(frames.len() as u64);

@@ -36,7 +36,7 @@ omni-triangulate ... | omni-merge --radius 5,4 - -o cloud.ply --ascii\n  \
 omni-merge points.jsonl -o cloud.las --units m\n  \
 omni-merge --voxel 2 points.jsonl -o cloud.pcd --normals --rosbag merged_bag\n\n\
 Voxels are anchored at the world origin and the output is ordered by voxel index (deterministic).\n\
-Exit codes: 0 ok, 1 bad input or I/O error (nothing half-written), 2 usage error."
+Exit codes: 0 ok, 1 bad input or I/O error (nothing half-written), 2 usage error; a signal (Ctrl-C, kill) ends it once its temporary files are removed, and the shell sees 128 + the signal's number (130 for Ctrl-C)."
 )]
 struct Args {
     /// Inputs: point streams (`-` = stdin) or PLY files (*.ply).

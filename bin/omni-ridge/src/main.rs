@@ -34,6 +34,9 @@ Methods: centroid (the paper's threshold + intensity centroid, Eq. 16), windowed
 threshold subtracted, the default), gauss (log-parabola fit), blais-rioux, hessian (Steger).
 Saturated stripes are always located at the centre of the saturated plateau.
 
+Exit codes: 0 ok (also when a reader such as `| head` closes the pipe), 1 bad input or a frame that
+failed (with --keep-going: at the end), 2 usage error; a signal (Ctrl-C, kill) ends it once its temporary files are removed, and the shell sees 128 + the signal's number (130 for Ctrl-C).
+
 Examples:
   omni-sim scan --scene room.json | omni-ridge --camera camera.json | omni-triangulate ...
   omni-ridge photos.jsonl --laser red -o ridges.jsonl       # colour photos of a red line laser

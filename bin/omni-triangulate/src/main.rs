@@ -38,7 +38,7 @@ omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl -o poi
 omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl --rosbag scan_bag --bag-per revolution\n  \
 omni-triangulate --camera camera.json --scanner scanner.json ridges.jsonl --rosbag scan_bag --rosbag-images\n\n\
 PLY scalar fields: intensity, scalar_frame, scalar_laser, scalar_alpha_deg, scalar_range (mm), scalar_u, scalar_v (px).\n\
-Exit codes: 0 ok, 1 bad input or I/O error (nothing half-written), 2 usage error."
+Exit codes: 0 ok, 1 bad input or I/O error (nothing half-written), 2 usage error; a signal (Ctrl-C, kill) ends it once its temporary files are removed, and the shell sees 128 + the signal's number (130 for Ctrl-C)."
 )]
 struct Args {
     /// Receiver model (camera.json).

@@ -247,6 +247,9 @@ pub struct Pairer {
     inferred: HashSet<u64>,
     /// `DONE` arrived: no event will come any more, so no frame needs to wait for one.
     run_ended: bool,
+    /// The longest time between two scheduled triggers at the nominal speed (µs): a frame whose
+    /// event was lost learns so only from the next event, which may come this much later.
+    longest_gap_us: i64,
     pub stats: PairStats,
 }
 
@@ -254,6 +257,8 @@ impl Pairer {
     /// `rpm`: the motor speed the controller runs at (its `STS` line).
     pub fn new(schedule: Schedule, rpm: f64, options: PairOptions) -> Self {
         let us_per_count = 60e6 / (rpm.max(1e-9) * schedule.counts_per_rev as f64);
+        let gaps = (0..schedule.per_revolution()).map(|s| schedule.position(s + 1) - schedule.position(s));
+        let longest_gap_us = (gaps.max().unwrap_or(0) as f64 * us_per_count).round() as i64;
         Pairer {
             schedule,
             latency_us: options.latency_us as f64,
@@ -268,6 +273,7 @@ impl Pairer {
             last_received: None,
             inferred: HashSet::new(),
             run_ended: false,
+            longest_gap_us,
             stats: PairStats::default(),
         }
     }
@@ -393,7 +399,10 @@ impl Pairer {
             let trigger_seen = self
                 .newest_trigger_time
                 .is_some_and(|(seq, t)| t as f64 + self.tolerance_us(seq) >= f.frame.time_us as f64);
-            if !trigger_seen && !self.run_ended && now_us - f.detected_us < self.options.event_grace_us {
+            // A frame whose event is lost waits for the next event, which tells: up to the
+            // schedule's longest gap after it, then the grace for the line's way here.
+            let waited = now_us - f.detected_us;
+            if !trigger_seen && !self.run_ended && waited < self.options.event_grace_us + self.longest_gap_us {
                 break;
             }
             let f = self.frames.pop_front().map(|f| f.frame);
@@ -640,6 +649,34 @@ mod tests {
         assert_eq!(paired(&out).len(), 11);
         assert!(out.iter().any(|e| matches!(e, PairEvent::FrameMissing { seq: 4, .. })));
         assert_eq!(stats.frames_missing, 1);
+    }
+
+    /// The event before the schedule's longest gap (320 ms here) is lost and its frame comes:
+    /// the frame waits for the next event, which shows the loss and places the trigger, even
+    /// when the gap is longer than the grace (a slow motor, few angles: seconds).
+    #[test]
+    fn a_frame_whose_event_is_lost_before_a_long_gap_waits_for_the_next_event() {
+        let s = schedule(false);
+        let mut p = Pairer::new(s.clone(), RPM, PairOptions { event_grace_us: 50_000, ..PairOptions::default() });
+        let at = |seq| event(&s, seq).t_us as i64 + OFFSET;
+        let mut out = Vec::new();
+        for seq in 0..2 {
+            out.extend(p.on_trigger(event(&s, seq), at(seq) + 300));
+            p.on_frame(frame(&format!("f{seq}.png"), at(seq)), at(seq) + 5000);
+            out.extend(p.tick(at(seq) + 5000));
+        }
+        p.on_frame(frame("f2.png", at(2)), at(2) + 5000);
+        let mut now = at(2) + 5000;
+        while now + 10_000 < at(3) {
+            now += 10_000;
+            out.extend(p.tick(now));
+        }
+        out.extend(p.on_trigger(event(&s, 3), at(3) + 300));
+        p.on_frame(frame("f3.png", at(3)), at(3) + 5000);
+        out.extend(p.tick(at(3) + 5000));
+        let pairs: Vec<(u64, String)> = paired(&out).into_iter().map(|(seq, path, ..)| (seq, path)).collect();
+        assert_eq!(pairs, [0, 1, 2, 3].map(|q| (q, format!("f{q}.png"))), "{out:?}");
+        assert_eq!((p.stats.frames_unmatched, p.stats.paired_inferred), (0, 1));
     }
 
     #[test]

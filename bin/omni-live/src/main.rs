@@ -42,7 +42,8 @@ unless a host is given) with `PREFIX/points` (foxglove.PointCloud, the same fiel
 (foxglove.FrameTransforms, from --extrinsics), the last two with every sweep. Open Foxglove, connect to \
 ws://HOST:PORT.\n\n\
 A slow or stalled consumer never holds back the input: each output keeps at most --queue sweeps waiting \
-and drops the oldest, counted in the status record. The frames of a live capture (a stream whose header \
+and drops the oldest, counted in the status record; the Foxglove server also keeps at most --queue sweeps \
+for each client and drops a slow client's oldest (its own count). The frames of a live capture (a stream whose header \
 says \"live\": true, as `omni-trigger scan --until-stopped` writes) are deleted once their points have \
 arrived (laser-off frames two revolutions later, when no frame can still need them), so that disk use stays \
 flat over hours; --keep-frames keeps them. A recorded scan's frames are kept unless --delete-frames. With --poses, each point is moved to where the sensor was at the sweep's \
@@ -224,6 +225,7 @@ fn foxglove_sink(
         base_frame: a.base_frame.clone(),
         extrinsics,
         calibration,
+        backlog_sweeps: a.queue.max(1),
     })
     .map_err(CliError::new)?;
     eprintln!("{TOOL}: Foxglove server on port {} (subprotocol foxglove.sdk.v1)", sink.port());

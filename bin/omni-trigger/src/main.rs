@@ -549,7 +549,10 @@ fn emulate(a: EmulateArgs) -> CliResult {
         ServeEnd::HostDisconnected => camera.finish(),
         ServeEnd::SimulatedDisconnect => {
             eprintln!("{TOOL} emulate: simulated disconnect after {} triggers", a.disconnect_after.unwrap_or(0));
+            // The port goes first, as an unplugged cable would; the frame being written is then
+            // finished, not left behind as a temporary file.
             drop(master);
+            camera.finish();
         }
     }
     Ok(())

@@ -162,7 +162,7 @@ fn a_slow_camera_misses_frames_and_they_are_reported_missing() {
 
 #[test]
 fn a_disconnect_mid_scan_stops_with_an_error_and_keeps_the_partial_manifest() {
-    let emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40", "--disconnect-after", "7"]);
+    let mut emu = Emulator::start(&["--camera-mode", "blank", "--max-rate-hz", "40", "--disconnect-after", "7"]);
     let out = emu.scan(&FAST);
     assert_eq!(out.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -173,6 +173,18 @@ fn a_disconnect_mid_scan_stops_with_an_error_and_keeps_the_partial_manifest() {
     assert!(status.errors.iter().any(|e| e.contains("disconnected")), "{status:?}");
     assert!(frames.len() <= 7);
     assert_frames_true(&frames, &emu.truth());
+    // The emulator ends by itself after its unplug, its last frame finished, none half-written.
+    let t0 = std::time::Instant::now();
+    while emu.child.try_wait().unwrap().is_none() {
+        assert!(t0.elapsed() < std::time::Duration::from_secs(10), "the emulator did not end");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let temps: Vec<_> = std::fs::read_dir(emu.frames())
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+        .filter(|n| n.contains("omniscan-tmp"))
+        .collect();
+    assert!(temps.is_empty(), "{temps:?}");
 }
 
 #[test]

@@ -35,7 +35,12 @@ pub struct FoxgloveOptions {
     pub extrinsics: Option<Isometry3<f64>>,
     /// camera.json and scanner.json as one JSON object, if given.
     pub calibration: Option<String>,
+    /// Sweeps the server keeps waiting for each client; a slower client loses the oldest.
+    pub backlog_sweeps: usize,
 }
+
+/// Messages one sweep sends: points, image, calibration and `/tf`.
+const MESSAGES_PER_SWEEP: usize = 4;
 
 /// The running server and its channels.
 pub struct FoxgloveSink {
@@ -67,6 +72,9 @@ impl FoxgloveSink {
             .name("omniscan")
             .context(&context)
             .bind(opts.host.clone(), opts.port)
+            // The server queues messages per client (1024 by default, hundreds of sweeps): a
+            // stalled client would get minutes-old clouds and hold their memory.
+            .message_backlog_size(MESSAGES_PER_SWEEP * opts.backlog_sweeps.max(1))
             .start_blocking()
             .map_err(|e| format!("--foxglove {}:{}: {e}", opts.host, opts.port))?;
         Ok(FoxgloveSink { server, points, image, transforms, calibration, opts, _context: context })

@@ -211,7 +211,9 @@ def foxglove(run):
     d, frames = run["dir"], run["frames"]
     (d / "fox.jsonl").write_text(replay(frames, range(0, 3), {**json.loads(
         (d / "a.jsonl").read_text().splitlines()[0]), "frames_dir": str(d / "f")}))
-    proc = subprocess.Popen([tool("omni-live"), "--foxglove", "127.0.0.1:0", "--camera", d / "s/camera.json",
+    # Every sweep is checked: the server's backlog (--queue sweeps per client) holds all of them
+    # however late a loaded machine lets the client read.
+    proc = subprocess.Popen([tool("omni-live"), "--foxglove", "127.0.0.1:0", "--queue", "8", "--camera", d / "s/camera.json",
                              "--scanner", d / "s/scanner.json", "--extrinsics", d / "base_link.json", "-"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     line = proc.stderr.readline().decode()

@@ -38,6 +38,13 @@ pub(crate) fn value_error(message: impl Into<String>) -> PyErr {
     pyo3::exceptions::PyValueError::new_err(message.into())
 }
 
+/// A count or index argument (`facet`, `laser`) taken as a Python int: a ValueError naming the
+/// argument for a negative or too large one, where pyo3's own conversion says OverflowError
+/// and names nothing.
+pub(crate) fn index_arg<T: TryFrom<i64>>(name: &str, value: i64) -> PyResult<T> {
+    T::try_from(value).map_err(|_| value_error(format!("{name}: expected a whole number from 0, got {value}")))
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FormatError", m.py().get_type::<FormatError>())?;

@@ -19,7 +19,8 @@ fn to_python<'py>(py: Python<'py>, value: &impl serde::Serialize) -> PyResult<Bo
 /// relative `frames_dir` resolved beside the file. Returns a dict: `header` (dict), `frames`
 /// (list of dicts with the record's fields; `stripe` an (n, 5) array of u, v, intensity, width,
 /// quality and `points` an (m, 6) array of x, y, z (mm), laser, range (mm), stripe_index where
-/// present, else None; `image_path` the frame's image resolved against `frames_dir`), `errors`
+/// present, else None; `image_path` the frame's image and `ambient_image_path` its laser-off
+/// frame (None without one) resolved against `frames_dir`), `errors`
 /// (per-frame error records) and `status` (the final record; for a stream cut short, the
 /// `complete: false` status the tools pass on).
 #[pyfunction]
@@ -37,6 +38,8 @@ pub fn read_stream<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, P
                 let stripe = frame.stripe.take();
                 let points = frame.points.take();
                 let image_path = frame.resolve_path(frames_dir.as_deref(), &frame.path);
+                let ambient_image_path =
+                    frame.ambient_path.as_ref().map(|a| frame.resolve_path(frames_dir.as_deref(), a));
                 let d = to_python(py, &frame)?.cast_into::<PyDict>()?;
                 let stripe = match stripe {
                     Some(s) => Some(rows(py, &s.into_iter().map(<[f64; 5]>::from).collect::<Vec<_>>())?),
@@ -49,6 +52,7 @@ pub fn read_stream<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, P
                 d.set_item("stripe", stripe)?;
                 d.set_item("points", points)?;
                 d.set_item("image_path", image_path)?;
+                d.set_item("ambient_image_path", ambient_image_path)?;
                 frames.append(d)?;
             }
             Record::Error(e) => errors.append(to_python(py, &e)?)?,

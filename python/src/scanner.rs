@@ -137,10 +137,10 @@ impl Scanner {
         &self,
         py: Python<'py>,
         alpha_deg: f64,
-        facet: u32,
-        laser: usize,
+        facet: i64,
+        laser: i64,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let at = self.plane_at(alpha_deg, facet, laser)?;
+        let at = self.plane_at(alpha_deg, crate::index_arg("facet", facet)?, crate::index_arg("laser", laser)?)?;
         let d = PyDict::new(py);
         let vec3 = |v: &[f64]| v.to_vec().into_pyarray(py);
         let plane = at.plane();
@@ -163,9 +163,10 @@ impl Scanner {
         &self,
         py: Python<'py>,
         alpha_deg: &Bound<'py, PyAny>,
-        facet: u32,
-        laser: usize,
+        facet: i64,
+        laser: i64,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let (facet, laser): (u32, usize) = (crate::index_arg("facet", facet)?, crate::index_arg("laser", laser)?);
         let np = py.import("numpy")?;
         let angles = np.call_method1("asarray", (alpha_deg, "float64"))?.call_method1("reshape", ((-1, 1),))?;
         let lead_shape: Vec<usize> = np.call_method1("shape", (alpha_deg,))?.extract()?;
@@ -203,13 +204,18 @@ pub fn triangulate<'py>(
     scanner: &Scanner,
     pixels: &Bound<'py, PyAny>,
     alpha_deg: f64,
-    facet: u32,
-    lasers: Vec<u32>,
+    facet: i64,
+    lasers: Vec<i64>,
     min_incidence_deg: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let facet: u32 = crate::index_arg("facet", facet)?;
+    let lasers = lasers.into_iter().map(|l| crate::index_arg("lasers", l)).collect::<PyResult<Vec<u32>>>()?;
     let px = Vectors::<2>::extract(pixels, "pixels")?;
     if px.lead_shape.len() != 1 {
         return Err(crate::value_error(format!("pixels: expected shape (n, 2), got {:?} + (2,)", px.lead_shape)));
+    }
+    if let Some(i) = (0..px.len()).find(|&i| px.get(i).iter().any(|c| !c.is_finite())) {
+        return Err(crate::value_error(format!("pixels[{i}]: not a finite number")));
     }
     let triangulator =
         Triangulator::new(camera.model.as_ref(), &scanner.model, min_incidence_deg).map_err(crate::value_error)?;

@@ -170,6 +170,8 @@ pub fn detect_stripe<'py>(
     params.mosaic = bayer.is_some();
     params.validate().map_err(crate::value_error)?;
     let spec = colour_spec(channel, laser, bayer, bayer_sites)?;
+    // As omni-ridge does after the detector: points on stripes shorter than the fit's window go.
+    let along_window = (params.along_stripe_px > 0.0).then(|| params.along_stripe_window_px());
 
     let mut img = frame_image(image, "image", &spec)?;
     if let Some(off) = ambient {
@@ -201,6 +203,10 @@ pub fn detect_stripe<'py>(
             None => stripe::frame_points(&img, &detector, what),
         })
         .map_err(crate::value_error)?;
+    let points = match along_window {
+        Some(window) => stripe::refuse_short_stripes(points, window).kept,
+        None => points,
+    };
     let table: Vec<[f64; 5]> = points.into_iter().map(<[f64; 5]>::from).collect();
     rows(py, &table)
 }

@@ -69,3 +69,18 @@ def test_read_ply_matches_plyfile(sim):
         bad = path.parent / "notply.ply"
         bad.write_text("hello\n")
         omniscan.read_ply(bad)
+
+
+def test_a_frames_laser_off_image_is_resolved_like_its_image(tmp_path):
+    import json
+    (tmp_path / "fr").mkdir()
+    records = [{"type": "header", "format": "omniscan.stream", "version": 1, "producers": ["test"], "frames_dir": "fr"},
+               {"type": "frame", "seq": 0, "path": "a.png", "alpha_deg": 1.0, "facet": 0, "ambient_path": "off.png"},
+               {"type": "frame", "seq": 1, "path": "b.png", "alpha_deg": 2.0, "facet": 0},
+               {"type": "status", "frames": 2, "frames_missing": 0, "complete": True, "errors": []}]
+    (tmp_path / "s.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    with_off, without = omniscan.read_stream(tmp_path / "s.jsonl")["frames"]
+    assert with_off["ambient_path"] == "off.png", "the record's field as written"
+    assert with_off["ambient_image_path"] == tmp_path / "fr" / "off.png"
+    assert with_off["image_path"] == tmp_path / "fr" / "a.png"
+    assert without["ambient_image_path"] is None

@@ -111,3 +111,18 @@ def test_fixed_plane_scanner_triangulates_its_one_plane(sim):
     doc["transmitter"]["kind"] = "galvo"
     with pytest.raises(ValueError, match='unknown transmitter kind "galvo"'):
         omniscan.Scanner.from_json(json.dumps(doc), "fixed.json")
+
+
+def test_negative_indices_and_nan_pixels_name_their_argument(sim):
+    cam = omniscan.Camera.load(sim["camera"])
+    scanner = omniscan.Scanner.load(sim["scanner"])
+    px = np.array([[250.0, 250.0]])
+    for kwargs, name in (({"facet": -1}, "facet"), ({"lasers": [-1]}, "lasers")):
+        with pytest.raises(ValueError, match=f"{name}: expected a whole number from 0, got -1"):
+            omniscan.triangulate(cam, scanner, px, 16.0, **kwargs)
+    with pytest.raises(ValueError, match="laser: expected a whole number from 0, got -1"):
+        scanner.light_plane(16.0, laser=-1)
+    with pytest.raises(ValueError, match="facet: expected"):
+        scanner.light_planes([16.0], facet=-3)
+    with pytest.raises(ValueError, match=r"pixels\[1\]: not a finite number"):
+        omniscan.triangulate(cam, scanner, np.array([[250.0, 250.0], [np.nan, 250.0]]), 16.0)

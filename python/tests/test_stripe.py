@@ -124,3 +124,28 @@ def test_colour_frames_by_laser_contrast_and_bayer_mosaic():
         assert np.all(np.abs((sites[:, 1] + 1) % 2 - 1) < 0.01), sites[:, 1]
         assert abs(sites[:, 0].mean() - centre) <= mean_error, (centre, sites[:, 0].mean())
         np.testing.assert_allclose(sites[:, 0], centre, atol=0.2)
+
+
+def test_the_along_stripe_fit_refuses_short_stripes_as_omni_ridge_does(tmp_path):
+    """A long stripe and an 8 px one (about 5 px of centres once its ends go): with the along-stripe fit, both refuse the short one's
+    points (shorter than the fit's window) and give the same centres."""
+    import json
+    from conftest import run, tool
+
+    y, x = np.mgrid[0:120, 0:160].astype(float)
+    img = 200 * np.exp(-0.5 * ((x - 60 - 0.1 * y) / 1.5) ** 2) * ((y >= 10) & (y < 110))
+    img += 200 * np.exp(-0.5 * ((x - 120) / 1.5) ** 2) * ((y >= 50) & (y < 58))
+    img = np.round(img).astype(np.uint8)
+    cv2.imwrite(str(tmp_path / "f.png"), img)
+    records = [{"type": "header", "format": "omniscan.stream", "version": 1, "producers": ["test"],
+                "frames_dir": str(tmp_path)},
+               {"type": "frame", "seq": 0, "path": "f.png", "alpha_deg": 0.0, "facet": 0},
+               {"type": "status", "frames": 1, "frames_missing": 0, "complete": True, "errors": []}]
+    (tmp_path / "s.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    run(tool("omni-ridge"), "--along-stripe", "3", tmp_path / "s.jsonl", "-o", tmp_path / "r.jsonl")
+    ridge = omniscan.read_stream(tmp_path / "r.jsonl")["frames"][0]["stripe"]
+    ours = omniscan.detect_stripe(img, along_stripe_px=3)
+    np.testing.assert_array_equal(ours, ridge)
+    near_short = lambda pts: np.abs(pts[:, 0] - 120) < 3
+    assert near_short(omniscan.detect_stripe(img)).any(), "the short stripe is found without the fit"
+    assert not near_short(ours).any() and len(ours) > 80, ours[:, :2]

@@ -28,6 +28,15 @@ pub enum CameraSpec {
     Fisheye(FisheyeParams),
 }
 
+/// A model's parameters (its `kind` taken out), with errors naming the parameter at fault; a
+/// missing one is named by serde's message alone (its path is the object itself, `.`).
+fn kind_params<T: DeserializeOwned, E: serde::de::Error>(v: serde_json::Value) -> std::result::Result<T, E> {
+    serde_path_to_error::deserialize(v).map_err(|e| match e.path().to_string().as_str() {
+        "." => E::custom(e.inner()),
+        path => E::custom(format!("field {path}: {}", e.inner())),
+    })
+}
+
 /// Deserialises `{"kind": K, ...params}` by hand so that errors name the exact parameter
 /// (serde's internally tagged enums lose the field path).
 impl<'de> Deserialize<'de> for CameraSpec {
@@ -37,15 +46,12 @@ impl<'de> Deserialize<'de> for CameraSpec {
         let kind = map.remove("kind").ok_or_else(|| D::Error::missing_field("kind"))?;
         let kind = kind.as_str().ok_or_else(|| D::Error::custom("field kind: expected a string"))?.to_string();
         let rest = serde_json::Value::Object(map);
-        fn params<T: DeserializeOwned, E: serde::de::Error>(v: serde_json::Value) -> std::result::Result<T, E> {
-            serde_path_to_error::deserialize(v).map_err(|e| E::custom(format!("field {}: {}", e.path(), e.inner())))
-        }
         match kind.as_str() {
-            "hyperbolic" => Ok(CameraSpec::Hyperbolic(params(rest)?)),
-            "mei" => Ok(CameraSpec::Mei(params(rest)?)),
-            "ocam" => Ok(CameraSpec::Ocam(params(rest)?)),
-            "pinhole" => Ok(CameraSpec::Pinhole(params(rest)?)),
-            "fisheye" => Ok(CameraSpec::Fisheye(params(rest)?)),
+            "hyperbolic" => Ok(CameraSpec::Hyperbolic(kind_params(rest)?)),
+            "mei" => Ok(CameraSpec::Mei(kind_params(rest)?)),
+            "ocam" => Ok(CameraSpec::Ocam(kind_params(rest)?)),
+            "pinhole" => Ok(CameraSpec::Pinhole(kind_params(rest)?)),
+            "fisheye" => Ok(CameraSpec::Fisheye(kind_params(rest)?)),
             other => Err(D::Error::custom(format!(
                 "unknown camera model kind \"{other}\" (known: hyperbolic, mei, ocam, pinhole, fisheye)"
             ))),
@@ -251,12 +257,9 @@ impl<'de> Deserialize<'de> for TransmitterSpec {
             Some(k) => k.as_str().ok_or_else(|| D::Error::custom("field kind: expected a string"))?.to_string(),
         };
         let rest = serde_json::Value::Object(map);
-        fn params<T: DeserializeOwned, E: serde::de::Error>(v: serde_json::Value) -> std::result::Result<T, E> {
-            serde_path_to_error::deserialize(v).map_err(|e| E::custom(format!("field {}: {}", e.path(), e.inner())))
-        }
         match kind.as_str() {
-            TRANSMITTER_KIND_POLYGON => Ok(TransmitterSpec::Polygon(params(rest)?)),
-            TRANSMITTER_KIND_FIXED_PLANES => Ok(TransmitterSpec::FixedPlanes(params(rest)?)),
+            TRANSMITTER_KIND_POLYGON => Ok(TransmitterSpec::Polygon(kind_params(rest)?)),
+            TRANSMITTER_KIND_FIXED_PLANES => Ok(TransmitterSpec::FixedPlanes(kind_params(rest)?)),
             other => Err(D::Error::custom(format!(
                 "field kind: unknown transmitter kind \"{other}\" (known: {TRANSMITTER_KIND_POLYGON}, {TRANSMITTER_KIND_FIXED_PLANES})"
             ))),
@@ -523,7 +526,7 @@ mod tests {
         let mut v = camera_json();
         v["model"].as_object_mut().unwrap().remove("a_mm");
         let e = parse(&v).unwrap_err().to_string();
-        assert!(e.contains("a_mm"), "{e}");
+        assert!(e.contains("field model: missing field `a_mm`"), "{e}");
 
         let text = serde_json::to_string(&camera_json()).unwrap().replace("\"fx_px\":1950.0", "\"fx_px\":NaN");
         let e = parse_doc::<CameraFile>(text.as_bytes(), "camera.json").unwrap_err().to_string();

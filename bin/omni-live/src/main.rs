@@ -225,7 +225,7 @@ fn foxglove_sink(
         base_frame: a.base_frame.clone(),
         extrinsics,
         calibration,
-        backlog_sweeps: a.queue.max(1),
+        backlog_sweeps: a.queue,
     })
     .map_err(CliError::new)?;
     eprintln!("{TOOL}: Foxglove server on port {} (subprotocol foxglove.sdk.v1)", sink.port());

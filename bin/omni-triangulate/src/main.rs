@@ -309,7 +309,8 @@ impl Run<'_> {
         let no_ray = self.rejections.no_ray;
         let pixels = self.points + self.rejections.refused();
         let camera = self.args.camera.display();
-        if no_ray > 0 && self.points == 0 && no_ray == pixels {
+        // Every pixel without a ray (none made a point, none was refused otherwise).
+        if no_ray > 0 && no_ray == pixels {
             return Err(format!(
                 "{name}: none of its {pixels} stripe pixels maps to a ray of {camera}: were the frames taken with this camera?"
             ));

@@ -9,7 +9,7 @@ use omni_cli::{CliError, CliResult};
 use omni_formats::stream::{FrameError, Record, StreamReader, StreamWriter};
 use omni_model::CameraModel;
 use omni_vision::colour::ColourSpec;
-use omni_vision::image_io::{DecodedGray, GrayImage, load_gray_decoded, write_rgb_png};
+use omni_vision::image_io::{DecodedGray, GrayImage, load_frame_channel_decoded, write_rgb_png};
 use omni_vision::stripe::{self, RidgeDetector, RidgeParams, SearchRegion};
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
@@ -326,8 +326,9 @@ fn process_frame(
     Ok(())
 }
 
-/// The stripe points of a laser frame, and its image as read unless it was a plain 8-bit grey
-/// frame with nothing to subtract and no overlay to draw: those are measured on their own bytes.
+/// The stripe points of a laser frame, and its image as read unless it was a plain 8-bit frame
+/// (grey, or colour read by a channel without a mosaic) with nothing to subtract and no overlay
+/// to draw: those are measured on their own bytes.
 fn detect_points(
     frame: &omni_formats::stream::Frame,
     frames_dir: Option<&str>,
@@ -336,11 +337,11 @@ fn detect_points(
     keep_image: bool,
 ) -> Result<(Vec<stripe::StripePoint>, Option<GrayImage>), String> {
     let plain = !keep_image
-        && detectors.colour == ColourSpec::default()
+        && detectors.colour.bayer.is_none()
         && frame.ambient_path.is_none()
         && detectors.static_ambient.is_none();
     let mut img = if plain {
-        match load_gray_decoded(path).map_err(|e| e.to_string())? {
+        match load_frame_channel_decoded(path, &detectors.colour).map_err(|e| e.to_string())? {
             DecodedGray::Eight { width, height, data } => {
                 let (detector, what) = detectors.for_size(width, height)?;
                 stripe::check_frame_size(width, height, detector, what)

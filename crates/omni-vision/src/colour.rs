@@ -249,55 +249,162 @@ fn laser_contrast_f32(l: f32, others: f32, max: f32, four_over_max: f32) -> u16 
 }
 
 /// The grey image `channel` makes of interleaved 8-bit samples, `stride` per pixel (3 for RGB,
-/// 4 for RGBA; red, green, blue first): one pass over the frame, no intermediate image.
+/// 4 for RGBA; red, green, blue first): [`channel_bytes_of_rgb8`] in 16-bit samples.
 pub fn channel_of_rgb8(samples: &[u8], stride: usize, width: u32, height: u32, channel: Channel) -> GrayImage {
-    let pixels = samples.chunks_exact(stride);
-    let data: Vec<u16> = match channel {
-        Channel::Luma => {
-            pixels.map(|p| ((2126 * p[0] as u32 + 7152 * p[1] as u32 + 722 * p[2] as u32) / 10000) as u16).collect()
-        }
-        Channel::Single(c) => pixels.map(|p| p[c.index()] as u16).collect(),
-        Channel::Laser(c) => laser_contrast_rgb8(samples, stride, c.laser_and_others()),
-    };
+    let data = channel_bytes_of_rgb8(samples, stride, channel).into_iter().map(u16::from).collect();
     GrayImage { width, height, bit_depth: 8, data }
 }
 
-/// [`laser_contrast8`] of every pixel of interleaved samples. The stride and the channels'
-/// places are made constants, so that the compiler turns the de-interleaving into shuffles and
-/// the arithmetic into vector lanes: with them read at run time the pass stays scalar.
-fn laser_contrast_rgb8(samples: &[u8], stride: usize, (l, a, b): (usize, usize, usize)) -> Vec<u16> {
-    match (stride, l, a, b) {
-        (3, 0, 1, 2) => contrast_pass::<3, 0, 1, 2>(samples),
-        (3, 1, 0, 2) => contrast_pass::<3, 1, 0, 2>(samples),
-        (3, 2, 0, 1) => contrast_pass::<3, 2, 0, 1>(samples),
-        (4, 0, 1, 2) => contrast_pass::<4, 0, 1, 2>(samples),
-        (4, 1, 0, 2) => contrast_pass::<4, 1, 0, 2>(samples),
-        (4, 2, 0, 1) => contrast_pass::<4, 2, 0, 1>(samples),
-        _ => samples.chunks_exact(stride).map(|p| laser_contrast8(p[l] as u32, p[a] as u32 + p[b] as u32)).collect(),
+/// The 8-bit grey samples `channel` makes of interleaved 8-bit samples, `stride` per pixel (3
+/// for RGB, 4 for RGBA; red, green, blue first), in one pass over the frame: every channel of an
+/// 8-bit frame fits a byte, and the stripe detector reads bytes faster than wider samples.
+pub fn channel_bytes_of_rgb8(samples: &[u8], stride: usize, channel: Channel) -> Vec<u8> {
+    let pixels = samples.chunks_exact(stride);
+    match channel {
+        // ≤ 255: the weights sum to 10000.
+        Channel::Luma => {
+            pixels.map(|p| ((2126 * p[0] as u32 + 7152 * p[1] as u32 + 722 * p[2] as u32) / 10000) as u8).collect()
+        }
+        Channel::Single(c) => pixels.map(|p| p[c.index()]).collect(),
+        Channel::Laser(c) => laser_contrast_rgb8(samples, stride, c.laser_and_others()),
     }
 }
 
-/// The pass in AVX2 where the processor has it (the build targets baseline x86-64, whose SSE2
-/// has neither byte shuffles nor 32-bit lane products), else as built. The same code either way.
-fn contrast_pass<const STRIDE: usize, const L: usize, const A: usize, const B: usize>(samples: &[u8]) -> Vec<u16> {
+/// [`laser_contrast8`] of every pixel of interleaved samples (≤ the laser's own level, so a
+/// byte). Where the processor has SSE4.1 (with SSSE3's byte shuffles), sixteen pixels at a time:
+/// de-interleaved by shuffles, and below ¾ of full scale, where the weight is 1, in 16-bit lanes
+/// (`(2·l + 1 − others) / 2`, exactly what the 32-bit formula gives there); blocks holding a
+/// brighter laser level take the 32-bit formula. The rest, and other processors, pixel by pixel.
+fn laser_contrast_rgb8(samples: &[u8], stride: usize, channels: (usize, usize, usize)) -> Vec<u8> {
+    let count = samples.len() / stride;
+    let mut out = vec![0u8; count];
+    let mut done = 0;
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the processor has AVX2, checked on the line above.
-        return unsafe { contrast_pass_avx2::<STRIDE, L, A, B>(samples) };
+    if (stride == 3 || stride == 4)
+        && std::arch::is_x86_feature_detected!("ssse3")
+        && std::arch::is_x86_feature_detected!("sse4.1")
+    {
+        // SAFETY: the processor has SSSE3 and SSE4.1, checked on the lines above.
+        done = unsafe { contrast_sse41::laser_contrast_blocks(samples, stride, channels, &mut out) };
     }
-    contrast_lanes::<STRIDE, L, A, B>(samples)
+    let (l, a, b) = channels;
+    for (o, p) in out[done..].iter_mut().zip(samples[done * stride..].chunks_exact(stride)) {
+        *o = laser_contrast8(p[l] as u32, p[a] as u32 + p[b] as u32) as u8;
+    }
+    out
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn contrast_pass_avx2<const STRIDE: usize, const L: usize, const A: usize, const B: usize>(samples: &[u8]) -> Vec<u16> {
-    contrast_lanes::<STRIDE, L, A, B>(samples)
-}
+mod contrast_sse41 {
+    use std::arch::x86_64::*;
 
-#[inline(always)]
-fn contrast_lanes<const STRIDE: usize, const L: usize, const A: usize, const B: usize>(samples: &[u8]) -> Vec<u16> {
-    let (pixels, _) = samples.as_chunks::<STRIDE>();
-    pixels.iter().map(|p| laser_contrast8(p[L] as u32, p[A] as u32 + p[B] as u32)).collect()
+    /// Pixels per block: one 16-byte register of each channel.
+    const BLOCK: usize = 16;
+
+    /// [`super::laser_contrast_rgb8`] of the whole blocks of `samples` (`stride` 3 or 4) into
+    /// `out`; returns how many pixels it wrote.
+    #[target_feature(enable = "ssse3,sse4.1")]
+    pub(super) fn laser_contrast_blocks(
+        samples: &[u8],
+        stride: usize,
+        (l, a, b): (usize, usize, usize),
+        out: &mut [u8],
+    ) -> usize {
+        let blocks = out.len().min(samples.len() / stride) / BLOCK;
+        let (ml, ma, mb) = (gather_masks(stride, l), gather_masks(stride, a), gather_masks(stride, b));
+        let zero = _mm_setzero_si128();
+        let one = _mm_set1_epi16(1);
+        let dim = _mm_set1_epi8(191u8 as i8);
+        for (block, o) in samples.chunks_exact(stride * BLOCK).zip(out.chunks_exact_mut(BLOCK)).take(blocks) {
+            let (vl, va, vb) = (gather(block, stride, &ml), gather(block, stride, &ma), gather(block, stride, &mb));
+            let (l_lo, l_hi) = (_mm_unpacklo_epi8(vl, zero), _mm_unpackhi_epi8(vl, zero));
+            let o_lo = _mm_add_epi16(_mm_unpacklo_epi8(va, zero), _mm_unpacklo_epi8(vb, zero));
+            let o_hi = _mm_add_epi16(_mm_unpackhi_epi8(va, zero), _mm_unpackhi_epi8(vb, zero));
+            // Every laser level ≤ 191 (below ¾ of full scale: the weight is 1).
+            let dim_only = _mm_movemask_epi8(_mm_cmpeq_epi8(_mm_min_epu8(vl, dim), vl)) == 0xFFFF;
+            let contrast = if dim_only {
+                let half = |l: __m128i, others: __m128i| {
+                    let twice = _mm_sub_epi16(_mm_add_epi16(_mm_add_epi16(l, l), one), others);
+                    _mm_srai_epi16(_mm_max_epi16(twice, zero), 1)
+                };
+                _mm_packus_epi16(half(l_lo, o_lo), half(l_hi, o_hi))
+            } else {
+                let lanes = |x: __m128i| (_mm_cvtepu16_epi32(x), _mm_cvtepu16_epi32(_mm_srli_si128(x, 8)));
+                let ((l0, l1), (l2, l3)) = (lanes(l_lo), lanes(l_hi));
+                let ((o0, o1), (o2, o3)) = (lanes(o_lo), lanes(o_hi));
+                let lo = _mm_packus_epi32(weighted(l0, o0), weighted(l1, o1));
+                let hi = _mm_packus_epi32(weighted(l2, o2), weighted(l3, o3));
+                _mm_packus_epi16(lo, hi)
+            };
+            // SAFETY: `o` holds BLOCK = 16 bytes.
+            unsafe { _mm_storeu_si128(o.as_mut_ptr().cast(), contrast) };
+        }
+        blocks * BLOCK
+    }
+
+    /// [`laser_contrast8`] in four 32-bit lanes: laser levels `l`, sums of the others `others`.
+    #[inline]
+    #[target_feature(enable = "ssse3,sse4.1")]
+    fn weighted(l: __m128i, others: __m128i) -> __m128i {
+        let w = _mm_srli_epi32(
+            _mm_add_epi32(
+                _mm_mullo_epi32(_mm_sub_epi32(_mm_set1_epi32(255), l), _mm_set1_epi32(16448)),
+                _mm_set1_epi32(128),
+            ),
+            8,
+        );
+        let w4096 = _mm_min_epi32(w, _mm_set1_epi32(4096));
+        let scaled =
+            _mm_sub_epi32(_mm_add_epi32(_mm_slli_epi32(l, 13), _mm_set1_epi32(4096)), _mm_mullo_epi32(w4096, others));
+        _mm_srai_epi32(_mm_max_epi32(scaled, _mm_setzero_si128()), 13)
+    }
+
+    /// One channel's bytes of a block's `stride` registers gathered into one: shuffle masks per
+    /// register, placing byte `stride·i + channel` at lane i where that register holds it (a
+    /// mask byte with its top bit set zeroes the lane).
+    fn gather_masks(stride: usize, channel: usize) -> [[u8; 16]; 4] {
+        let mut masks = [[0x80u8; 16]; 4];
+        for i in 0..BLOCK {
+            let at = stride * i + channel;
+            masks[at / 16][i] = (at % 16) as u8;
+        }
+        masks
+    }
+
+    /// The channel of `masks` ([`gather_masks`]) from a block of `stride` × 16 bytes.
+    #[inline]
+    #[target_feature(enable = "ssse3,sse4.1")]
+    fn gather(block: &[u8], stride: usize, masks: &[[u8; 16]; 4]) -> __m128i {
+        let mut v = _mm_setzero_si128();
+        for (k, mask) in masks.iter().enumerate().take(stride) {
+            // SAFETY: `block` holds stride × 16 bytes, so bytes 16k..16k + 16 are inside it.
+            let (bytes, mask) =
+                unsafe { (_mm_loadu_si128(block.as_ptr().add(16 * k).cast()), _mm_loadu_si128(mask.as_ptr().cast())) };
+            v = _mm_or_si128(v, _mm_shuffle_epi8(bytes, mask));
+        }
+        v
+    }
+
+    #[cfg(test)]
+    #[test]
+    fn blocks_equal_the_formula_for_every_level() {
+        use super::laser_contrast8;
+        let mut rgb = Vec::new();
+        for l in 0..=255u8 {
+            for o in [0u8, 1, 2, 50, 127, 128, 191, 192, 254, 255] {
+                rgb.extend([l, o, o.wrapping_mul(3)]);
+            }
+        }
+        rgb.truncate(rgb.len() / 48 * 48);
+        let want: Vec<u8> =
+            rgb.chunks_exact(3).map(|p| laser_contrast8(p[0] as u32, p[1] as u32 + p[2] as u32) as u8).collect();
+        let mut got = vec![0; want.len()];
+        if std::arch::is_x86_feature_detected!("sse4.1") {
+            // SAFETY: checked on the line above.
+            assert_eq!(unsafe { laser_contrast_blocks(&rgb, 3, (0, 1, 2), &mut got) }, want.len());
+            assert_eq!(got, want);
+        }
+    }
 }
 
 /// A raw mosaic read at `colour`'s own sites (red or blue: one per 2 × 2 cell) as an RGB image
@@ -475,10 +582,10 @@ mod tests {
             assert_eq!(channel_of_rgb8(&rgb, 3, px.len() as u32, 1, channel), want, "{channel}");
             assert_eq!(channel_of_rgb8(&rgba, 4, px.len() as u32, 1, channel), want, "{channel}");
         }
-        // The baseline build's pass, which a processor with AVX2 never takes above.
-        let red = general.channel(Channel::Laser(Colour::Red)).data;
-        assert_eq!(contrast_lanes::<3, 0, 1, 2>(&rgb), red);
-        assert_eq!(contrast_lanes::<4, 0, 1, 2>(&rgba), red);
+        // The bytes as the detector reads them, and the pixels after the last whole block.
+        let red: Vec<u8> = general.channel(Channel::Laser(Colour::Red)).data.iter().map(|&v| v as u8).collect();
+        assert_eq!(channel_bytes_of_rgb8(&rgb, 3, Channel::Laser(Colour::Red)), red);
+        assert_eq!(channel_bytes_of_rgb8(&rgba[..4 * 21], 4, Channel::Laser(Colour::Red)), red[..21]);
     }
 
     fn img_red(img: &RgbImage) -> Vec<u16> {

@@ -124,6 +124,18 @@ pub enum DecodedGray {
     Wide(GrayImage),
 }
 
+impl DecodedGray {
+    /// The frame as a [`GrayImage`] (an 8-bit frame's bytes widened).
+    pub fn into_gray(self) -> GrayImage {
+        match self {
+            DecodedGray::Eight { width, height, data } => {
+                GrayImage { width, height, bit_depth: 8, data: data.into_iter().map(u16::from).collect() }
+            }
+            DecodedGray::Wide(img) => img,
+        }
+    }
+}
+
 /// [`load_gray`], keeping an 8-bit grey frame's bytes as they are. A plain 8-bit binary PGM
 /// (what `omni-trigger` captures) is read straight into the frame's buffer: one copy out of the
 /// page cache, where the decoder adds a zeroed buffer and a second copy.
@@ -227,7 +239,22 @@ pub fn decode_frame_channel(bytes: &[u8], name: &str, spec: &ColourSpec) -> Resu
     if *spec == ColourSpec::default() {
         return decode_gray(bytes, name);
     }
-    let dynamic = decode_checked(bytes, name)?;
+    Ok(decode_channel(decode_checked(bytes, name)?, name, spec)?.into_gray())
+}
+
+/// [`load_frame_channel`], keeping the bytes of a channel read from an 8-bit colour frame as
+/// [`load_gray_decoded`] keeps an 8-bit grey frame's.
+pub fn load_frame_channel_decoded(path: &Path, spec: &ColourSpec) -> Result<DecodedGray, Error> {
+    if *spec == ColourSpec::default() {
+        return load_gray_decoded(path);
+    }
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| Error::io(name.clone(), &e))?;
+    decode_channel(decode_checked(&bytes, &name)?, &name, spec)
+}
+
+/// The grey frame `spec` (not the default) reads from a decoded frame file `name`.
+fn decode_channel(dynamic: image::DynamicImage, name: &str, spec: &ColourSpec) -> Result<DecodedGray, Error> {
     let grey = !dynamic.color().has_color();
     let rgb = match spec.bayer {
         Some(order) => {
@@ -254,30 +281,20 @@ pub fn decode_frame_channel(bytes: &[u8], name: &str, spec: &ColourSpec) -> Resu
                 ));
             }
             // 8-bit colour, the common case, in one pass from the decoded samples.
+            let (width, height) = (dynamic.width(), dynamic.height());
+            let bytes = |samples: &[u8], stride| crate::colour::channel_bytes_of_rgb8(samples, stride, spec.channel);
             match &dynamic {
                 image::DynamicImage::ImageRgb8(buf) => {
-                    return Ok(crate::colour::channel_of_rgb8(
-                        buf.as_raw(),
-                        3,
-                        buf.width(),
-                        buf.height(),
-                        spec.channel,
-                    ));
+                    return Ok(DecodedGray::Eight { width, height, data: bytes(buf.as_raw(), 3) });
                 }
                 image::DynamicImage::ImageRgba8(buf) => {
-                    return Ok(crate::colour::channel_of_rgb8(
-                        buf.as_raw(),
-                        4,
-                        buf.width(),
-                        buf.height(),
-                        spec.channel,
-                    ));
+                    return Ok(DecodedGray::Eight { width, height, data: bytes(buf.as_raw(), 4) });
                 }
                 _ => rgb_of(dynamic),
             }
         }
     };
-    Ok(rgb.channel(spec.channel))
+    Ok(DecodedGray::Wide(rgb.channel(spec.channel)))
 }
 
 /// A colour frame's samples as RGB in its own depth (8 or 16 bit; alpha dropped).

@@ -137,6 +137,11 @@ struct FixedArgs {
     /// Write every board point here (JSON Lines: frame, x y z mm, u v px, residual mm, inlier).
     #[arg(long)]
     points: Option<PathBuf>,
+    /// Refuse a plane whose residual RMS (mm, its inliers about it) exceeds this: the points are
+    /// not one laser's on the boards (the wrong channel or colour, stripes of another scan).
+    /// A sound rig gives hundredths to a few tenths.
+    #[arg(long, default_value_t = 2.0, value_name = "MM")]
+    max_residual_mm: f64,
     /// Output scanner.json (`-` = stdout), written atomically.
     #[arg(short, long, default_value = "scanner.json")]
     output: PathBuf,
@@ -422,6 +427,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
     if a.min_corners < 4 {
         return Err(CliError::usage("--min-corners must be at least 4"));
     }
+    omni_cli::positive("--max-residual-mm", a.max_residual_mm)?;
     let channel = match (a.laser.as_deref(), a.channel.as_deref()) {
         (Some(c), _) => Channel::Laser(c.parse().map_err(CliError::usage)?),
         (None, None) => Channel::Laser(omni_vision::colour::Colour::Red),
@@ -464,6 +470,16 @@ fn fixed(a: &FixedArgs) -> CliResult {
         seed: 1,
     };
     let fit = fixed_plane::fit_fixed_plane(camera.as_ref(), &frames, &opts).map_err(CliError::new)?;
+    if !(fit.report.rms_mm <= a.max_residual_mm) {
+        let why = match &a.stripes {
+            Some(path) => format!("do the stripes of {} belong to these frames?", name(path)),
+            None => format!("is the laser read right (read as {}: --laser, --channel)?", detect.colour.channel),
+        };
+        return Err(CliError::new(format!(
+            "the plane's residual RMS is {:.3} mm, above --max-residual-mm {}: {why}",
+            fit.report.rms_mm, a.max_residual_mm
+        )));
+    }
     let mut report = serde_json::to_value(&fit.report)?;
     report["inputs"] = serde_json::json!({
         "camera": name(&a.camera),
@@ -501,6 +517,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
     out.report = Some(report);
     write_doc(&a.output, &out)?;
     warn_saturated(&fit.report);
+    warn_inconsistent(&fit.report);
     let table = fixed_table(&fit.report);
     use std::io::Write;
     if a.output == Path::new("-") {
@@ -510,6 +527,37 @@ fn fixed(a: &FixedArgs) -> CliResult {
         stdout.write_all(table.as_bytes()).and_then(|_| stdout.flush()).map_err(omni_cli::stdout_error)?;
     }
     Ok(())
+}
+
+/// A leave-one-frame-out RMS above this multiple of the in-sample RMS draws a warning: with
+/// hundreds of points a frame, a frame's own points barely move the plane, so the two agree
+/// unless the frames disagree (sound rigs: 1.1-1.3, the real hand-held frames and the rendered
+/// fixed plane alike).
+const LEAVE_ONE_OUT_WARNING_RATIO: f64 = 2.0;
+
+/// Warns, in one line, when the frames disagree about the plane (the leave-one-frame-out RMS
+/// well above the in-sample RMS), naming the frames that disagree most: a frame whose stripe is
+/// not this laser's (a reflection, another frame's stripes), whose board pose is off, or a rig
+/// that moved between frames.
+fn warn_inconsistent(r: &omni_calib::fixed_plane::FixedPlaneReport) {
+    if !(r.leave_one_out_rms_mm > LEAVE_ONE_OUT_WARNING_RATIO * r.rms_mm) {
+        return;
+    }
+    let mut frames: Vec<&omni_calib::fixed_plane::FrameReport> = r.frames.iter().collect();
+    frames.sort_by(|a, b| b.leave_one_out_rms_mm.total_cmp(&a.leave_one_out_rms_mm));
+    let worst: Vec<String> =
+        frames.iter().take(3).map(|f| format!("{} {:.3} mm", file_name(&f.name), f.leave_one_out_rms_mm)).collect();
+    omni_cli::warn(
+        "omni-calib-plane",
+        &format!(
+            "the frames disagree about the plane: leave-one-frame-out RMS {:.3} mm, {:.1} x the residual RMS {:.3} mm \
+             (most: {}); check those frames' stripes and board poses, and that the laser did not move",
+            r.leave_one_out_rms_mm,
+            r.leave_one_out_rms_mm / r.rms_mm,
+            r.rms_mm,
+            worst.join(", ")
+        ),
+    );
 }
 
 /// More than this share of a frame's stripe points on the board saturated draws a warning.

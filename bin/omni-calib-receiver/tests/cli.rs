@@ -44,12 +44,20 @@ fn calibrates_the_real_images_exports_and_reimports() {
         .arg(dir.path().join("camchain.yaml"))
         .arg("--export-opencv")
         .arg(dir.path().join("omnidir.yaml"))
+        .args(["--viewpoint-mm", "1,2,80"])
         .arg(real_dir())
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", stderr(&out));
     let cam: serde_json::Value = serde_json::from_slice(&std::fs::read(&camera).unwrap()).unwrap();
     assert_eq!(cam["model"]["kind"], "mei");
+    // The exports written by the same run carry its viewpoint: imported, the same camera.
+    for (import, file) in [("import-opencv", "omnidir.yaml"), ("import-kalibr", "camchain.yaml")] {
+        let out = bin().arg(import).arg(dir.path().join(file)).args(["-o", "-"]).output().unwrap();
+        assert!(out.status.success(), "{}", stderr(&out));
+        let back: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(back["model"]["viewpoint_mm"], serde_json::json!([1.0, 2.0, 80.0]), "{file}");
+    }
     let rms = cam["report"]["rms_px"].as_f64().unwrap();
     assert!(rms <= 0.4, "RMS {rms} px");
     assert!(cam["report"]["images_used"].as_u64().unwrap() >= 14);
@@ -76,6 +84,7 @@ fn calibrates_the_real_images_exports_and_reimports() {
         .arg(&txt)
         .arg("--annulus")
         .arg("375.5,239.5,20,300")
+        .args(["--viewpoint-mm", "0,0,80"])
         .arg("-o")
         .arg(dir.path().join("ocam.json"))
         .output()
@@ -87,6 +96,7 @@ fn calibrates_the_real_images_exports_and_reimports() {
     let a: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("ocam.json")).unwrap()).unwrap();
     let b: serde_json::Value = serde_json::from_slice(&std::fs::read(&imported).unwrap()).unwrap();
     assert_eq!(b["model"]["kind"], "ocam");
+    assert_eq!(b["model"]["viewpoint_mm"], serde_json::json!([0.0, 0.0, 80.0]), "the run's viewpoint kept");
     // The fitted model is valid inside the given annulus.
     assert_eq!(a["model"]["outer_radius_px"], 300.0);
     assert_eq!(a["model"]["inner_radius_px"], 20.0);

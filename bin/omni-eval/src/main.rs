@@ -2,9 +2,9 @@
 
 use clap::{Parser, Subcommand};
 use omni_cli::CliError;
-use omni_cloud::eval::{ObjectReport, compare_with_scene};
+use omni_cloud::eval::{self, Comparison, compare_with_scene};
 use omni_cloud::filter::CropBox;
-use omni_cloud::fit::{ErrorStats, FitOptions, Shape, ShapeKind, fit_shape};
+use omni_cloud::fit::{ErrorStats, FitOptions, Shape, ShapeKind, fit_and_measure};
 use omni_formats::read_doc;
 use omni_formats::rig::{BoardPosesFile, RigFile};
 use omni_formats::scene::SceneFile;
@@ -24,7 +24,9 @@ omni-eval fit --shape sphere --radius 50 --centre 500,0,0 sphere.ply\n  \
 omni-eval fit --shape plane --crop 400,-200,-150,600,200,150 --json plane.ply\n  \
 omni-eval compare --scene scene.json cloud.ply\n\n\
 Errors are signed distances (mm) to the surface, positive outside the object (for a plane: towards \
-the sensor). Statistics: mean signed error, standard deviation (n-1), RMS, max |error|.\n\
+the sensor). Statistics: mean signed error, standard deviation (n-1), RMS, max |error|; `fit` takes \
+them over the points within max(--inlier-mm, 3.5 robust σ) of the shape, `compare` over each \
+object's points within --max-distance-mm of it.\n\
 Exit codes: 0 ok, 1 bad input, 2 usage error."
 )]
 struct Args {
@@ -34,7 +36,8 @@ struct Args {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Fit a primitive (RANSAC, then least squares on the inliers) and report the residuals.
+    /// Fit a primitive (RANSAC, least squares on its inliers, then on the points within 3.5 robust
+    /// σ of that shape) and report the residuals.
     Fit {
         /// plane, sphere, cylinder or cone.
         #[arg(long)]
@@ -42,7 +45,9 @@ enum Command {
         /// Use only points inside this box (mm).
         #[arg(long, value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX", allow_hyphen_values = true)]
         crop: Option<String>,
-        /// RANSAC inlier threshold (mm); statistics are over the inliers.
+        /// RANSAC inlier threshold (mm). The statistics are over the points within the larger of
+        /// this and 3.5 robust σ of the fitted shape (1.4826 × the residuals' median absolute
+        /// deviation): gross outliers out, the scatter whole however wide.
         #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
         inlier_mm: f64,
         /// RANSAC hypotheses (cylinder and cone use at most 24).
@@ -51,10 +56,11 @@ enum Command {
         /// Random seed (same seed, same result).
         #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
         seed: u64,
-        /// Nominal radius (mm), to report the fitted radius error.
+        /// Nominal radius (mm), to report the fitted radius error, ± its standard error (a
+        /// jackknife over 10 interleaved blocks of the points).
         #[arg(long, allow_negative_numbers = true)]
         radius: Option<f64>,
-        /// Nominal sphere centre (mm), to report the centre distance error.
+        /// Nominal sphere centre (mm), to report the centre distance error, ± its standard error.
         #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
         centre: Option<String>,
         /// Print JSON instead of a table.
@@ -158,7 +164,8 @@ Example:
         /// 4 × the width and 16384).
         #[arg(long, default_value_t = 800, value_parser = clap::value_parser!(u32).range(16..=16384), allow_negative_numbers = true)]
         width: u32,
-        /// Colour by `height` (z) or `range` (distance from the origin).
+        /// Colour by `height` (z) or `range` (distance from the world origin, not the viewpoint
+        /// distance of the clouds' `scalar_range`).
         #[arg(long, default_value = "height")]
         color: omni_cloud::render::ColorBy,
     },
@@ -287,17 +294,32 @@ fn main() -> std::process::ExitCode {
             let pts = load_points(&cloud, crop.as_ref(), transform.as_deref())?;
             let name = omni_formats::io::display_name(&cloud, "stdin");
             let opts = FitOptions { inlier_mm, iterations, seed };
-            let fit = fit_shape(shape, &pts, &opts).map_err(|m| format!("{name}: {m}"))?;
-            let inl: Vec<f64> =
-                pts.iter().zip(&fit.inliers).filter(|(_, k)| **k).map(|(p, _)| fit.shape.signed_distance(p)).collect();
-            let stats = ErrorStats::from_errors(&inl).ok_or_else(|| format!("{name}: no inliers"))?;
-            let radius_error = radius.zip(fit.shape.radius()).map(|(nominal, r)| r - nominal);
-            let centre_error = match (centre, fit.shape) {
-                (Some(c), Shape::Sphere { center, .. }) => Some((center - c).norm()),
-                _ => None,
+            let fit = fit_and_measure(shape, &pts, &opts).map_err(|m| format!("{name}: {m}"))?;
+            let errors_of = |shape: &Shape| {
+                let radius_error = radius.zip(shape.radius()).map(|(nominal, r)| r - nominal);
+                let centre_error = match (centre, shape) {
+                    (Some(c), Shape::Sphere { center, .. }) => Some((center - c).norm()),
+                    _ => None,
+                };
+                (radius_error, centre_error)
             };
-            print_fit(&mut std::io::stdout().lock(), &fit.shape, pts.len(), &stats, radius_error, centre_error, json)
-                .map_err(omni_cli::stdout_error)?;
+            let (radius_error, centre_error) = errors_of(&fit.shape);
+            // Their standard errors: the same fit without each jackknife block of the points.
+            let leave_outs: Vec<(Option<f64>, Option<f64>)> = match radius_error.is_some() || centre_error.is_some() {
+                true => (0..eval::JACKKNIFE_BLOCKS)
+                    .filter_map(|b| fit_and_measure(shape, &eval::without_block(&pts, b), &opts).ok())
+                    .map(|f| errors_of(&f.shape))
+                    .collect(),
+                false => Vec::new(),
+            };
+            let measured = Measured {
+                points: pts.len(),
+                stats: fit.stats,
+                band_mm: fit.band_mm,
+                radius_error: radius_error.map(|e| (e, eval::jackknife_se(leave_outs.iter().filter_map(|l| l.0)))),
+                centre_error: centre_error.map(|e| (e, eval::jackknife_se(leave_outs.iter().filter_map(|l| l.1)))),
+            };
+            print_fit(&mut std::io::stdout().lock(), &fit.shape, &measured, json).map_err(omni_cli::stdout_error)?;
             Ok(())
         }
         Command::Compare { scene, max_distance_mm, inlier_mm, json, transform, cloud } => {
@@ -306,9 +328,18 @@ fn main() -> std::process::ExitCode {
             let scene_file: SceneFile = read_doc(&scene)?;
             let pts = load_points(&cloud, None, transform.as_deref())?;
             let opts = FitOptions { inlier_mm, ..FitOptions::default() };
-            let (reports, stray) = compare_with_scene(&scene_file, &pts, max_distance_mm, &opts)
+            let comparison = compare_with_scene(&scene_file, &pts, max_distance_mm, &opts)
                 .map_err(|m| format!("{}: {m}", scene.display()))?;
-            print_compare(&mut std::io::stdout().lock(), &reports, pts.len(), stray, json)
+            if !comparison.unmeasured.is_empty() {
+                omni_cli::warn(
+                    "omni-eval",
+                    &format!(
+                        "no point within --max-distance-mm {max_distance_mm} of {}: not measured",
+                        comparison.unmeasured.join(", ")
+                    ),
+                );
+            }
+            print_compare(&mut std::io::stdout().lock(), &comparison, pts.len(), json)
                 .map_err(omni_cli::stdout_error)?;
             Ok(())
         }
@@ -427,22 +458,30 @@ fn shape_json(s: &Shape) -> serde_json::Value {
     }
 }
 
-fn print_fit(
-    out: &mut dyn Write,
-    shape: &Shape,
-    n: usize,
-    e: &ErrorStats,
-    radius_err: Option<f64>,
-    centre_err: Option<f64>,
-    json: bool,
-) -> std::io::Result<()> {
+/// A fit's residual statistics and errors against the nominal shape.
+struct Measured {
+    /// Points given, and the statistics of those within `band_mm` of the shape.
+    points: usize,
+    stats: ErrorStats,
+    band_mm: f64,
+    /// Fitted − nominal radius and the centre's distance from the nominal one (mm), each with
+    /// its jackknife standard error (mm) where the leave-outs allow one.
+    radius_error: Option<(f64, Option<f64>)>,
+    centre_error: Option<(f64, Option<f64>)>,
+}
+
+fn print_fit(out: &mut dyn Write, shape: &Shape, m: &Measured, json: bool) -> std::io::Result<()> {
+    let e = &m.stats;
     if json {
-        let mut v = serde_json::json!({"shape": shape_json(shape), "points": n, "inliers": e.count, "errors": e});
-        if let Some(r) = radius_err {
+        let mut v = serde_json::json!({"shape": shape_json(shape), "points": m.points, "inliers": e.count,
+            "band_mm": m.band_mm, "errors": e});
+        if let Some((r, se)) = m.radius_error {
             v["radius_error_mm"] = r.into();
+            v["radius_error_se_mm"] = se.into();
         }
-        if let Some(c) = centre_err {
+        if let Some((c, se)) = m.centre_error {
             v["centre_error_mm"] = c.into();
+            v["centre_error_se_mm"] = se.into();
         }
         writeln!(out, "{v}")?;
         return Ok(());
@@ -451,18 +490,36 @@ fn print_fit(
     writeln!(out, "shape               {}", v["type"].as_str().unwrap_or("?"))?;
     if let Some(obj) = v.as_object() {
         for (k, val) in obj.iter().filter(|(k, _)| k.as_str() != "type") {
-            writeln!(out, "{k:<20}{val}")?;
+            writeln!(out, "{k:<20}{}", rounded(val))?;
         }
     }
-    writeln!(out, "points              {n} ({} inliers, {:.1} %)", e.count, 100.0 * e.count as f64 / n as f64)?;
+    writeln!(
+        out,
+        "points              {} ({} within {:.3} mm of the shape, {:.1} %)",
+        m.points,
+        e.count,
+        m.band_mm,
+        100.0 * e.count as f64 / m.points as f64
+    )?;
     print_stats(out, e)?;
-    if let Some(r) = radius_err {
-        writeln!(out, "radius error        {r:+.4} mm")?;
+    let se = |se: Option<f64>| se.map_or(String::new(), |s| format!(" ± {s:.4}"));
+    if let Some((r, s)) = m.radius_error {
+        writeln!(out, "radius error        {r:+.4}{} mm", se(s))?;
     }
-    if let Some(c) = centre_err {
-        writeln!(out, "centre error        {c:.4} mm")?;
+    if let Some((c, s)) = m.centre_error {
+        writeln!(out, "centre error        {c:.4}{} mm", se(s))?;
     }
     Ok(())
+}
+
+/// A shape parameter as the table prints it: numbers to 6 decimals (nm in mm, µ° in degrees),
+/// beyond any fit's precision; arrays element by element.
+fn rounded(v: &serde_json::Value) -> String {
+    match v {
+        serde_json::Value::Number(n) => n.as_f64().map_or(n.to_string(), |x| format!("{x:.6}")),
+        serde_json::Value::Array(a) => format!("[{}]", a.iter().map(rounded).collect::<Vec<_>>().join(", ")),
+        other => other.to_string(),
+    }
 }
 
 fn print_stats(out: &mut dyn Write, e: &ErrorStats) -> std::io::Result<()> {
@@ -473,28 +530,31 @@ fn print_stats(out: &mut dyn Write, e: &ErrorStats) -> std::io::Result<()> {
     Ok(())
 }
 
-fn print_compare(
-    out: &mut dyn Write,
-    reports: &[ObjectReport],
-    n: usize,
-    stray: usize,
-    json: bool,
-) -> std::io::Result<()> {
+fn print_compare(out: &mut dyn Write, c: &Comparison, n: usize, json: bool) -> std::io::Result<()> {
     if json {
-        writeln!(out, "{}", serde_json::json!({"points": n, "stray_points": stray, "objects": reports}))?;
+        let v =
+            serde_json::json!({"points": n, "stray_points": c.stray, "objects": c.objects, "unmeasured": c.unmeasured});
+        writeln!(out, "{v}")?;
         return Ok(());
     }
     writeln!(
         out,
-        "{:<14}{:<10}{:>8}{:>11}{:>10}{:>10}{:>10}{:>12}{:>12}",
-        "object", "kind", "points", "mean mm", "std mm", "rms mm", "max mm", "radius err", "centre err"
+        "{:<14}{:<10}{:>8}{:>11}{:>10}{:>10}{:>10}{:>20}{:>20}",
+        "object", "kind", "points", "mean mm", "std mm", "rms mm", "max mm", "radius err mm", "centre err mm"
     )?;
-    let opt = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:+.4}"));
-    for r in reports {
+    // An error with its standard error (the jackknife's), to the precision it has.
+    let with_se = |x: Option<f64>, se: Option<f64>, signed: bool| match (x, se) {
+        (Some(v), Some(se)) if signed => format!("{v:+.3} ± {se:.3}"),
+        (Some(v), Some(se)) => format!("{v:.3} ± {se:.3}"),
+        (Some(v), None) if signed => format!("{v:+.3}"),
+        (Some(v), None) => format!("{v:.3}"),
+        (None, _) => "-".to_string(),
+    };
+    for r in &c.objects {
         let e = &r.errors;
         writeln!(
             out,
-            "{:<14}{:<10}{:>8}{:>+11.4}{:>10.4}{:>10.4}{:>10.4}{:>12}{:>12}",
+            "{:<14}{:<10}{:>8}{:>+11.4}{:>10.4}{:>10.4}{:>10.4}{:>20}{:>20}",
             r.name,
             r.kind,
             e.count,
@@ -502,10 +562,13 @@ fn print_compare(
             e.std_dev,
             e.rms,
             e.max_abs,
-            opt(r.radius_error_mm),
-            opt(r.centre_error_mm)
+            with_se(r.radius_error_mm, r.radius_error_se_mm, true),
+            with_se(r.centre_error_mm, r.centre_error_se_mm, false)
         )?;
     }
-    writeln!(out, "{n} points, {stray} farther than the distance limit from every surface")?;
+    for name in &c.unmeasured {
+        writeln!(out, "{name:<14}{:<10}{:>8}   (not measured: no point near it)", "-", 0)?;
+    }
+    writeln!(out, "{n} points, {} farther than the distance limit from every surface", c.stray)?;
     Ok(())
 }

@@ -670,7 +670,7 @@ fn joint_fit(mut model: Model, obs: &[Observation], mut poses: Vec<Option<[f64; 
         match worst {
             Some((k, r)) if r > limit && used.len() > 3 => {
                 reasons[k] = Some(format!(
-                    "outlier after fitting: RMS {r:.3} px > {limit:.3} px ({} × median {med:.3} px)",
+                    "outlier after fitting: RMS {r:.3} px per coordinate > {limit:.3} px ({} × median {med:.3} px)",
                     opts.outlier_factor
                 ));
             }
@@ -930,6 +930,12 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
     let mut all_res = Vec::new();
     for (s, &k) in usable.iter().enumerate() {
         if let Some(p) = fit.poses[s] {
+            // A refused image's pose froze when it was refused: posed again under the final
+            // intrinsics, its RMS says how far it is from them, not from an earlier model.
+            let p = match &fit.reasons[s] {
+                Some(_) => initial_pose(&fit.model, &fit.model.full, &sub[s], 20).map_or(p, |(q, _)| q),
+                None => p,
+            };
             let mut r = vec![0.0; 2 * sub[s].pixels.len()];
             image_residuals(&fit.model, &fit.model.full, &p, &sub[s], &mut r);
             images[k].rms_px = Some(rms(&r));

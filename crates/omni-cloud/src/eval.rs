@@ -104,32 +104,58 @@ pub struct ObjectReport {
     pub kind: String,
     /// Signed errors of the points assigned to the object.
     pub errors: ErrorStats,
-    /// Fitted radius − true radius (mm), spheres and cylinders.
+    /// Fitted radius − true radius (mm), spheres and cylinders, and its standard error (mm).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub radius_error_mm: Option<f64>,
-    /// Distance between fitted and true sphere centre (mm).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radius_error_se_mm: Option<f64>,
+    /// Distance between fitted and true sphere centre (mm), and its standard error (mm).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub centre_error_mm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub centre_error_se_mm: Option<f64>,
+}
+
+/// A cloud compared with its scene.
+#[derive(Debug, Clone)]
+pub struct Comparison {
+    /// The objects that points were assigned to, in the scene's order.
+    pub objects: Vec<ObjectReport>,
+    /// The scene's objects no point was assigned to (by name): nothing of them was measured.
+    pub unmeasured: Vec<String>,
+    /// Points farther than the distance limit from every surface.
+    pub stray: usize,
 }
 
 fn object_name(i: usize, o: &SceneObject) -> String {
     o.name.clone().unwrap_or_else(|| format!("object {i}"))
 }
 
+/// Blocks of the delete-a-block jackknife that gives the fitted radius's and centre's standard
+/// errors: neighbouring points (the cloud's order) share a stripe and its errors, so a block is
+/// every [`JACKKNIFE_BLOCKS`]-th point, each block spread over the whole object.
+pub const JACKKNIFE_BLOCKS: usize = 10;
+
+/// `points` without jackknife block `block` (every [`JACKKNIFE_BLOCKS`]-th point from `block`).
+pub fn without_block(points: &[Point3<f64>], block: usize) -> Vec<Point3<f64>> {
+    points.iter().enumerate().filter(|(k, _)| k % JACKKNIFE_BLOCKS != block).map(|(_, p)| *p).collect()
+}
+
 /// Compares points with the scene. Points farther than `max_distance_mm` from every surface
-/// are not assigned (stray points; counted in the returned total). Returns the per-object
-/// reports (objects with no points are left out) and the number of unassigned points.
+/// are not assigned (stray points). Spheres with at least 10 points and cylinders with at least
+/// 30 get their radius (and a sphere its centre) fitted, with standard errors from a jackknife
+/// over [`JACKKNIFE_BLOCKS`] blocks of their points.
 pub fn compare_with_scene(
     scene: &SceneFile,
     points: &[Point3<f64>],
     max_distance_mm: f64,
     fit: &FitOptions,
-) -> Result<(Vec<ObjectReport>, usize), String> {
+) -> Result<Comparison, String> {
     if scene.objects.is_empty() {
         return Err("the scene has no objects".into());
     }
     let mut per_object: Vec<(Vec<f64>, Vec<Point3<f64>>)> = vec![(Vec::new(), Vec::new()); scene.objects.len()];
-    let mut unassigned = 0;
+    let mut stray = 0;
     for p in points {
         let (best, d) = scene
             .objects
@@ -142,40 +168,67 @@ pub fn compare_with_scene(
             per_object[best].0.push(d);
             per_object[best].1.push(*p);
         } else {
-            unassigned += 1;
+            stray += 1;
         }
     }
-    let mut reports = Vec::new();
+    let mut out = Comparison { objects: Vec::new(), unmeasured: Vec::new(), stray };
     for (i, (o, (errs, pts))) in scene.objects.iter().zip(per_object).enumerate() {
-        let Some(errors) = ErrorStats::from_errors(&errs) else { continue };
-        let (mut radius_error_mm, mut centre_error_mm) = (None, None);
-        match &o.shape {
-            Shape::Sphere { centre_mm, radius_mm } if pts.len() >= 10 => {
-                if let Ok(f) = fit_shape(ShapeKind::Sphere, &pts, fit)
-                    && let FitShape::Sphere { center, radius } = f.shape
-                {
-                    radius_error_mm = Some(radius - radius_mm);
-                    centre_error_mm = Some((center - Point3::from(*centre_mm)).norm());
-                }
-            }
-            Shape::Cylinder { radius_mm, .. } if pts.len() >= 30 => {
-                if let Ok(f) = fit_shape(ShapeKind::Cylinder, &pts, fit)
-                    && let Some(r) = f.shape.radius()
-                {
-                    radius_error_mm = Some(r - radius_mm);
-                }
-            }
-            _ => {}
-        }
-        reports.push(ObjectReport {
+        let Some(errors) = ErrorStats::from_errors(&errs) else {
+            out.unmeasured.push(object_name(i, o));
+            continue;
+        };
+        let mut report = ObjectReport {
             name: object_name(i, o),
             kind: o.shape.kind().into(),
             errors,
-            radius_error_mm,
-            centre_error_mm,
-        });
+            radius_error_mm: None,
+            radius_error_se_mm: None,
+            centre_error_mm: None,
+            centre_error_se_mm: None,
+        };
+        // The fitted radius's error and, for a sphere, its centre's distance from the truth.
+        let measure = |pts: &[Point3<f64>]| -> Option<(f64, Option<f64>)> {
+            match &o.shape {
+                Shape::Sphere { centre_mm, radius_mm } => match fit_shape(ShapeKind::Sphere, pts, fit).ok()?.shape {
+                    FitShape::Sphere { center, radius } => {
+                        Some((radius - radius_mm, Some((center - Point3::from(*centre_mm)).norm())))
+                    }
+                    _ => None,
+                },
+                Shape::Cylinder { radius_mm, .. } => {
+                    Some((fit_shape(ShapeKind::Cylinder, pts, fit).ok()?.shape.radius()? - radius_mm, None))
+                }
+                _ => None,
+            }
+        };
+        let enough = match &o.shape {
+            Shape::Sphere { .. } => pts.len() >= 10,
+            Shape::Cylinder { .. } => pts.len() >= 30,
+            _ => false,
+        };
+        if enough && let Some((radius, centre)) = measure(&pts) {
+            let leave_outs: Vec<(f64, Option<f64>)> =
+                (0..JACKKNIFE_BLOCKS).filter_map(|b| measure(&without_block(&pts, b))).collect();
+            report.radius_error_mm = Some(radius);
+            report.radius_error_se_mm = jackknife_se(leave_outs.iter().map(|l| l.0));
+            report.centre_error_mm = centre;
+            report.centre_error_se_mm = centre.and_then(|_| jackknife_se(leave_outs.iter().filter_map(|l| l.1)));
+        }
+        out.objects.push(report);
     }
-    Ok((reports, unassigned))
+    Ok(out)
+}
+
+/// The jackknife's standard error of a statistic from its leave-one-block-out values
+/// (√((g − 1)/g · Σ(θₖ − θ̄)²) over g blocks); `None` with fewer than two.
+pub fn jackknife_se(values: impl Iterator<Item = f64>) -> Option<f64> {
+    let v: Vec<f64> = values.collect();
+    let g = v.len() as f64;
+    if v.len() < 2 {
+        return None;
+    }
+    let mean = v.iter().sum::<f64>() / g;
+    Some(((g - 1.0) / g * v.iter().map(|x| (x - mean).powi(2)).sum::<f64>()).sqrt())
 }
 
 #[cfg(test)]

@@ -70,8 +70,10 @@ fn measure(object: BenchObject, kind: ShapeKind, z_range: (f64, f64), step: f64)
     let coords: Vec<[f64; 3]> = raw.iter().map(|p| p.coords.into()).collect();
     let keep = statistical_outlier_mask(&coords, 20, 3.0).unwrap();
     let points: Vec<Point3<f64>> = raw.iter().zip(&keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect();
-    let (reports, stray) = compare_with_scene(&scene_file, &points, 10.0, &FitOptions::default()).unwrap();
+    let comparison = compare_with_scene(&scene_file, &points, 10.0, &FitOptions::default()).unwrap();
+    let (reports, stray) = (&comparison.objects, comparison.stray);
     assert_eq!(reports.len(), 1);
+    assert!(comparison.unmeasured.is_empty());
     let fit = fit_shape(kind, &points, &FitOptions::default()).unwrap();
     let inliers: Vec<Point3<f64>> = points.iter().zip(&fit.inliers).filter(|(_, k)| **k).map(|(p, _)| *p).collect();
     let fit_stats = ErrorStats::from_errors(&signed_errors(&fit.shape, &inliers)).unwrap();

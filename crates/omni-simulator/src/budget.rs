@@ -2,8 +2,10 @@
 //! each leave in its range, for a matte wall facing the sensor at a given distance.
 //!
 //! The rule: every term is a stripe-centre uncertainty in pixels across the stripe, turned into
-//! range by the sensor's own geometry (how far the triangulated point moves along its ray when
-//! the pixel moves by one across the stripe); terms add in quadrature.
+//! millimetres normal to the wall by the sensor's own geometry (how far the triangulated point
+//! moves across the wall when the pixel moves by one across the stripe: the error a fit to the
+//! wall or a comparison with its truth measures); terms add in quadrature. The point moves
+//! within its light plane, not along its ray: its range changes less than the wall's distance.
 //! * Speckle: Dorsch's limit C·λN/π for a resolved line; a line whose geometric image (width
 //!   σ_g) is narrower than the speckle cannot move by more than about its width, so the two
 //!   combine harmonically: C / √((π/λN)² + 1/(κσ_g)²).
@@ -40,7 +42,7 @@ pub struct BudgetLine {
     pub range_mm: f64,
     /// The point's distance from the viewpoint (mm).
     pub distance_mm: f64,
-    /// Range change per pixel across the stripe (mm/px).
+    /// How far the point moves normal to the wall per pixel across the stripe (mm/px).
     pub mm_per_px: f64,
     /// The laser line's geometric width in the image (σ, px).
     pub line_sigma_px: f64,
@@ -91,19 +93,20 @@ fn budget_at(
     let along = n.cross(&Vector3::x()).normalize();
     let tangent = (cam.point_to_pixel(&(point + along))? - pixel).normalize();
     let across = Vector2::new(-tangent.y, tangent.x);
-    let on_plane = |p: Vector2<f64>| -> Option<(f64, Point3<f64>)> {
+    let on_plane = |p: Vector2<f64>| -> Option<(Point3<f64>, Point3<f64>)> {
         let ray = cam.pixel_to_ray(&p)?;
         let hit = intersect_ray_plane(&ray, &lp.plane, 1e-9).ok()?;
-        Some(((hit.point - ray.origin).norm(), ray.origin))
+        Some((hit.point, ray.origin))
     };
     let on_wall = |p: Vector2<f64>| -> Option<Point3<f64>> {
         let ray = cam.pixel_to_ray(&p)?;
         let t = (range - ray.origin.x) / ray.dir.x;
         (t > 0.0).then(|| ray.origin + ray.dir.into_inner() * t)
     };
-    let (r0, origin) = on_plane(pixel - across * 0.5)?;
-    let (r1, _) = on_plane(pixel + across * 0.5)?;
-    let mm_per_px = (r1 - r0).abs();
+    let (h0, origin) = on_plane(pixel - across * 0.5)?;
+    let (h1, _) = on_plane(pixel + across * 0.5)?;
+    // The wall's normal is x.
+    let mm_per_px = (h1.x - h0.x).abs();
     let distance = (point - origin).norm();
     // How fast the distance to the light plane changes across the stripe on the wall (mm/px).
     let (w0, w1) = (on_wall(pixel - across * 0.5)?, on_wall(pixel + across * 0.5)?);
@@ -154,8 +157,8 @@ fn centroid_noise_px(signal: f64, background: f64, width_px: f64, opts: &RenderO
     (width_px * width_px / signal + per_pixel * window.powi(3) / (12.0 * signal * signal)).sqrt()
 }
 
-/// The calibration's share (mm): the camera's pixel error through the geometry, and the light
-/// plane's offset along the viewing ray.
+/// The calibration's share (mm normal to the wall): the camera's pixel error through the
+/// geometry, and the light plane's offset through the viewing ray.
 fn calibration_range_mm(
     c: &CalibrationUncertainty,
     mm_per_px: f64,
@@ -166,8 +169,11 @@ fn calibration_range_mm(
         return None;
     }
     let camera = c.camera_px.unwrap_or(0.0) * mm_per_px;
-    let cos = (plane_normal.dot(&view.normalize())).abs().max(1e-6);
-    let planes = c.planes_mm.unwrap_or(0.0) / cos;
+    // A plane's offset moves the point along its ray, by offset / cos(normal, ray); normal to
+    // the wall (x) by that times the ray's x component.
+    let view = view.normalize();
+    let cos = (plane_normal.dot(&view)).abs().max(1e-6);
+    let planes = c.planes_mm.unwrap_or(0.0) / cos * view.x.abs();
     Some(camera.hypot(planes))
 }
 

@@ -365,7 +365,10 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     let mut cal = super::calibrate(corners.width, corners.height, &obs, &fit).map_err(|e| {
         let reasons: Vec<String> =
             corners.images.iter().filter_map(|i| i.reason.as_ref().map(|r| format!("{}: {r}", i.name))).collect();
-        Error::Failed(format!("calibration failed: {e}; {}", reasons.join("; ")))
+        match reasons.is_empty() {
+            true => Error::Failed(format!("calibration failed: {e}")),
+            false => Error::Failed(format!("calibration failed: {e}; {}", reasons.join("; "))),
+        }
     })?;
     // The detector's reason ("no board found", …) says more than "too few corners (0 < 8)".
     for (img, entry) in cal.images.iter_mut().zip(&corners.images) {
@@ -399,9 +402,10 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     if let Some(dir) = &opts.overlay {
         write_overlays(dir, &cal, &obs, &detected.images)?;
     }
-    staged.extend(stage_exports(opts, &cal, out)?);
+    // The exports carry the viewpoint too (as `omniscan_viewpoint_mm` or an OCamCalib comment).
     let mut spec = cal.spec.clone();
     set_viewpoint(&mut spec, checked.viewpoint_mm);
+    staged.extend(stage_exports(opts, &spec, out)?);
     let mut file = CameraFile::new(spec);
     file.lens_blur_px = lens_blur.map(|b| b.median_px);
     let mut r = report(&cal, opts.model, &board, annulus, &warnings, held_out.as_ref());
@@ -497,9 +501,9 @@ fn inverse_fit_line(fit: &omni_model::ocam::InverseFit) -> String {
 }
 
 /// The exports asked for that the fitted model allows, staged.
-fn stage_exports(opts: &CalibrateOptions, cal: &Calibration, out: &dyn Reporter) -> Result<Vec<Staged>, Error> {
+fn stage_exports(opts: &CalibrateOptions, spec: &CameraSpec, out: &dyn Reporter) -> Result<Vec<Staged>, Error> {
     let mut staged = Vec::new();
-    match &cal.spec {
+    match spec {
         CameraSpec::Ocam(p) => {
             if let Some(path) = &opts.export_ocam {
                 let (text, fit) = export::ocam_calib_results(p);

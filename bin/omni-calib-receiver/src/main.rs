@@ -109,6 +109,11 @@ struct CalibArgs {
     /// fitted to the others; K more fits). 0 = none.
     #[arg(long, value_name = "K", default_value_t = 0)]
     folds: usize,
+    /// Also report each parameter's σ from a leave-one-image-out jackknife (one more fit per
+    /// used image): the fit's own σ takes the corners' errors as independent, which corners
+    /// biased alike within an image (print, board flatness, blur) are not.
+    #[arg(long)]
+    jackknife: bool,
     /// Huber threshold of the robust loss (px).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     huber_px: f64,
@@ -308,6 +313,7 @@ fn calibrate(a: CalibArgs, out: &Stderr) -> Result<(), Error> {
         export_opencv: a.export_opencv,
         rostopic: a.rostopic,
         folds: a.folds,
+        jackknife: a.jackknife,
         huber_px: a.huber_px,
         least_squares: a.least_squares,
         viewpoint_mm: a.viewpoint_mm,

@@ -99,6 +99,8 @@ pub struct CalibrateOptions {
     pub rostopic: String,
     /// K of the K-fold held-out validation; 0 = none.
     pub folds: usize,
+    /// Also a leave-one-image-out jackknife σ of each parameter ([`validate::jackknife`]).
+    pub jackknife: bool,
     /// Huber threshold of the robust loss (px).
     pub huber_px: f64,
     /// Plain least squares: no Huber loss, no per-image weights, no image rejected as an outlier
@@ -133,6 +135,7 @@ impl CalibrateOptions {
             export_opencv: None,
             rostopic: export::DEFAULT_ROSTOPIC.to_string(),
             folds: 0,
+            jackknife: false,
             huber_px: 1.0,
             least_squares: false,
             viewpoint_mm: "0,0,0".to_string(),
@@ -399,6 +402,17 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
             Some(h)
         }
     };
+    let jackknife = match opts.jackknife {
+        false => None,
+        true => {
+            let sigmas = validate::jackknife(corners.width, corners.height, &obs, &fit, &cal)?;
+            out.say("leave-one-image-out jackknife σ (the fit's own σ in brackets):");
+            for ((n, s), own) in cal.param_names.iter().zip(&sigmas).zip(&cal.std_devs) {
+                out.say(&format!("  {n} ± {s:.2e} ({own:.2e})"));
+            }
+            Some(sigmas)
+        }
+    };
     if let Some(dir) = &opts.overlay {
         write_overlays(dir, &cal, &obs, &detected.images)?;
     }
@@ -411,6 +425,9 @@ pub fn calibrate(opts: &CalibrateOptions, out: &dyn Reporter) -> Result<(), Erro
     let mut r = report(&cal, opts.model, &board, annulus, &warnings, held_out.as_ref());
     if let Some(b) = &lens_blur {
         r["lens_blur"] = b.json();
+    }
+    for (n, s) in cal.param_names.iter().zip(jackknife.iter().flatten()) {
+        r["parameters"][n]["jackknife_std"] = serde_json::json!(s);
     }
     file.report = Some(r);
     staged.push(stage_doc(&opts.output, &file)?);

@@ -152,6 +152,41 @@ pub fn ray_difference_deg(
 }
 
 /// The k-fold test RMS (see the module docs); needs at least 2 folds and 2 images per training set.
+/// Each parameter's leave-one-image-out jackknife σ about `cal` (fitted to `obs` with `opts`):
+/// the fit repeated without each image `cal` used, √((g − 1)/g · Σ(θₖ − θ̄)²) over the g fits,
+/// in `cal.param_names`' order. Errors when a fit fails or names its parameters otherwise.
+pub fn jackknife(
+    width: u32,
+    height: u32,
+    obs: &[Observation],
+    opts: &Options,
+    cal: &Calibration,
+) -> Result<Vec<f64>, String> {
+    let used: Vec<usize> = (0..obs.len()).filter(|&k| cal.images.get(k).is_some_and(|i| i.used)).collect();
+    if used.len() < 3 {
+        return Err(format!("the jackknife needs at least 3 used images, have {}", used.len()));
+    }
+    let refit = Options { compare_models: false, ..opts.clone() };
+    let mut values: Vec<Vec<f64>> = Vec::with_capacity(used.len());
+    for &k in &used {
+        let others: Vec<Observation> =
+            obs.iter().enumerate().filter(|&(j, _)| j != k).map(|(_, o)| o.clone()).collect();
+        let c =
+            calibrate(width, height, &others, &refit).map_err(|e| format!("jackknife without {}: {e}", obs[k].name))?;
+        if c.param_names != cal.param_names {
+            return Err(format!("jackknife without {}: the fit has other parameters", obs[k].name));
+        }
+        values.push(c.params);
+    }
+    let g = values.len() as f64;
+    Ok((0..cal.params.len())
+        .map(|i| {
+            let mean = values.iter().map(|v| v[i]).sum::<f64>() / g;
+            ((g - 1.0) / g * values.iter().map(|v| (v[i] - mean).powi(2)).sum::<f64>()).sqrt()
+        })
+        .collect())
+}
+
 pub fn k_fold(width: u32, height: u32, obs: &[Observation], opts: &Options, folds: usize) -> Result<HeldOut, String> {
     let usable: Vec<&Observation> =
         obs.iter().filter(|o| o.pixels.len() >= opts.min_corners && o.pixels.len() == o.board_mm.len()).collect();

@@ -5,7 +5,8 @@
 //! millimetres normal to the wall by the sensor's own geometry (how far the triangulated point
 //! moves across the wall when the pixel moves by one across the stripe: the error a fit to the
 //! wall or a comparison with its truth measures); terms add in quadrature. The point moves
-//! within its light plane, not along its ray: its range changes less than the wall's distance.
+//! within its light plane, not along its ray, so its range changes less than its distance from
+//! the wall does.
 //! * Speckle: Dorsch's limit C·λN/π for a resolved line; a line whose geometric image (width
 //!   σ_g) is narrower than the speckle cannot move by more than about its width, so the two
 //!   combine harmonically: C / √((π/λN)² + 1/(κσ_g)²).

@@ -14,12 +14,13 @@
 # lit scene showing the whole mirror), else in pose.png, else in the board images (their per-pixel
 # range), else the receiver runs without it (OUT/annulus.txt says which; ANNULUS=CX,CY,R_IN,R_OUT
 # or ANNULUS=none overrides). Writes OUT/camera.json and OUT/scanner.json (plus every intermediate
-# stream).
+# stream). RIG_ANGLES, MODEL and VIEWPOINT set the rig scan's angles and the receiver; BIN: the omni-* tools' directory (else PATH).
 set -euo pipefail
 
-usage() { sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
+usage() { sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; exit "${1:-2}"; }
 board= boards= rig= pose= rim_image= port= frames= scene= true_camera= true_scanner= out=
 angles=${RIG_ANGLES:-14:28:0.5} model=${MODEL:-mei} viewpoint=${VIEWPOINT:-0,0,80}
+[ -n "${BIN:-}" ] && PATH="$BIN:$PATH"
 while [ $# -gt 0 ]; do
   case "$1" in
     --board) board=$2; shift 2 ;;
@@ -34,7 +35,7 @@ while [ $# -gt 0 ]; do
     --true-scanner) true_scanner=$2; shift 2 ;;
     --angles) angles=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
-    -h|--help) usage ;;
+    -h|--help) usage 0 ;;
     *) echo "calibrate.sh: unknown argument $1" >&2; usage ;;
   esac
 done

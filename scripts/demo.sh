@@ -11,6 +11,11 @@
 # Environment: OUT (default out/demo), BIN (directory of the omni-* binaries, default
 # target/release), DEMO_SIZE=small for the reduced run used by the CI test.
 set -euo pipefail
+case "${1:-}" in
+  "") ;;
+  -h|--help) sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+  *) echo "demo.sh: no arguments (the environment sets it up: see --help), got $1" >&2; exit 2 ;;
+esac
 here=$(cd "$(dirname "$0")/.." && pwd)
 OUT=${OUT:-out/demo}
 BIN=${BIN:-$here/target/release}

@@ -7,12 +7,17 @@
 # On the virtual sensor (the emulator renders every triggered frame of SCENE through omni-sim):
 #   scripts/scan.sh --camera camera.json --scanner scanner.json --emulate scene.json \
 #       --true-camera truth/camera.json --true-scanner truth/scanner.json --out scan/
-# Writes OUT/manifest.jsonl, OUT/stripes.jsonl, OUT/points.jsonl and OUT/cloud.ply.
+# Writes OUT/manifest.jsonl, OUT/stripes.jsonl, OUT/points.jsonl and OUT/cloud.ply; a scan cut
+# short (a failed stage, an interrupted controller) writes no cloud.ply.
+# Options: --angles START:STOP:STEP (deg; ANGLES, default 14:29:0.25), --facets LIST (FACETS,
+# default 0), --seed N (SEED, the emulator's), --laser-off (a laser-off frame per angle).
+# Environment: DENOISE (omni-merge --statistical, default 20,2.0), FRAME_TIMEOUT_MS (default
+# 2000), STAGES=stripes (stop after omni-ridge), BIN (the omni-* tools' directory, else PATH).
 set -euo pipefail
 
-usage() { sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
+usage() { sed -n '2,15p' "$0" | sed 's/^# \{0,1\}//'; exit "${1:-2}"; }
 camera= scanner= port= scene= true_camera= true_scanner= out= frames=
-angles=${ANGLES:-14:29:0.25} facets=${FACETS:-0} seed=${SEED:-0} width=${WIDTH:-}
+angles=${ANGLES:-14:29:0.25} facets=${FACETS:-0} seed=${SEED:-0}
 denoise=${DENOISE:-20,2.0} laser_off= frame_timeout_ms=${FRAME_TIMEOUT_MS:-2000}
 stages=${STAGES:-cloud}  # `stripes`: stop after omni-ridge (calibration scans)
 while [ $# -gt 0 ]; do
@@ -29,11 +34,12 @@ while [ $# -gt 0 ]; do
     --seed) seed=$2; shift 2 ;;
     --laser-off) laser_off=1; shift ;;
     --out) out=$2; shift 2 ;;
-    -h|--help) usage ;;
+    -h|--help) usage 0 ;;
     *) echo "scan.sh: unknown argument $1" >&2; usage ;;
   esac
 done
 [ -n "$camera" ] && [ -n "$scanner" ] && [ -n "$out" ] || usage
+[ -n "${BIN:-}" ] && PATH="$BIN:$PATH"
 [ -n "$port" ] || [ -n "$scene" ] || { echo "scan.sh: give --port or --emulate" >&2; exit 2; }
 mkdir -p "$out"
 frames=${frames:-$out/frames}
@@ -70,7 +76,7 @@ if [ "$stages" = stripes ]; then
 else
   trigger \
     | omni-ridge --camera "$camera" | tee "$out/stripes.jsonl" \
-    | omni-triangulate --camera "$camera" --scanner "$scanner" | tee "$out/points.jsonl" \
-    | omni-merge - --statistical "$denoise" -o "$out/cloud.ply"
+    | omni-triangulate --strict --camera "$camera" --scanner "$scanner" | tee "$out/points.jsonl" \
+    | omni-merge - --strict --statistical "$denoise" -o "$out/cloud.ply"
 fi
 echo "scan.sh: $(grep -c '"type":"frame"' "$out/manifest.jsonl" || true) frames -> $out" >&2

@@ -62,13 +62,14 @@ def mtimes(root):
     return out
 
 
-def write_batch(work, change=None):
-    """The test batch in `work` (outputs in work/out, its own copy of the scenes, so that a test
-    can change one); `change(config)` edits it first. Returns the config's path."""
+def write_batch(work, change=None, out="out", bin_dir=BIN):
+    """The test batch in `work` (outputs in work/`out`, its own copy of the scenes, so that a test
+    can change one; the tools in `bin_dir`); `change(config)` edits it first. Returns the
+    config's path."""
     with open(os.path.join(HERE, "config.yaml")) as f:
         config = yaml.safe_load(f)
-    config["bin"] = BIN
-    config["out"] = str(work / "out")
+    config["bin"] = bin_dir
+    config["out"] = str(work / out)
     config["calibration"]["board"] = os.path.join(REPO, config["calibration"]["board"])
     (work / "scenes").mkdir()
     for scan in config["scans"].values():
@@ -88,17 +89,27 @@ def compared_outputs(out):
     return {rel: open(path, "rb").read() for rel, path in sorted(files.items())}
 
 
+TOOLS = ("omni-sim", "omni-calib-receiver", "omni-calib-plane", "omni-ridge", "omni-triangulate", "omni-merge",
+         "omni-eval")
+
+
 @pytest.fixture(scope="module")
 def batch(tmp_path_factory):
-    for name in ("omni-sim", "omni-calib-receiver", "omni-calib-plane", "omni-ridge", "omni-triangulate",
-                 "omni-merge", "omni-eval"):
+    for name in TOOLS:
         if not os.access(os.path.join(BIN, name), os.X_OK):
             pytest.fail(f"{BIN}/{name} is missing: build the tools first (cargo build), or set OMNISCAN_BIN")
     work = tmp_path_factory.mktemp("workflow")
-    config_path = write_batch(work)
+    # The tools through links of their own, which a test replaces by a "rebuilt" tool; an output
+    # directory with a space in its name, which every rule's command must quote.
+    links = work / "bin"
+    links.mkdir()
+    for name in TOOLS:
+        os.symlink(os.path.join(BIN, name), links / name)
+    out = work / "out dir"
+    config_path = write_batch(work, out=out.name, bin_dir=str(links))
     snakemake(work, config_path)
     # The outputs as the local run made them, before a test changes a scene.
-    return {"work": work, "out": work / "out", "config": config_path, "outputs": compared_outputs(work / "out")}
+    return {"work": work, "out": out, "bin": links, "config": config_path, "outputs": compared_outputs(out)}
 
 
 def summary(out):
@@ -159,6 +170,34 @@ def test_a_changed_scene_reruns_only_its_scan(batch):
     # The new scan measures the moved plane as well as the old one measured the first.
     row = summary(out)["plane"]
     assert row["points"] > 200 and abs(row["mean"]) < 1.0 and row["std"] < 1.5, row
+
+
+def test_a_rebuilt_tool_reruns_what_it_made(batch):
+    """A tool is an input of the jobs that run it: after a rebuild (here omni-merge replaced by a
+    wrapper, other bytes), only the clouds and what reads them are planned again."""
+    link = batch["bin"] / "omni-merge"
+    os.unlink(link)
+    link.write_text(f'#!/bin/sh\nexec {os.path.join(BIN, "omni-merge")} "$@"\n')
+    link.chmod(0o755)
+    try:
+        jobs = planned_jobs(snakemake(batch["work"], batch["config"], "--dry-run"))
+    finally:
+        link.unlink()
+        os.symlink(os.path.join(BIN, "omni-merge"), link)
+    assert jobs == {"reconstruct": 3, "evaluate": 3, "summary": 1, "all": 1, "total": 8}, jobs
+
+
+def test_a_misspelt_or_missing_config_key_is_named(tmp_path):
+    for change, says in [
+        (lambda c: c["scans"]["plane"].update(sed=3), "scan plane has unknown keys sed"),
+        (lambda c: c["scans"]["plane"].pop("angles"), "scan plane lacks angles"),
+        (lambda c: c.pop("denoise"), "the config lacks denoise"),
+    ]:
+        work = tmp_path / str(len(list(tmp_path.iterdir())))
+        work.mkdir()
+        cmd = snakemake_cmd(work, write_batch(work, change), "--cores", "1", "--dry-run")
+        done = subprocess.run(cmd, capture_output=True, text=True)
+        assert done.returncode != 0 and says in done.stdout + done.stderr, done.stdout + done.stderr
 
 
 def test_a_config_of_another_version_is_refused(tmp_path):

@@ -77,8 +77,8 @@ struct Args {
     /// concatenated twice, or a repeated frame, would count its points twice).
     #[arg(long)]
     allow_duplicates: bool,
-    /// Refuse a stream without its final status record (cut short upstream); without it the
-    /// tool warns and goes on.
+    /// Refuse a stream cut short upstream: without its final status record, or marked incomplete
+    /// by it (an interrupted scan, a tool that failed); without it the tool warns and goes on.
     #[arg(long)]
     strict: bool,
 }
@@ -246,7 +246,11 @@ fn add_stream(
         let frame = match record {
             Record::Frame(frame) => frame,
             Record::Status(s) if !s.complete => {
-                omni_cli::warn("omni-merge", &format!("{name}: the stream is marked incomplete ({:?})", s.errors));
+                let msg = format!("{name}: the stream is marked incomplete ({:?})", s.errors);
+                if args.strict {
+                    return Err(CliError::new(format!("{msg}; refused with --strict")));
+                }
+                omni_cli::warn("omni-merge", &msg);
                 continue;
             }
             _ => continue,

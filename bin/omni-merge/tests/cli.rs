@@ -287,6 +287,18 @@ fn a_stream_cut_short_is_warned_about_or_refused_with_strict() {
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("cut.jsonl") && err.contains("--strict"), "{err}");
     assert!(!d.join("strict.ply").exists());
+    // A stream whose status says it is incomplete (an interrupted scan): warned about, refused
+    // with --strict, no cloud written.
+    let incomplete = text.replace("\"complete\":true", "\"complete\":false");
+    assert_ne!(incomplete, text);
+    std::fs::write(d.join("incomplete.jsonl"), incomplete).unwrap();
+    let out = run(d, &["incomplete.jsonl", "-o", "inc.ply"]);
+    assert!(out.status.success() && String::from_utf8_lossy(&out.stderr).contains("marked incomplete"));
+    let out = run(d, &["incomplete.jsonl", "-o", "inc_strict.ply", "--strict"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("marked incomplete") && err.contains("--strict") && err.lines().count() == 1, "{err}");
+    assert!(!d.join("inc_strict.ply").exists());
 }
 
 /// Odometry samples of `pose` every 10 ms over [0, `end_us`].

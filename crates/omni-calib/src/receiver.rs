@@ -629,6 +629,8 @@ struct Fit {
     model: Model,
     poses: Vec<Option<[f64; 6]>>,
     reasons: Vec<Option<String>>,
+    /// Each image's residual weight in the final fit (1 where the images were not reweighted).
+    weights: Vec<f64>,
 }
 
 fn joint_fit(mut model: Model, obs: &[Observation], mut poses: Vec<Option<[f64; 6]>>, opts: &Options) -> Option<Fit> {
@@ -683,7 +685,10 @@ fn joint_fit(mut model: Model, obs: &[Observation], mut poses: Vec<Option<[f64; 
                 }
                 weights = Some(w);
             }
-            _ => return Some(Fit { model, poses, reasons }),
+            _ => {
+                let weights = weights.unwrap_or_else(|| vec![1.0; obs.len()]);
+                return Some(Fit { model, poses, reasons, weights });
+            }
         }
     }
 }
@@ -952,11 +957,15 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
             .filter(|&k| fit.reasons[k].is_none() && fit.poses[k].is_some())
             .map(|k| sub[k].clone())
             .collect();
+        let weights: Vec<f64> = (0..sub.len())
+            .filter(|&k| fit.reasons[k].is_none() && fit.poses[k].is_some())
+            .map(|k| fit.weights[k])
+            .collect();
         let mut x = fit.model.free_values();
         for k in (0..sub.len()).filter(|&k| fit.reasons[k].is_none()) {
             x.extend_from_slice(&fit.poses[k].unwrap_or_default());
         }
-        intrinsic_std_devs(&fit.model, &used, &x, opts.huber_px)
+        intrinsic_std_devs(&fit.model, &used, &weights, &x, opts.huber_px)
     };
     let (names, params, std_devs, mut spec) = describe(&fit.model, &std_free, width, height, opts);
     // Corners that do not constrain a parameter (all at one pixel, one board seen edge-on)
@@ -1004,9 +1013,12 @@ const BLIND_CENTRE_MARGIN: f64 = 0.9;
 
 /// Standard deviations of the free intrinsics: σ²·(JᵀWJ)⁻¹ with σ² = Σw·r²/(m − n), inverted
 /// after Jacobi scaling (the parameters differ by many orders of magnitude). NaN if singular.
-fn intrinsic_std_devs(model: &Model, obs: &[Observation], x: &[f64], huber: f64) -> Vec<f64> {
+/// The residuals and the Jacobian carry the images' weights of the fit (`image_weights`, one per
+/// observation): an image the fit found noisier counts for as little here as it did there.
+fn intrinsic_std_devs(model: &Model, obs: &[Observation], image_weights: &[f64], x: &[f64], huber: f64) -> Vec<f64> {
     use lm::Problem as _;
-    let problem = Joint::new(model, obs);
+    let mut problem = Joint::new(model, obs);
+    problem.weights = image_weights.to_vec();
     let (m, n) = (problem.num_residuals(), problem.num_params());
     let ni = model.free.len();
     if x.len() != n || m <= n {

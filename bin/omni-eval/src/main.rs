@@ -4,7 +4,7 @@ use clap::{Parser, Subcommand};
 use omni_cli::CliError;
 use omni_cloud::eval::{self, Comparison, compare_with_scene};
 use omni_cloud::filter::CropBox;
-use omni_cloud::fit::{ErrorStats, FitOptions, Shape, ShapeKind, fit_and_measure};
+use omni_cloud::fit::{ErrorStats, FitOptions, Shape, ShapeKind};
 use omni_formats::read_doc;
 use omni_formats::rig::{BoardPosesFile, RigFile};
 use omni_formats::scene::SceneFile;
@@ -294,30 +294,14 @@ fn main() -> std::process::ExitCode {
             let pts = load_points(&cloud, crop.as_ref(), transform.as_deref())?;
             let name = omni_formats::io::display_name(&cloud, "stdin");
             let opts = FitOptions { inlier_mm, iterations, seed };
-            let fit = fit_and_measure(shape, &pts, &opts).map_err(|m| format!("{name}: {m}"))?;
-            let errors_of = |shape: &Shape| {
-                let radius_error = radius.zip(shape.radius()).map(|(nominal, r)| r - nominal);
-                let centre_error = match (centre, shape) {
-                    (Some(c), Shape::Sphere { center, .. }) => Some((center - c).norm()),
-                    _ => None,
-                };
-                (radius_error, centre_error)
-            };
-            let (radius_error, centre_error) = errors_of(&fit.shape);
-            // Their standard errors: the same fit without each jackknife block of the points.
-            let leave_outs: Vec<(Option<f64>, Option<f64>)> = match radius_error.is_some() || centre_error.is_some() {
-                true => (0..eval::JACKKNIFE_BLOCKS)
-                    .filter_map(|b| fit_and_measure(shape, &eval::without_block(&pts, b), &opts).ok())
-                    .map(|f| errors_of(&f.shape))
-                    .collect(),
-                false => Vec::new(),
-            };
+            let (fit, errors) =
+                eval::fit_with_errors(shape, &pts, &opts, radius, centre).map_err(|m| format!("{name}: {m}"))?;
             let measured = Measured {
                 points: pts.len(),
                 stats: fit.stats,
                 band_mm: fit.band_mm,
-                radius_error: radius_error.map(|e| (e, eval::jackknife_se(leave_outs.iter().filter_map(|l| l.0)))),
-                centre_error: centre_error.map(|e| (e, eval::jackknife_se(leave_outs.iter().filter_map(|l| l.1)))),
+                radius_error: errors.radius,
+                centre_error: errors.centre,
             };
             print_fit(&mut std::io::stdout().lock(), &fit.shape, &measured, json).map_err(omni_cli::stdout_error)?;
             Ok(())

@@ -11,7 +11,7 @@
 //! approximate only within a few mm of a rim); the pyramid uses the largest face-plane distance
 //! (exact next to a face).
 
-use crate::fit::{ErrorStats, FitOptions, Shape as FitShape, ShapeKind, fit_shape};
+use crate::fit::{ErrorStats, FitOptions, Measured, Shape as FitShape, ShapeKind, fit_and_measure};
 use nalgebra::{Point3, Rotation3, Unit, Vector3};
 use omni_formats::scene::{SceneFile, SceneObject, Shape};
 
@@ -136,15 +136,59 @@ fn object_name(i: usize, o: &SceneObject) -> String {
 /// every [`JACKKNIFE_BLOCKS`]-th point, each block spread over the whole object.
 pub const JACKKNIFE_BLOCKS: usize = 10;
 
-/// `points` without jackknife block `block` (every [`JACKKNIFE_BLOCKS`]-th point from `block`).
-pub fn without_block(points: &[Point3<f64>], block: usize) -> Vec<Point3<f64>> {
-    points.iter().enumerate().filter(|(k, _)| k % JACKKNIFE_BLOCKS != block).map(|(_, p)| *p).collect()
+/// A fitted shape's size and place against nominal ones (mm), each with its jackknife standard
+/// error (mm) where the leave-outs allow one.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ShapeErrors {
+    /// Fitted − nominal radius.
+    pub radius: Option<(f64, Option<f64>)>,
+    /// Distance of a fitted sphere's centre from the nominal one.
+    pub centre: Option<(f64, Option<f64>)>,
+}
+
+/// [`fit_and_measure`] of `kind` on `points`, and its errors against the nominal `radius` and,
+/// for a sphere, `centre`, with standard errors from the same fit without each of
+/// [`JACKKNIFE_BLOCKS`] interleaved blocks of the points (skipped when neither is given).
+pub fn fit_with_errors(
+    kind: ShapeKind,
+    points: &[Point3<f64>],
+    opts: &FitOptions,
+    radius: Option<f64>,
+    centre: Option<Point3<f64>>,
+) -> Result<(Measured, ShapeErrors), String> {
+    let errors_of = |shape: &FitShape| {
+        let radius_error = radius.zip(shape.radius()).map(|(nominal, r)| r - nominal);
+        let centre_error = match (centre, shape) {
+            (Some(c), FitShape::Sphere { center, .. }) => Some((center - c).norm()),
+            _ => None,
+        };
+        (radius_error, centre_error)
+    };
+    let measured = fit_and_measure(kind, points, opts)?;
+    let (radius_error, centre_error) = errors_of(&measured.shape);
+    if radius_error.is_none() && centre_error.is_none() {
+        return Ok((measured, ShapeErrors::default()));
+    }
+    let leave_outs: Vec<(Option<f64>, Option<f64>)> = (0..JACKKNIFE_BLOCKS)
+        .filter_map(|b| {
+            let kept: Vec<Point3<f64>> =
+                points.iter().enumerate().filter(|(k, _)| k % JACKKNIFE_BLOCKS != b).map(|(_, p)| *p).collect();
+            fit_and_measure(kind, &kept, opts).ok()
+        })
+        .map(|f| errors_of(&f.shape))
+        .collect();
+    let sigma = |values: Vec<f64>| omni_geom::stats::jackknife_sigma(&values);
+    let errors = ShapeErrors {
+        radius: radius_error.map(|e| (e, sigma(leave_outs.iter().filter_map(|l| l.0).collect()))),
+        centre: centre_error.map(|e| (e, sigma(leave_outs.iter().filter_map(|l| l.1).collect()))),
+    };
+    Ok((measured, errors))
 }
 
 /// Compares points with the scene. Points farther than `max_distance_mm` from every surface
 /// are not assigned (stray points). Spheres with at least 10 points and cylinders with at least
-/// 30 get their radius (and a sphere its centre) fitted, with standard errors from a jackknife
-/// over [`JACKKNIFE_BLOCKS`] blocks of their points.
+/// 30 get their radius (and a sphere its centre) fitted, with standard errors
+/// ([`fit_with_errors`]).
 pub fn compare_with_scene(
     scene: &SceneFile,
     points: &[Point3<f64>],
@@ -177,58 +221,27 @@ pub fn compare_with_scene(
             out.unmeasured.push(object_name(i, o));
             continue;
         };
-        let mut report = ObjectReport {
+        let fitted = match &o.shape {
+            Shape::Sphere { centre_mm, radius_mm } if pts.len() >= 10 => {
+                fit_with_errors(ShapeKind::Sphere, &pts, fit, Some(*radius_mm), Some(Point3::from(*centre_mm))).ok()
+            }
+            Shape::Cylinder { radius_mm, .. } if pts.len() >= 30 => {
+                fit_with_errors(ShapeKind::Cylinder, &pts, fit, Some(*radius_mm), None).ok()
+            }
+            _ => None,
+        };
+        let e = fitted.map(|(_, e)| e).unwrap_or_default();
+        out.objects.push(ObjectReport {
             name: object_name(i, o),
             kind: o.shape.kind().into(),
             errors,
-            radius_error_mm: None,
-            radius_error_se_mm: None,
-            centre_error_mm: None,
-            centre_error_se_mm: None,
-        };
-        // The fitted radius's error and, for a sphere, its centre's distance from the truth.
-        let measure = |pts: &[Point3<f64>]| -> Option<(f64, Option<f64>)> {
-            match &o.shape {
-                Shape::Sphere { centre_mm, radius_mm } => match fit_shape(ShapeKind::Sphere, pts, fit).ok()?.shape {
-                    FitShape::Sphere { center, radius } => {
-                        Some((radius - radius_mm, Some((center - Point3::from(*centre_mm)).norm())))
-                    }
-                    _ => None,
-                },
-                Shape::Cylinder { radius_mm, .. } => {
-                    Some((fit_shape(ShapeKind::Cylinder, pts, fit).ok()?.shape.radius()? - radius_mm, None))
-                }
-                _ => None,
-            }
-        };
-        let enough = match &o.shape {
-            Shape::Sphere { .. } => pts.len() >= 10,
-            Shape::Cylinder { .. } => pts.len() >= 30,
-            _ => false,
-        };
-        if enough && let Some((radius, centre)) = measure(&pts) {
-            let leave_outs: Vec<(f64, Option<f64>)> =
-                (0..JACKKNIFE_BLOCKS).filter_map(|b| measure(&without_block(&pts, b))).collect();
-            report.radius_error_mm = Some(radius);
-            report.radius_error_se_mm = jackknife_se(leave_outs.iter().map(|l| l.0));
-            report.centre_error_mm = centre;
-            report.centre_error_se_mm = centre.and_then(|_| jackknife_se(leave_outs.iter().filter_map(|l| l.1)));
-        }
-        out.objects.push(report);
+            radius_error_mm: e.radius.map(|r| r.0),
+            radius_error_se_mm: e.radius.and_then(|r| r.1),
+            centre_error_mm: e.centre.map(|c| c.0),
+            centre_error_se_mm: e.centre.and_then(|c| c.1),
+        });
     }
     Ok(out)
-}
-
-/// The jackknife's standard error of a statistic from its leave-one-block-out values
-/// (√((g − 1)/g · Σ(θₖ − θ̄)²) over g blocks); `None` with fewer than two.
-pub fn jackknife_se(values: impl Iterator<Item = f64>) -> Option<f64> {
-    let v: Vec<f64> = values.collect();
-    let g = v.len() as f64;
-    if v.len() < 2 {
-        return None;
-    }
-    let mean = v.iter().sum::<f64>() / g;
-    Some(((g - 1.0) / g * v.iter().map(|x| (x - mean).powi(2)).sum::<f64>()).sqrt())
 }
 
 #[cfg(test)]

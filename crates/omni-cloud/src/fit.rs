@@ -393,13 +393,10 @@ impl ErrorStats {
     /// [`STATS_BAND_SIGMAS`] robust σ (1.4826 × the median absolute deviation from the median):
     /// gross outliers left out, whatever the scatter; with the band (mm) used.
     pub fn within_robust_band(e: &[f64], floor_mm: f64) -> Option<(Self, f64)> {
-        let median = |v: &mut Vec<f64>| -> Option<f64> {
-            v.sort_by(f64::total_cmp);
-            let n = v.len();
-            (n > 0).then(|| if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) })
-        };
-        let centre = median(&mut e.to_vec())?;
-        let sigma = 1.4826 * median(&mut e.iter().map(|x| (x - centre).abs()).collect())?;
+        use omni_geom::stats::median;
+        let centre = median(e)?;
+        let deviations: Vec<f64> = e.iter().map(|x| (x - centre).abs()).collect();
+        let sigma = 1.4826 * median(&deviations)?;
         let band = floor_mm.max(STATS_BAND_SIGMAS * sigma);
         let kept: Vec<f64> = e.iter().copied().filter(|x| x.abs() <= band).collect();
         Some((ErrorStats::from_errors(&kept)?, band))

@@ -18,6 +18,7 @@ mod plane;
 mod ray;
 pub mod rng;
 pub mod robust_plane;
+pub mod stats;
 
 pub use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Unit, UnitQuaternion, Vector2, Vector3};
 pub use plane::Plane;

@@ -248,13 +248,6 @@ fn laser_contrast_f32(l: f32, others: f32, max: f32, four_over_max: f32) -> u16 
     ((l - 0.5 * w * others).max(0.0) + 0.5) as u16
 }
 
-/// The grey image `channel` makes of interleaved 8-bit samples, `stride` per pixel (3 for RGB,
-/// 4 for RGBA; red, green, blue first): [`channel_bytes_of_rgb8`] in 16-bit samples.
-pub fn channel_of_rgb8(samples: &[u8], stride: usize, width: u32, height: u32, channel: Channel) -> GrayImage {
-    let data = channel_bytes_of_rgb8(samples, stride, channel).into_iter().map(u16::from).collect();
-    GrayImage { width, height, bit_depth: 8, data }
-}
-
 /// The 8-bit grey samples `channel` makes of interleaved 8-bit samples, `stride` per pixel (3
 /// for RGB, 4 for RGBA; red, green, blue first), in one pass over the frame: every channel of an
 /// 8-bit frame fits a byte, and the stripe detector reads bytes faster than wider samples.
@@ -578,9 +571,9 @@ mod tests {
             Channel::Laser(Colour::Blue),
         ];
         for channel in channels {
-            let want = general.channel(channel);
-            assert_eq!(channel_of_rgb8(&rgb, 3, px.len() as u32, 1, channel), want, "{channel}");
-            assert_eq!(channel_of_rgb8(&rgba, 4, px.len() as u32, 1, channel), want, "{channel}");
+            let want: Vec<u8> = general.channel(channel).data.iter().map(|&v| v as u8).collect();
+            assert_eq!(channel_bytes_of_rgb8(&rgb, 3, channel), want, "{channel}");
+            assert_eq!(channel_bytes_of_rgb8(&rgba, 4, channel), want, "{channel}");
         }
         // The bytes as the detector reads them, and the pixels after the last whole block.
         let red: Vec<u8> = general.channel(Channel::Laser(Colour::Red)).data.iter().map(|&v| v as u8).collect();

@@ -178,11 +178,10 @@ pub fn jackknife(
         }
         values.push(c.params);
     }
-    let g = values.len() as f64;
     Ok((0..cal.params.len())
         .map(|i| {
-            let mean = values.iter().map(|v| v[i]).sum::<f64>() / g;
-            ((g - 1.0) / g * values.iter().map(|v| (v[i] - mean).powi(2)).sum::<f64>()).sqrt()
+            let leave_outs: Vec<f64> = values.iter().map(|v| v[i]).collect();
+            omni_geom::stats::jackknife_sigma(&leave_outs).unwrap_or(f64::NAN)
         })
         .collect())
 }

@@ -6,6 +6,7 @@ use omni_cloud::export::CloudOutputArgs;
 use omni_cloud::filter::CropBox;
 use omni_cloud::merge::{MergeOptions, Merger};
 use omni_cloud::motion::Trajectory;
+use omni_cloud::normals::Viewpoints;
 use omni_formats::rosbag::BagMessage;
 use omni_formats::stream::{Record, StreamReader};
 use std::path::{Path, PathBuf};
@@ -143,8 +144,8 @@ fn options(args: &Args) -> Result<MergeOptions, CliError> {
     {
         return Err(CliError::usage("--radius: R must be positive"));
     }
-    // With poses, each point's normal faces the sensor where its own frame was taken.
-    let viewpoints = args.cloud.normals && args.poses.is_some();
+    // Each point's normal faces the viewpoint its own frame was seen from.
+    let viewpoints = args.cloud.normals;
     Ok(MergeOptions { voxel: args.voxel, statistical, radius, crop_box, crop_range, viewpoints })
 }
 
@@ -198,7 +199,8 @@ fn main() -> std::process::ExitCode {
         if cloud.is_empty() {
             omni_cli::warn("omni-merge", "no points left after cropping and filtering; writing an empty cloud");
         }
-        args.cloud.finish_cloud_seen_from(&mut cloud, viewpoints.as_deref())?;
+        let seen_from = viewpoints.as_deref().map_or(Viewpoints::Fixed([0.0; 3]), Viewpoints::PerPoint);
+        args.cloud.finish_cloud_seen_from(&mut cloud, seen_from)?;
         if args.cloud.rosbag.is_some() && latest_us.is_none() {
             omni_cli::warn(
                 "omni-merge",
@@ -245,6 +247,10 @@ fn add_stream(
     while let Some(record) = reader.next_record()? {
         let frame = match record {
             Record::Frame(frame) => frame,
+            Record::Header(h) => {
+                merger.set_stream_viewpoint(h.viewpoint_mm.unwrap_or([0.0; 3]));
+                continue;
+            }
             Record::Status(s) if !s.complete => {
                 let msg = format!("{name}: the stream is marked incomplete ({:?})", s.errors);
                 if args.strict {

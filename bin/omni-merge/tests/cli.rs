@@ -25,8 +25,13 @@ fn ok(out: &Output) {
 
 /// A point stream, one frame per element of `frames` (sensor-frame points, timestamp).
 fn write_stream(path: &Path, frames: &[(Vec<[f64; 3]>, Option<u64>)]) {
+    write_stream_seen_from(path, frames, None);
+}
+
+/// [`write_stream`] with the header's `viewpoint_mm`, as omni-triangulate writes it.
+fn write_stream_seen_from(path: &Path, frames: &[(Vec<[f64; 3]>, Option<u64>)], viewpoint_mm: Option<[f64; 3]>) {
     let mut w = StreamWriter::new(std::fs::File::create(path).unwrap(), "test");
-    w.write(&Record::Header(Header::new("test"))).unwrap();
+    w.write(&Record::Header(Header { viewpoint_mm, ..Header::new("test") })).unwrap();
     for (seq, (pts, ts)) in frames.iter().enumerate() {
         let mut f = Frame::new(seq as u64, "x.png", 10.0, 0);
         f.timestamp_us = *ts;
@@ -383,6 +388,31 @@ fn normals_under_poses_face_the_sensor_of_their_own_frame() {
             back += (seq[i] > 3.5) as usize;
         }
         assert!(back > cloud.len() / 3, "{name}: {back} of {} points seen from behind", cloud.len());
+    }
+}
+
+/// A shelf at the sensor's own height, between the camera (the origin) and the mirror focus F
+/// (0, 0, 80 mm) that every ray starts from: its normals face F, up, not the camera below it,
+/// with the sensor still and moved by a pose alike.
+#[test]
+fn normals_face_the_streams_viewpoint_not_the_sensor_origin() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut rng = SplitMix64::new(5);
+    let shelf: Vec<[f64; 3]> = (0..600)
+        .map(|_| [300.0 + rng.uniform() * 200.0, rng.uniform() * 200.0 - 100.0, 40.0 + rng.normal() * 0.05])
+        .collect();
+    write_stream_seen_from(&d.join("shelf.jsonl"), &[(shelf, Some(0))], Some([0.0, 0.0, 80.0]));
+    // The sensor lifted 500 mm: the shelf at z = 540 is seen from F at z = 580.
+    write_poses(&d.join("lift.jsonl"), 20_000, &|_| Isometry3::translation(0.0, 0.0, 500.0));
+    for (name, poses) in [("still.ply", &[][..]), ("lifted.ply", &["--poses", "lift.jsonl"][..])] {
+        let mut args = vec!["shelf.jsonl", "-o", name, "--normals"];
+        args.extend(poses);
+        ok(&run(d, &args));
+        let cloud = read_ply(&d.join(name)).unwrap();
+        let nz = cloud.scalar("nz").unwrap();
+        assert_eq!(nz.len(), 600, "{name}");
+        assert!(nz.iter().all(|&z| z > 0.99), "{name}: a normal faces down: {:?}", nz.iter().cloned().fold(1.0, f32::min));
     }
 }
 

@@ -4,6 +4,7 @@ use clap::Parser;
 use omni_cli::CliError;
 use omni_cloud::cloud::{append_frame_points, empty_point_cloud};
 use omni_cloud::export::{BagGrouping, CloudOutputArgs, FrameSpan, bag_messages, frame_stamp_ns};
+use omni_cloud::normals::Viewpoints;
 use omni_cloud::triangulate::{DEFAULT_MIN_INCIDENCE_DEG, Rejections, Triangulator};
 use omni_formats::export::CloudFormat;
 use omni_formats::ply::PointCloud;
@@ -139,6 +140,7 @@ fn main() -> std::process::ExitCode {
             base_dir,
             frames_dir: None,
             images: Vec::new(),
+            viewpoint_mm: camera_file.model.viewpoint_mm(),
             tri: &tri,
             args: &args,
             cloud: cloud.as_mut(),
@@ -175,7 +177,7 @@ fn main() -> std::process::ExitCode {
             let in_input = |m: String| CliError::new(format!("{name}: {m}"));
             let messages =
                 if bag { bag_messages(&spans, args.bag_per, period_us).map_err(in_input)? } else { Vec::new() };
-            args.cloud_out.finish_cloud(&mut cloud)?;
+            args.cloud_out.finish_cloud_seen_from(&mut cloud, Viewpoints::Fixed(camera_file.model.viewpoint_mm()))?;
             let mut load = |i: usize| {
                 let g = omni_vision::image_io::load_gray(&frames[i].2)?;
                 Ok(BagImage { width: g.width, height: g.height, bit_depth: g.bit_depth, samples: g.data })
@@ -212,6 +214,8 @@ struct Run<'a> {
     base_dir: PathBuf,
     /// The header's frames directory, resolved.
     frames_dir: Option<String>,
+    /// Where the camera's rays start (mm, sensor frame; a catadioptric camera's mirror focus).
+    viewpoint_mm: [f64; 3],
     /// Each frame's seq, timestamp and image file (for --rosbag-images).
     images: Vec<(u64, Option<u64>, PathBuf)>,
     tri: &'a Triangulator<'a>,
@@ -344,6 +348,7 @@ impl Run<'_> {
         h.producers.push(PRODUCER.into());
         h.camera = Some(self.args.camera.display().to_string());
         h.scanner = Some(self.args.scanner.display().to_string());
+        h.viewpoint_mm = Some(self.viewpoint_mm);
         h.extra.insert("min_incidence_deg".into(), self.args.min_incidence_deg.into());
         h
     }

@@ -85,23 +85,13 @@ impl CloudOutputArgs {
         CloudFormat::for_output(path, self.format)
     }
 
-    /// Adds normals if asked for, facing the sensor at the origin.
-    pub fn finish_cloud(&self, cloud: &mut PointCloud) -> Result<(), String> {
-        self.finish_cloud_seen_from(cloud, None)
-    }
-
-    /// Adds normals if asked for, each facing its point's viewpoint (mm, the cloud's frame; the
-    /// origin for all if `None`).
-    pub fn finish_cloud_seen_from(
-        &self,
-        cloud: &mut PointCloud,
-        viewpoints: Option<&[[f64; 3]]>,
-    ) -> Result<(), String> {
+    /// Adds normals if asked for, each facing the viewpoint its point was seen from (mm, the
+    /// cloud's frame).
+    pub fn finish_cloud_seen_from(&self, cloud: &mut PointCloud, viewpoints: Viewpoints<'_>) -> Result<(), String> {
         if !self.normals {
             return Ok(());
         }
-        let views = viewpoints.map_or(Viewpoints::Fixed([0.0; 3]), Viewpoints::PerPoint);
-        add_normals_seen_from(cloud, self.normal_neighbours, views)
+        add_normals_seen_from(cloud, self.normal_neighbours, viewpoints)
     }
 
     /// Writes the cloud file (if `path`) and the bag (if --rosbag) with `messages`, both put

@@ -7,8 +7,9 @@
 //! kept points are stored once (positions f64 + f32 scalars) and outlier removal filters that
 //! one copy in place.
 //!
-//! With `viewpoints` set, each point also carries the sensor position it was measured from (the
-//! frame pose's translation; the origin without a pose or for a PLY input) as three hidden f32
+//! With `viewpoints` set, each point also carries the point it was seen from (its stream's
+//! viewpoint, the camera's mirror focus, moved by the frame's pose; the origin for a PLY input)
+//! as three hidden f32
 //! fields that go through the voxel grid (averaged: the mean of positions on the seen side of a
 //! surface stays on that side) and the filters with the point, and come out beside the cloud.
 
@@ -69,6 +70,8 @@ pub struct Merger {
     buf: Vec<f32>,
     /// The viewpoint of the points being added (mm, world frame).
     viewpoint: [f64; 3],
+    /// The current stream's viewpoint (mm, sensor frame).
+    stream_viewpoint: [f64; 3],
 }
 
 impl Merger {
@@ -93,6 +96,7 @@ impl Merger {
             range_index: None,
             buf: Vec::new(),
             viewpoint: [0.0; 3],
+            stream_viewpoint: [0.0; 3],
         })
     }
 
@@ -141,6 +145,7 @@ impl Merger {
         }
         self.buf = vec![0.0; self.names.len() + if self.opts.viewpoints { 3 } else { 0 }];
         self.viewpoint = [0.0; 3];
+        self.stream_viewpoint = [0.0; 3];
         Ok(())
     }
 
@@ -189,11 +194,18 @@ impl Merger {
         self.begin_input(&names)
     }
 
+    /// The point the current stream's frames were seen from (mm, sensor frame: its header's
+    /// `viewpoint_mm`, the origin where it has none).
+    pub fn set_stream_viewpoint(&mut self, viewpoint_mm: [f64; 3]) {
+        self.stream_viewpoint = viewpoint_mm;
+    }
+
     /// Adds a triangulated frame's points, mapped by `pose` (sensor → world) if given; their
-    /// viewpoint is the sensor origin moved by the pose. Call [`Merger::begin_stream_input`]
-    /// first for each stream.
+    /// viewpoint is the stream's ([`Merger::set_stream_viewpoint`]) moved by the pose. Call
+    /// [`Merger::begin_stream_input`] first for each stream.
     pub fn add_frame(&mut self, frame: &Frame, pose: Option<&Isometry3<f64>>) -> Result<(), String> {
-        self.viewpoint = pose.map_or([0.0; 3], |iso| iso.translation.vector.into());
+        let seen_from = Point3::from(self.stream_viewpoint);
+        self.viewpoint = pose.map_or(seen_from, |iso| iso * seen_from).coords.into();
         let points = frame.points.as_ref().ok_or("no `points` field (run omni-triangulate first)")?;
         let stripe = frame.stripe.as_deref().unwrap_or(&[]);
         for (i, p) in points.iter().enumerate() {

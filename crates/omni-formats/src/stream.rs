@@ -51,6 +51,11 @@ pub struct Header {
     pub camera: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scanner: Option<String>,
+    /// Where the camera's rays start (mm, sensor frame): the point each frame's points were
+    /// seen from, which their `range` is measured from and their normals face. Written by
+    /// omni-triangulate; absent in streams without points (the sensor origin is assumed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub viewpoint_mm: Option<[f64; 3]>,
     #[serde(flatten)]
     pub extra: serde_json::Map<String, serde_json::Value>,
 }
@@ -64,6 +69,7 @@ impl Header {
             frames_dir: None,
             camera: None,
             scanner: None,
+            viewpoint_mm: None,
             extra: Default::default(),
         }
     }

@@ -240,6 +240,7 @@ impl RidgeDetector {
         let wide = measured_wide + buffers.too_wide;
         if let Some(coarse) = self.coarser_stripes(frame, threshold, scale, wide, kept.len()) {
             let mut refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
+            drop_tapering(&mut refined);
             lean_to_the_lights_peak(&mut refined, self.peak_blur_variance(scale), self.mosaic_at(scale));
             fit_along_stripe(&mut refined, self.params.along_stripe_px);
             kept.extend(refined);
@@ -918,6 +919,39 @@ fn remove_steady_lean(points: &mut [Linked]) {
     }
 }
 
+/// Drops the points re-measured from a coarser scale whose half-maximum width changes along
+/// their stripe faster than [`MAX_WIDTH_SLOPE`], as `link_and_correct` drops its own: a lit
+/// area tapering to a tip, binned, is a narrow ridge at the coarse scale, and only its width
+/// on the finer frame tells it from a laser's line. The slope is fitted over ±half the
+/// point's half-maximum width (at least [`SHAPE_HALF_ARC_PX`]), where a wide stripe's own
+/// width, noisy from profile to profile, is still steady.
+fn drop_tapering(points: &mut Vec<Linked>) {
+    let widest = points.iter().map(|l| l.half_width).fold(0.0, f64::max);
+    let reach = SHAPE_HALF_ARC_PX.max(0.5 * widest) + 1.0;
+    let grid = Grid::from_placed(points.iter().map(Linked::placed), reach);
+    let tapering: Vec<bool> = points
+        .iter()
+        .map(|l| {
+            let here = l.placed();
+            let arc = SHAPE_HALF_ARC_PX.max(0.5 * l.half_width);
+            let mut width_line = LineSums::default();
+            grid.visit(here[0], here[1], |j, other| {
+                if let Some((t, _, _)) = on_the_stripe(&here, other, reach)
+                    && t.abs() <= arc
+                {
+                    width_line.add(t, points[j].half_width);
+                }
+            });
+            width_line.slope().is_some_and(|slope| slope.abs() > MAX_WIDTH_SLOPE)
+        })
+        .collect();
+    let mut k = 0;
+    points.retain(|_| {
+        k += 1;
+        !tapering[k - 1]
+    });
+}
+
 /// The along-stripe fit ([`super::RidgeParams::along_stripe_px`], `along` px) of points
 /// re-measured from a coarser scale, which [`RidgeDetector::link_and_correct`] never sees: as
 /// there, each point moves to the line fitted to its stripe's neighbours within ±`along` once
@@ -1353,6 +1387,14 @@ impl LineSums {
         let LineSums { s0, s1, s2, r0, r1, before, after } = *self;
         let det = s0 * s2 - s1 * s1;
         (before >= 2 && after >= 2 && det > 1e-9).then(|| ((r0 * s2 - r1 * s1) / det, (s0 * r1 - s1 * r0) / det))
+    }
+
+    /// The slope `b` of the line through at least three points, two of them on one side of
+    /// t = 0 (a stripe's end has no points beyond it); `None` with fewer.
+    fn slope(&self) -> Option<f64> {
+        let LineSums { s0, s1, s2, r0, r1, before, after } = *self;
+        let det = s0 * s2 - s1 * s1;
+        (before + after >= 2 && before.max(after) >= 2 && det > 1e-9).then(|| (s0 * r1 - s1 * r0) / det)
     }
 
     /// The standard error of the fit's `a` per unit of the points' independent noise.

@@ -297,6 +297,14 @@ fn fit(a: &FitArgs) -> CliResult {
         "initial": a.initial.as_deref().map(name),
         "gate_mm": a.gate_mm,
     });
+    if let Some(unseen) = unseen_on_the_rig(&cal.report.model.fixed) {
+        omni_cli::warn(
+            "omni-calib-plane",
+            &format!(
+                "{unseen}: no stripe on the rig, kept at their initial values: frames taken with them triangulate through uncalibrated light planes; calibrate with frames of every facet and laser the scans use"
+            ),
+        );
+    }
     let mut out = ScannerFile::new(cal.transmitter);
     out.report = Some(report);
     write_doc(&a.output, &out)?;
@@ -314,6 +322,39 @@ fn fit(a: &FitArgs) -> CliResult {
         );
     }
     Ok(())
+}
+
+/// The facets and lasers the fit kept at their initial values because no rig frame showed
+/// them (the report's `fixed` entries `facet_errors[k]` / `lasers[j]` … "not observed"), as
+/// "facets 1–11, laser 1"; `None` if every one was seen.
+fn unseen_on_the_rig(fixed: &[String]) -> Option<String> {
+    let indices = |prefix: &str| -> Vec<usize> {
+        fixed
+            .iter()
+            .filter(|f| f.contains("not observed"))
+            .filter_map(|f| f.strip_prefix(prefix)?.split(']').next()?.parse().ok())
+            .collect()
+    };
+    let named = |one: &str, many: &str, k: Vec<usize>| -> Option<String> {
+        let mut runs: Vec<String> = Vec::new();
+        let mut i = 0;
+        while i < k.len() {
+            let mut j = i;
+            while j + 1 < k.len() && k[j + 1] == k[j] + 1 {
+                j += 1;
+            }
+            runs.push(if j > i { format!("{}–{}", k[i], k[j]) } else { k[i].to_string() });
+            i = j + 1;
+        }
+        let word = if k.len() == 1 { one } else { many };
+        (!k.is_empty()).then(|| format!("{word} {}", runs.join(", ")))
+    };
+    let parts: Vec<String> =
+        [named("facet", "facets", indices("facet_errors[")), named("laser", "lasers", indices("lasers["))]
+            .into_iter()
+            .flatten()
+            .collect();
+    (!parts.is_empty()).then(|| parts.join(", "))
 }
 
 fn table(a: &TableArgs) -> CliResult {
@@ -663,4 +704,21 @@ fn fixed_table(r: &omni_calib::fixed_plane::FixedPlaneReport) -> String {
         p.jackknife_centroid_sigma_mm
     ));
     t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::unseen_on_the_rig;
+
+    #[test]
+    fn facets_and_lasers_the_rig_never_showed_are_named_as_runs() {
+        let mut fixed: Vec<String> =
+            (1..12).map(|k| format!("facet_errors[{k}]: facet not observed, kept at its initial value")).collect();
+        fixed.push("lasers[1]: laser not observed, kept at its initial value".into());
+        fixed.push("polygon.circumradius_mm: nominal (radius errors are fitted per facet)".into());
+        assert_eq!(unseen_on_the_rig(&fixed).as_deref(), Some("facets 1–11, laser 1"));
+        fixed.remove(4);
+        assert_eq!(unseen_on_the_rig(&fixed).as_deref(), Some("facets 1–4, 6–11, laser 1"));
+        assert_eq!(unseen_on_the_rig(&fixed[fixed.len() - 1..]), None);
+    }
 }

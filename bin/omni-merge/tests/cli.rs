@@ -412,7 +412,11 @@ fn normals_face_the_streams_viewpoint_not_the_sensor_origin() {
         let cloud = read_ply(&d.join(name)).unwrap();
         let nz = cloud.scalar("nz").unwrap();
         assert_eq!(nz.len(), 600, "{name}");
-        assert!(nz.iter().all(|&z| z > 0.99), "{name}: a normal faces down: {:?}", nz.iter().cloned().fold(1.0, f32::min));
+        assert!(
+            nz.iter().all(|&z| z > 0.99),
+            "{name}: a normal faces down: {:?}",
+            nz.iter().cloned().fold(1.0, f32::min)
+        );
     }
 }
 

@@ -306,9 +306,10 @@ impl Run<'_> {
         Ok(())
     }
 
-    /// Refuses a run in which no stripe pixel maps to a ray of the camera, and warns where
-    /// most do not: the frames were taken with another camera (another image size, another
-    /// sensor's mirror), which would otherwise pass as a scan that saw nothing.
+    /// Refuses a run in which no stripe pixel gives a point, and warns where most map to no
+    /// ray of the camera: the frames were taken with another camera (another image size,
+    /// another sensor's mirror) or scanner, which would otherwise pass as a scan that saw
+    /// nothing.
     fn check_the_camera_fits(&self, name: &str) -> Result<(), String> {
         let no_ray = self.rejections.no_ray;
         let pixels = self.points + self.rejections.refused();
@@ -317,6 +318,19 @@ impl Run<'_> {
         if no_ray > 0 && no_ray == pixels {
             return Err(format!(
                 "{name}: none of its {pixels} stripe pixels maps to a ray of {camera}: were the frames taken with this camera?"
+            ));
+        }
+        // Every pixel refused: rays that meet no light plane where it lights them are the
+        // other sensor's (another mirror, size or scanner file); a scan of a real scene keeps
+        // most of its stripe.
+        if pixels > 0 && self.points == 0 {
+            let r = &self.rejections;
+            return Err(format!(
+                "{name}: none of its {pixels} stripe pixels gives a point ({} with no ray, {} unlit by any light plane, {} grazing) with {camera} and {}: are they the frames' sensor files?",
+                r.no_ray,
+                r.unlit,
+                r.grazing,
+                self.args.scanner.display()
             ));
         }
         if 2 * no_ray > pixels {

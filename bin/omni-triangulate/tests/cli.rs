@@ -134,6 +134,22 @@ fn bad_input_fails_with_one_line_and_leaves_no_output() {
     let elsewhere = "{\"type\":\"frame\",\"seq\":1,\"path\":\"a.png\",\"alpha_deg\":3,\"facet\":0,\"stripe\":[[5000,5000,1,1,0]]}\n";
     let status = "{\"type\":\"status\",\"frames\":1,\"frames_missing\":0,\"complete\":true,\"errors\":[]}\n";
     std::fs::write(fx.path("elsewhere.jsonl"), format!("{HEADER}{elsewhere}{status}")).unwrap();
+    // The stripes of the same sensor's 512 px frames read with its 1024 px camera: every pixel
+    // has a ray, none a lit point.
+    let halved: Vec<String> = std::fs::read_to_string(fx.path("ridges.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|line| {
+            let mut record: serde_json::Value = serde_json::from_str(line).unwrap();
+            for p in record.get_mut("stripe").and_then(|s| s.as_array_mut()).into_iter().flatten() {
+                for k in 0..2 {
+                    p[k] = ((p[k].as_f64().unwrap() + 0.5) / 2.0 - 0.5).into();
+                }
+            }
+            record.to_string()
+        })
+        .collect();
+    std::fs::write(fx.path("ridges512.jsonl"), halved.join("\n") + "\n").unwrap();
     for (input, expect) in [
         ("empty.jsonl", "empty stream"),
         ("elsewhere.jsonl", "none of its 1 stripe pixels maps to a ray of camera.json"),
@@ -151,6 +167,24 @@ fn bad_input_fails_with_one_line_and_leaves_no_output() {
         assert!(err.contains(input) && err.contains(expect) && err.lines().count() == 1, "{err}");
         assert!(!fx.path("out.jsonl").exists() && !fx.path("c.ply").exists());
     }
+    let out = run(
+        fx.dir.path(),
+        &[
+            "--camera",
+            "camera.json",
+            "--scanner",
+            "scanner.json",
+            "ridges512.jsonl",
+            "-o",
+            "out.jsonl",
+            "--ply",
+            "c.ply",
+        ],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("none of its 30 stripe pixels gives a point") && err.lines().count() == 1, "{err}");
+    assert!(!fx.path("out.jsonl").exists() && !fx.path("c.ply").exists());
     let out = run(fx.dir.path(), &["--camera", "nope.json", "--scanner", "scanner.json", "ridges.jsonl"]);
     assert_eq!(out.status.code(), Some(1));
     let out =

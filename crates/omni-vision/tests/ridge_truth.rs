@@ -615,23 +615,32 @@ fn realistic_sensor_coverage_and_speckle() {
 }
 
 /// Without a laser-off frame, the cone + pyramid scene's lit faces taper to tips a few px wide
-/// that stay put from frame to frame: they are not taken for the laser's line.
+/// that stay put from frame to frame: they are not taken for the laser's line. On 512 px
+/// frames a face's tip binned 8 × 8 is a narrow ridge the coarsest scale finds; re-measured on
+/// the frame's own pixels its width grows 1–3 px per px along it, and those points are dropped
+/// (the detector's tapering rule for re-measured points): 35 false points of 101 before, 5 of 70
+/// (the wedge's wide end, where its width levels off) after. Asserted: none at 1024 px, at most
+/// 8 % at 512.
 #[test]
 fn lit_tapering_faces_are_not_stripes() {
-    let sensor = Sensor::paper_scaled(SIZE);
     let scene = Scene::from_file(paper_bench(BenchObject::ConePyramid)).unwrap();
-    let circle = sensor.camera.mirror_circle();
-    let det = RidgeDetector::new(SIZE, SIZE, circle, RidgeParams::default());
-    let mut all = Tally::default();
-    for k in 0..8 {
-        let alpha = 14.0 + 2.0 * k as f64;
-        let o = RenderOptions { seed: k, ..RenderOptions::default() };
-        let f = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &o);
-        add(&mut all, &det.detect(&to_gray(&f.image)), &f.truth, (circle.centre.x, circle.centre.y));
+    for (size, min_points, false_per_mille) in [(SIZE, 150, 1), (512, 60, 80)] {
+        let sensor = Sensor::paper_scaled(size);
+        let circle = sensor.camera.mirror_circle();
+        let det = RidgeDetector::new(size, size, circle, RidgeParams::default());
+        let mut all = Tally::default();
+        for k in 0..8 {
+            let alpha = 14.0 + 2.0 * k as f64;
+            // `omni-sim scan`'s default seed on the 512 px frames, where it showed the tips.
+            let o = RenderOptions { seed: if size == 512 { 0 } else { k }, ..RenderOptions::default() };
+            let f = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0, 1], &o);
+            add(&mut all, &det.detect(&to_gray(&f.image)), &f.truth, (circle.centre.x, circle.centre.y));
+        }
+        eprintln!("{}", all.line(&format!("realistic cone + pyramid, {size} px")));
+        let (n, false_points) = (all.errors.len(), all.false_points);
+        assert!(n > min_points, "{size} px: {n} points");
+        assert!(false_points * 1000 <= false_per_mille * n, "{size} px: {false_points} false points of {n}");
     }
-    eprintln!("{}", all.line("realistic cone + pyramid"));
-    assert!(all.errors.len() > 150, "{} points", all.errors.len());
-    assert!(all.false_points * 1000 <= all.errors.len(), "{} false points of {}", all.false_points, all.errors.len());
 }
 
 /// Speckle of contrast 0.5 and 0.25 (4 and 16 independent patterns: a rougher, more

@@ -96,6 +96,10 @@ const NARROW_PERCENTILE: usize = 10;
 /// A stripe whose half-maximum width changes faster than this (px per px along it, over ±3 px)
 /// is a tapering lit area, not the laser's line.
 pub const MAX_WIDTH_SLOPE: f64 = 0.2;
+/// The fastest change of half-maximum width (px per px along the stripe) of a wide stripe
+/// re-measured from a coarser scale whose profiles peak ([`MAX_FLATNESS`]): a wedge of lit
+/// surface 40° wide opens by 0.73; a laser line at a grazing angle changes width more slowly.
+pub const MAX_PEAKED_WIDTH_SLOPE: f64 = 0.7;
 /// The flattest profile (width at 90 % of the peak over the half-maximum width) counted as a
 /// laser's line wider than its scale: a Gaussian has 0.39, a lit surface's blurred flat top
 /// nearly 1.
@@ -184,6 +188,9 @@ pub(super) struct Linked {
     /// The profile's top shape ([`Centre::top_shape`]) where the lean has not taken its
     /// stripe's yet (points re-measured from a coarser scale).
     top_shape: Option<[f64; 2]>,
+    /// Whether the profile peaks like a laser's line (saturated, or a top no flatter than
+    /// [`MAX_FLATNESS`]) rather than a lit surface's flat top.
+    peaks: bool,
 }
 
 /// A measured centre before linking.
@@ -884,6 +891,7 @@ impl Centre {
             half_width: self.half_width,
             lean: self.lean,
             top_shape: self.top_shape,
+            peaks: peaks(self),
         }
     }
 }
@@ -920,11 +928,12 @@ fn remove_steady_lean(points: &mut [Linked]) {
 }
 
 /// Drops the points re-measured from a coarser scale whose half-maximum width changes along
-/// their stripe faster than [`MAX_WIDTH_SLOPE`], as `link_and_correct` drops its own: a lit
-/// area tapering to a tip, binned, is a narrow ridge at the coarse scale, and only its width
-/// on the finer frame tells it from a laser's line. The slope is fitted over ±half the
-/// point's half-maximum width (at least [`SHAPE_HALF_ARC_PX`]), where a wide stripe's own
-/// width, noisy from profile to profile, is still steady.
+/// their stripe faster than [`MAX_WIDTH_SLOPE`] where their top is flat, or
+/// [`MAX_PEAKED_WIDTH_SLOPE`] where it peaks: a lit area tapering to a tip, binned, is a narrow
+/// ridge at the coarse scale, and only its width on the finer frame tells it from a laser's
+/// line. A wide laser line's width, noisy from profile to profile and changing with the
+/// surface's distance, needs the looser limit where it peaks like one. The slope is fitted over
+/// ±half the point's half-maximum width (at least [`SHAPE_HALF_ARC_PX`]).
 fn drop_tapering(points: &mut Vec<Linked>) {
     let widest = points.iter().map(|l| l.half_width).fold(0.0, f64::max);
     let reach = SHAPE_HALF_ARC_PX.max(0.5 * widest) + 1.0;
@@ -942,7 +951,8 @@ fn drop_tapering(points: &mut Vec<Linked>) {
                     width_line.add(t, points[j].half_width);
                 }
             });
-            width_line.slope().is_some_and(|slope| slope.abs() > MAX_WIDTH_SLOPE)
+            let limit = if l.peaks { MAX_PEAKED_WIDTH_SLOPE } else { MAX_WIDTH_SLOPE };
+            width_line.slope().is_some_and(|slope| slope.abs() > limit)
         })
         .collect();
     let mut k = 0;

@@ -297,6 +297,16 @@ fn fit(a: &FitArgs) -> CliResult {
         "initial": a.initial.as_deref().map(name),
         "gate_mm": a.gate_mm,
     });
+    if let Some(loose) = plane::loosely_determined(&cal.report.model.parameters, 1.0) {
+        omni_cli::warn(
+            "omni-calib-plane",
+            &format!(
+                "the frames determine the transmitter loosely: {loose} (σ above {} mm or {}°): its light planes are good within the rig's mirror angles and extrapolated beyond them; for every angle, take stripe frames over each facet's whole sweep",
+                plane::LOOSE_STD_MM,
+                plane::LOOSE_STD_DEG
+            ),
+        );
+    }
     if let Some(unseen) = unseen_on_the_rig(&cal.report.model.fixed) {
         omni_cli::warn(
             "omni-calib-plane",

@@ -192,6 +192,52 @@ pub fn check_frames(tx: &Transmitter, boards: &[PlacedBoard], frames: &[FrameStr
     Ok(())
 }
 
+/// Fewest stripe points on a board for it to count as seen ([`one_board_plane`]).
+const MIN_POINTS_ON_A_BOARD: usize = 10;
+
+/// The board names, if every board with stripe points on it (`on_board[i]` of `boards[i]`,
+/// [`MIN_POINTS_ON_A_BOARD`] or more) lies in one plane (normals within 1°, 5 mm apart at most):
+/// then each frame gives lines on that plane alone, which any light plane through them fits as
+/// well (a one-board rig, or boards placed side by side).
+fn one_board_plane(boards: &[PlacedBoard], on_board: &[usize]) -> Option<String> {
+    let seen: Vec<&PlacedBoard> =
+        boards.iter().zip(on_board).filter(|&(_, &n)| n >= MIN_POINTS_ON_A_BOARD).map(|(b, _)| b).collect();
+    let first = seen.first()?;
+    let normal = |b: &PlacedBoard| b.pose.rotation * nalgebra::Vector3::z();
+    let n0 = normal(first);
+    let coplanar = seen.iter().all(|b| {
+        let n = normal(b);
+        n.dot(&n0).abs() >= 1f64.to_radians().cos()
+            && n0.dot(&(b.pose.translation.vector - first.pose.translation.vector)).abs() <= 5.0
+    });
+    coplanar.then(|| seen.iter().map(|b| b.name.as_str()).collect::<Vec<_>>().join(", "))
+}
+
+/// The standard deviation of a fitted length (mm) and angle (°) beyond which a rig determines
+/// it loosely: a facet's whole sweep on two boards gives hundredths to tenths (0.13 mm, 0.04°
+/// with 0.1 px stripes); an 8° sweep with 0.5 px stripes 9 mm and 3°, its light planes good
+/// within the sweep and extrapolated beyond it (the tool warns); a sweep of 1° gives 100 mm and
+/// 4°, a model that fits its frames and no other angle.
+pub const LOOSE_STD_MM: f64 = 5.0;
+pub const LOOSE_STD_DEG: f64 = 1.0;
+/// How many times [`LOOSE_STD_MM`] or [`LOOSE_STD_DEG`] a σ may reach before the fit is
+/// refused as not determined.
+const UNDETERMINED_FACTOR: f64 = 10.0;
+
+/// The fitted parameters whose standard deviation exceeds `factor` × [`LOOSE_STD_MM`] or
+/// [`LOOSE_STD_DEG`], named with their σ; `None` if there are none.
+pub fn loosely_determined(estimates: &[Estimate], factor: f64) -> Option<String> {
+    let loose: Vec<String> = estimates
+        .iter()
+        .filter_map(|e| {
+            let std = e.std?;
+            let limit = factor * if e.unit == "mm" { LOOSE_STD_MM } else { LOOSE_STD_DEG };
+            (std > limit).then(|| format!("{} σ {std:.3} {}", e.name, e.unit))
+        })
+        .collect();
+    (!loose.is_empty()).then(|| loose.join(", "))
+}
+
 /// Splits a frame's board points between its lit lasers using the initial model: a point goes to
 /// the laser whose fan lights it (nearest plane if several or none do), if it lies within
 /// `gate_mm` of that laser's initial plane.
@@ -258,6 +304,8 @@ fn calibrate_once(
     let mut rejected = vec![];
     let mut observations = vec![];
     let mut own_planes: Vec<(FrameReport, Option<FramePlane>)> = vec![];
+    // Stripe points used on each board.
+    let mut on_board = vec![0usize; boards.len()];
     for frame in frames {
         if frame.lasers.is_empty() {
             continue; // an ambient (laser-off) frame
@@ -280,6 +328,9 @@ fn calibrate_once(
                 continue;
             }
             let pts: Vec<observe::BoardPoint> = idx.iter().map(|&i| points[i]).collect();
+            for p in &pts {
+                on_board[p.board] += 1;
+            }
             // Oriented like the model's planes (non-negative z) so the report reads consistently.
             let own = fit_frame_plane(&pts, boards.len(), &opts.frame).map(|mut fp| {
                 if fp.plane.normal.z < 0.0 {
@@ -313,7 +364,18 @@ fn calibrate_once(
         let why = rejected.first().map(|r| format!(" (e.g. frame {}: {})", r.seq, r.reason)).unwrap_or_default();
         return Err(format!("no usable frame: no stripe fell on the boards{why}"));
     }
+    if let Some(plane) = one_board_plane(boards, &on_board) {
+        return Err(format!(
+            "every stripe point lies on one board plane ({plane}): a light plane's turn about its line on a board is not seen, so the transmitter is not determined; the rig needs boards at an angle (two in view, or placements)"
+        ));
+    }
     let fit = fit_transmitter(initial, &observations, &opts.model)?;
+    if let Some(loose) = loosely_determined(&fit.estimates, UNDETERMINED_FACTOR) {
+        let (mm, deg) = (UNDETERMINED_FACTOR * LOOSE_STD_MM, UNDETERMINED_FACTOR * LOOSE_STD_DEG);
+        return Err(format!(
+            "the frames do not determine the transmitter: {loose} (σ above {mm} mm or {deg}°); take stripe frames over the whole sweep of each facet, on boards at an angle"
+        ));
+    }
     let tx = Transmitter::new(fit.params.clone())?;
     let mut frames_out = Vec::with_capacity(own_planes.len());
     let (mut ss, mut n) = (0.0, 0usize);

@@ -560,8 +560,8 @@ pub(crate) fn facet_exit(lp: &LightPlane, u: &Vector3<f64>) -> Point3<f64> {
 /// axis, from its own sub-pixel position: a stripe narrower than a pixel keeps its sub-pixel
 /// position in the image (blurring the pixel-integrated image instead would snap it to pixel
 /// centres).
-fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &RenderOptions, seed: u64) -> Vec<f64> {
-    render_light(sensor, scene, slices, opts, seed, false).0
+fn render_electrons(sensor: &Sensor, scene: &Scene, slices: &[Slice], opts: &RenderOptions) -> Vec<f64> {
+    render_light(sensor, scene, slices, opts, false).0
 }
 
 /// [`render_electrons`], with the laser light in an image of its own when `split` (the ambient
@@ -571,7 +571,6 @@ fn render_light(
     scene: &Scene,
     slices: &[Slice],
     opts: &RenderOptions,
-    seed: u64,
     split: bool,
 ) -> (Vec<f64>, Option<Vec<f64>>) {
     let camera = sensor.camera.as_ref();
@@ -701,7 +700,7 @@ fn render_light(
                 field.add_pixel(*x, y, energies);
             }
         }
-        imager.image_into(&field, laser_out.as_mut().unwrap_or(&mut out), w, h, seed);
+        imager.image_into(&field, laser_out.as_mut().unwrap_or(&mut out), w, h, surface_seed(opts.seed));
     }
     (out, laser_out)
 }
@@ -964,6 +963,14 @@ fn finish(sensor: &Sensor, electrons: Vec<f64>, opts: &RenderOptions, frame_seed
     Frame16 { width: w, height: h, data: digitise(&electrons, w as usize, opts, frame_seed), bit_depth: opts.bit_depth }
 }
 
+/// The seed of the scene's surfaces' roughness: the user's seed alone. Speckle belongs to the
+/// surface a camera cell sees and the light on it, not to the frame: a sensor that stands still
+/// sees the same grains at every mirror angle and facet that light the same place (frames a
+/// hundredth of a degree apart, one light plane from two facets), where photon noise is new.
+fn surface_seed(seed: u64) -> u64 {
+    mix(seed ^ 0x5_0F_ACE)
+}
+
 /// The noise seed of one frame: the user's seed mixed with what identifies the frame, so that
 /// the frames of a scan get independent noise yet each is reproducible.
 fn frame_seed(seed: u64, alpha: f64, facet: u32, lasers: &[u32]) -> u64 {
@@ -1141,10 +1148,10 @@ fn capture_frame(
     seed: u64,
 ) -> (Frame16, Option<RgbFrame>) {
     if opts.halo.is_none() && opts.bloom.is_none() && opts.colour.is_none() {
-        let electrons = render_electrons(sensor, scene, slices, opts, seed);
+        let electrons = render_electrons(sensor, scene, slices, opts);
         return (finish(sensor, electrons, opts, seed), None);
     }
-    let (main, laser) = render_light(sensor, scene, slices, opts, seed, opts.colour.is_some());
+    let (main, laser) = render_light(sensor, scene, slices, opts, opts.colour.is_some());
     let (w, h) = sensor.camera.image_size();
     crate::capture::capture(main, laser, w as usize, h as usize, opts, seed)
 }

@@ -67,9 +67,11 @@ mod gige_camera {
     const SHORT_SCAN: [&str; 4] = ["--angles", "0,15", "--revolutions", "2"];
     const SHORT_TRIGGERS: u64 = 48;
     /// The fake camera looks for a software trigger every 40 ms (its fixed 25 Hz trigger poll), so
-    /// a frame comes 0–40 ms after its trigger: 6 Hz gives the pairing a ±66 ms window around the
-    /// 20 ms mean, room for a loaded machine.
-    const EMULATOR: [&str; 4] = ["--camera-mode", "blank", "--max-rate-hz", "6"];
+    /// a frame comes 0–40 ms after its trigger, and it stamps the frame when its thread gets to
+    /// it: on a machine loaded by parallel builds one frame was stamped more than a trigger
+    /// period (166 ms at 6 Hz) late and so named the next trigger (a real camera stamps the
+    /// exposure, within microseconds of the trigger). 4 Hz leaves 250 ms.
+    const EMULATOR: [&str; 4] = ["--camera-mode", "blank", "--max-rate-hz", "4"];
 
     /// Camera flags: a small ROI (fast), the exposure and gain that leave the ramp unscaled;
     /// `changes` replace flags' values.

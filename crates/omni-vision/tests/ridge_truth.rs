@@ -617,14 +617,13 @@ fn realistic_sensor_coverage_and_speckle() {
 /// Without a laser-off frame, the cone + pyramid scene's lit faces taper to tips a few px wide
 /// that stay put from frame to frame: they are not taken for the laser's line. On 512 px
 /// frames a face's tip binned 8 × 8 is a narrow ridge the coarsest scale finds; re-measured on
-/// the frame's own pixels its width grows 1–3 px per px along it, and those points are dropped
-/// (the detector's tapering rule for re-measured points): 35 false points of 101 before, 5 of 70
-/// (the wedge's wide end, where its width levels off) after. Asserted: none at 1024 px, at most
-/// 8 % at 512.
+/// the frame's own pixels its chain widens by 0.5–2.5 px per px, and is dropped (the detector's
+/// rule for re-measured chains): 28–35 false points of 70–100 before, 1 after. Asserted: none
+/// at 1024 px, at most 3 % at 512.
 #[test]
 fn lit_tapering_faces_are_not_stripes() {
     let scene = Scene::from_file(paper_bench(BenchObject::ConePyramid)).unwrap();
-    for (size, min_points, false_per_mille) in [(SIZE, 150, 1), (512, 60, 80)] {
+    for (size, min_points, false_per_mille) in [(SIZE, 150, 1), (512, 60, 30)] {
         let sensor = Sensor::paper_scaled(size);
         let circle = sensor.camera.mirror_circle();
         let det = RidgeDetector::new(size, size, circle, RidgeParams::default());
@@ -803,17 +802,20 @@ fn a_static_ambient_estimate_needs_several_mirror_angles() {
 }
 
 /// Under the realistic sensor's speckle, the along-stripe fit (±3 px) on the curved objects
-/// lowers the scatter and leaves the bias where the single points put it: it adds none.
+/// lowers the scatter and leaves the bias where the single points put it: it adds none. The
+/// sphere's stripes hold 34 points, whose moves by the fit (0.05 px each, correlated over the
+/// ±3 px arc) leave their mean within about 0.005 px of 0: its bound is 0.01 px, the
+/// cylinder's (154 points) 0.005.
 #[test]
 fn the_along_stripe_fit_adds_no_bias_on_curved_stripes_under_speckle() {
-    for object in [BenchObject::Cylinder, BenchObject::Sphere] {
+    for (object, bias_tolerance) in [(BenchObject::Cylinder, 0.005), (BenchObject::Sphere, 0.01)] {
         let opts = RenderOptions::default();
         let along_params = RidgeParams { along_stripe_px: 3.0, ..Default::default() };
         let [alone, along] =
             <[Tally; 2]>::try_from(bench_each(object, &opts, &[RidgeParams::default(), along_params])).ok().unwrap();
         eprintln!("{}\n{}", alone.line(&format!("realistic {object:?}")), along.line("  along ±3"));
         let ((rms0, bias0), (rms3, bias3)) = (alone.rms_bias(), along.rms_bias());
-        assert!((bias3 - bias0).abs() <= 0.005, "{object:?}: bias {bias0:+.4} → {bias3:+.4} px");
+        assert!((bias3 - bias0).abs() <= bias_tolerance, "{object:?}: bias {bias0:+.4} → {bias3:+.4} px");
         assert!(rms3 <= 0.8 * rms0, "{object:?}: rms {rms0:.4} → {rms3:.4} px");
         assert!(bias0.abs() <= 0.035, "{object:?}: bias {bias0:+.4} px");
     }

@@ -96,10 +96,11 @@ const NARROW_PERCENTILE: usize = 10;
 /// A stripe whose half-maximum width changes faster than this (px per px along it, over ±3 px)
 /// is a tapering lit area, not the laser's line.
 pub const MAX_WIDTH_SLOPE: f64 = 0.2;
-/// The fastest change of half-maximum width (px per px along the stripe) of a wide stripe
-/// re-measured from a coarser scale whose profiles peak ([`MAX_FLATNESS`]): a wedge of lit
-/// surface 40° wide opens by 0.73; a laser line at a grazing angle changes width more slowly.
-pub const MAX_PEAKED_WIDTH_SLOPE: f64 = 0.7;
+/// The fastest change of half-maximum width (px per px along the stripe) of a chain of points
+/// re-measured from a coarser scale ([`drop_tapering`]): the lit faces' tips that coarse scales
+/// find widen by 0.5–2.5; a wide laser line's width changes with the surface's distance, far
+/// more slowly over a chain.
+pub const MAX_CHAIN_WIDTH_SLOPE: f64 = 0.3;
 /// The flattest profile (width at 90 % of the peak over the half-maximum width) counted as a
 /// laser's line wider than its scale: a Gaussian has 0.39, a lit surface's blurred flat top
 /// nearly 1.
@@ -188,9 +189,6 @@ pub(super) struct Linked {
     /// The profile's top shape ([`Centre::top_shape`]) where the lean has not taken its
     /// stripe's yet (points re-measured from a coarser scale).
     top_shape: Option<[f64; 2]>,
-    /// Whether the profile peaks like a laser's line (saturated, or a top no flatter than
-    /// [`MAX_FLATNESS`]) rather than a lit surface's flat top.
-    peaks: bool,
 }
 
 /// A measured centre before linking.
@@ -891,7 +889,6 @@ impl Centre {
             half_width: self.half_width,
             lean: self.lean,
             top_shape: self.top_shape,
-            peaks: peaks(self),
         }
     }
 }
@@ -927,40 +924,73 @@ fn remove_steady_lean(points: &mut [Linked]) {
     }
 }
 
-/// Drops the points re-measured from a coarser scale whose half-maximum width changes along
-/// their stripe faster than [`MAX_WIDTH_SLOPE`] where their top is flat, or
-/// [`MAX_PEAKED_WIDTH_SLOPE`] where it peaks: a lit area tapering to a tip, binned, is a narrow
-/// ridge at the coarse scale, and only its width on the finer frame tells it from a laser's
-/// line. A wide laser line's width, noisy from profile to profile and changing with the
-/// surface's distance, needs the looser limit where it peaks like one. The slope is fitted over
-/// ±half the point's half-maximum width (at least [`SHAPE_HALF_ARC_PX`]).
+/// Drops the points re-measured from a coarser scale whose chain (points within
+/// [`super::along::STRIPE_LINK_PX`] of each other with nearly parallel normals, at least
+/// [`CHAIN_MIN_PX`] end to end) widens or narrows along its length faster than
+/// [`MAX_CHAIN_WIDTH_SLOPE`]: a lit area tapering to a tip, binned, is a narrow ridge at the
+/// coarse scale, and only its width on the finer frame tells it from a laser's line. The
+/// slope is fitted over the whole chain, where a wide laser line's width, noisy from profile
+/// to profile, averages out; a lit wedge widens steadily all along.
 fn drop_tapering(points: &mut Vec<Linked>) {
-    let widest = points.iter().map(|l| l.half_width).fold(0.0, f64::max);
-    let reach = SHAPE_HALF_ARC_PX.max(0.5 * widest) + 1.0;
-    let grid = Grid::from_placed(points.iter().map(Linked::placed), reach);
-    let tapering: Vec<bool> = points
-        .iter()
-        .map(|l| {
-            let here = l.placed();
-            let arc = SHAPE_HALF_ARC_PX.max(0.5 * l.half_width);
-            let mut width_line = LineSums::default();
-            grid.visit(here[0], here[1], |j, other| {
-                if let Some((t, _, _)) = on_the_stripe(&here, other, reach)
-                    && t.abs() <= arc
-                {
-                    width_line.add(t, points[j].half_width);
-                }
-            });
-            let limit = if l.peaks { MAX_PEAKED_WIDTH_SLOPE } else { MAX_WIDTH_SLOPE };
-            width_line.slope().is_some_and(|slope| slope.abs() > limit)
-        })
-        .collect();
+    let slopes = chain_width_slopes(points);
     let mut k = 0;
     points.retain(|_| {
         k += 1;
-        !tapering[k - 1]
+        !slopes[k - 1].is_some_and(|s| s.abs() > MAX_CHAIN_WIDTH_SLOPE)
     });
 }
+
+/// Each point's chain's half-maximum width slope (px per px along the chain: least squares
+/// over the chain's points, placed along its principal direction), for chains that span at
+/// least [`CHAIN_MIN_PX`]; `None` for shorter chains.
+fn chain_width_slopes(points: &[Linked]) -> Vec<Option<f64>> {
+    let link = super::along::STRIPE_LINK_PX;
+    let grid = Grid::from_placed(points.iter().map(Linked::placed), link);
+    let mut stripes = Stripes::new(points.len());
+    for (i, l) in points.iter().enumerate() {
+        let here = l.placed();
+        grid.visit(here[0], here[1], |j, other| {
+            if j != i && on_the_stripe(&here, other, link).is_some() {
+                stripes.join(i, j, false);
+            }
+        });
+    }
+    let mut chains: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for i in 0..points.len() {
+        chains.entry(stripes.find(i).0).or_default().push(i);
+    }
+    let mut slope_of = vec![None; points.len()];
+    for chain in chains.values() {
+        let at = |i: usize| (points[i].point.u, points[i].point.v);
+        let n = chain.len() as f64;
+        let (mu, mv) = chain.iter().fold((0.0, 0.0), |(a, b), &i| (a + at(i).0 / n, b + at(i).1 / n));
+        let (mut suu, mut suv, mut svv) = (0.0, 0.0, 0.0);
+        for &i in chain {
+            let (du, dv) = (at(i).0 - mu, at(i).1 - mv);
+            (suu, suv, svv) = (suu + du * du, suv + du * dv, svv + dv * dv);
+        }
+        // The principal direction of the chain's points.
+        let angle = 0.5 * (2.0 * suv).atan2(suu - svv);
+        let (cu, cv) = (angle.cos(), angle.sin());
+        let mut line = LineSums::default();
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for &i in chain {
+            let t = (at(i).0 - mu) * cu + (at(i).1 - mv) * cv;
+            (lo, hi) = (lo.min(t), hi.max(t));
+            line.add(t, points[i].half_width);
+        }
+        if hi - lo >= CHAIN_MIN_PX {
+            let slope = line.slope();
+            for &i in chain {
+                slope_of[i] = slope;
+            }
+        }
+    }
+    slope_of
+}
+
+/// Shortest chain (px end to end) whose width slope [`chain_width_slopes`] judges.
+const CHAIN_MIN_PX: f64 = 6.0;
 
 /// The along-stripe fit ([`super::RidgeParams::along_stripe_px`], `along` px) of points
 /// re-measured from a coarser scale, which [`RidgeDetector::link_and_correct`] never sees: as

@@ -968,7 +968,7 @@ fn finish(sensor: &Sensor, electrons: Vec<f64>, opts: &RenderOptions, frame_seed
 /// sees the same grains at every mirror angle and facet that light the same place (frames a
 /// hundredth of a degree apart, one light plane from two facets), where photon noise is new.
 fn surface_seed(seed: u64) -> u64 {
-    mix(seed ^ 0x5_0F_ACE)
+    mix(seed ^ 0x0050_FACE)
 }
 
 /// The noise seed of one frame: the user's seed mixed with what identifies the frame, so that

@@ -74,8 +74,9 @@ struct Args {
     /// Print the point counts of each stage to stderr as JSON.
     #[arg(long)]
     stats: bool,
-    /// Keep frames whose `seq` repeats within one stream (refused by default: a stream
-    /// concatenated twice, or a repeated frame, would count its points twice).
+    /// Keep frames whose `seq` repeats within one stream, and an input file given twice (refused
+    /// by default: a stream concatenated or named twice, or a repeated frame, would count its
+    /// points twice).
     #[arg(long)]
     allow_duplicates: bool,
     /// Refuse a stream cut short upstream: without its final status record, or marked incomplete
@@ -149,6 +150,13 @@ fn options(args: &Args) -> Result<MergeOptions, CliError> {
     Ok(MergeOptions { voxel: args.voxel, statistical, radius, crop_box, crop_range, viewpoints })
 }
 
+/// The first input file named twice (the same file by its canonical path; stdin and files that
+/// cannot be resolved are left to the readers).
+fn given_twice(inputs: &[PathBuf]) -> Option<&PathBuf> {
+    let mut seen = std::collections::HashSet::new();
+    inputs.iter().find(|p| p.as_os_str() != "-" && p.canonicalize().is_ok_and(|c| !seen.insert(c)))
+}
+
 fn is_ply(p: &Path) -> bool {
     p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
 }
@@ -167,6 +175,12 @@ fn main() -> std::process::ExitCode {
         }
         if args.inputs.iter().filter(|p| p.as_os_str() == "-").count() > 1 {
             return Err(CliError::usage("stdin (`-`) can be given only once"));
+        }
+        if let Some(twice) = given_twice(&args.inputs).filter(|_| !args.allow_duplicates) {
+            return Err(CliError::usage(format!(
+                "{}: given twice (its points would be merged twice; --allow-duplicates keeps both)",
+                twice.display()
+            )));
         }
         if !(args.max_pose_gap_ms >= 0.0 && args.max_pose_gap_ms.is_finite()) {
             return Err(CliError::usage("--max-pose-gap-ms must be a non-negative number"));

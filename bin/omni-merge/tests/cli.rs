@@ -186,6 +186,12 @@ fn bad_inputs_fail_cleanly_without_output() {
         assert_eq!(run(d, bad).status.code(), Some(2));
     }
     assert_eq!(run(d, &["s.jsonl"]).status.code(), Some(2));
+    // One stream named twice (here once through another path) would merge its points twice.
+    let out = run(d, &["s.jsonl", "./s.jsonl", "-o", "o.ply"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("./s.jsonl: given twice") && err.lines().count() == 1, "{err}");
+    assert!(!d.join("o.ply").exists());
 }
 
 #[test]
@@ -268,8 +274,11 @@ fn a_repeated_frame_seq_is_refused_unless_allowed() {
     assert!(!d.join("c.ply").exists());
     ok(&run(d, &["twice.jsonl", "-o", "c.ply", "--allow-duplicates"]));
     assert_eq!(read_ply(&d.join("c.ply")).unwrap().len(), 60);
-    // The same seqs in two different streams are two scans, not a repeat.
-    ok(&run(d, &["a.jsonl", "a.jsonl", "-o", "two.ply"]));
+    // The same seqs in two different streams are two scans, not a repeat; one file named twice is.
+    std::fs::copy(d.join("a.jsonl"), d.join("b.jsonl")).unwrap();
+    ok(&run(d, &["a.jsonl", "b.jsonl", "-o", "two.ply"]));
+    assert_eq!(run(d, &["a.jsonl", "a.jsonl", "-o", "same.ply"]).status.code(), Some(2));
+    ok(&run(d, &["a.jsonl", "a.jsonl", "-o", "same.ply", "--allow-duplicates"]));
 }
 
 #[test]

@@ -93,7 +93,7 @@ fn main() -> std::process::ExitCode {
     omni_cli::main("omni-triangulate", || {
         let args = omni_cli::parse_args::<Args>()?;
         let (camera_file, camera) = CameraFile::load(&args.camera)?;
-        let (_, transmitter) = ScannerFile::load(&args.scanner)?;
+        let (scanner_file, transmitter) = ScannerFile::load(&args.scanner)?;
         let tri = Triangulator::new(camera.as_ref(), &transmitter, args.min_incidence_deg).map_err(CliError::usage)?;
         args.cloud_out.check().map_err(CliError::usage)?;
         if let Some(p) = args.stamp_period_ms {
@@ -141,6 +141,8 @@ fn main() -> std::process::ExitCode {
             frames_dir: None,
             images: Vec::new(),
             viewpoint_mm: camera_file.model.viewpoint_mm(),
+            unobserved: scanner_file.unobserved(),
+            uncalibrated_frames: 0,
             tri: &tri,
             args: &args,
             cloud: cloud.as_mut(),
@@ -216,6 +218,10 @@ struct Run<'a> {
     frames_dir: Option<String>,
     /// Where the camera's rays start (mm, sensor frame; a catadioptric camera's mirror focus).
     viewpoint_mm: [f64; 3],
+    /// The facets and lasers the scanner file's calibration never saw ([`ScannerFile::unobserved`]).
+    unobserved: (Vec<u32>, Vec<u32>),
+    /// Frames with points from those facets or lasers.
+    uncalibrated_frames: u64,
     /// Each frame's seq, timestamp and image file (for --rosbag-images).
     images: Vec<(u64, Option<u64>, PathBuf)>,
     tri: &'a Triangulator<'a>,
@@ -257,6 +263,11 @@ impl Run<'_> {
                     let loc = format!("{name}: line {} (frame {})", reader.line(), frame.seq);
                     let res = self.tri.triangulate_frame(&frame).map_err(|m| fail(format!("{loc}: {m}")))?;
                     self.rejections.add(&res.rejections);
+                    let (facets, lasers) = &self.unobserved;
+                    let unseen_facet = !res.points.is_empty() && facets.contains(&frame.facet);
+                    if unseen_facet || res.points.iter().any(|p| lasers.contains(&p.laser)) {
+                        self.uncalibrated_frames += 1;
+                    }
                     self.points += res.points.len() as u64;
                     self.frames += 1;
                     frame.points = Some(res.points);
@@ -300,10 +311,31 @@ impl Run<'_> {
             }
         }
         self.check_the_camera_fits(name)?;
+        self.warn_of_uncalibrated_planes(name);
         if let Some(w) = writer.as_mut() {
             w.flush().map_err(|e| fail(e.to_string()))?;
         }
         Ok(())
+    }
+
+    /// Warns where frames took points from facets or lasers the scanner's calibration never saw:
+    /// their light planes are the initial ones, off by up to millimetres on a real build.
+    fn warn_of_uncalibrated_planes(&self, name: &str) {
+        if self.uncalibrated_frames == 0 {
+            return;
+        }
+        let list = |v: &[u32]| v.iter().map(u32::to_string).collect::<Vec<_>>().join(", ");
+        let (facets, lasers) = &self.unobserved;
+        omni_cli::warn(
+            "omni-triangulate",
+            &format!(
+                "{name}: {} frame(s) took points from light planes {} never calibrated (facets not seen on its rig: [{}], lasers: [{}]; kept at their initial values): calibrate with frames of every facet and laser the scan uses",
+                self.uncalibrated_frames,
+                self.args.scanner.display(),
+                list(facets),
+                list(lasers)
+            ),
+        );
     }
 
     /// Refuses a run in which no stripe pixel gives a point, and warns where most map to no

@@ -231,6 +231,31 @@ fn facets_off_the_polygon_and_angles_far_outside_the_facet_are_refused() {
     }
 }
 
+/// A scanner file whose calibration never saw facet 3 (its report's `model.fixed`): frames on
+/// facet 3 are triangulated through its initial planes, with one warning naming the file and
+/// the facet; frames on calibrated facets bring none.
+#[test]
+fn frames_on_facets_the_calibration_never_saw_are_warned_of() {
+    let fx = fixture();
+    let d = fx.dir.path();
+    let mut scanner = ScannerFile::new(TransmitterParams::paper());
+    scanner.report = Some(serde_json::json!({"model": {"fixed": [
+        "facet_errors[3]: facet not observed, kept at its initial value",
+        "lasers[1]: laser not observed, kept at its initial value",
+        "polygon.circumradius_mm: nominal (radius errors are fitted per facet)"
+    ]}}));
+    write_doc(&d.join("partial.json"), &scanner).unwrap();
+    let ridges = std::fs::read_to_string(d.join("ridges.jsonl")).unwrap();
+    std::fs::write(d.join("facet3.jsonl"), ridges.replace("\"facet\":0", "\"facet\":3")).unwrap();
+    for (input, warned) in [("ridges.jsonl", false), ("facet3.jsonl", true)] {
+        let out = run(d, &["--camera", "camera.json", "--scanner", "partial.json", input, "-o", "out.jsonl"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{input}: {err}");
+        let warning = format!("{input}: 3 frame(s) took points from light planes partial.json never calibrated");
+        assert_eq!(err.contains(&warning) && err.contains("facets not seen on its rig: [3]"), warned, "{input}: {err}");
+    }
+}
+
 #[test]
 fn a_bad_facet_offset_is_blamed_on_scanner_json() {
     let fx = fixture();

@@ -338,14 +338,8 @@ fn fit(a: &FitArgs) -> CliResult {
 /// them (the report's `fixed` entries `facet_errors[k]` / `lasers[j]` … "not observed"), as
 /// "facets 1–11, laser 1"; `None` if every one was seen.
 fn unseen_on_the_rig(fixed: &[String]) -> Option<String> {
-    let indices = |prefix: &str| -> Vec<usize> {
-        fixed
-            .iter()
-            .filter(|f| f.contains("not observed"))
-            .filter_map(|f| f.strip_prefix(prefix)?.split(']').next()?.parse().ok())
-            .collect()
-    };
-    let named = |one: &str, many: &str, k: Vec<usize>| -> Option<String> {
+    let (facets, lasers) = omni_formats::unobserved_in(fixed.iter().map(String::as_str));
+    let named = |one: &str, many: &str, k: Vec<u32>| -> Option<String> {
         let mut runs: Vec<String> = Vec::new();
         let mut i = 0;
         while i < k.len() {
@@ -360,10 +354,7 @@ fn unseen_on_the_rig(fixed: &[String]) -> Option<String> {
         (!k.is_empty()).then(|| format!("{word} {}", runs.join(", ")))
     };
     let parts: Vec<String> =
-        [named("facet", "facets", indices("facet_errors[")), named("laser", "lasers", indices("lasers["))]
-            .into_iter()
-            .flatten()
-            .collect();
+        [named("facet", "facets", facets), named("laser", "lasers", lasers)].into_iter().flatten().collect();
     (!parts.is_empty()).then(|| parts.join(", "))
 }
 

@@ -285,18 +285,23 @@ impl Versioned for ScannerFile {
     const MIN_VERSION: u32 = 1;
 }
 
+/// The facet and laser indices of a light-plane calibration report's `model.fixed` entries that
+/// say "not observed" (`facet_errors[k]: …`, `lasers[j]: …`), in their order.
+pub fn unobserved_in<'a>(fixed: impl IntoIterator<Item = &'a str>) -> (Vec<u32>, Vec<u32>) {
+    let entries: Vec<&str> = fixed.into_iter().filter(|e| e.contains("not observed")).collect();
+    let indices = |prefix: &str| -> Vec<u32> {
+        entries.iter().filter_map(|e| e.strip_prefix(prefix)?.split(']').next()?.parse().ok()).collect()
+    };
+    (indices("facet_errors["), indices("lasers["))
+}
+
 impl ScannerFile {
     /// The facets and lasers the light-plane calibration never saw, and so kept at their
     /// initial values: its report's `model.fixed` entries `facet_errors[k]: … not observed` and
     /// `lasers[j]: … not observed` (both empty without a report).
     pub fn unobserved(&self) -> (Vec<u32>, Vec<u32>) {
         let fixed = self.report.as_ref().and_then(|r| r.pointer("/model/fixed")).and_then(|f| f.as_array());
-        let entries: Vec<&str> =
-            fixed.into_iter().flatten().filter_map(|e| e.as_str()).filter(|e| e.contains("not observed")).collect();
-        let indices = |prefix: &str| -> Vec<u32> {
-            entries.iter().filter_map(|e| e.strip_prefix(prefix)?.split(']').next()?.parse().ok()).collect()
-        };
-        (indices("facet_errors["), indices("lasers["))
+        unobserved_in(fixed.into_iter().flatten().filter_map(|e| e.as_str()))
     }
 
     /// A file holding `transmitter`: version 1 for a polygon (the layout older builds read),

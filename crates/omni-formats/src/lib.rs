@@ -30,7 +30,7 @@ pub mod transform;
 
 pub use docs::{
     BoardFile, CameraFile, CameraSpec, ScannerFile, TransmitterSpec, not_polygon, parse_doc, read_doc, stage_doc,
-    write_doc,
+    unobserved_in, write_doc,
 };
 pub use error::{Error, Result};
 

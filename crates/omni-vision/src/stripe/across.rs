@@ -1429,12 +1429,12 @@ impl LineSums {
         (before >= 2 && after >= 2 && det > 1e-9).then(|| ((r0 * s2 - r1 * s1) / det, (s0 * r1 - s1 * r0) / det))
     }
 
-    /// The slope `b` of the line through at least three points, two of them on one side of
-    /// t = 0 (a stripe's end has no points beyond it); `None` with fewer.
+    /// The slope `b` of the least-squares line through three points or more; `None` with fewer
+    /// or all at one t.
     fn slope(&self) -> Option<f64> {
-        let LineSums { s0, s1, s2, r0, r1, before, after } = *self;
+        let LineSums { s0, s1, s2, r0, r1, .. } = *self;
         let det = s0 * s2 - s1 * s1;
-        (before + after >= 2 && before.max(after) >= 2 && det > 1e-9).then(|| (s0 * r1 - s1 * r0) / det)
+        (s0 >= 3.0 && det > 1e-9).then(|| (s0 * r1 - s1 * r0) / det)
     }
 
     /// The standard error of the fit's `a` per unit of the points' independent noise.

@@ -21,8 +21,8 @@ use std::path::{Path, PathBuf};
 clouds (by the .ply extension), optionally moves each frame by the sensor pose interpolated from an \
 odometry file at the frame's timestamp_us (slerp + lerp), then crops, voxel-downsamples and removes \
 outliers, in that order, and writes one cloud: PLY, PCD or LAS by the output's extension (or \
---format), optionally with normals facing the sensor (with --poses: its position when it took \
-each point's frame), and/or a ROS 2 bag (--rosbag) with the merged \
+--format), optionally with normals facing the point each stream's rays start from (its header's \
+viewpoint_mm; with --poses: where it was when each point's frame was taken), and/or a ROS 2 bag (--rosbag) with the merged \
 cloud as one sensor_msgs/msg/PointCloud2 message in frame `map`, stamped with the latest frame \
 timestamp (0 where no frame has one). Scalar fields keep their PLY types (uchar colours stay uchar).\n\n\
 Outlier removal matches Open3D: --statistical K,STD_RATIO is remove_statistical_outlier(nb_neighbors=K, \

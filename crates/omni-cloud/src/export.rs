@@ -28,8 +28,9 @@ pub struct CloudOutputArgs {
     #[arg(long, value_name = "m|mm", default_value = "mm", value_parser = Units::parse)]
     pub units: Units,
     /// Add normals nx ny nz (PCD and bags: normal_x …): the plane fitted to each point's
-    /// --normal-neighbours nearest points, turned to face the sensor (the origin of the sensor
-    /// frame; with omni-merge --poses, where the sensor was when it took the point's frame).
+    /// --normal-neighbours nearest points, turned to face the point its ray started from (the
+    /// camera's viewpoint, a catadioptric camera's mirror focus; with omni-merge --poses, moved
+    /// to where the sensor was when it took the point's frame).
     #[arg(long)]
     pub normals: bool,
     /// Neighbours (the point itself counted) of the normals' plane fit.

@@ -22,7 +22,7 @@ clouds (by the .ply extension), optionally moves each frame by the sensor pose i
 odometry file at the frame's timestamp_us (slerp + lerp), then crops, voxel-downsamples and removes \
 outliers, in that order, and writes one cloud: PLY, PCD or LAS by the output's extension (or \
 --format), optionally with normals facing the point each stream's rays start from (its header's \
-viewpoint_mm; with --poses: where it was when each point's frame was taken), and/or a ROS 2 bag (--rosbag) with the merged \
+viewpoint_mm; with --poses: where it was when each point's frame was taken; a PLY input's: the origin), and/or a ROS 2 bag (--rosbag) with the merged \
 cloud as one sensor_msgs/msg/PointCloud2 message in frame `map`, stamped with the latest frame \
 timestamp (0 where no frame has one). Scalar fields keep their PLY types (uchar colours stay uchar).\n\n\
 Outlier removal matches Open3D: --statistical K,STD_RATIO is remove_statistical_outlier(nb_neighbors=K, \
@@ -202,6 +202,14 @@ fn main() -> std::process::ExitCode {
                     return Err(CliError::new(format!(
                         "{name}: --poses needs point streams (a PLY cloud has no frame timestamps)"
                     )));
+                }
+                if args.cloud.normals {
+                    omni_cli::warn(
+                        "omni-merge",
+                        &format!(
+                            "{name}: a PLY cloud carries no viewpoint, so its normals face the origin; merge omni-triangulate's point stream instead for normals that face where its rays start"
+                        ),
+                    );
                 }
                 add_ply(&mut merger, input, &name)?;
             } else {

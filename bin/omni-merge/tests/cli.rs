@@ -427,6 +427,10 @@ fn normals_face_the_streams_viewpoint_not_the_sensor_origin() {
             nz.iter().cloned().fold(1.0, f32::min)
         );
     }
+    // A PLY carries no viewpoint: its normals face the origin, and the tool says so.
+    let out = run(d, &["still.ply", "-o", "again.ply", "--normals"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && err.contains("still.ply: a PLY cloud carries no viewpoint"), "{err}");
 }
 
 /// The omniscan temporary entries (files or directories) in `dir`.

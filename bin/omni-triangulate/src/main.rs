@@ -142,6 +142,13 @@ fn main() -> std::process::ExitCode {
             images: Vec::new(),
             viewpoint_mm: camera_file.model.viewpoint_mm(),
             unobserved: scanner_file.unobserved(),
+            facet_offsets: match &transmitter {
+                omni_model::TransmitterModel::Polygon(tx) => {
+                    let n = tx.num_facets();
+                    Some((n, tx.params().lasers.iter().map(|l| l.facet_offset % n).collect()))
+                }
+                omni_model::TransmitterModel::FixedPlanes(_) => None,
+            },
             uncalibrated_frames: 0,
             tri: &tri,
             args: &args,
@@ -222,6 +229,9 @@ struct Run<'a> {
     unobserved: (Vec<u32>, Vec<u32>),
     /// Frames with points from those facets or lasers.
     uncalibrated_frames: u64,
+    /// A polygon's facet count and each laser's facet offset: laser j reflects off facet
+    /// (frame facet + offset j) mod n, the facet the calibration report names.
+    facet_offsets: Option<(u32, Vec<u32>)>,
     /// Each frame's seq, timestamp and image file (for --rosbag-images).
     images: Vec<(u64, Option<u64>, PathBuf)>,
     tri: &'a Triangulator<'a>,
@@ -263,9 +273,7 @@ impl Run<'_> {
                     let loc = format!("{name}: line {} (frame {})", reader.line(), frame.seq);
                     let res = self.tri.triangulate_frame(&frame).map_err(|m| fail(format!("{loc}: {m}")))?;
                     self.rejections.add(&res.rejections);
-                    let (facets, lasers) = &self.unobserved;
-                    let unseen_facet = !res.points.is_empty() && facets.contains(&frame.facet);
-                    if unseen_facet || res.points.iter().any(|p| lasers.contains(&p.laser)) {
+                    if res.points.iter().any(|p| self.uncalibrated(frame.facet, p.laser)) {
                         self.uncalibrated_frames += 1;
                     }
                     self.points += res.points.len() as u64;
@@ -318,6 +326,17 @@ impl Run<'_> {
         Ok(())
     }
 
+    /// Whether laser `laser`'s light plane in a frame whose laser 0 faces `facet` is one the
+    /// scanner's calibration never saw: the laser, or the facet it reflects off.
+    fn uncalibrated(&self, facet: u32, laser: u32) -> bool {
+        let (facets, lasers) = &self.unobserved;
+        let reflected = self.facet_offsets.as_ref().and_then(|(n, offsets)| {
+            let offset = offsets.get(laser as usize)?;
+            Some((facet % n + offset) % n)
+        });
+        lasers.contains(&laser) || reflected.is_some_and(|k| facets.contains(&k))
+    }
+
     /// Warns where frames took points from facets or lasers the scanner's calibration never saw:
     /// their light planes are the initial ones, off by up to millimetres on a real build.
     fn warn_of_uncalibrated_planes(&self, name: &str) {
@@ -357,8 +376,13 @@ impl Run<'_> {
         // most of its stripe.
         if pixels > 0 && self.points == 0 {
             let r = &self.rejections;
+            let cause = if 2 * r.grazing > pixels {
+                format!("is --min-incidence-deg {} too strict?", self.args.min_incidence_deg)
+            } else {
+                "are they the frames' sensor files?".to_string()
+            };
             return Err(format!(
-                "{name}: none of its {pixels} stripe pixels gives a point ({} with no ray, {} unlit by any light plane, {} grazing) with {camera} and {}: are they the frames' sensor files?",
+                "{name}: none of its {pixels} stripe pixels gives a point ({} with no ray, {} unlit by any light plane, {} grazing) with {camera} and {}: {cause}",
                 r.no_ray,
                 r.unlit,
                 r.grazing,

@@ -231,9 +231,10 @@ fn facets_off_the_polygon_and_angles_far_outside_the_facet_are_refused() {
     }
 }
 
-/// A scanner file whose calibration never saw facet 3 (its report's `model.fixed`): frames on
-/// facet 3 are triangulated through its initial planes, with one warning naming the file and
-/// the facet; frames on calibrated facets bring none.
+/// A scanner file whose calibration never saw facet 3 (its report's `model.fixed`): points lit
+/// off facet 3 are triangulated through its initial plane, with one warning naming the file and
+/// the facet; others bring none. Laser 0 reflects off the frame's facet, laser 1 off the
+/// opposite one (offset 6): laser 1's points in a frame on facet 9 come off facet 3.
 #[test]
 fn frames_on_facets_the_calibration_never_saw_are_warned_of() {
     let fx = fixture();
@@ -241,14 +242,40 @@ fn frames_on_facets_the_calibration_never_saw_are_warned_of() {
     let mut scanner = ScannerFile::new(TransmitterParams::paper());
     scanner.report = Some(serde_json::json!({"model": {"fixed": [
         "facet_errors[3]: facet not observed, kept at its initial value",
-        "lasers[1]: laser not observed, kept at its initial value",
         "polygon.circumradius_mm: nominal (radius errors are fitted per facet)"
     ]}}));
     write_doc(&d.join("partial.json"), &scanner).unwrap();
-    let ridges = std::fs::read_to_string(d.join("ridges.jsonl")).unwrap();
-    std::fs::write(d.join("facet3.jsonl"), ridges.replace("\"facet\":0", "\"facet\":3")).unwrap();
-    for (input, warned) in [("ridges.jsonl", false), ("facet3.jsonl", true)] {
-        let out = run(d, &["--camera", "camera.json", "--scanner", "partial.json", input, "-o", "out.jsonl"]);
+    let cam = HyperbolicCamera::new(HyperbolicParams::paper()).unwrap();
+    let tx = Transmitter::new(TransmitterParams::paper()).unwrap();
+    // Three frames of one laser's stripe, each frame on `facet`.
+    let stream = |facet: u32, laser: u32| {
+        let mut text = Vec::new();
+        let mut w = StreamWriter::new(&mut text, "mem");
+        w.write(&Record::Header(omni_formats::stream::Header::new("test"))).unwrap();
+        for (seq, alpha) in [(0u64, 5.0f64), (1, 15.0), (2, 25.0)] {
+            let lp = tx.light_plane(alpha.to_radians(), facet, laser as usize).unwrap();
+            let across = lp.plane.normal.cross(&lp.out_dir).normalize();
+            let stripe = (0..10)
+                .filter_map(|i| {
+                    let p = lp.facet_point
+                        + lp.out_dir.into_inner() * (400.0 + 60.0 * i as f64)
+                        + across * (i as f64 * 30.0 - 150.0);
+                    let px = cam.point_to_pixel(&p)?;
+                    Some(StripePoint { u: px.x, v: px.y, intensity: 100.0, width: 3.0, quality: 0 })
+                })
+                .collect();
+            let mut f = Frame::new(seq, format!("{seq}.png"), alpha, facet);
+            f.lasers = vec![laser];
+            f.stripe = Some(stripe);
+            w.write(&Record::Frame(Box::new(f))).unwrap();
+        }
+        drop(w);
+        text
+    };
+    for (facet, laser, warned) in [(0, 0, false), (3, 0, true), (9, 0, false), (9, 1, true), (3, 1, false)] {
+        let input = format!("f{facet}l{laser}.jsonl");
+        std::fs::write(d.join(&input), stream(facet, laser)).unwrap();
+        let out = run(d, &["--camera", "camera.json", "--scanner", "partial.json", &input, "-o", "out.jsonl"]);
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(out.status.success(), "{input}: {err}");
         let warning = format!("{input}: 3 frame(s) took points from light planes partial.json never calibrated");

@@ -30,7 +30,8 @@ pub struct CloudOutputArgs {
     /// Add normals nx ny nz (PCD and bags: normal_x …): the plane fitted to each point's
     /// --normal-neighbours nearest points, turned to face the point its ray started from (the
     /// camera's viewpoint, a catadioptric camera's mirror focus; with omni-merge --poses, moved
-    /// to where the sensor was when it took the point's frame).
+    /// to where the sensor was when it took the point's frame; a PLY input carries none: the
+    /// origin).
     #[arg(long)]
     pub normals: bool,
     /// Neighbours (the point itself counted) of the normals' plane fit.

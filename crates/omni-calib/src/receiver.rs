@@ -953,14 +953,9 @@ pub fn calibrate(width: u32, height: u32, obs: &[Observation], opts: &Options) -
         images[k].reason = fit.reasons[s].clone();
     }
     let std_free = {
-        let used: Vec<Observation> = (0..sub.len())
-            .filter(|&k| fit.reasons[k].is_none() && fit.poses[k].is_some())
-            .map(|k| sub[k].clone())
-            .collect();
-        let weights: Vec<f64> = (0..sub.len())
-            .filter(|&k| fit.reasons[k].is_none() && fit.poses[k].is_some())
-            .map(|k| fit.weights[k])
-            .collect();
+        let kept: Vec<usize> = (0..sub.len()).filter(|&k| fit.reasons[k].is_none() && fit.poses[k].is_some()).collect();
+        let used: Vec<Observation> = kept.iter().map(|&k| sub[k].clone()).collect();
+        let weights: Vec<f64> = kept.iter().map(|&k| fit.weights[k]).collect();
         let mut x = fit.model.free_values();
         for k in (0..sub.len()).filter(|&k| fit.reasons[k].is_none()) {
             x.extend_from_slice(&fit.poses[k].unwrap_or_default());

@@ -151,7 +151,6 @@ pub fn ray_difference_deg(
     Some((errs[errs.len() / 2], errs[errs.len() - 1]))
 }
 
-/// The k-fold test RMS (see the module docs); needs at least 2 folds and 2 images per training set.
 /// Each parameter's leave-one-image-out jackknife σ about `cal` (fitted to `obs` with `opts`):
 /// the fit repeated without each image `cal` used, √((g − 1)/g · Σ(θₖ − θ̄)²) over the g fits,
 /// in `cal.param_names`' order. Errors when a fit fails or names its parameters otherwise.
@@ -186,6 +185,7 @@ pub fn jackknife(
         .collect())
 }
 
+/// The k-fold test RMS (see the module docs); needs at least 2 folds and 2 images per training set.
 pub fn k_fold(width: u32, height: u32, obs: &[Observation], opts: &Options, folds: usize) -> Result<HeldOut, String> {
     let usable: Vec<&Observation> =
         obs.iter().filter(|o| o.pixels.len() >= opts.min_corners && o.pixels.len() == o.board_mm.len()).collect();

@@ -648,8 +648,7 @@ fn render_light(
                     row.centre[x] = 0.25 * c.iter().map(|k| k.value - k.laser).sum::<f64>();
                     match q {
                         Some(q) if laser > 0.0 => {
-                            let cell = CellLight { energy: laser / (q * q) as f64, ..Default::default() };
-                            row.laser.push((x, vec![cell; q * q]));
+                            row.laser.push((x, vec![CellLight::uniform(laser / (q * q) as f64, q); q * q]));
                         }
                         Some(_) => {}
                         None => row.centre_laser[x] = laser,
@@ -664,7 +663,7 @@ fn render_light(
                         row.patches.push((x, psf.patch(&ambient)));
                         let laser: Vec<f64> = samples.iter().map(|s| s.laser).collect();
                         if laser.iter().any(|v| *v > 0.0) {
-                            row.laser.push((x, sample_energies(&laser, n, q)));
+                            row.laser.push((x, CellLight::from_samples(&laser, n, q)));
                         }
                     }
                     None if split => {
@@ -744,26 +743,6 @@ fn coherent_imager(optics: &Optics) -> Arc<CoherentImager> {
     let imager = Arc::new(CoherentImager::new(optics));
     cache.push((*optics, imager.clone()));
     imager
-}
-
-/// A pixel's q × q coherent cells from its n × n signal densities (e⁻ per pixel area at each
-/// sample; n a multiple of q): energy and centroid moment (offsets in px from the cell centre).
-fn sample_energies(density: &[f64], n: usize, q: usize) -> Vec<CellLight> {
-    let k = n / q;
-    let area = 1.0 / (n * n) as f64;
-    // Offset of sample i from its cell's centre (px).
-    let offset = |i: usize| ((i % k) as f64 + 0.5 - 0.5 * k as f64) / n as f64;
-    let mut out = vec![CellLight::default(); q * q];
-    for (j, row) in density.chunks_exact(n).enumerate() {
-        for (i, v) in row.iter().enumerate() {
-            let c = &mut out[(j / k) * q + i / k];
-            let e = v * area;
-            c.energy += e;
-            c.moment_x += e * offset(i);
-            c.moment_y += e * offset(j);
-        }
-    }
-    out
 }
 
 /// One image row: centre samples of uniform pixels, (column, PSF patch) of supersampled ones,

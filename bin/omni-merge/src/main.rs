@@ -223,7 +223,9 @@ fn main() -> std::process::ExitCode {
             omni_cli::warn("omni-merge", "no points left after cropping and filtering; writing an empty cloud");
         }
         let seen_from = viewpoints.as_deref().map_or(Viewpoints::Fixed([0.0; 3]), Viewpoints::PerPoint);
-        args.cloud.finish_cloud_seen_from(&mut cloud, seen_from)?;
+        if let Some(warning) = args.cloud.finish_cloud_seen_from(&mut cloud, seen_from)? {
+            omni_cli::warn("omni-merge", &warning);
+        }
         if args.cloud.rosbag.is_some() && latest_us.is_none() {
             omni_cli::warn(
                 "omni-merge",

@@ -186,7 +186,10 @@ fn main() -> std::process::ExitCode {
             let in_input = |m: String| CliError::new(format!("{name}: {m}"));
             let messages =
                 if bag { bag_messages(&spans, args.bag_per, period_us).map_err(in_input)? } else { Vec::new() };
-            args.cloud_out.finish_cloud_seen_from(&mut cloud, Viewpoints::Fixed(camera_file.model.viewpoint_mm()))?;
+            let seen_from = Viewpoints::Fixed(camera_file.model.viewpoint_mm());
+            if let Some(warning) = args.cloud_out.finish_cloud_seen_from(&mut cloud, seen_from)? {
+                omni_cli::warn("omni-triangulate", &warning);
+            }
             let mut load = |i: usize| {
                 let g = omni_vision::image_io::load_gray(&frames[i].2)?;
                 Ok(BagImage { width: g.width, height: g.height, bit_depth: g.bit_depth, samples: g.data })

@@ -122,6 +122,13 @@ fn writes_ply_with_scalar_fields() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let pcd = std::fs::read(fx.path("c.pcd")).unwrap();
     assert!(String::from_utf8_lossy(&pcd).contains("\nVIEWPOINT 0 0 80 1 0 0 0\n"));
+    // The fixture's stripes are straight lines 10 points long: 4 nearest neighbours lie on one.
+    let args = ["--camera", "camera.json", "--scanner", "scanner.json", "ridges.jsonl", "-o", "n.ply", "--normals"];
+    let args = [&args[..], &["--normal-neighbours", "4"]].concat();
+    let out = run(fx.dir.path(), &args);
+    let se = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{se}");
+    assert!(se.contains("nearest neighbours lie along a line (one stripe)"), "{se}");
 }
 
 #[test]

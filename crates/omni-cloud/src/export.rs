@@ -31,7 +31,9 @@ pub struct CloudOutputArgs {
     /// --normal-neighbours nearest points, turned to face the point its ray started from (the
     /// camera's viewpoint, a catadioptric camera's mirror focus; with omni-merge --poses, moved
     /// to where the sensor was when it took the point's frame; a PLY input carries none: the
-    /// origin).
+    /// origin). Where the neighbours lie along one stripe (one frame's cloud), the plane is
+    /// undetermined: those normals are across the stripe towards the sensor, and a warning
+    /// counts them.
     #[arg(long)]
     pub normals: bool,
     /// Neighbours (the point itself counted) of the normals' plane fit.
@@ -90,12 +92,24 @@ impl CloudOutputArgs {
     }
 
     /// Adds normals if asked for, each facing the viewpoint its point was seen from (mm, the
-    /// cloud's frame).
-    pub fn finish_cloud_seen_from(&self, cloud: &mut PointCloud, viewpoints: Viewpoints<'_>) -> Result<(), String> {
+    /// cloud's frame). Returns a warning for the user when some points' neighbourhoods lie
+    /// along a line, whose normals only face across it ([`crate::normals::Normals`]).
+    pub fn finish_cloud_seen_from(
+        &self,
+        cloud: &mut PointCloud,
+        viewpoints: Viewpoints<'_>,
+    ) -> Result<Option<String>, String> {
         if !self.normals {
-            return Ok(());
+            return Ok(None);
         }
-        add_normals_seen_from(cloud, self.normal_neighbours, viewpoints)
+        let along_a_line = add_normals_seen_from(cloud, self.normal_neighbours, viewpoints)?;
+        Ok((along_a_line > 0).then(|| {
+            format!(
+                "{along_a_line} of {} points' {} nearest neighbours lie along a line (one stripe): their normals are across it, towards the sensor, but the surface's tilt about the stripe is not measured; merge more slices, or raise --normal-neighbours",
+                cloud.len(),
+                self.normal_neighbours
+            )
+        }))
     }
 
     /// Writes the cloud file (if `path`) and the bag (if --rosbag) with `messages`, both put

@@ -30,19 +30,34 @@ impl Viewpoints<'_> {
     }
 }
 
-/// Unit normals of `points` (mm) from their `k` nearest neighbours (the point itself counted),
-/// oriented so that `normal · (viewpoint − point) ≥ 0`. A point with fewer than 3 neighbours,
-/// or whose neighbours lie on a line, gets the unit vector towards the viewpoint.
-pub fn estimate_normals(points: &[[f64; 3]], k: usize, viewpoint: [f64; 3]) -> Result<Vec<[f64; 3]>, String> {
-    estimate_normals_seen_from(points, k, Viewpoints::Fixed(viewpoint))
+/// How thin a neighbourhood may be, across against along (the square root of its covariance's
+/// middle eigenvalue over its largest), and still be taken for a patch of surface: thinner, it is
+/// points along one curve (one stripe of one frame), whose noise alone would set the surface's
+/// tilt about the curve. Adjacent slices of a scan give 0.3 or more.
+pub const LINE_WIDTH_RATIO: f64 = 0.1;
+
+/// Normals and how many of them came from a neighbourhood along a line.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Normals {
+    /// Unit normals (the cloud's order).
+    pub normals: Vec<[f64; 3]>,
+    /// Points whose neighbours lie along a line ([`LINE_WIDTH_RATIO`]): their normals are
+    /// perpendicular to it and as near the viewpoint's direction as that allows, the surface's
+    /// tilt about the line unmeasured.
+    pub along_a_line: usize,
 }
 
-/// [`estimate_normals`] with each point turned towards its own viewpoint.
-pub fn estimate_normals_seen_from(
-    points: &[[f64; 3]],
-    k: usize,
-    viewpoints: Viewpoints,
-) -> Result<Vec<[f64; 3]>, String> {
+/// Unit normals of `points` (mm) from their `k` nearest neighbours (the point itself counted),
+/// oriented so that `normal · (viewpoint − point) ≥ 0`. A point with fewer than 3 neighbours
+/// gets the unit vector towards the viewpoint; one whose neighbours lie along a line, the
+/// direction perpendicular to the line nearest to that.
+pub fn estimate_normals(points: &[[f64; 3]], k: usize, viewpoint: [f64; 3]) -> Result<Vec<[f64; 3]>, String> {
+    Ok(estimate_normals_seen_from(points, k, Viewpoints::Fixed(viewpoint))?.normals)
+}
+
+/// [`estimate_normals`] with each point turned towards its own viewpoint, and the count of
+/// neighbourhoods along a line.
+pub fn estimate_normals_seen_from(points: &[[f64; 3]], k: usize, viewpoints: Viewpoints) -> Result<Normals, String> {
     if k < 3 {
         return Err(format!("normals need at least 3 neighbours, got {k}"));
     }
@@ -52,21 +67,37 @@ pub fn estimate_normals_seen_from(
         return Err(format!("internal: {} viewpoints for {} points", v.len(), points.len()));
     }
     let tree = KdTree::build(points);
-    Ok(points
+    let estimated: Vec<([f64; 3], bool)> = points
         .par_iter()
         .enumerate()
         .map_init(Vec::new, |nearest, (i, p)| {
             tree.knn(p, k, nearest);
-            let to_view = viewpoints.of(i) - Vector3::from(*p);
-            let n = plane_normal(points, nearest).unwrap_or_else(|| to_view.normalize());
+            let to_view = (viewpoints.of(i) - Vector3::from(*p)).normalize();
+            let (n, line) = match neighbourhood_shape(points, nearest) {
+                Some(Shape::Plane(n)) => (n, false),
+                Some(Shape::Line(t)) => {
+                    let across = to_view - t * to_view.dot(&t);
+                    (if across.norm() > 1e-9 { across.normalize() } else { to_view }, true)
+                }
+                None => (to_view, false),
+            };
             let n = if n.dot(&to_view) < 0.0 { -n } else { n };
-            if n.iter().all(|c| c.is_finite()) { n.into() } else { [0.0; 3] }
+            (if n.iter().all(|c| c.is_finite()) { n.into() } else { [0.0; 3] }, line)
         })
-        .collect())
+        .collect();
+    let along_a_line = estimated.iter().filter(|e| e.1).count();
+    Ok(Normals { normals: estimated.into_iter().map(|e| e.0).collect(), along_a_line })
 }
 
-/// The normal of the least-squares plane through the neighbours, if they span a plane.
-fn plane_normal(points: &[[f64; 3]], nearest: &[(f64, u32)]) -> Option<Vector3<f64>> {
+/// A neighbourhood's shape: a patch of surface (its least-squares plane's normal) or points
+/// along a line (the line's direction).
+enum Shape {
+    Plane(Vector3<f64>),
+    Line(Vector3<f64>),
+}
+
+/// The shape of the neighbours, if there are at least 3.
+fn neighbourhood_shape(points: &[[f64; 3]], nearest: &[(f64, u32)]) -> Option<Shape> {
     if nearest.len() < 3 {
         return None;
     }
@@ -80,27 +111,27 @@ fn plane_normal(points: &[[f64; 3]], nearest: &[(f64, u32)]) -> Option<Vector3<f
     let eig = SymmetricEigen::new(cov);
     let mut order = [0, 1, 2];
     order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
-    // Collinear neighbours: the two smallest eigenvalues are both ~0 and the normal is any
-    // direction perpendicular to the line.
-    if eig.eigenvalues[order[1]] <= 1e-12 * eig.eigenvalues[order[2]].max(f64::MIN_POSITIVE) {
-        return None;
+    let (middle, largest) = (eig.eigenvalues[order[1]].max(0.0), eig.eigenvalues[order[2]]);
+    if middle <= LINE_WIDTH_RATIO.powi(2) * largest {
+        return Some(Shape::Line(eig.eigenvectors.column(order[2]).normalize()));
     }
-    Some(eig.eigenvectors.column(order[0]).normalize())
+    Some(Shape::Plane(eig.eigenvectors.column(order[0]).normalize()))
 }
 
-/// Adds (or replaces) the `nx ny nz` float fields of `cloud` with [`estimate_normals`].
-pub fn add_normals(cloud: &mut PointCloud, k: usize, viewpoint: [f64; 3]) -> Result<(), String> {
+/// Adds (or replaces) the `nx ny nz` float fields of `cloud` with [`estimate_normals`]; returns
+/// how many came from a neighbourhood along a line ([`Normals::along_a_line`]).
+pub fn add_normals(cloud: &mut PointCloud, k: usize, viewpoint: [f64; 3]) -> Result<usize, String> {
     add_normals_seen_from(cloud, k, Viewpoints::Fixed(viewpoint))
 }
 
 /// [`add_normals`] with each point turned towards its own viewpoint.
-pub fn add_normals_seen_from(cloud: &mut PointCloud, k: usize, viewpoints: Viewpoints) -> Result<(), String> {
-    let normals = estimate_normals_seen_from(&cloud.positions, k, viewpoints)?;
+pub fn add_normals_seen_from(cloud: &mut PointCloud, k: usize, viewpoints: Viewpoints) -> Result<usize, String> {
+    let Normals { normals, along_a_line } = estimate_normals_seen_from(&cloud.positions, k, viewpoints)?;
     cloud.scalars.retain(|s| !NORMAL_FIELDS.contains(&s.name.as_str()));
     for (axis, name) in NORMAL_FIELDS.iter().enumerate() {
         cloud.scalars.push(ScalarField::new(*name, normals.iter().map(|n| n[axis] as f32).collect()));
     }
-    Ok(())
+    Ok(along_a_line)
 }
 
 #[cfg(test)]
@@ -179,6 +210,8 @@ mod tests {
             pts.iter().map(|p| if p[0] < 0.0 { [-100.0, 0.0, 600.0] } else { [100.0, 50.0, -600.0] }).collect();
         let up = Vector3::new(0.0, -0.2, 1.0).normalize();
         let normals = estimate_normals_seen_from(&pts, 16, Viewpoints::PerPoint(&views)).unwrap();
+        assert_eq!(normals.along_a_line, 0);
+        let normals = normals.normals;
         for ((p, n), v) in pts.iter().zip(&normals).zip(&views) {
             let to_view = Vector3::from(*v) - Vector3::from(*p);
             assert!(Vector3::from(*n).dot(&to_view) > 0.0, "{p:?} faces away from {v:?}");
@@ -204,5 +237,36 @@ mod tests {
         assert_eq!(names, ["intensity", "nx", "ny", "nz"]);
         assert_eq!(cloud.scalar("nz").unwrap(), &[-1.0; 4]);
         assert!(estimate_normals(&cloud.positions, 2, [0.0; 3]).is_err());
+    }
+
+    /// One stripe of one frame: points along the curve where a light plane meets the plane
+    /// z = 0.3·x + 500, with 0.05 mm noise. Its neighbourhoods are lines, so each normal is
+    /// perpendicular to the stripe and as near the direction to the sensor as that allows, and
+    /// every point is counted; two stripes 4 mm apart give planes.
+    #[test]
+    fn a_lone_stripe_gets_normals_across_it_and_is_counted() {
+        let mut rng = SplitMix64::new(13);
+        let stripe = |offset: f64, rng: &mut SplitMix64| -> Vec<[f64; 3]> {
+            (0..400)
+                .map(|i| {
+                    let x = -100.0 + 0.5 * i as f64;
+                    let y = 0.1 * x + offset;
+                    [x, y + 0.05 * rng.normal(), 0.3 * x + 500.0 + 0.05 * rng.normal()]
+                })
+                .collect()
+        };
+        let one = stripe(0.0, &mut rng);
+        let found = estimate_normals_seen_from(&one, 16, Viewpoints::Fixed([0.0; 3])).unwrap();
+        assert_eq!(found.along_a_line, one.len());
+        let tangent = Vector3::new(1.0, 0.1, 0.3).normalize();
+        for (p, n) in one.iter().zip(&found.normals) {
+            let n = Vector3::from(*n);
+            let to_view = -Vector3::from(*p).normalize();
+            let nearest = (to_view - tangent * to_view.dot(&tangent)).normalize();
+            assert!(n.dot(&tangent).abs() < 0.05 && n.angle(&nearest).to_degrees() < 3.0, "{n:?} at {p:?}");
+        }
+        let two: Vec<[f64; 3]> = one.iter().copied().chain(stripe(4.0, &mut rng)).collect();
+        let found = estimate_normals_seen_from(&two, 16, Viewpoints::Fixed([0.0; 3])).unwrap();
+        assert!(found.along_a_line < two.len() / 20, "{} of {}", found.along_a_line, two.len());
     }
 }

@@ -217,7 +217,6 @@ fn main() -> std::process::ExitCode {
                 latest_us = latest_us.max(latest);
             }
         }
-        let merger_viewpoint = merger.shared_viewpoint();
         let (mut cloud, stats, viewpoints) = merger.finish_with_viewpoints()?;
         if cloud.is_empty() {
             omni_cli::warn("omni-merge", "no points left after cropping and filtering; writing an empty cloud");
@@ -233,7 +232,7 @@ fn main() -> std::process::ExitCode {
             );
         }
         let message = BagMessage { stamp_ns: latest_us.unwrap_or(0) * 1000, points: 0..cloud.len() };
-        args.cloud.write(&cloud, args.output.as_deref(), &[message], "map", merger_viewpoint)?;
+        args.cloud.write(&cloud, args.output.as_deref(), &[message], "map")?;
         if args.stats {
             eprintln!("{}", serde_json::to_string(&stats).unwrap_or_default());
         }

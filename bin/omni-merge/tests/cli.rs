@@ -402,8 +402,7 @@ fn normals_under_poses_face_the_sensor_of_their_own_frame() {
 
 /// A shelf at the sensor's own height, between the camera (the origin) and the mirror focus F
 /// (0, 0, 80 mm) that every ray starts from: its normals face F, up, not the camera below it,
-/// with the sensor still and moved by a pose alike; PCD's VIEWPOINT is F where the cloud has
-/// one viewpoint.
+/// with the sensor still and moved by a pose alike.
 #[test]
 fn normals_face_the_streams_viewpoint_not_the_sensor_origin() {
     let dir = tempfile::tempdir().unwrap();
@@ -428,24 +427,6 @@ fn normals_face_the_streams_viewpoint_not_the_sensor_origin() {
             nz.iter().cloned().fold(1.0, f32::min)
         );
     }
-    // PCD keeps the one viewpoint of a sensor that did not move, in the file's unit; a sensor
-    // that moved has none (the origin).
-    let viewpoint_line = |name: &str| {
-        let text = String::from_utf8_lossy(&std::fs::read(d.join(name)).unwrap()).into_owned();
-        text.lines().find(|l| l.starts_with("VIEWPOINT")).unwrap().to_string()
-    };
-    ok(&run(d, &["shelf.jsonl", "-o", "still.pcd"]));
-    assert_eq!(viewpoint_line("still.pcd"), "VIEWPOINT 0 0 80 1 0 0 0");
-    ok(&run(d, &["shelf.jsonl", "--poses", "lift.jsonl", "-o", "lifted.pcd", "--units", "m"]));
-    assert_eq!(viewpoint_line("lifted.pcd"), "VIEWPOINT 0 0 0.58 1 0 0 0");
-    write_stream_seen_from(
-        &d.join("two.jsonl"),
-        &[(vec![[500.0, 0.0, 0.0]], Some(0)), (vec![[500.0, 9.0, 0.0]], Some(30_000))],
-        Some([0.0, 0.0, 80.0]),
-    );
-    write_poses(&d.join("drive.jsonl"), 40_000, &|t| Isometry3::translation(t as f64 / 100.0, 0.0, 0.0));
-    ok(&run(d, &["two.jsonl", "--poses", "drive.jsonl", "-o", "moved.pcd"]));
-    assert_eq!(viewpoint_line("moved.pcd"), "VIEWPOINT 0 0 0 1 0 0 0");
     // A PLY carries no viewpoint: its normals face the origin, and the tool says so.
     let out = run(d, &["still.ply", "-o", "again.ply", "--normals"]);
     let err = String::from_utf8_lossy(&out.stderr);

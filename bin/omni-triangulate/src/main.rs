@@ -214,7 +214,6 @@ fn main() -> std::process::ExitCode {
                 &messages,
                 images.as_mut(),
                 "omniscan",
-                Some(camera_file.model.viewpoint_mm()),
             )?);
         }
         omni_formats::io::commit_all(staged)?;

@@ -71,10 +71,8 @@ impl CloudOutputArgs {
         Ok(())
     }
 
-    /// The cloud file's options, with the one point every point was seen from (mm, the cloud's
-    /// frame) if there is one.
-    pub fn cloud_options(&self, viewpoint_mm: Option<[f64; 3]>) -> CloudOptions {
-        CloudOptions { ascii: self.ascii, double: self.double, units: self.units, viewpoint_mm }
+    pub fn cloud_options(&self) -> CloudOptions {
+        CloudOptions { ascii: self.ascii, double: self.double, units: self.units }
     }
 
     pub fn bag_options(&self, default_frame_id: &str) -> BagOptions {
@@ -113,16 +111,15 @@ impl CloudOutputArgs {
     }
 
     /// Writes the cloud file (if `path`) and the bag (if --rosbag) with `messages`, both put
-    /// in place only once both are written; `viewpoint_mm` as in [`Self::cloud_options`].
+    /// in place only once both are written.
     pub fn write(
         &self,
         cloud: &PointCloud,
         path: Option<&Path>,
         messages: &[BagMessage],
         default_frame_id: &str,
-        viewpoint_mm: Option<[f64; 3]>,
     ) -> Result<(), String> {
-        let staged = self.stage(cloud, path, messages, None, default_frame_id, viewpoint_mm)?;
+        let staged = self.stage(cloud, path, messages, None, default_frame_id)?;
         omni_formats::io::commit_all(staged).map_err(|e| e.to_string())
     }
 
@@ -136,13 +133,11 @@ impl CloudOutputArgs {
         messages: &[BagMessage],
         images: Option<&mut BagImages>,
         default_frame_id: &str,
-        viewpoint_mm: Option<[f64; 3]>,
     ) -> Result<Vec<Staged>, String> {
         let mut staged = Vec::new();
         if let Some(path) = path {
             let format = self.format_for(path)?;
-            let opts = self.cloud_options(viewpoint_mm);
-            staged.push(write_cloud_staged(path, cloud, format, &opts).map_err(|e| e.to_string())?);
+            staged.push(write_cloud_staged(path, cloud, format, &self.cloud_options()).map_err(|e| e.to_string())?);
         }
         if let Some(dir) = &self.rosbag {
             let bag = write_rosbag_staged(dir, cloud, messages, images, &self.bag_options(default_frame_id));

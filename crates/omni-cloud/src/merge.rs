@@ -72,16 +72,6 @@ pub struct Merger {
     viewpoint: [f64; 3],
     /// The current stream's viewpoint (mm, sensor frame).
     stream_viewpoint: [f64; 3],
-    /// The viewpoint every kept point so far was seen from, while they share one.
-    shared_viewpoint: SharedViewpoint,
-}
-
-/// Whether the points kept so far share one viewpoint.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum SharedViewpoint {
-    NoPoints,
-    One([f64; 3]),
-    Several,
 }
 
 impl Merger {
@@ -107,7 +97,6 @@ impl Merger {
             buf: Vec::new(),
             viewpoint: [0.0; 3],
             stream_viewpoint: [0.0; 3],
-            shared_viewpoint: SharedViewpoint::NoPoints,
         })
     }
 
@@ -178,11 +167,6 @@ impl Merger {
             self.stats.cropped += 1;
             return Ok(());
         }
-        self.shared_viewpoint = match self.shared_viewpoint {
-            SharedViewpoint::NoPoints => SharedViewpoint::One(self.viewpoint),
-            SharedViewpoint::One(v) if v != self.viewpoint => SharedViewpoint::Several,
-            other => other,
-        };
         for (o, &i) in self.buf.iter_mut().zip(&self.map) {
             *o = scalars[i];
         }
@@ -208,15 +192,6 @@ impl Merger {
     pub fn begin_stream_input(&mut self) -> Result<(), String> {
         let names: Vec<String> = POINT_SCALARS.iter().map(|s| s.to_string()).collect();
         self.begin_input(&names)
-    }
-
-    /// The one point every point kept so far was seen from (mm, world frame), if they share
-    /// one: a sensor that did not move. PCD's `VIEWPOINT` holds it.
-    pub fn shared_viewpoint(&self) -> Option<[f64; 3]> {
-        match self.shared_viewpoint {
-            SharedViewpoint::One(v) => Some(v),
-            _ => None,
-        }
     }
 
     /// The point the current stream's frames were seen from (mm, sensor frame: its header's

@@ -102,16 +102,13 @@ impl Units {
 
 /// How coordinates are written. Scalar fields keep their own types and values whatever the
 /// options (a `scalar_range` stays in millimetres).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct CloudOptions {
     /// ASCII instead of binary (PLY, PCD; LAS is always binary).
     pub ascii: bool,
     /// Coordinates as float64 instead of float32 (PLY, PCD; LAS stores scaled integers).
     pub double: bool,
     pub units: Units,
-    /// The one point every point was seen from (mm, the cloud's frame), if there is one: PCD's
-    /// `VIEWPOINT` (the origin where there is none).
-    pub viewpoint_mm: Option<[f64; 3]>,
 }
 
 impl CloudOptions {

@@ -40,17 +40,14 @@ pub fn write_pcd_to(w: &mut dyn Write, cloud: &PointCloud, opts: &CloudOptions) 
         .collect();
     let join = |f: &dyn Fn(&(&str, ScalarType)) -> String| fields.iter().map(f).collect::<Vec<_>>().join(" ");
     let n = cloud.len();
-    // PCL's acquisition viewpoint: a translation (in the file's unit) and a unit quaternion.
-    let viewpoint = opts.viewpoint_mm.unwrap_or([0.0; 3]).map(|c| c * opts.units.per_mm());
     let header = format!(
-        "# .PCD v0.7 - Point Cloud Data file format\n# written by omniscan {}\n# units {}\nVERSION 0.7\nFIELDS {}\nSIZE {}\nTYPE {}\nCOUNT {}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT {} 1 0 0 0\nPOINTS {n}\nDATA {}\n",
+        "# .PCD v0.7 - Point Cloud Data file format\n# written by omniscan {}\n# units {}\nVERSION 0.7\nFIELDS {}\nSIZE {}\nTYPE {}\nCOUNT {}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {}\n",
         env!("CARGO_PKG_VERSION"),
         opts.units.name(),
         join(&|(name, _)| name.to_string()),
         join(&|(_, ty)| pcd_type(*ty).0.to_string()),
         join(&|(_, ty)| pcd_type(*ty).1.to_string()),
         join(&|_| "1".to_string()),
-        viewpoint.map(|c| c.to_string()).join(" "),
         if opts.ascii { "ascii" } else { "binary" },
     );
     w.write_all(header.as_bytes())?;
@@ -78,26 +75,11 @@ mod tests {
     #[test]
     fn ascii_header_and_lines_name_fields_types_and_units() {
         let mut buf = Vec::new();
-        write_pcd_to(
-            &mut buf,
-            &cloud(),
-            &CloudOptions { ascii: true, double: false, units: Units::Metres, viewpoint_mm: None },
-        )
-        .unwrap();
+        write_pcd_to(&mut buf, &cloud(), &CloudOptions { ascii: true, double: false, units: Units::Metres }).unwrap();
         let text = String::from_utf8(buf).unwrap();
         let expected_tail = "VERSION 0.7\nFIELDS x y z intensity red normal_x\nSIZE 4 4 4 4 1 4\nTYPE F F F F U F\nCOUNT 1 1 1 1 1 1\nWIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n0.0015 -0.002 3.00025 10.5 255 0\n0 0.004 -0.001 20 3 1\n";
         assert!(text.ends_with(expected_tail), "{text}");
         assert!(text.contains("# units m\n"), "{text}");
-        // The one point every point was seen from, in the file's unit.
-        let seen_from = CloudOptions {
-            ascii: true,
-            units: Units::Metres,
-            viewpoint_mm: Some([1.0, -2.5, 80.0]),
-            ..Default::default()
-        };
-        let mut buf = Vec::new();
-        write_pcd_to(&mut buf, &cloud(), &seen_from).unwrap();
-        assert!(String::from_utf8(buf).unwrap().contains("\nVIEWPOINT 0.001 -0.0025 0.08 1 0 0 0\n"));
     }
 
     #[test]

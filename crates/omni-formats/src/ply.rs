@@ -702,7 +702,7 @@ mod tests {
         cloud.scalars.push(ScalarField { name: "label".into(), values: vec![-7.0; 100], ty: ScalarType::I16 });
         for ascii in [false, true] {
             for units in [Units::Millimetres, Units::Metres] {
-                let opts = CloudOptions { ascii, double: true, units, viewpoint_mm: None };
+                let opts = CloudOptions { ascii, double: true, units };
                 let mut buf = Vec::new();
                 write_ply_with(&mut buf, &cloud, &opts).unwrap();
                 let text = String::from_utf8_lossy(&buf[..400]).into_owned();

@@ -411,7 +411,10 @@ fn normals_face_the_streams_viewpoint_not_the_sensor_origin() {
     let shelf: Vec<[f64; 3]> = (0..600)
         .map(|_| [300.0 + rng.uniform() * 200.0, rng.uniform() * 200.0 - 100.0, 40.0 + rng.normal() * 0.05])
         .collect();
-    write_stream_seen_from(&d.join("shelf.jsonl"), &[(shelf, Some(0))], Some([0.0, 0.0, 80.0]));
+    // Spread over 12 frames (one frame's points would be one stripe, which fixes no plane).
+    let frames: Vec<(Vec<[f64; 3]>, Option<u64>)> =
+        (0..12).map(|k| (shelf.iter().skip(k).step_by(12).copied().collect(), Some(k as u64 * 1000))).collect();
+    write_stream_seen_from(&d.join("shelf.jsonl"), &frames, Some([0.0, 0.0, 80.0]));
     // The sensor lifted 500 mm: the shelf at z = 540 is seen from F at z = 580.
     write_poses(&d.join("lift.jsonl"), 20_000, &|_| Isometry3::translation(0.0, 0.0, 500.0));
     for (name, poses) in [("still.ply", &[][..]), ("lifted.ply", &["--poses", "lift.jsonl"][..])] {

@@ -103,7 +103,7 @@ impl CloudOutputArgs {
         let along_a_line = add_normals_seen_from(cloud, self.normal_neighbours, viewpoints)?;
         Ok((along_a_line > 0).then(|| {
             format!(
-                "{along_a_line} of {} points' {} nearest neighbours lie along a line (one stripe): their normals are across it, towards the sensor, but the surface's tilt about the stripe is not measured; merge more slices, or raise --normal-neighbours",
+                "{along_a_line} of {} points' {} nearest neighbours lie along a line (one stripe): their normals are across it, towards the sensor, but the surface's tilt about the stripe is not measured; merge more frames (or, where slices lie farther apart than the neighbours reach, raise --normal-neighbours)",
                 cloud.len(),
                 self.normal_neighbours
             )

@@ -283,11 +283,65 @@ pub fn calibrate_planes(
     opts: &PlaneCalibOptions,
 ) -> Result<PlaneCalibration, String> {
     let first = calibrate_once(camera, boards, frames, initial, opts)?;
-    let Some(gate) = opts.gate_mm else { return Ok(first) };
-    // The first gate must cover the initial model's error, so it may still let in bright lines
-    // near the stripe; a second pass gates tightly around the first pass's model.
-    let tight = (gate / 4.0).max(2.0).min(gate);
-    calibrate_once(camera, boards, frames, &first.transmitter, &PlaneCalibOptions { gate_mm: Some(tight), ..*opts })
+    let (mut cal, start, last) = match opts.gate_mm {
+        None => (first, initial.clone(), *opts),
+        Some(gate) => {
+            // The first gate must cover the initial model's error, so it may still let in
+            // bright lines near the stripe; a second pass gates tightly around the first pass's.
+            let tight = PlaneCalibOptions { gate_mm: Some((gate / 4.0).max(2.0).min(gate)), ..*opts };
+            let start = first.transmitter;
+            (calibrate_once(camera, boards, frames, &start, &tight)?, start, tight)
+        }
+    };
+    add_board_pose_spread(camera, boards, frames, &mut cal, &start, &last);
+    Ok(cal)
+}
+
+/// Adds to each estimate's σ the spread the boards' pose errors give it: the fit's own σ takes
+/// the stripe points' errors as independent, while one board's pose error moves every point on
+/// that board alike (measured: 1.6–11 × the fit's σ from 0.1 px corners). Each board with a
+/// pose covariance is moved by one standard deviation along each principal axis of it and the
+/// last pass (`start`, `opts`) fitted again; the squared changes add up to the variance.
+fn add_board_pose_spread(
+    camera: &dyn CameraModel,
+    boards: &[PlacedBoard],
+    frames: &[FrameStripes],
+    cal: &mut PlaneCalibration,
+    start: &TransmitterParams,
+    opts: &PlaneCalibOptions,
+) {
+    let base = &cal.report.model.parameters;
+    let mut variance = vec![0.0; base.len()];
+    let mut moved_any = false;
+    for (b, board) in boards.iter().enumerate() {
+        let Some(covariance) = board.pose_covariance else { continue };
+        let axes = nalgebra::SymmetricEigen::new(covariance);
+        let p0 = crate::pose::pose_to_params(&board.pose);
+        for k in 0..6 {
+            let step = axes.eigenvectors.column(k) * axes.eigenvalues[k].max(0.0).sqrt();
+            let p: Vec<f64> = (0..6).map(|i| p0[i] + step[i]).collect();
+            let mut moved = boards.to_vec();
+            moved[b].pose = crate::pose::params_to_pose(&p);
+            // A rig the moved pose no longer fits leaves the fit's σ alone.
+            let Ok(refit) = calibrate_once(camera, &moved, frames, start, opts) else { return };
+            let changes = &refit.report.model.parameters;
+            if changes.len() != base.len() || changes.iter().zip(base).any(|(c, e)| c.name != e.name) {
+                return;
+            }
+            for (v, (c, e)) in variance.iter_mut().zip(changes.iter().zip(base)) {
+                *v += (c.value - e.value).powi(2);
+            }
+            moved_any = true;
+        }
+    }
+    if !moved_any {
+        return;
+    }
+    for (e, v) in cal.report.model.parameters.iter_mut().zip(variance) {
+        e.std_fit = e.std;
+        e.std_board_poses = Some(v.sqrt());
+        e.std = e.std.map(|s| (s * s + v).sqrt());
+    }
 }
 
 /// One pass of [`calibrate_planes`]: laser assignment and gating with `initial`, frame planes,

@@ -4,7 +4,9 @@
 //! A board point (x, y) in mm (board frame, z = 0) maps to the world as R·(x, y, 0) + t.
 //! Poses are parametrised for optimisation as (rotation vector, translation) — 6 numbers.
 
-use nalgebra::{DMatrix, Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{
+    DMatrix, Isometry3, Matrix3, Matrix6, Point3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3,
+};
 use omni_geom::lm;
 use omni_model::CameraModel;
 
@@ -132,10 +134,25 @@ pub fn refine_pose(
     initial: &Isometry3<f64>,
     iterations: usize,
 ) -> (Isometry3<f64>, f64) {
+    let (pose, rms, _) = refine_pose_with_covariance(project, board_mm, pixels, initial, iterations);
+    (pose, rms)
+}
+
+/// [`refine_pose`] with the covariance of the pose's parameters ([`pose_to_params`]: rotation
+/// vector in rad, translation in mm), the corners' errors taken as independent; `None` if
+/// singular.
+pub fn refine_pose_with_covariance(
+    project: &dyn Fn(&Point3<f64>) -> Option<Vector2<f64>>,
+    board_mm: &[[f64; 2]],
+    pixels: &[[f64; 2]],
+    initial: &Isometry3<f64>,
+    iterations: usize,
+) -> (Isometry3<f64>, f64, Option<Matrix6<f64>>) {
     let problem = PoseProblem { project, board: board_mm, pixels };
     let opts = lm::Options { max_iterations: iterations, huber: Some(3.0), ..Default::default() };
     let report = lm::minimize(&problem, &pose_to_params(initial), &opts);
-    (params_to_pose(&report.params), report.rms)
+    let covariance = report.covariance.as_ref().map(|c| Matrix6::from_fn(|i, j| c[(i, j)]));
+    (params_to_pose(&report.params), report.rms, covariance)
 }
 
 /// The pose (board → world) of a planar board from its detected corners: `board_points_mm` are
@@ -147,6 +164,16 @@ pub fn estimate_board_pose(
     board_points_mm: &[[f64; 2]],
     pixels: &[[f64; 2]],
 ) -> Option<Isometry3<f64>> {
+    estimate_board_pose_with_covariance(camera, board_points_mm, pixels).map(|(pose, _)| pose)
+}
+
+/// [`estimate_board_pose`] with the covariance of the pose's parameters
+/// ([`refine_pose_with_covariance`]).
+pub fn estimate_board_pose_with_covariance(
+    camera: &dyn CameraModel,
+    board_points_mm: &[[f64; 2]],
+    pixels: &[[f64; 2]],
+) -> Option<(Isometry3<f64>, Option<Matrix6<f64>>)> {
     let mut dirs = Vec::new();
     let mut board = Vec::new();
     let mut px_used = Vec::new();
@@ -165,8 +192,8 @@ pub fn estimate_board_pose(
     let origin = Point3::from(origin / dirs.len() as f64);
     let initial = pose_from_rays(&origin, &dirs, &board)?;
     let project = |p: &Point3<f64>| camera.point_to_pixel(p);
-    let (pose, _) = refine_pose(&project, &board, &px_used, &initial, 50);
-    Some(pose)
+    let (pose, _, covariance) = refine_pose_with_covariance(&project, &board, &px_used, &initial, 50);
+    Some((pose, covariance))
 }
 
 #[cfg(test)]

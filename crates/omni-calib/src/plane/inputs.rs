@@ -2,7 +2,7 @@
 //! [`FrameStripes`], and board poses (given, or from corner pixels) into [`PlacedBoard`]s.
 
 use super::{FrameStripes, PlacedBoard};
-use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector2};
+use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Rotation3, Translation3, UnitQuaternion, Vector2};
 use omni_formats::rig::{BoardCornersFile, BoardPose, BoardPosesFile, RigFile};
 use omni_formats::stream::{Record, StreamReader};
 use omni_formats::{Error, Result};
@@ -51,6 +51,9 @@ pub struct BoardPoseFit {
     pub rms_rad: f64,
     /// Corners whose pixels give a camera ray.
     pub corners_used: usize,
+    /// Covariance of the pose's parameters (rotation vector rad, translation mm), the corners'
+    /// errors independent; `None` if singular.
+    pub covariance: Option<Matrix6<f64>>,
 }
 
 /// The pose of a planar board from its corners with any calibrated camera: the receiver
@@ -63,7 +66,7 @@ pub fn estimate_board_pose(
     board_mm: &[[f64; 2]],
     pixels: &[[f64; 2]],
 ) -> Option<BoardPoseFit> {
-    let pose = crate::pose::estimate_board_pose(camera, board_mm, pixels)?;
+    let (pose, covariance) = crate::pose::estimate_board_pose_with_covariance(camera, board_mm, pixels)?;
     let (mut ss, mut n) = (0.0, 0usize);
     for (xy, px) in board_mm.iter().zip(pixels) {
         if let Some(ray) = camera.pixel_to_ray(&Vector2::new(px[0], px[1])) {
@@ -72,7 +75,7 @@ pub fn estimate_board_pose(
             n += 1;
         }
     }
-    Some(BoardPoseFit { pose, rms_rad: (ss / n.max(1) as f64).sqrt(), corners_used: n })
+    Some(BoardPoseFit { pose, rms_rad: (ss / n.max(1) as f64).sqrt(), corners_used: n, covariance })
 }
 
 /// A board's pose as used, for the report.
@@ -188,7 +191,7 @@ pub fn boards_from_corners(
             let mut r = report(b, &fit.pose, "corners");
             r.corners_used = Some(fit.corners_used);
             r.corner_rms_deg = Some(fit.rms_rad.to_degrees());
-            Ok((PlacedBoard::new(b, fit.pose), r))
+            Ok((PlacedBoard::new(b, fit.pose).with_pose_covariance(fit.covariance), r))
         })
         .collect()
 }
@@ -247,7 +250,7 @@ pub fn boards_from_pose_image(
         let mut r = report(b, &fit.pose, "pose image");
         r.corners_used = Some(fit.corners_used);
         r.corner_rms_deg = Some(fit.rms_rad.to_degrees());
-        out.push((PlacedBoard::new(b, fit.pose), r));
+        out.push((PlacedBoard::new(b, fit.pose).with_pose_covariance(fit.covariance), r));
     }
     Ok(out)
 }

@@ -68,14 +68,22 @@ impl Default for ModelFitOptions {
     }
 }
 
-/// One fitted scalar with its standard deviation (from the LM covariance).
+/// One fitted scalar with its standard deviation.
 #[derive(Debug, Clone, Serialize)]
 pub struct Estimate {
     pub name: String,
     pub value: f64,
-    /// `None` when the covariance was singular.
+    /// The whole σ: the fit's own, and the boards' pose errors' where the poses came from
+    /// corners. `None` when the fit's covariance was singular.
     pub std: Option<f64>,
     pub unit: &'static str,
+    /// The fit's own σ (the LM covariance: stripe points' errors independent), where the
+    /// boards' share was added.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub std_fit: Option<f64>,
+    /// The boards' pose errors' share of the σ.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub std_board_poses: Option<f64>,
 }
 
 /// Result of the physical model fit.
@@ -477,7 +485,14 @@ fn estimates(layout: &Layout, report: &lm::Report) -> Vec<Estimate> {
         .enumerate()
         .map(|(i, (name, unit, radians))| {
             let scale = if radians { 1f64.to_degrees() } else { 1.0 };
-            Estimate { name, value: p[i] * scale, std: std(i).map(|s| s * scale), unit }
+            Estimate {
+                name,
+                value: p[i] * scale,
+                std: std(i).map(|s| s * scale),
+                unit,
+                std_fit: None,
+                std_board_poses: None,
+            }
         })
         .collect();
     if let (Some(&last), true) = (layout.facets.last(), layout.facets.len() > 1) {
@@ -496,6 +511,8 @@ fn estimates(layout: &Layout, report: &lm::Report) -> Vec<Estimate> {
                 value: layout.zero_mean(p, start, layout.facets.len() - 1) * scale,
                 std: var.map(|v| v.max(0.0).sqrt() * scale),
                 unit,
+                std_fit: None,
+                std_board_poses: None,
             });
         }
     }

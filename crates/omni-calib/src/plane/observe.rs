@@ -1,6 +1,6 @@
 //! From stripe pixels to 3D points on the rig boards, and one robust plane per frame.
 
-use nalgebra::{Isometry3, Point3, Vector2, Vector3};
+use nalgebra::{Isometry3, Matrix6, Point3, Vector2, Vector3};
 use omni_formats::rig::RigBoard;
 use omni_geom::fit::fit_plane;
 use omni_geom::rng::SplitMix64;
@@ -17,11 +17,25 @@ pub struct PlacedBoard {
     pub pose: Isometry3<f64>,
     /// Physical outline in board coordinates (mm): (x_min, x_max, y_min, y_max).
     pub extent_mm: (f64, f64, f64, f64),
+    /// Covariance of the pose's parameters ([`crate::pose::pose_to_params`]: rotation vector in
+    /// rad, translation in mm) where it was estimated from corners; `None` for a given pose.
+    pub pose_covariance: Option<Matrix6<f64>>,
 }
 
 impl PlacedBoard {
     pub fn new(board: &RigBoard, pose: Isometry3<f64>) -> Self {
-        PlacedBoard { name: board.name.clone(), placement: board.placement, pose, extent_mm: board.extent_mm() }
+        PlacedBoard {
+            name: board.name.clone(),
+            placement: board.placement,
+            pose,
+            extent_mm: board.extent_mm(),
+            pose_covariance: None,
+        }
+    }
+
+    /// The board with the covariance of its estimated pose.
+    pub fn with_pose_covariance(self, covariance: Option<Matrix6<f64>>) -> Self {
+        PlacedBoard { pose_covariance: covariance, ..self }
     }
 
     /// The board's plane in the world frame (normal = board z axis).

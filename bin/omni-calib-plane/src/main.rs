@@ -297,6 +297,15 @@ fn fit(a: &FitArgs) -> CliResult {
         "initial": a.initial.as_deref().map(name),
         "gate_mm": a.gate_mm,
     });
+    let failed = cal.report.model.board_pose_steps_failed;
+    if failed > 0 {
+        omni_cli::warn(
+            "omni-calib-plane",
+            &format!(
+                "{failed} of the boards' pose steps gave no fit: the parameters' σ leave out that part of the boards' pose errors"
+            ),
+        );
+    }
     if let Some(loose) = plane::loosely_determined(&cal.report.model.parameters, 1.0) {
         omni_cli::warn(
             "omni-calib-plane",

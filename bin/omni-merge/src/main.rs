@@ -222,7 +222,10 @@ fn main() -> std::process::ExitCode {
             omni_cli::warn("omni-merge", "no points left after cropping and filtering; writing an empty cloud");
         }
         let seen_from = viewpoints.as_deref().map_or(Viewpoints::Fixed([0.0; 3]), Viewpoints::PerPoint);
-        if let Some(warning) = args.cloud.finish_cloud_seen_from(&mut cloud, seen_from)? {
+        // One stream's frame numbers name its stripes; several streams may repeat them, and a
+        // voxel's are means.
+        let frames_are_stripes = args.inputs.len() == 1 && args.voxel.is_none();
+        if let Some(warning) = args.cloud.finish_cloud_seen_from(&mut cloud, seen_from, frames_are_stripes)? {
             omni_cli::warn("omni-merge", &warning);
         }
         if args.cloud.rosbag.is_some() && latest_us.is_none() {

@@ -187,7 +187,7 @@ fn main() -> std::process::ExitCode {
             let messages =
                 if bag { bag_messages(&spans, args.bag_per, period_us).map_err(in_input)? } else { Vec::new() };
             let seen_from = Viewpoints::Fixed(camera_file.model.viewpoint_mm());
-            if let Some(warning) = args.cloud_out.finish_cloud_seen_from(&mut cloud, seen_from)? {
+            if let Some(warning) = args.cloud_out.finish_cloud_seen_from(&mut cloud, seen_from, true)? {
                 omni_cli::warn("omni-triangulate", &warning);
             }
             let mut load = |i: usize| {

@@ -135,6 +135,10 @@ pub struct ModelReport {
     pub parameters: Vec<Estimate>,
     pub fixed: Vec<String>,
     pub gauge: Vec<String>,
+    /// Steps of a board's pose (for the σ's share of the boards' poses) whose fit failed or
+    /// changed the parameters' layout; their share is missing from the σ.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub board_pose_steps_failed: usize,
 }
 
 /// What `scanner.json`'s `report` holds.
@@ -299,9 +303,11 @@ pub fn calibrate_planes(
 
 /// Adds to each estimate's σ the spread the boards' pose errors give it: the fit's own σ takes
 /// the stripe points' errors as independent, while one board's pose error moves every point on
-/// that board alike (measured: 1.6–11 × the fit's σ from 0.1 px corners). Each board with a
-/// pose covariance is moved by one standard deviation along each principal axis of it and the
-/// last pass (`start`, `opts`) fitted again; the squared changes add up to the variance.
+/// that board alike. Each board with a pose covariance is moved by ± one standard deviation
+/// along each principal axis of it and the last pass (`start`, `opts`) fitted again; half the
+/// change between the two (central differences: a step's second-order part and much of a
+/// change of inliers cancel) squared and summed over the axes is the variance. Steps whose fit
+/// fails or changes the parameters' layout are counted in the report, not used.
 fn add_board_pose_spread(
     camera: &dyn CameraModel,
     boards: &[PlacedBoard],
@@ -311,30 +317,36 @@ fn add_board_pose_spread(
     opts: &PlaneCalibOptions,
 ) {
     let base = &cal.report.model.parameters;
+    let refit = |b: usize, pose: &[f64]| -> Option<Vec<f64>> {
+        let mut moved = boards.to_vec();
+        moved[b].pose = crate::pose::params_to_pose(pose);
+        let fit = calibrate_once(camera, &moved, frames, start, opts).ok()?;
+        let values = &fit.report.model.parameters;
+        let same = values.len() == base.len() && values.iter().zip(base).all(|(v, e)| v.name == e.name);
+        same.then(|| values.iter().map(|v| v.value).collect())
+    };
     let mut variance = vec![0.0; base.len()];
-    let mut moved_any = false;
+    let (mut used, mut failed) = (0usize, 0usize);
     for (b, board) in boards.iter().enumerate() {
         let Some(covariance) = board.pose_covariance else { continue };
         let axes = nalgebra::SymmetricEigen::new(covariance);
         let p0 = crate::pose::pose_to_params(&board.pose);
         for k in 0..6 {
             let step = axes.eigenvectors.column(k) * axes.eigenvalues[k].max(0.0).sqrt();
-            let p: Vec<f64> = (0..6).map(|i| p0[i] + step[i]).collect();
-            let mut moved = boards.to_vec();
-            moved[b].pose = crate::pose::params_to_pose(&p);
-            // A rig the moved pose no longer fits leaves the fit's σ alone.
-            let Ok(refit) = calibrate_once(camera, &moved, frames, start, opts) else { return };
-            let changes = &refit.report.model.parameters;
-            if changes.len() != base.len() || changes.iter().zip(base).any(|(c, e)| c.name != e.name) {
-                return;
+            let moved = |sign: f64| -> Vec<f64> { (0..6).map(|i| p0[i] + sign * step[i]).collect() };
+            match (refit(b, &moved(1.0)), refit(b, &moved(-1.0))) {
+                (Some(up), Some(down)) => {
+                    for (v, (u, d)) in variance.iter_mut().zip(up.iter().zip(&down)) {
+                        *v += (0.5 * (u - d)).powi(2);
+                    }
+                    used += 1;
+                }
+                _ => failed += 1,
             }
-            for (v, (c, e)) in variance.iter_mut().zip(changes.iter().zip(base)) {
-                *v += (c.value - e.value).powi(2);
-            }
-            moved_any = true;
         }
     }
-    if !moved_any {
+    cal.report.model.board_pose_steps_failed = failed;
+    if used == 0 {
         return;
     }
     for (e, v) in cal.report.model.parameters.iter_mut().zip(variance) {
@@ -457,9 +469,14 @@ fn calibrate_once(
             parameters: fit.estimates,
             fixed: fit.fixed,
             gauge: GAUGE_NOTES.iter().map(|s| s.to_string()).collect(),
+            board_pose_steps_failed: 0,
         },
         frames: frames_out,
         rejected,
     };
     Ok(PlaneCalibration { transmitter: fit.params, report })
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }

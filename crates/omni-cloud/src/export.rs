@@ -90,17 +90,19 @@ impl CloudOutputArgs {
     }
 
     /// Adds normals if asked for, each facing the viewpoint its point was seen from (mm, the
-    /// cloud's frame). Returns a warning for the user when some points' neighbourhoods lie
-    /// along a line, whose normals only face across it ([`crate::normals::Normals`]).
+    /// cloud's frame); `frames_are_stripes` as in [`add_normals_seen_from`]. Returns a warning
+    /// for the user when some points' neighbourhoods lie along a line, whose normals only face
+    /// across it ([`crate::normals::Normals`]).
     pub fn finish_cloud_seen_from(
         &self,
         cloud: &mut PointCloud,
         viewpoints: Viewpoints<'_>,
+        frames_are_stripes: bool,
     ) -> Result<Option<String>, String> {
         if !self.normals {
             return Ok(None);
         }
-        let along_a_line = add_normals_seen_from(cloud, self.normal_neighbours, viewpoints)?;
+        let along_a_line = add_normals_seen_from(cloud, self.normal_neighbours, viewpoints, frames_are_stripes)?;
         Ok((along_a_line > 0).then(|| {
             format!(
                 "{along_a_line} of {} points' {} nearest neighbours lie along a line (one stripe): their normals are across it, towards the sensor, but the surface's tilt about the stripe is not measured; merge more frames (or, where slices lie farther apart than the neighbours reach, raise --normal-neighbours)",

@@ -145,20 +145,33 @@ fn neighbourhood_shape(points: &[[f64; 3]], nearest: &[(f64, u32)], one_stripe: 
     Some(Shape::Plane(column(0)))
 }
 
+/// A point's stripe: its frame and laser where both are whole numbers of f32's exact range,
+/// else an id of its own (bit 63 set, its index).
+fn stripe_id(index: usize, frame: f32, laser: f32) -> u64 {
+    let whole = |v: f32| v.is_finite() && v.fract() == 0.0 && (0.0..16_777_216.0).contains(&v);
+    if whole(frame) && whole(laser) { (frame as u64) << 24 | laser as u64 } else { 1 << 63 | index as u64 }
+}
+
 /// Adds (or replaces) the `nx ny nz` float fields of `cloud` with [`estimate_normals`]; returns
 /// how many came from a neighbourhood along a line ([`Normals::along_a_line`]).
 pub fn add_normals(cloud: &mut PointCloud, k: usize, viewpoint: [f64; 3]) -> Result<usize, String> {
-    add_normals_seen_from(cloud, k, Viewpoints::Fixed(viewpoint))
+    add_normals_seen_from(cloud, k, Viewpoints::Fixed(viewpoint), false)
 }
 
-/// [`add_normals`] with each point turned towards its own viewpoint; where the cloud has
-/// `scalar_frame` and `scalar_laser`, neighbours of one frame and laser are one stripe
-/// ([`estimate_normals_of_stripes`]).
-pub fn add_normals_seen_from(cloud: &mut PointCloud, k: usize, viewpoints: Viewpoints) -> Result<usize, String> {
-    let stripes: Option<Vec<u64>> = cloud
-        .scalar("scalar_frame")
-        .zip(cloud.scalar("scalar_laser"))
-        .map(|(f, l)| f.iter().zip(l).map(|(f, l)| (f.to_bits() as u64) << 32 | l.to_bits() as u64).collect());
+/// [`add_normals`] with each point turned towards its own viewpoint. With `frames_are_stripes`
+/// (one stream's points, not averaged in voxels) and the cloud's `scalar_frame` and
+/// `scalar_laser`, neighbours of one frame and laser are one stripe
+/// ([`estimate_normals_of_stripes`]); a point whose numbers are not whole is no stripe's.
+pub fn add_normals_seen_from(
+    cloud: &mut PointCloud,
+    k: usize,
+    viewpoints: Viewpoints,
+    frames_are_stripes: bool,
+) -> Result<usize, String> {
+    let stripes: Option<Vec<u64>> =
+        cloud.scalar("scalar_frame").zip(cloud.scalar("scalar_laser")).filter(|_| frames_are_stripes).map(
+            |(frames, lasers)| frames.iter().zip(lasers).enumerate().map(|(i, (f, l))| stripe_id(i, *f, *l)).collect(),
+        );
     let Normals { normals, along_a_line } =
         estimate_normals_of_stripes(&cloud.positions, k, viewpoints, stripes.as_deref())?;
     cloud.scalars.retain(|s| !NORMAL_FIELDS.contains(&s.name.as_str()));
@@ -359,6 +372,18 @@ mod tests {
         assert_eq!(found.along_a_line, line.len());
         for n in &found.normals {
             assert!(n[0].abs() < 1e-9 && (Vector3::from(*n).norm() - 1.0).abs() < 1e-9, "{n:?}");
+        }
+    }
+
+    /// A stripe is named only by whole frame and laser numbers: a voxel's mean or a NaN names
+    /// none, so such points never make a neighbourhood one stripe.
+    #[test]
+    fn only_whole_frame_numbers_name_a_stripe() {
+        assert_eq!(stripe_id(0, 5.0, 1.0), stripe_id(9, 5.0, 1.0));
+        assert_ne!(stripe_id(0, 5.0, 1.0), stripe_id(0, 5.0, 0.0));
+        assert_ne!(stripe_id(0, 5.0, 1.0), stripe_id(0, 6.0, 1.0));
+        for (frame, laser) in [(5.5, 0.0), (f32::NAN, 0.0), (5.0, f32::INFINITY), (-1.0, 0.0), (3e7, 0.0)] {
+            assert_ne!(stripe_id(1, frame, laser), stripe_id(2, frame, laser), "{frame} {laser}");
         }
     }
 }

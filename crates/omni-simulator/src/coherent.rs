@@ -220,12 +220,17 @@ impl CoherentImager {
         let share = 1.0 / self.patterns as f64;
         for pattern in 0..self.patterns {
             let pattern_seed = mix(surface_seed ^ mix(0x5BEC_0000 + pattern as u64));
-            let convolved: Vec<Shifted> =
-                keys.par_iter().map(|key| self.convolve_tile(&field.tiles[key], share, *key, pattern_seed)).collect();
-            intensity.par_iter_mut().zip(&outputs).for_each(|(acc, key)| {
-                let pixels = self.tile_intensity(*key, &index, &convolved);
-                acc.iter_mut().zip(&pixels).for_each(|(a, p)| *a += p);
-            });
+            let spectra: Vec<Vec<C32>> =
+                keys.par_iter().map(|key| self.tile_spectrum(&field.tiles[key], share, *key, pattern_seed)).collect();
+            // The image field on the four grids shifted by (±¼, ±¼) of a cell, one grid at a
+            // time: together each pixel's 2q × 2q sub-cells' centres.
+            for ramp in &self.shifts_t {
+                let fields: Vec<Vec<C32>> = spectra.par_iter().map(|s| self.shifted_field(s, ramp)).collect();
+                intensity.par_iter_mut().zip(&outputs).for_each(|(acc, key)| {
+                    let pixels = self.tile_intensity(*key, &index, &fields);
+                    acc.iter_mut().zip(&pixels).for_each(|(a, p)| *a += 0.25 * p);
+                });
+            }
         }
         for (&(tx, ty), pixels) in outputs.iter().zip(&intensity) {
             for j in 0..TILE_PX {
@@ -244,9 +249,9 @@ impl CoherentImager {
     }
 
     /// One tile's random field (a share of its energy; each cell's phasor from `pattern_seed`
-    /// and the cell's place in the image), convolved with h: the n × n output covering the tile
-    /// and its margin.
-    fn convolve_tile(&self, cells: &[CellLight], share: f64, key: (u32, u32), pattern_seed: u64) -> Shifted {
+    /// and the cell's place in the image), convolved with h: the spectrum (transposed) of the
+    /// n × n output covering the tile and its margin.
+    fn tile_spectrum(&self, cells: &[CellLight], share: f64, key: (u32, u32), pattern_seed: u64) -> Vec<C32> {
         let (n, q) = (self.n, self.q);
         let side = q * TILE_PX;
         let off = q * MARGIN_PX;
@@ -293,67 +298,66 @@ impl CoherentImager {
         for (field, transfer) in fields.iter().zip(&self.transfers_t) {
             spectrum.iter_mut().zip(field.iter().zip(transfer)).for_each(|(g, (f, t))| *g += f * t);
         }
-        // The image field on the four grids shifted by (±¼, ±¼) of a cell, through a phase
-        // ramp: together the pixel's 2q × 2q sub-cells' centres (`Shifted`).
-        self.shifts_t.each_ref().map(|ramp| {
-            let mut grid: Vec<C64> = spectrum.iter().zip(ramp).map(|(s, r)| s * r).collect();
-            self.ifft.process(&mut grid);
-            transpose(&mut grid, n);
-            self.ifft.process(&mut grid);
-            grid.into_iter().map(|c| C32::new(c.re as f32, c.im as f32)).collect()
-        })
+        spectrum.into_iter().map(|c| C32::new(c.re as f32, c.im as f32)).collect()
     }
 
-    /// Pixel intensities of output tile `key`: the fields of the input tiles around it summed
-    /// (in a fixed order), squared and summed over each pixel's samples on the four shifted
-    /// grids (2q × 2q per pixel: the field is band-limited far below that rate, its square's
-    /// band, twice the pupil's cutoff, comes close to q's, where q × q sums alone over-weighted
-    /// the intensity's finest detail).
-    fn tile_intensity(&self, key: (u32, u32), index: &BTreeMap<(u32, u32), usize>, conv: &[Shifted]) -> Vec<f64> {
+    /// The image field of a tile's spectrum moved by a phase ramp (`shifts_t`): the n × n
+    /// output on a shifted grid.
+    fn shifted_field(&self, spectrum: &[C32], ramp: &[C64]) -> Vec<C32> {
+        let n = self.n;
+        let mut grid: Vec<C64> =
+            spectrum.iter().zip(ramp).map(|(s, r)| C64::new(s.re as f64, s.im as f64) * r).collect();
+        self.ifft.process(&mut grid);
+        transpose(&mut grid, n);
+        self.ifft.process(&mut grid);
+        grid.into_iter().map(|c| C32::new(c.re as f32, c.im as f32)).collect()
+    }
+
+    /// Pixel intensities of output tile `key` on one shifted grid: the fields of the input tiles
+    /// around it summed (in a fixed order), squared and summed over each pixel's q × q samples.
+    /// Summed over the four grids (2q × 2q per pixel) they weigh the intensity's finest detail
+    /// right: the field is band-limited far below the cells' rate, but its square's band, twice
+    /// the pupil's cutoff, comes close to it.
+    fn tile_intensity(&self, key: (u32, u32), index: &BTreeMap<(u32, u32), usize>, fields: &[Vec<C32>]) -> Vec<f64> {
         let (n, q) = (self.n, self.q);
         let side = q * TILE_PX;
-        let mut pixels = vec![0.0; TILE_PX * TILE_PX];
-        for shift in 0..4 {
-            let mut field = vec![C64::new(0.0, 0.0); side * side];
-            for dy in -1i64..=1 {
-                for dx in -1i64..=1 {
-                    let (sx, sy) = (key.0 as i64 + dx, key.1 as i64 + dy);
-                    if sx < 0 || sy < 0 {
+        let mut field = vec![C64::new(0.0, 0.0); side * side];
+        for dy in -1i64..=1 {
+            for dx in -1i64..=1 {
+                let (sx, sy) = (key.0 as i64 + dx, key.1 as i64 + dy);
+                if sx < 0 || sy < 0 {
+                    continue;
+                }
+                let Some(&src) = index.get(&(sx as u32, sy as u32)) else { continue };
+                // Source tile's output sample (0, 0) sits at q·(MARGIN − TILE) samples from its
+                // own origin; this tile's origin is (−dx, −dy) tiles from the source's.
+                let ox = (q * MARGIN_PX) as i64 - dx * side as i64;
+                let oy = (q * MARGIN_PX) as i64 - dy * side as i64;
+                for j in 0..side as i64 {
+                    let y = oy + j;
+                    if y < 0 || y >= n as i64 {
                         continue;
                     }
-                    let Some(&src) = index.get(&(sx as u32, sy as u32)) else { continue };
-                    // Source tile's output sample (0, 0) sits at q·(MARGIN − TILE) samples from
-                    // its own origin; this tile's origin is (−dx, −dy) tiles from the source's.
-                    let ox = (q * MARGIN_PX) as i64 - dx * side as i64;
-                    let oy = (q * MARGIN_PX) as i64 - dy * side as i64;
-                    for j in 0..side as i64 {
-                        let y = oy + j;
-                        if y < 0 || y >= n as i64 {
-                            continue;
-                        }
-                        let row = &conv[src][shift][y as usize * n..(y as usize + 1) * n];
-                        for i in 0..side as i64 {
-                            let x = ox + i;
-                            if x >= 0 && x < n as i64 {
-                                let c = row[x as usize];
-                                field[j as usize * side + i as usize] += C64::new(c.re as f64, c.im as f64);
-                            }
+                    let row = &fields[src][y as usize * n..(y as usize + 1) * n];
+                    for i in 0..side as i64 {
+                        let x = ox + i;
+                        if x >= 0 && x < n as i64 {
+                            let c = row[x as usize];
+                            field[j as usize * side + i as usize] += C64::new(c.re as f64, c.im as f64);
                         }
                     }
                 }
             }
-            for (j, row) in field.chunks_exact(side).enumerate() {
-                for (i, c) in row.iter().enumerate() {
-                    pixels[(j / q) * TILE_PX + i / q] += 0.25 * c.norm_sqr();
-                }
+        }
+        let mut pixels = vec![0.0; TILE_PX * TILE_PX];
+        for (j, row) in field.chunks_exact(side).enumerate() {
+            for (i, c) in row.iter().enumerate() {
+                pixels[(j / q) * TILE_PX + i / q] += c.norm_sqr();
             }
         }
         pixels
     }
 }
-
-/// A tile's image field on the four sample grids shifted by (∓¼, ∓¼) of a cell (x first).
-type Shifted = [Vec<C32>; 4];
 
 /// Every tile whose pixels can receive light from the given input tiles (their 3 × 3 blocks).
 fn output_tiles(inputs: &[(u32, u32)]) -> Vec<(u32, u32)> {

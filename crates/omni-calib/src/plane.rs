@@ -56,6 +56,7 @@ pub use table::{TableRow, light_plane_table, parse_alpha_range};
 
 use nalgebra::Point3;
 use omni_model::{CameraModel, Transmitter, TransmitterParams};
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// Settings of the whole light-plane calibration.
@@ -325,25 +326,31 @@ fn add_board_pose_spread(
         let same = values.len() == base.len() && values.iter().zip(base).all(|(v, e)| v.name == e.name);
         same.then(|| values.iter().map(|v| v.value).collect())
     };
-    let mut variance = vec![0.0; base.len()];
-    let (mut used, mut failed) = (0usize, 0usize);
+    // Every board's ± steps along its covariance's principal axes: (board, pose parameters).
+    let mut steps: Vec<(usize, Vec<f64>)> = vec![];
     for (b, board) in boards.iter().enumerate() {
         let Some(covariance) = board.pose_covariance else { continue };
         let axes = nalgebra::SymmetricEigen::new(covariance);
         let p0 = crate::pose::pose_to_params(&board.pose);
         for k in 0..6 {
             let step = axes.eigenvectors.column(k) * axes.eigenvalues[k].max(0.0).sqrt();
-            let moved = |sign: f64| -> Vec<f64> { (0..6).map(|i| p0[i] + sign * step[i]).collect() };
-            match (refit(b, &moved(1.0)), refit(b, &moved(-1.0))) {
-                (Some(up), Some(down)) => {
-                    for (v, (u, d)) in variance.iter_mut().zip(up.iter().zip(&down)) {
-                        *v += (0.5 * (u - d)).powi(2);
-                    }
-                    used += 1;
-                }
-                _ => failed += 1,
+            for sign in [1.0, -1.0] {
+                steps.push((b, (0..6).map(|i| p0[i] + sign * step[i]).collect()));
             }
         }
+    }
+    let fits: Vec<Option<Vec<f64>>> = steps.par_iter().map(|(b, pose)| refit(*b, pose)).collect();
+    let mut variance = vec![0.0; base.len()];
+    let (mut used, mut failed) = (0usize, 0usize);
+    for pair in fits.chunks_exact(2) {
+        let (Some(up), Some(down)) = (&pair[0], &pair[1]) else {
+            failed += 1;
+            continue;
+        };
+        for (v, (u, d)) in variance.iter_mut().zip(up.iter().zip(down)) {
+            *v += (0.5 * (u - d)).powi(2);
+        }
+        used += 1;
     }
     cal.report.model.board_pose_steps_failed = failed;
     if used == 0 {

@@ -125,23 +125,10 @@ impl lm::Problem for PoseProblem<'_> {
     }
 }
 
-/// Refines a board pose by minimising the pixel reprojection error; returns the pose and the
-/// RMS error (px).
+/// Refines a board pose by minimising the pixel reprojection error; returns the pose, the RMS
+/// error (px) and the covariance of the pose's parameters ([`pose_to_params`]: rotation vector
+/// in rad, translation in mm), the corners' errors taken as independent (`None` if singular).
 pub fn refine_pose(
-    project: &dyn Fn(&Point3<f64>) -> Option<Vector2<f64>>,
-    board_mm: &[[f64; 2]],
-    pixels: &[[f64; 2]],
-    initial: &Isometry3<f64>,
-    iterations: usize,
-) -> (Isometry3<f64>, f64) {
-    let (pose, rms, _) = refine_pose_with_covariance(project, board_mm, pixels, initial, iterations);
-    (pose, rms)
-}
-
-/// [`refine_pose`] with the covariance of the pose's parameters ([`pose_to_params`]: rotation
-/// vector in rad, translation in mm), the corners' errors taken as independent; `None` if
-/// singular.
-pub fn refine_pose_with_covariance(
     project: &dyn Fn(&Point3<f64>) -> Option<Vector2<f64>>,
     board_mm: &[[f64; 2]],
     pixels: &[[f64; 2]],
@@ -167,8 +154,7 @@ pub fn estimate_board_pose(
     estimate_board_pose_with_covariance(camera, board_points_mm, pixels).map(|(pose, _)| pose)
 }
 
-/// [`estimate_board_pose`] with the covariance of the pose's parameters
-/// ([`refine_pose_with_covariance`]).
+/// [`estimate_board_pose`] with the covariance of the pose's parameters ([`refine_pose`]).
 pub fn estimate_board_pose_with_covariance(
     camera: &dyn CameraModel,
     board_points_mm: &[[f64; 2]],
@@ -192,7 +178,7 @@ pub fn estimate_board_pose_with_covariance(
     let origin = Point3::from(origin / dirs.len() as f64);
     let initial = pose_from_rays(&origin, &dirs, &board)?;
     let project = |p: &Point3<f64>| camera.point_to_pixel(p);
-    let (pose, _, covariance) = refine_pose_with_covariance(&project, &board, &px_used, &initial, 50);
+    let (pose, _, covariance) = refine_pose(&project, &board, &px_used, &initial, 50);
     Some((pose, covariance))
 }
 

@@ -572,7 +572,7 @@ fn initial_pose(model: &Model, full: &[f64], obs: &Observation, iterations: usiz
     }
     let pose = pose_from_rays(&Point3::origin(), &dirs, &board)?;
     let project = |p: &Point3<f64>| model.project(full, &p.coords);
-    let (pose, rms) = refine_pose(&project, &obs.board_mm, &obs.pixels, &pose, iterations);
+    let (pose, rms, _) = refine_pose(&project, &obs.board_mm, &obs.pixels, &pose, iterations);
     Some((pose_to_params(&pose), rms))
 }
 

@@ -649,6 +649,7 @@ fn a_known_lens_blur_keeps_wide_curved_stripes_in_place() {
         f_number: 2.0,
         pixel_pitch_um: 10.0,
         defocus_px: 0.0,
+        focus_mm: None,
         speckle_patterns: 2,
     });
     let cam = dir.path().join("camera.json");

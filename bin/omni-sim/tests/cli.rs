@@ -219,6 +219,8 @@ fn optics_out_of_range_name_the_field() {
         ("--wavelength-nm", "2500", "wavelength_nm"),
         ("--pixel-pitch-um", "0", "pixel_pitch_um"),
         ("--blur-px", "0.05", "diffraction limit"),
+        ("--focus-mm", "-5", "focus_mm"),
+        ("--focus-mm", "5", "beyond the 24 px"),
     ] {
         let out = scan(&[&format!("{flag}={value}")]);
         let err = String::from_utf8_lossy(&out.stderr);
@@ -226,9 +228,21 @@ fn optics_out_of_range_name_the_field() {
         assert!(err.contains(expect) && err.lines().count() == 1, "{flag} {value}: {err}");
         assert!(!d.join("m.jsonl").exists());
     }
-    // The idealised sensor has no lens to set.
+    // The idealised sensor has no lens to set; a focus distance and one blur exclude each other.
     assert_eq!(scan(&["--ideal", "--f-number", "8"]).status.code(), Some(2));
+    for extra in [&["--focus-mm", "90", "--blur-px", "1"], &["--focus-mm", "90", "--defocus-px", "1"]] {
+        let out = scan(extra);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains("focus") && err.lines().count() == 1, "{extra:?}: {err}");
+    }
     assert!(!d.join("m.jsonl").exists());
+    // Focused, the frame renders, blurred differently from the default's one defocus.
+    ok(&scan(&["--focus-mm", "85"]));
+    let focused = std::fs::read(d.join("f/frame_000000.png")).unwrap();
+    std::fs::remove_dir_all(d.join("f")).unwrap();
+    ok(&scan(&[]));
+    assert_ne!(focused, std::fs::read(d.join("f/frame_000000.png")).unwrap());
 }
 
 #[test]

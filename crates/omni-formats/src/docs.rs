@@ -151,9 +151,10 @@ impl CameraFile {
     }
 
     /// The lens's blur (PSF σ, px) the stripe detector should remove: the measured one, else the
-    /// one the optics imply; `None` if the file has neither.
+    /// one the optics imply; `None` if the file has neither, or its optics are focused at a
+    /// distance (their blur varies over the image).
     pub fn lens_blur(&self) -> Option<f64> {
-        self.lens_blur_px.or(self.optics.map(|o| o.psf_sigma_px()))
+        self.lens_blur_px.or(self.optics.filter(|o| !o.field_dependent()).map(|o| o.psf_sigma_px()))
     }
 
     /// Reads and validates `camera.json`, returning the usable model.
@@ -607,6 +608,13 @@ mod tests {
         v["optics"] = serde_json::to_value(Optics::paper()).unwrap();
         let from_optics = parse(&v).unwrap().0.lens_blur().unwrap();
         assert!((from_optics - Optics::paper().psf_sigma_px()).abs() < 1e-12);
+        v["optics"]["defocus_px"] = 0.0.into();
+        v["optics"]["focus_mm"] = 91.0.into();
+        assert_eq!(parse(&v).unwrap().0.lens_blur(), None, "a blur varying over the image is not one figure");
+        v["optics"]["defocus_px"] = 1.5.into();
+        let e = parse(&v).err().unwrap().to_string();
+        assert!(e.starts_with("camera.json: field optics: defocus_px (1.5) and focus_mm (91)"), "{e}");
+        v["optics"]["focus_mm"] = serde_json::Value::Null;
         v["lens_blur_px"] = 0.6.into();
         assert_eq!(parse(&v).unwrap().0.lens_blur(), Some(0.6));
         v["lens_blur_px"] = (-1.0).into();

@@ -70,6 +70,14 @@ pub trait CameraModel: Send + Sync + std::fmt::Debug {
     /// The valid mirror annulus in the image.
     fn mirror_circle(&self) -> MirrorCircle;
 
+    /// σ (px) of the defocus blur disc (σ = diameter / 4) of the scene point `distance_mm`
+    /// along the pixel's ray ([`Self::pixel_to_ray`]) through a lens of `optics` focused at
+    /// `optics.focus_mm`; `None` without a focus distance, or where the model does not hold the
+    /// physical geometry that sets the focus (the fitted models: Mei, OCam, ...).
+    fn defocus_sigma_px(&self, _px: &Vector2<f64>, _distance_mm: f64, _optics: &crate::Optics) -> Option<f64> {
+        None
+    }
+
     /// Whether the pixel lies inside the image bounds (pixel edges at −0.5 and size − 0.5).
     fn in_image(&self, px: &Vector2<f64>) -> bool {
         let (w, h) = self.image_size();

@@ -34,7 +34,7 @@ pub use fixed::{FixedPlaneParams, FixedPlanes, FixedPlanesParams, TransmitterMod
 pub use camera::{CameraModel, CentralCamera, CentralParams, MirrorCircle};
 pub use colour::{BayerPattern, CameraColour, filter_response};
 pub use fisheye::{FisheyeCamera, FisheyeParams};
-pub use hyperbolic::{HyperbolicCamera, HyperbolicParams};
+pub use hyperbolic::{DefocusSpot, HyperbolicCamera, HyperbolicParams};
 pub use mei::{MeiCamera, MeiParams};
 pub use ocam::{OcamCamera, OcamParams};
 pub use optics::Optics;

@@ -26,9 +26,17 @@ pub struct Optics {
     pub f_number: f64,
     /// Pixel pitch (µm).
     pub pixel_pitch_um: f64,
-    /// Defocus: the diameter of the geometric blur circle (px); 0 = in focus.
+    /// Defocus: the diameter of the geometric blur circle (px); 0 = in focus. One figure for
+    /// the whole image; 0 when `focus_mm` is given.
     #[serde(default)]
     pub defocus_px: f64,
+    /// The distance (mm) from the lens, along its axis, of the plane it is focused on. Given,
+    /// the defocus varies over the image and with the scene's depth as the camera's geometry
+    /// makes it (a catadioptric camera sees the mirror's virtual image of the scene, a curved
+    /// surface, so it is sharp along one ring only): see
+    /// [`CameraModel::defocus_sigma_px`](crate::CameraModel::defocus_sigma_px).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focus_mm: Option<f64>,
     /// Independent speckle patterns that add in intensity (2 for a depolarising matte surface,
     /// 1 for a polarisation-preserving one); the speckle contrast is 1/√n.
     #[serde(default = "default_speckle_patterns")]
@@ -48,7 +56,14 @@ impl Optics {
     /// catadioptric image cannot be sharp everywhere: the mirror's virtual image of the scene is
     /// curved), a matte depolarising scene.
     pub fn paper() -> Optics {
-        Optics { wavelength_nm: 650.0, f_number: 4.0, pixel_pitch_um: 4.65, defocus_px: 1.5, speckle_patterns: 2 }
+        Optics {
+            wavelength_nm: 650.0,
+            f_number: 4.0,
+            pixel_pitch_um: 4.65,
+            defocus_px: 1.5,
+            focus_mm: None,
+            speckle_patterns: 2,
+        }
     }
 
     /// Checks ranges; the message names the field.
@@ -67,6 +82,18 @@ impl Optics {
         }
         if !(self.defocus_px.is_finite() && (0.0..=8.0).contains(&self.defocus_px)) {
             return Err(format!("defocus_px must be within 0–8 px, got {}", self.defocus_px));
+        }
+        if let Some(focus) = self.focus_mm {
+            if !(focus.is_finite() && focus > 0.0 && focus <= 1e6) {
+                return Err(format!("focus_mm must be within (0, 1e6] mm, got {focus}"));
+            }
+            if self.defocus_px != 0.0 {
+                return Err(format!(
+                    "defocus_px ({}) and focus_mm ({focus}) exclude each other: with a focus distance \
+                     the defocus follows from the camera's geometry",
+                    self.defocus_px
+                ));
+            }
         }
         if !(1..=16).contains(&self.speckle_patterns) {
             return Err(format!("speckle_patterns must be within 1–16, got {}", self.speckle_patterns));
@@ -95,7 +122,20 @@ impl Optics {
         self.defocus_px / 4.0
     }
 
-    /// σ of the optical PSF, diffraction and defocus (px); the pixel area comes on top.
+    /// Radius (mm) of the lens's entrance pupil for a camera whose focal length is `f_px`
+    /// pixels: the working F-number is image-side, N = f / (2 R).
+    pub fn pupil_radius_mm(&self, f_px: f64) -> f64 {
+        self.focal_length_mm(f_px) / (2.0 * self.f_number)
+    }
+
+    /// Whether the defocus varies over the image (a focus distance is given) rather than being
+    /// the one figure `defocus_px`.
+    pub fn field_dependent(&self) -> bool {
+        self.focus_mm.is_some()
+    }
+
+    /// σ of the optical PSF, diffraction and the constant defocus `defocus_px` (px); the pixel
+    /// area comes on top. With a focus distance this is the sharpest the image gets.
     pub fn psf_sigma_px(&self) -> f64 {
         self.diffraction_sigma_px().hypot(self.defocus_sigma_px())
     }
@@ -167,6 +207,9 @@ mod tests {
             (Optics { pixel_pitch_um: 0.0, ..o }, "pixel_pitch_um"),
             (Optics { pixel_pitch_um: f64::NAN, ..o }, "pixel_pitch_um"),
             (Optics { speckle_patterns: 0, ..o }, "speckle_patterns"),
+            (Optics { focus_mm: Some(-1.0), defocus_px: 0.0, ..o }, "focus_mm"),
+            (Optics { focus_mm: Some(f64::INFINITY), defocus_px: 0.0, ..o }, "focus_mm"),
+            (Optics { focus_mm: Some(90.0), ..o }, "exclude each other"),
         ] {
             let e = bad.validate().unwrap_err();
             assert!(e.contains(field), "{e}");

@@ -119,7 +119,8 @@ fn budget_at(
     let cos_inc = (to_p.normalize().dot(&Vector3::x())).abs();
     let signal = albedo * opts.laser_strength * cos_inc / (std::f64::consts::PI * to_p.norm()) / plane_mm_per_px;
     let background = albedo * opts.ambient_e;
-    let width = (opts.imaging.psf_sigma_px().powi(2) + 1.0 / 12.0 + line_sigma_px.powi(2)).sqrt();
+    let blur = opts.imaging.psf_sigma_at(cam, &pixel, distance);
+    let width = (blur.powi(2) + 1.0 / 12.0 + line_sigma_px.powi(2)).sqrt();
     let noise_px = centroid_noise_px(signal, background, width, opts);
     let calibration_mm = calibration_range_mm(calibration, mm_per_px, &n, &(point - origin));
     let (speckle_mm, noise_mm) = (speckle_px * mm_per_px, noise_px * mm_per_px);

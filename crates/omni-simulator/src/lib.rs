@@ -13,7 +13,10 @@
 //! * the optical PSF acts on the continuous image before the pixels integrate it (each sample is
 //!   spread from its own sub-pixel position); the lens ([`Optics`]) sets it from diffraction and
 //!   defocus, and images the laser coherently through its pupil, so that laser speckle follows
-//!   from the physics; then photon (Poisson) and read noise,
+//!   from the physics. The defocus is one figure for the frame, or, with the lens focused at a
+//!   distance ([`Optics::focus_mm`]), each pixel's own as the mirror's curved virtual image makes
+//!   it (per pixel for incoherent light, per 16 px tile for the laser's); then photon (Poisson)
+//!   and read noise,
 //!   saturation, gamma and quantisation, deterministic for a seed (a self-contained SplitMix64);
 //! * scene lighting (level, gradients, hard-edged patches) and textured albedo; optional motion
 //!   blur (the polygon turning during the exposure);
@@ -64,6 +67,8 @@ mod boards;
 mod budget;
 mod capture;
 mod coherent;
+#[cfg(test)]
+mod focus_tests;
 mod frame;
 mod profile;
 mod render;

@@ -20,7 +20,7 @@
 //!    quantisation to the bit depth.
 
 use crate::capture::{Bloom, Colour, ColourOutput, Halo};
-use crate::coherent::{CellLight, CoherentImager, LaserField};
+use crate::coherent::{CellLight, CoherentImager, LaserField, MAX_DEFOCUS_PX};
 use crate::frame::{Frame16, RgbFrame};
 use crate::profile::{Shape, SheetProfile};
 use crate::rng::{SplitMix64, mix};
@@ -51,6 +51,27 @@ impl Imaging {
         match self {
             Imaging::Gaussian { sigma_px } => *sigma_px,
             Imaging::Lens { optics, .. } => optics.psf_sigma_px(),
+        }
+    }
+
+    /// σ (px) of the optical PSF of incoherent light at pixel `px` seeing a surface `distance_mm`
+    /// along its ray: with a focus distance, the diffraction and the camera's defocus there; else
+    /// [`Self::psf_sigma_px`].
+    pub fn psf_sigma_at(&self, camera: &dyn omni_model::CameraModel, px: &Vector2<f64>, distance_mm: f64) -> f64 {
+        match self {
+            Imaging::Lens { optics, .. } if optics.field_dependent() => {
+                let defocus = camera.defocus_sigma_px(px, distance_mm, optics).unwrap_or(0.0);
+                optics.diffraction_sigma_px().hypot(defocus.min(MAX_DEFOCUS_PX / 4.0))
+            }
+            _ => self.psf_sigma_px(),
+        }
+    }
+
+    /// The lens focused at a distance, where the defocus varies over the image.
+    fn field_optics(&self) -> Option<&Optics> {
+        match self {
+            Imaging::Lens { optics, .. } if optics.field_dependent() => Some(optics),
+            _ => None,
         }
     }
 
@@ -225,6 +246,45 @@ impl RenderOptions {
     }
 
     /// Checks values; the message names the field.
+    /// Checks that `sensor`'s camera can render these options: a lens focused at a distance
+    /// needs a camera model that holds the mirror's geometry, and the blur it makes must stay
+    /// within what the coherent imager reaches. The error names `optics.focus_mm`.
+    pub fn check_sensor(&self, sensor: &Sensor) -> Result<(), String> {
+        let Some(optics) = self.imaging.field_optics() else { return Ok(()) };
+        let camera = sensor.camera.as_ref();
+        let circle = camera.mirror_circle();
+        let focus = optics.focus_mm.unwrap_or_default();
+        let mut worst: Option<(f64, f64)> = None;
+        for k in 1..64 {
+            let rho = circle.inner_radius + (circle.outer_radius - circle.inner_radius) * k as f64 / 64.0;
+            for direction in
+                [Vector2::new(1.0, 0.0), Vector2::new(0.0, 1.0), Vector2::new(-1.0, 0.0), Vector2::new(0.0, -1.0)]
+            {
+                let px = circle.centre + direction * rho;
+                for distance in [50.0, 1e4] {
+                    if let Some(sigma) = camera.defocus_sigma_px(&px, distance, optics)
+                        && worst.is_none_or(|(w, _)| 4.0 * sigma > w)
+                    {
+                        worst = Some((4.0 * sigma, rho));
+                    }
+                }
+            }
+        }
+        match worst {
+            None => Err(format!(
+                "optics.focus_mm ({focus} mm) needs a camera model that holds the mirror's geometry \
+                 (hyperbolic); this camera's model does not, so give defocus_px instead"
+            )),
+            Some((diameter, rho)) if diameter > MAX_DEFOCUS_PX => Err(format!(
+                "optics.focus_mm ({focus} mm) blurs the image {rho:.0} px from its centre by a circle of \
+                 {diameter:.1} px, beyond the {MAX_DEFOCUS_PX} px the renderer images: focus nearer the \
+                 mirror's middle or close the lens (F/{})",
+                optics.f_number
+            )),
+            Some(_) => Ok(()),
+        }
+    }
+
     pub fn validate(&self) -> Result<(), String> {
         let non_negative = [
             ("laser_strength", self.laser_strength),
@@ -382,6 +442,8 @@ struct CornerKey {
     /// The slice whose plane is nearest in units of its σ, and the plane distance (mm).
     nearest: u32,
     dist: f64,
+    /// The hit's distance along the ray (mm); NaN for no hit.
+    distance: f64,
 }
 
 impl Shader<'_> {
@@ -395,6 +457,7 @@ impl Shader<'_> {
             laser: 0.0,
             nearest: u32::MAX,
             dist: 0.0,
+            distance: f64::NAN,
         };
         let Some(ray) = camera.pixel_to_ray(&px) else { return none };
         let Some(hit) = self.scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY) else { return none };
@@ -430,6 +493,7 @@ impl Shader<'_> {
             laser,
             nearest,
             dist,
+            distance: hit.t,
         }
     }
 
@@ -591,13 +655,25 @@ fn render_light(
         })
         .collect();
     let n = opts.supersample.max(1) as usize;
-    let psf = PixelPsf::new(opts.imaging.psf_sigma_px(), n);
-    let imager = opts.imaging.coherent().filter(|_| !slices.is_empty()).map(coherent_imager);
+    let defocus = opts.imaging.field_optics().map(|optics| pixel_defocus(camera, optics, &corners, w, h));
+    let sigmas = defocus.as_ref().map(|d| {
+        let diffraction = opts.imaging.psf_sigma_px();
+        d.par_iter().map(|d| diffraction.hypot(0.25 * d)).collect::<Vec<f64>>()
+    });
+    let psf = FramePsfs::new(opts.imaging.psf_sigma_px(), sigmas.as_deref(), n, w);
+    let imager = opts.imaging.coherent().filter(|_| !slices.is_empty()).map(|optics| match &defocus {
+        None => coherent_imager(optics, crate::coherent::MARGIN_PX),
+        Some(d) => {
+            let widest = d.iter().copied().fold(0.0, f64::max).min(MAX_DEFOCUS_PX);
+            let flat = Optics { defocus_px: 0.0, focus_mm: None, ..*optics };
+            coherent_imager(&flat, CoherentImager::margin_for(widest))
+        }
+    });
     let q = imager.as_ref().map(|i| i.q());
     // A sheet wide against the pixel (its plane distance changing by less than σ/2 across it)
     // is smooth there: 2 × 2 samples (the coherent imager's q × q) integrate it, each box-filtered.
     let n_coarse = q.unwrap_or(2).min(n);
-    let psf_coarse = PixelPsf::new(opts.imaging.psf_sigma_px(), n_coarse);
+    let psf_coarse = FramePsfs::new(opts.imaging.psf_sigma_px(), sigmas.as_deref(), n_coarse, w);
     let coarse = |c: &[CornerKey; 4]| {
         if !shader.flat_across
             || c.iter().any(|k| k.nearest != c[0].nearest || k.surface != c[0].surface || k.class != c[0].class)
@@ -656,11 +732,12 @@ fn render_light(
                     continue;
                 }
                 let (n, psf) = if coarse(&c) { (n_coarse, &psf_coarse) } else { (n, &psf) };
+                let psf = psf.at(x, y);
                 let samples = pixel_samples(&shader, camera, x as f64, y as f64, n as u32);
                 match q {
                     Some(q) => {
                         let ambient: Vec<f64> = samples.iter().map(|s| s.ambient).collect();
-                        row.patches.push((x, psf.patch(&ambient)));
+                        row.patches.push((x, psf.radius, psf.patch(&ambient)));
                         let laser: Vec<f64> = samples.iter().map(|s| s.laser).collect();
                         if laser.iter().any(|v| *v > 0.0) {
                             row.laser.push((x, CellLight::from_samples(&laser, n, q)));
@@ -668,15 +745,15 @@ fn render_light(
                     }
                     None if split => {
                         let ambient: Vec<f64> = samples.iter().map(|s| s.ambient).collect();
-                        row.patches.push((x, psf.patch(&ambient)));
+                        row.patches.push((x, psf.radius, psf.patch(&ambient)));
                         let laser: Vec<f64> = samples.iter().map(|s| s.laser).collect();
                         if laser.iter().any(|v| *v > 0.0) {
-                            row.laser_patches.push((x, psf.patch(&laser)));
+                            row.laser_patches.push((x, psf.radius, psf.patch(&laser)));
                         }
                     }
                     None => {
                         let total: Vec<f64> = samples.iter().map(Signal::total).collect();
-                        row.patches.push((x, psf.patch(&total)));
+                        row.patches.push((x, psf.radius, psf.patch(&total)));
                     }
                 }
             }
@@ -685,18 +762,21 @@ fn render_light(
         .collect();
     let centre: Vec<f64> = rows.iter().flat_map(|r| r.centre.iter().copied()).collect();
     let mut out = psf.convolve_centres(&centre, w, h);
-    add_patches(&mut out, rows.iter().map(|r| &r.patches), &psf, w, h);
+    add_patches(&mut out, rows.iter().map(|r| &r.patches), w, h);
     let mut laser_out = split.then(|| {
         let centre: Vec<f64> = rows.iter().flat_map(|r| r.centre_laser.iter().copied()).collect();
         let mut img = psf.convolve_centres(&centre, w, h);
-        add_patches(&mut img, rows.iter().map(|r| &r.laser_patches), &psf, w, h);
+        add_patches(&mut img, rows.iter().map(|r| &r.laser_patches), w, h);
         img
     });
     if let (Some(imager), Some(q)) = (imager, q) {
         let mut field = LaserField::new(q);
         for (y, row) in rows.iter().enumerate() {
             for (x, energies) in &row.laser {
-                field.add_pixel(*x, y, energies);
+                match &defocus {
+                    None => field.add_pixel(*x, y, energies),
+                    Some(d) => field.add_defocused_pixel(*x, y, energies, d[y * w + x]),
+                }
             }
         }
         imager.image_into(&field, laser_out.as_mut().unwrap_or(&mut out), w, h, surface_seed(opts.seed));
@@ -704,18 +784,13 @@ fn render_light(
     (out, laser_out)
 }
 
-/// Adds each row's supersampled pixels' PSF patches (row y, column x) into `out`.
-fn add_patches<'a>(
-    out: &mut [f64],
-    rows: impl Iterator<Item = &'a Vec<(usize, Vec<f64>)>>,
-    psf: &PixelPsf,
-    w: usize,
-    h: usize,
-) {
-    let r = psf.radius as isize;
-    let side = 2 * psf.radius + 1;
+/// Adds each row's supersampled pixels' PSF patches (row y, column x, the PSF's radius) into
+/// `out`.
+fn add_patches<'a>(out: &mut [f64], rows: impl Iterator<Item = &'a Vec<Patch>>, w: usize, h: usize) {
     for (y, row) in rows.enumerate() {
-        for (x, patch) in row {
+        for (x, radius, patch) in row {
+            let r = *radius as isize;
+            let side = 2 * radius + 1;
             for dy in -r..=r {
                 let yy = y as isize + dy;
                 if yy < 0 || yy >= h as isize {
@@ -733,16 +808,131 @@ fn add_patches<'a>(
     }
 }
 
-/// The coherent imager of `optics`, built once per process for each set of optics in use.
-fn coherent_imager(optics: &Optics) -> Arc<CoherentImager> {
-    static CACHE: Mutex<Vec<(Optics, Arc<CoherentImager>)>> = Mutex::new(Vec::new());
+/// The coherent imager of `optics` whose PSF reaches `margin` px, built once per process for
+/// each set in use.
+fn coherent_imager(optics: &Optics, margin: usize) -> Arc<CoherentImager> {
+    static CACHE: Mutex<Vec<(Optics, usize, Arc<CoherentImager>)>> = Mutex::new(Vec::new());
     let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some((_, imager)) = cache.iter().find(|(o, _)| o == optics) {
+    if let Some((_, _, imager)) = cache.iter().find(|(o, m, _)| o == optics && *m == margin) {
         return imager.clone();
     }
-    let imager = Arc::new(CoherentImager::new(optics));
-    cache.push((*optics, imager.clone()));
+    let imager = Arc::new(CoherentImager::with_margin(optics, margin));
+    cache.push((*optics, margin, imager.clone()));
     imager
+}
+
+/// Each pixel's blur circle diameter (px) through `optics` focused at its focus distance: the
+/// camera's defocus at the pixel's centre for the mean distance of what its corners see (0 where
+/// they see nothing).
+fn pixel_defocus(
+    camera: &dyn omni_model::CameraModel,
+    optics: &Optics,
+    corners: &[CornerKey],
+    w: usize,
+    h: usize,
+) -> Vec<f64> {
+    let cw = w + 1;
+    (0..h)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            (0..w).map(move |x| {
+                let c = [
+                    corners[y * cw + x],
+                    corners[y * cw + x + 1],
+                    corners[(y + 1) * cw + x],
+                    corners[(y + 1) * cw + x + 1],
+                ];
+                let (sum, count) = c
+                    .iter()
+                    .filter(|k| k.distance.is_finite())
+                    .fold((0.0, 0usize), |(s, n), k| (s + k.distance, n + 1));
+                if count == 0 {
+                    return 0.0;
+                }
+                let px = Vector2::new(x as f64, y as f64);
+                let sigma = camera.defocus_sigma_px(&px, sum / count as f64, optics).unwrap_or(0.0);
+                (4.0 * sigma).min(MAX_DEFOCUS_PX)
+            })
+        })
+        .collect()
+}
+
+/// A supersampled pixel's PSF patch: its column, the PSF's radius (px), the (2r+1)² values.
+type Patch = (usize, usize, Vec<f64>);
+
+/// The optical PSF of each pixel integrated over a pixel ([`PixelPsf`]): one for the frame, or,
+/// where the defocus varies over the image, each pixel's own (σ rounded to [`SIGMA_STEP_PX`]).
+struct FramePsfs {
+    /// Indexed by σ level; only the levels in use are made.
+    psfs: Vec<Option<PixelPsf>>,
+    /// Each pixel's σ level (w × h); `None`: `psfs[0]` everywhere.
+    levels: Option<Vec<u16>>,
+    w: usize,
+}
+
+/// The step of the per-pixel PSFs' σ (px).
+const SIGMA_STEP_PX: f64 = 0.01;
+
+impl FramePsfs {
+    /// The PSF of σ `sigma` px everywhere, or, with `sigmas` (px, w × h), each pixel's; `n`
+    /// sub-samples per axis for supersampled pixels.
+    fn new(sigma: f64, sigmas: Option<&[f64]>, n: usize, w: usize) -> Self {
+        let Some(sigmas) = sigmas else {
+            return FramePsfs { psfs: vec![Some(PixelPsf::new(sigma, n))], levels: None, w };
+        };
+        let levels: Vec<u16> = sigmas.iter().map(|s| (s / SIGMA_STEP_PX).round() as u16).collect();
+        let mut used = vec![false; levels.iter().copied().max().unwrap_or(0) as usize + 1];
+        levels.iter().for_each(|l| used[*l as usize] = true);
+        let psfs = used
+            .par_iter()
+            .enumerate()
+            .map(|(l, used)| used.then(|| PixelPsf::new(l as f64 * SIGMA_STEP_PX, n)))
+            .collect();
+        FramePsfs { psfs, levels: Some(levels), w }
+    }
+
+    /// The PSF of pixel (x, y).
+    fn at(&self, x: usize, y: usize) -> &PixelPsf {
+        let level = self.levels.as_ref().map_or(0, |l| l[y * self.w + x] as usize);
+        self.psfs[level].as_ref().expect("every pixel's level has its PSF")
+    }
+
+    /// Separable discrete convolution of the centre-sampled image with each output pixel's K
+    /// (zero outside): with one PSF, the convolution; with a PSF varying slowly over the image,
+    /// its gather form, which keeps a constant field constant.
+    fn convolve_centres(&self, img: &[f64], w: usize, h: usize) -> Vec<f64> {
+        let mut tmp = vec![0.0; w * h];
+        tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            for (x, out) in row.iter_mut().enumerate() {
+                let psf = self.at(x, y);
+                let r = psf.radius as isize;
+                let mut s = 0.0;
+                for (i, kv) in psf.centre.iter().enumerate() {
+                    let xx = x as isize + i as isize - r;
+                    if xx >= 0 && xx < w as isize {
+                        s += kv * img[y * w + xx as usize];
+                    }
+                }
+                *out = s;
+            }
+        });
+        let mut out = vec![0.0; w * h];
+        out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            for (x, o) in row.iter_mut().enumerate() {
+                let psf = self.at(x, y);
+                let r = psf.radius as isize;
+                let mut s = 0.0;
+                for (i, kv) in psf.centre.iter().enumerate() {
+                    let yy = y as isize + i as isize - r;
+                    if yy >= 0 && yy < h as isize {
+                        s += kv * tmp[yy as usize * w + x];
+                    }
+                }
+                *o = s;
+            }
+        });
+        out
+    }
 }
 
 /// One image row: centre samples of uniform pixels, (column, PSF patch) of supersampled ones,
@@ -750,12 +940,12 @@ fn coherent_imager(optics: &Optics) -> Arc<CoherentImager> {
 #[derive(Default)]
 struct RowResult {
     centre: Vec<f64>,
-    patches: Vec<(usize, Vec<f64>)>,
+    patches: Vec<Patch>,
     laser: Vec<(usize, Vec<CellLight>)>,
     /// With the laser light apart and no coherent imager: the laser light of uniform pixels
     /// and the laser patches of supersampled ones.
     centre_laser: Vec<f64>,
-    laser_patches: Vec<(usize, Vec<f64>)>,
+    laser_patches: Vec<Patch>,
 }
 
 /// The optical PSF (Gaussian, σ in px) integrated over a pixel: K(t) = Φ((t + ½)/σ) − Φ((t − ½)/σ).
@@ -819,39 +1009,6 @@ impl PixelPsf {
             }
         }
         patch
-    }
-
-    /// Separable discrete convolution of the centre-sampled image with K (zero outside).
-    fn convolve_centres(&self, img: &[f64], w: usize, h: usize) -> Vec<f64> {
-        let r = self.radius as isize;
-        let k = &self.centre;
-        let mut tmp = vec![0.0; w * h];
-        tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            for (x, out) in row.iter_mut().enumerate() {
-                let mut s = 0.0;
-                for (i, kv) in k.iter().enumerate() {
-                    let xx = x as isize + i as isize - r;
-                    if xx >= 0 && xx < w as isize {
-                        s += kv * img[y * w + xx as usize];
-                    }
-                }
-                *out = s;
-            }
-        });
-        let mut out = vec![0.0; w * h];
-        out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            for (x, o) in row.iter_mut().enumerate() {
-                let mut s = 0.0;
-                for (i, kv) in k.iter().enumerate() {
-                    let yy = y as isize + i as isize - r;
-                    if yy >= 0 && yy < h as isize {
-                        s += kv * tmp[yy as usize * w + x];
-                    }
-                }
-                *o = s;
-            }
-        });
-        out
     }
 }
 
@@ -994,7 +1151,8 @@ pub struct LaserFrame {
 /// facet `facet` and the given lasers on, with its ground truth (always the still mirror at
 /// `alpha`, also under motion blur).
 ///
-/// Panics if `opts` is invalid (see [`RenderOptions::validate`]) or `alpha_rad` is not finite.
+/// Panics if `opts` is invalid (see [`RenderOptions::validate`] and
+/// [`RenderOptions::check_sensor`]) or `alpha_rad` is not finite.
 /// Lasers the transmitter does not have, or whose central ray misses the facet, stay dark.
 pub fn render_laser_frame(
     sensor: &Sensor,
@@ -1004,7 +1162,7 @@ pub fn render_laser_frame(
     lasers: &[u32],
     opts: &RenderOptions,
 ) -> LaserFrame {
-    if let Err(e) = opts.validate() {
+    if let Err(e) = opts.validate().and_then(|()| opts.check_sensor(sensor)) {
         panic!("invalid RenderOptions: {e}");
     }
     assert!(alpha_rad.is_finite(), "render_laser_frame: mirror angle must be finite, got {alpha_rad}");
@@ -1030,8 +1188,6 @@ fn sheet_sigmas(
     opts: &RenderOptions,
 ) -> Vec<f64> {
     let Some(target) = opts.stripe_fwhm_px else { return vec![opts.beam_sigma(); lasers.len()] };
-    let blur = (opts.imaging.psf_sigma_px().powi(2) + 1.0 / 12.0).sqrt();
-    let sheet_px = opts.profile.sheet_fwhm_for_image_px(target, blur);
     let per_sigma = opts.beam_fwhm_mm / opts.beam_sigma();
     lasers
         .iter()
@@ -1041,12 +1197,15 @@ fn sheet_sigmas(
             // The middle point, else the nearest one to it whose neighbourhood is one surface.
             let scale = (0..points.len()).find_map(|k| {
                 let i = if k % 2 == 0 { mid + k / 2 } else { mid.checked_sub(k / 2 + 1)? };
-                let g = sheet_gradient_at(sensor, scene, alpha_rad, facet, points.get(i)?)?;
-                Some((g[0] * g[0] + g[1] * g[1]).sqrt())
+                let t = points.get(i)?;
+                let g = sheet_gradient_at(sensor, scene, alpha_rad, facet, t)?;
+                Some(((g[0] * g[0] + g[1] * g[1]).sqrt(), blur_at(sensor, t, opts)))
             });
-            match (scale, sheet_px) {
-                (Some(mm_per_px), Some(px)) => px * mm_per_px / per_sigma,
-                _ => opts.beam_sigma(),
+            match scale
+                .and_then(|(mm_per_px, blur)| Some((mm_per_px, opts.profile.sheet_fwhm_for_image_px(target, blur)?)))
+            {
+                Some((mm_per_px, px)) => px * mm_per_px / per_sigma,
+                None => opts.beam_sigma(),
             }
         })
         .collect()
@@ -1106,7 +1265,7 @@ pub fn blurred_peak_at(
 ) -> Option<[f64; 2]> {
     let g = sheet_gradient_at(sensor, scene, alpha_rad, facet, t)?;
     let mm_per_px = (g[0] * g[0] + g[1] * g[1]).sqrt();
-    let blur = (opts.imaging.psf_sigma_px().powi(2) + 1.0 / 12.0).sqrt();
+    let blur = blur_at(sensor, t, opts);
     let (pull, side) = match opts.profile {
         SheetProfile::Gaussian => (0.0, 1.0),
         p @ SheetProfile::Tailed { tail_side, .. } => {
@@ -1115,6 +1274,14 @@ pub fn blurred_peak_at(
     };
     let k = side * pull / mm_per_px;
     Some([t.pixel[0] + k * g[0], t.pixel[1] + k * g[1]])
+}
+
+/// σ (px) of the optics' blur and the pixel's area at truth point `t`.
+fn blur_at(sensor: &Sensor, t: &TruthPoint, opts: &RenderOptions) -> f64 {
+    let camera = sensor.camera.as_ref();
+    let px = Vector2::new(t.pixel[0], t.pixel[1]);
+    let distance = camera.pixel_to_ray(&px).map_or(f64::INFINITY, |ray| (Point3::from(t.xyz) - ray.origin).norm());
+    (opts.imaging.psf_sigma_at(camera, &px, distance).powi(2) + 1.0 / 12.0).sqrt()
 }
 
 /// The frame a camera delivers from the light of `slices` in `scene`: its grey frame and, for
@@ -1146,9 +1313,10 @@ pub fn render_ambient_frame(sensor: &Sensor, scene: &Scene, opts: &RenderOptions
 /// Renders the frame with all lasers off (ambient light only): the grey frame and, for a colour
 /// camera's RGB output, the colour frame (as [`LaserFrame`]).
 ///
-/// Panics if `opts` is invalid (see [`RenderOptions::validate`]).
+/// Panics if `opts` is invalid (see [`RenderOptions::validate`] and
+/// [`RenderOptions::check_sensor`]).
 pub fn render_ambient_images(sensor: &Sensor, scene: &Scene, opts: &RenderOptions) -> (Frame16, Option<RgbFrame>) {
-    if let Err(e) = opts.validate() {
+    if let Err(e) = opts.validate().and_then(|()| opts.check_sensor(sensor)) {
         panic!("invalid RenderOptions: {e}");
     }
     let seed = frame_seed(opts.seed, f64::NAN, u32::MAX, &[]);

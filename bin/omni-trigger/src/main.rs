@@ -481,6 +481,9 @@ fn renderer(a: &EmulateArgs) -> CliResult<(Box<dyn FrameRenderer>, u32, u32)> {
         }
     };
     let options = omni_simulator::RenderOptions { seed: a.seed, ..options };
+    options.check_sensor(&sensor).map_err(|e| {
+        CliError::new(format!("{}: {e}", a.camera.as_ref().map_or("camera".into(), |c| c.display().to_string())))
+    })?;
     let (facets, lasers) = (sensor.transmitter.num_facets(), sensor.transmitter.num_lasers() as u32);
     Ok((Box::new(render::SimRenderer { sensor, scene, options }), facets, lasers))
 }

@@ -55,7 +55,8 @@ impl Camera {
 
     /// The lens's blur (PSF σ, px) the stripe detector removes from curved stripes: camera.json's
     /// `lens_blur_px` (measured by omni-calib-receiver on its boards' edges), else what its
-    /// `optics` imply, else None.
+    /// `optics` imply, else None (also for optics focused at a distance, `focus_mm`, whose blur
+    /// varies over the image).
     #[getter]
     fn lens_blur_px(&self) -> Option<f64> {
         self.file.lens_blur()

@@ -106,6 +106,9 @@ def test_the_lens_blur_comes_from_the_measurement_else_the_optics():
     doc["optics"] = {"wavelength_nm": 650.0, "f_number": 4.0, "pixel_pitch_um": 4.65, "defocus_px": 1.5}
     expected = np.hypot(0.42 * 0.65 * 4.0 / 4.65, 1.5 / 4.0)
     assert omniscan.Camera.from_json(json.dumps(doc)).lens_blur_px == pytest.approx(expected, rel=1e-9)
+    # Focused at a distance, the blur varies over the image: no one figure.
+    focused = dict(doc["optics"], defocus_px=0.0, focus_mm=91.0)
+    assert omniscan.Camera.from_json(json.dumps(dict(doc, optics=focused))).lens_blur_px is None
     doc["lens_blur_px"] = 0.6
     assert omniscan.Camera.from_json(json.dumps(doc)).lens_blur_px == 0.6
     doc["lens_blur_px"] = 9.0

@@ -394,6 +394,7 @@ fn main() -> std::process::ExitCode {
             let calibration =
                 omni_simulator::calibration_from_reports(camera_file.report.as_ref(), scanner_file.report.as_ref());
             let sensor = omni_simulator::Sensor { camera: camera_model, transmitter };
+            opts.check_sensor(&sensor).map_err(|e| CliError::new(format!("{}: {e}", camera.display())))?;
             let lines = omni_simulator::error_budget(
                 &sensor,
                 &optics,

@@ -157,7 +157,8 @@ struct RenderArgs {
     /// camera.json's optics) instead of one --defocus-px for the whole image: the mirror's
     /// virtual image of the scene is curved, so the frame is sharp along one ring and blurs on
     /// either side of it, more for nearer surfaces. The paper's sensor is sharpest at 250 px
-    /// from the centre when focused at 91 mm and at 310 px at 100 mm. Needs a hyperbolic camera.
+    /// from the centre when focused at 91 mm and at 310 px at 100 mm. Needs a hyperbolic camera;
+    /// --defocus-px or --blur-px instead sets one blur for the frame, whatever camera.json says.
     #[arg(long, value_name = "MM", allow_negative_numbers = true)]
     focus_mm: Option<f64>,
     /// Override the optical blur: σ of the PSF (px, 0.4–1.5 are typical; with a lens, the
@@ -562,14 +563,17 @@ impl RenderArgs {
             }
             Imaging::Lens { optics, speckle } => {
                 let base = camera_optics.unwrap_or(optics);
-                let focus_mm = self.focus_mm.or(base.focus_mm);
-                if focus_mm.is_some() && self.blur_px.is_some() {
+                // The flags override camera.json: one blur for the frame (--defocus-px, --blur-px)
+                // replaces the file's focus distance, and --focus-mm the file's one blur.
+                let one_blur = self.defocus_px.is_some() || self.blur_px.is_some();
+                if self.focus_mm.is_some() && one_blur {
                     return Err(CliError::usage(
-                        "--blur-px sets one blur for the whole image; a lens focused at a distance (--focus-mm or \
-                         camera.json's optics.focus_mm) blurs each part of it as the mirror makes it",
+                        "--focus-mm blurs each part of the frame as the mirror makes it; --defocus-px and --blur-px \
+                         set one blur for the whole frame: give one of them",
                     ));
                 }
-                let defocus_px = match (self.defocus_px, self.focus_mm) {
+                let focus_mm = if one_blur { None } else { self.focus_mm.or(base.focus_mm) };
+                let defocus_px = match (self.defocus_px, focus_mm) {
                     (Some(d), _) => d,
                     (None, Some(_)) => 0.0,
                     (None, None) => base.defocus_px,

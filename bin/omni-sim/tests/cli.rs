@@ -237,12 +237,23 @@ fn optics_out_of_range_name_the_field() {
         assert!(err.contains("focus") && err.lines().count() == 1, "{extra:?}: {err}");
     }
     assert!(!d.join("m.jsonl").exists());
-    // Focused, the frame renders, blurred differently from the default's one defocus.
-    ok(&scan(&["--focus-mm", "85"]));
-    let focused = std::fs::read(d.join("f/frame_000000.png")).unwrap();
-    std::fs::remove_dir_all(d.join("f")).unwrap();
-    ok(&scan(&[]));
-    assert_ne!(focused, std::fs::read(d.join("f/frame_000000.png")).unwrap());
+    // Focused, the frame renders, blurred differently from the default's one defocus; a camera
+    // file focused at a distance renders the same, and one blur given on the command line
+    // replaces its focus.
+    let frame = |extra: &[&str]| {
+        let _ = std::fs::remove_dir_all(d.join("f"));
+        ok(&scan(extra));
+        std::fs::read(d.join("f/frame_000000.png")).unwrap()
+    };
+    let (focused, plain) = (frame(&["--focus-mm", "85"]), frame(&[]));
+    assert_ne!(focused, plain);
+    let mut camera: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("sensor/camera.json")).unwrap()).unwrap();
+    camera["optics"]["defocus_px"] = 0.0.into();
+    camera["optics"]["focus_mm"] = 85.0.into();
+    std::fs::write(d.join("sensor/camera.json"), serde_json::to_vec(&camera).unwrap()).unwrap();
+    assert_eq!(frame(&[]), focused);
+    assert_eq!(frame(&["--defocus-px", "1.5"]), plain);
 }
 
 #[test]

@@ -402,7 +402,8 @@ impl CameraModel for HyperbolicCamera {
     /// the mirror point, O the lens, F the outer focus and D the scene point's distance from M.
     /// The thin lens focused on the plane at `focus_mm` blurs a point at axial distance z into a
     /// disc of diameter 2R·f·|1/focus − 1/z| (px). [`HyperbolicCamera::defocus_spot`] traces it
-    /// exactly.
+    /// exactly. Exact for the ideal build: with the camera off the focus the pencil is
+    /// astigmatic and this lies between its two foci.
     fn defocus_sigma_px(&self, px: &Vector2<f64>, distance_mm: f64, optics: &crate::Optics) -> Option<f64> {
         let focus = optics.focus_mm?;
         let f_px = 0.5 * (self.params.fx_px + self.params.fy_px);

@@ -45,7 +45,7 @@ pub(crate) const MAX_DEFOCUS_PX: f64 = 24.0;
 /// A tile's defocus is rounded to this step (px of blur circle diameter; a wavefront error of
 /// 0.045 waves at F/4, 4.65 µm pixels and 650 nm).
 pub(crate) const DEFOCUS_STEP_PX: f64 = 0.2;
-/// How many defocus levels' transfers an imager keeps.
+/// How many defocus levels' transfers an imager keeps beyond those of the frame it images.
 const CACHED_LEVELS: usize = 32;
 
 type C64 = Complex<f64>;
@@ -152,6 +152,11 @@ impl LaserField {
         Some((diameter / DEFOCUS_STEP_PX).round() as u32)
     }
 
+    /// The largest blur circle (px across) of any tile; 0 for one defocus over the image.
+    pub fn max_tile_defocus_px(&self) -> f64 {
+        self.tiles.keys().filter_map(|k| self.tile_defocus_level(*k)).max().unwrap_or(0) as f64 * DEFOCUS_STEP_PX
+    }
+
     /// Adds pixel (x, y)'s q × q cells (row-major).
     pub fn add_pixel(&mut self, x: usize, y: usize, cells: &[CellLight]) {
         let q = self.q;
@@ -172,6 +177,10 @@ impl LaserField {
 /// centre: h, −∂h/∂x, −∂h/∂y (per px), ½∂²h/∂x², ∂²h/∂x∂y, ½∂²h/∂y² (per px²).
 struct Transfers([Vec<C64>; 6]);
 
+/// The frames imaged so far, and each defocus level's transfers with the frame that last used
+/// them.
+type LevelCache = (u64, BTreeMap<u32, (u64, Arc<Transfers>)>);
+
 /// The imaging system for one set of optics.
 pub(crate) struct CoherentImager {
     q: usize,
@@ -183,8 +192,9 @@ pub(crate) struct CoherentImager {
     /// The transfers of the optics' own defocus.
     transfers: Transfers,
     /// Those of other defocus levels (blur circle diameter in [`DEFOCUS_STEP_PX`]), made when a
-    /// field with defocus varying over the image first needs them.
-    levels: Mutex<BTreeMap<u32, Arc<Transfers>>>,
+    /// field with defocus varying over the image first needs them, each with when it was last
+    /// used (the count of frames imaged).
+    levels: Mutex<LevelCache>,
     /// Phase ramps (transposed like the transfers) that move the image field by (∓¼, ∓¼) of
     /// a cell: its values between the cells' centres.
     shifts_t: [Vec<C64>; 4],
@@ -224,7 +234,7 @@ impl CoherentImager {
             margin,
             optics: *optics,
             transfers,
-            levels: Mutex::new(BTreeMap::new()),
+            levels: Mutex::new((0, BTreeMap::new())),
             shifts_t,
             fft,
             ifft,
@@ -272,21 +282,42 @@ impl CoherentImager {
         ])
     }
 
-    /// The transfers of defocus level `level` (a blur circle of `level` · [`DEFOCUS_STEP_PX`]
-    /// px across), made once and kept while fewer than [`CACHED_LEVELS`] are.
-    fn level_transfers(&self, level: u32) -> Arc<Transfers> {
-        let mut levels = self.levels.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(t) = levels.get(&level) {
-            return t.clone();
+    /// The transfers of defocus levels `levels` (blur circles of `level` · [`DEFOCUS_STEP_PX`] px
+    /// across): those kept from earlier frames, the others made in parallel. The least recently
+    /// used beyond [`CACHED_LEVELS`] are dropped, never one of `levels`; the transfers are a
+    /// function of the level alone, so what is kept changes no image.
+    fn level_transfers(&self, levels: &std::collections::BTreeSet<u32>) -> BTreeMap<u32, Arc<Transfers>> {
+        let missing: Vec<u32> = {
+            let cache = self.levels.lock().unwrap_or_else(|e| e.into_inner());
+            levels.iter().copied().filter(|l| !cache.1.contains_key(l)).collect()
+        };
+        let made: Vec<(u32, Arc<Transfers>)> = missing
+            .par_iter()
+            .map(|&level| {
+                let optics = Optics { defocus_px: level as f64 * DEFOCUS_STEP_PX, focus_mm: None, ..self.optics };
+                (level, Arc::new(Self::transfers(&optics, self.q, self.margin, &self.fft, &mut FftPlanner::new())))
+            })
+            .collect();
+        let mut cache = self.levels.lock().unwrap_or_else(|e| e.into_inner());
+        cache.0 += 1;
+        let now = cache.0;
+        for (level, t) in made {
+            cache.1.entry(level).or_insert((now, t));
         }
-        if levels.len() >= CACHED_LEVELS {
-            levels.clear();
+        let out: BTreeMap<u32, Arc<Transfers>> = levels
+            .iter()
+            .map(|l| {
+                let entry = cache.1.get_mut(l).expect("made above");
+                entry.0 = now;
+                (*l, entry.1.clone())
+            })
+            .collect();
+        while cache.1.len() > CACHED_LEVELS + levels.len() {
+            let oldest = cache.1.iter().filter(|(l, _)| !levels.contains(l)).min_by_key(|(_, (used, _))| *used);
+            let Some((&level, _)) = oldest else { break };
+            cache.1.remove(&level);
         }
-        let optics = Optics { defocus_px: level as f64 * DEFOCUS_STEP_PX, focus_mm: None, ..self.optics };
-        let mut planner = FftPlanner::new();
-        let t = Arc::new(Self::transfers(&optics, self.q, self.margin, &self.fft, &mut planner));
-        levels.insert(level, t.clone());
-        t
+        out
     }
 
     /// The margin (px) an imager needs for a field whose largest blur circle is `defocus_px`
@@ -295,6 +326,7 @@ impl CoherentImager {
         if defocus_px <= MARGIN_PX as f64 { MARGIN_PX } else { WIDE_MARGIN_PX }
     }
 
+    #[cfg(test)]
     pub fn q(&self) -> usize {
         self.q
     }
@@ -310,13 +342,15 @@ impl CoherentImager {
         let outputs = output_tiles(&keys);
         let mut intensity = vec![vec![0.0; TILE_PX * TILE_PX]; outputs.len()];
         let share = 1.0 / self.patterns as f64;
+        let tile_levels: BTreeMap<(u32, u32), u32> =
+            keys.iter().filter_map(|k| Some((*k, field.tile_defocus_level(*k)?))).collect();
+        let transfers = self.level_transfers(&tile_levels.values().copied().collect());
         for pattern in 0..self.patterns {
             let pattern_seed = mix(surface_seed ^ mix(0x5BEC_0000 + pattern as u64));
             let spectra: Vec<Vec<C32>> = keys
                 .par_iter()
                 .map(|key| {
-                    let level = field.tile_defocus_level(*key).map(|l| self.level_transfers(l));
-                    let transfers = level.as_deref().unwrap_or(&self.transfers);
+                    let transfers = tile_levels.get(key).map_or(&self.transfers, |l| &*transfers[l]);
                     self.tile_spectrum(&field.tiles[key], share, *key, pattern_seed, transfers)
                 })
                 .collect();

@@ -156,7 +156,12 @@ fn a_focus_distance_is_checked_against_the_camera() {
     let focused = lens(Some(91.0), true);
     focused.check_sensor(&sensor).unwrap();
     let near = lens(Some(60.0), true).check_sensor(&sensor).unwrap_err();
-    assert!(near.contains("optics.focus_mm (60 mm)") && near.contains("beyond the 24 px"), "{near}");
+    assert!(
+        near.contains("optics.focus_mm (60 mm)") && near.contains("24 px") && near.contains("focus farther"),
+        "{near}"
+    );
+    let far = lens(Some(400.0), true).check_sensor(&sensor).unwrap_err();
+    assert!(far.contains("focus nearer"), "{far}");
     let mei = omni_model::MeiParams {
         xi: 0.9,
         fx_px: 300.0,

@@ -254,7 +254,7 @@ impl RenderOptions {
         let camera = sensor.camera.as_ref();
         let circle = camera.mirror_circle();
         let focus = optics.focus_mm.unwrap_or_default();
-        let mut worst: Option<(f64, f64)> = None;
+        let mut worst: Option<(f64, f64, Vector2<f64>, f64)> = None;
         for k in 1..64 {
             let rho = circle.inner_radius + (circle.outer_radius - circle.inner_radius) * k as f64 / 64.0;
             for direction in
@@ -263,9 +263,9 @@ impl RenderOptions {
                 let px = circle.centre + direction * rho;
                 for distance in [50.0, 1e4] {
                     if let Some(sigma) = camera.defocus_sigma_px(&px, distance, optics)
-                        && worst.is_none_or(|(w, _)| 4.0 * sigma > w)
+                        && worst.is_none_or(|(w, ..)| 4.0 * sigma > w)
                     {
-                        worst = Some((4.0 * sigma, rho));
+                        worst = Some((4.0 * sigma, rho, px, distance));
                     }
                 }
             }
@@ -275,12 +275,20 @@ impl RenderOptions {
                 "optics.focus_mm ({focus} mm) needs a camera model that holds the mirror's geometry \
                  (hyperbolic); this camera's model does not, so give defocus_px instead"
             )),
-            Some((diameter, rho)) if diameter > MAX_DEFOCUS_PX => Err(format!(
-                "optics.focus_mm ({focus} mm) blurs the image {rho:.0} px from its centre by a circle of \
-                 {diameter:.1} px, beyond the {MAX_DEFOCUS_PX} px the renderer images: focus nearer the \
-                 mirror's middle or close the lens (F/{})",
-                optics.f_number
-            )),
+            Some((diameter, rho, px, distance)) if diameter > MAX_DEFOCUS_PX => {
+                // Which way the focus moves that part of the image towards sharpness.
+                let farther = Optics { focus_mm: Some(focus * 1.01), ..*optics };
+                let way = match camera.defocus_sigma_px(&px, distance, &farther) {
+                    Some(s) if 4.0 * s < diameter => "farther",
+                    _ => "nearer",
+                };
+                Err(format!(
+                    "optics.focus_mm ({focus} mm) blurs the image {rho:.0} px from its centre by a circle of \
+                     {diameter:.1} px, beyond the {MAX_DEFOCUS_PX} px the renderer images: focus {way} or close \
+                     the lens (F/{})",
+                    optics.f_number
+                ))
+            }
             Some(_) => Ok(()),
         }
     }
@@ -661,15 +669,8 @@ fn render_light(
         d.par_iter().map(|d| diffraction.hypot(0.25 * d)).collect::<Vec<f64>>()
     });
     let psf = FramePsfs::new(opts.imaging.psf_sigma_px(), sigmas.as_deref(), n, w);
-    let imager = opts.imaging.coherent().filter(|_| !slices.is_empty()).map(|optics| match &defocus {
-        None => coherent_imager(optics, crate::coherent::MARGIN_PX),
-        Some(d) => {
-            let widest = d.iter().copied().fold(0.0, f64::max).min(MAX_DEFOCUS_PX);
-            let flat = Optics { defocus_px: 0.0, focus_mm: None, ..*optics };
-            coherent_imager(&flat, CoherentImager::margin_for(widest))
-        }
-    });
-    let q = imager.as_ref().map(|i| i.q());
+    let coherent = opts.imaging.coherent().filter(|_| !slices.is_empty());
+    let q = coherent.map(CoherentImager::samples_per_px);
     // A sheet wide against the pixel (its plane distance changing by less than σ/2 across it)
     // is smooth there: 2 × 2 samples (the coherent imager's q × q) integrate it, each box-filtered.
     let n_coarse = q.unwrap_or(2).min(n);
@@ -769,7 +770,7 @@ fn render_light(
         add_patches(&mut img, rows.iter().map(|r| &r.laser_patches), w, h);
         img
     });
-    if let (Some(imager), Some(q)) = (imager, q) {
+    if let (Some(optics), Some(q)) = (coherent, q) {
         let mut field = LaserField::new(q);
         for (y, row) in rows.iter().enumerate() {
             for (x, energies) in &row.laser {
@@ -779,6 +780,14 @@ fn render_light(
                 }
             }
         }
+        // With the defocus varying, the PSF reaches as far as the laser's widest blur needs.
+        let imager = match &defocus {
+            None => coherent_imager(optics, crate::coherent::MARGIN_PX),
+            Some(_) => {
+                let flat = Optics { defocus_px: 0.0, focus_mm: None, ..*optics };
+                coherent_imager(&flat, CoherentImager::margin_for(field.max_tile_defocus_px()))
+            }
+        };
         imager.image_into(&field, laser_out.as_mut().unwrap_or(&mut out), w, h, surface_seed(opts.seed));
     }
     (out, laser_out)
@@ -822,8 +831,9 @@ fn coherent_imager(optics: &Optics, margin: usize) -> Arc<CoherentImager> {
 }
 
 /// Each pixel's blur circle diameter (px) through `optics` focused at its focus distance: the
-/// camera's defocus at the pixel's centre for the mean distance of what its corners see (0 where
-/// they see nothing).
+/// camera's defocus at the pixel's centre for the mean distance of what its corners see; where
+/// the centre has no ray (a pixel across the mirror's rim or blind centre), the mean of its
+/// seeing corners' own; 0 where no corner sees anything.
 fn pixel_defocus(
     camera: &dyn omni_model::CameraModel,
     optics: &Optics,
@@ -842,15 +852,19 @@ fn pixel_defocus(
                     corners[(y + 1) * cw + x],
                     corners[(y + 1) * cw + x + 1],
                 ];
-                let (sum, count) = c
-                    .iter()
-                    .filter(|k| k.distance.is_finite())
-                    .fold((0.0, 0usize), |(s, n), k| (s + k.distance, n + 1));
+                let seeing = || c.iter().enumerate().filter(|(_, k)| k.distance.is_finite());
+                let count = seeing().count();
                 if count == 0 {
                     return 0.0;
                 }
-                let px = Vector2::new(x as f64, y as f64);
-                let sigma = camera.defocus_sigma_px(&px, sum / count as f64, optics).unwrap_or(0.0);
+                let mean = seeing().map(|(_, k)| k.distance).sum::<f64>() / count as f64;
+                let centre = Vector2::new(x as f64, y as f64);
+                let sigma = camera.defocus_sigma_px(&centre, mean, optics).unwrap_or_else(|| {
+                    let corner = |i: usize| centre + Vector2::new((i % 2) as f64 - 0.5, (i / 2) as f64 - 0.5);
+                    let sigmas: Vec<f64> =
+                        seeing().filter_map(|(i, k)| camera.defocus_sigma_px(&corner(i), k.distance, optics)).collect();
+                    sigmas.iter().sum::<f64>() / sigmas.len().max(1) as f64
+                });
                 (4.0 * sigma).min(MAX_DEFOCUS_PX)
             })
         })
@@ -897,9 +911,9 @@ impl FramePsfs {
         self.psfs[level].as_ref().expect("every pixel's level has its PSF")
     }
 
-    /// Separable discrete convolution of the centre-sampled image with each output pixel's K
-    /// (zero outside): with one PSF, the convolution; with a PSF varying slowly over the image,
-    /// its gather form, which keeps a constant field constant.
+    /// Separable discrete convolution of the centre-sampled image with K (zero outside): with
+    /// one PSF, the convolution; with a PSF varying slowly over the image, a gather form (each
+    /// pass with the kernel of the pixel it computes), which keeps a constant field constant.
     fn convolve_centres(&self, img: &[f64], w: usize, h: usize) -> Vec<f64> {
         let mut tmp = vec![0.0; w * h];
         tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
@@ -1355,5 +1369,44 @@ mod tests {
             let uniform = 3.0 * psf.centre[k / side] * psf.centre[k % side];
             assert!((v - uniform).abs() < 1e-12, "offset {k}: supersampled {v}, uniform {uniform}");
         }
+    }
+
+    /// A pixel across the mirror's rim (its centre beyond it, a corner inside) is blurred like
+    /// its neighbours inside, not left sharp for want of a ray at its centre.
+    #[test]
+    fn pixels_across_the_rim_take_their_corners_defocus() {
+        let sensor = Sensor::paper();
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../testdata/scenes/room.json");
+        let scene = Scene::load(std::path::Path::new(path)).unwrap();
+        let optics = Optics { defocus_px: 0.0, focus_mm: Some(91.0), ..Optics::paper() };
+        let opts = RenderOptions::default().with_optics(optics);
+        let shader = Shader { scene: &scene, slices: &[], shape: None, flat_across: false, opts: &opts };
+        let camera = sensor.camera.as_ref();
+        let (w, h) = (1024usize, 1024usize);
+        let corners: Vec<CornerKey> = (0..=h)
+            .flat_map(|cy| (0..=w).map(move |cx| (cx, cy)))
+            .map(|(cx, cy)| shader.corner(camera, Vector2::new(cx as f64 - 0.5, cy as f64 - 0.5)))
+            .collect();
+        let defocus = pixel_defocus(camera, &optics, &corners, w, h);
+        let circle = camera.mirror_circle();
+        let (mut across, mut inside) = (vec![], vec![]);
+        for y in 0..h {
+            for x in 0..w {
+                let r = (Vector2::new(x as f64, y as f64) - circle.centre).norm();
+                if r > circle.outer_radius && r < circle.outer_radius + 0.7 && defocus[y * w + x] > 0.0 {
+                    across.push(defocus[y * w + x]);
+                } else if (circle.outer_radius - 3.0..circle.outer_radius - 1.0).contains(&r) {
+                    inside.push(defocus[y * w + x]);
+                }
+            }
+        }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        eprintln!(
+            "{} pixels across the rim: blur circle {:.2} px, inside {:.2} px",
+            across.len(),
+            mean(&across),
+            mean(&inside)
+        );
+        assert!(across.len() > 500 && (mean(&across) / mean(&inside) - 1.0).abs() < 0.05);
     }
 }

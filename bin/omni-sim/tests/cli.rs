@@ -254,6 +254,15 @@ fn optics_out_of_range_name_the_field() {
     std::fs::write(d.join("sensor/camera.json"), serde_json::to_vec(&camera).unwrap()).unwrap();
     assert_eq!(frame(&[]), focused);
     assert_eq!(frame(&["--defocus-px", "1.5"]), plain);
+    // `sensor --focus-mm` writes that camera file; an impossible focus writes nothing.
+    ok(&sim(&["sensor", "--width", "256", "--focus-mm", "85", "-o", "focused"], d));
+    let written: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("focused/camera.json")).unwrap()).unwrap();
+    assert_eq!(written["optics"], camera["optics"]);
+    let out = sim(&["sensor", "--width", "256", "--focus-mm", "5", "-o", "blurred"], d);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("--focus-mm") && err.contains("focus farther") && !d.join("blurred").exists(), "{err}");
 }
 
 #[test]

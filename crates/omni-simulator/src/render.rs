@@ -915,31 +915,24 @@ impl FramePsfs {
     /// one PSF, the convolution; with a PSF varying slowly over the image, a gather form (each
     /// pass with the kernel of the pixel it computes), which keeps a constant field constant.
     fn convolve_centres(&self, img: &[f64], w: usize, h: usize) -> Vec<f64> {
-        let mut tmp = vec![0.0; w * h];
-        tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            for (x, out) in row.iter_mut().enumerate() {
-                let psf = self.at(x, y);
-                let r = psf.radius as isize;
-                let mut s = 0.0;
-                for (i, kv) in psf.centre.iter().enumerate() {
-                    let xx = x as isize + i as isize - r;
-                    if xx >= 0 && xx < w as isize {
-                        s += kv * img[y * w + xx as usize];
-                    }
-                }
-                *out = s;
-            }
-        });
+        let rows = self.convolve_along(img, w, h, false);
+        self.convolve_along(&rows, w, h, true)
+    }
+
+    /// One pass of [`Self::convolve_centres`]: along the columns if `vertical`, else the rows.
+    fn convolve_along(&self, img: &[f64], w: usize, h: usize, vertical: bool) -> Vec<f64> {
         let mut out = vec![0.0; w * h];
         out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
             for (x, o) in row.iter_mut().enumerate() {
                 let psf = self.at(x, y);
                 let r = psf.radius as isize;
+                // The pixel's place along the pass, the pass's length, and where its line starts.
+                let (at, len, stride, start) = if vertical { (y, h, w, x) } else { (x, w, 1, y * w) };
                 let mut s = 0.0;
                 for (i, kv) in psf.centre.iter().enumerate() {
-                    let yy = y as isize + i as isize - r;
-                    if yy >= 0 && yy < h as isize {
-                        s += kv * tmp[yy as usize * w + x];
+                    let p = at as isize + i as isize - r;
+                    if p >= 0 && p < len as isize {
+                        s += kv * img[start + p as usize * stride];
                     }
                 }
                 *o = s;

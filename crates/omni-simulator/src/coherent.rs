@@ -287,10 +287,12 @@ impl CoherentImager {
     /// used beyond [`CACHED_LEVELS`] are dropped, never one of `levels`; the transfers are a
     /// function of the level alone, so what is kept changes no image.
     fn level_transfers(&self, levels: &std::collections::BTreeSet<u32>) -> BTreeMap<u32, Arc<Transfers>> {
-        let missing: Vec<u32> = {
+        // Those kept are taken (shared) at once: another frame may drop them from the cache.
+        let mut out: BTreeMap<u32, Arc<Transfers>> = {
             let cache = self.levels.lock().unwrap_or_else(|e| e.into_inner());
-            levels.iter().copied().filter(|l| !cache.1.contains_key(l)).collect()
+            levels.iter().filter_map(|l| Some((*l, cache.1.get(l)?.1.clone()))).collect()
         };
+        let missing: Vec<u32> = levels.iter().copied().filter(|l| !out.contains_key(l)).collect();
         let made: Vec<(u32, Arc<Transfers>)> = missing
             .par_iter()
             .map(|&level| {
@@ -302,16 +304,14 @@ impl CoherentImager {
         cache.0 += 1;
         let now = cache.0;
         for (level, t) in made {
-            cache.1.entry(level).or_insert((now, t));
+            out.insert(level, t.clone());
+            cache.1.insert(level, (now, t));
         }
-        let out: BTreeMap<u32, Arc<Transfers>> = levels
-            .iter()
-            .map(|l| {
-                let entry = cache.1.get_mut(l).expect("made above");
+        for level in levels {
+            if let Some(entry) = cache.1.get_mut(level) {
                 entry.0 = now;
-                (*l, entry.1.clone())
-            })
-            .collect();
+            }
+        }
         while cache.1.len() > CACHED_LEVELS + levels.len() {
             let oldest = cache.1.iter().filter(|(l, _)| !levels.contains(l)).min_by_key(|(_, (used, _))| *used);
             let Some((&level, _)) = oldest else { break };
@@ -737,5 +737,35 @@ mod tests {
         eprintln!("energy {sharp_energy:.4} / {energy:.4}, variance across {sharp:.3} → {blurred:.3} px²");
         assert!((energy - 1.0).abs() < 0.02 && (sharp_energy - 1.0).abs() < 0.02, "{sharp_energy} {energy}");
         assert!(((blurred - sharp) / 25.0 - 1.0).abs() < 0.1, "variance across {sharp:.3} → {blurred:.3} px²");
+    }
+
+    /// Two frames of 40 tiles each, every tile with its own defocus level, more than the imager
+    /// keeps: the first frame imaged again after the second (some of its levels dropped and made
+    /// again) and by a fresh imager gives the same image.
+    #[test]
+    fn the_defocus_levels_kept_change_no_image() {
+        let optics = Optics { defocus_px: 0.0, speckle_patterns: 1, ..Optics::paper() };
+        let imager = CoherentImager::with_margin(&optics, MARGIN_PX);
+        let q = imager.q();
+        let cells = vec![CellLight::uniform(100.0 / (q * q) as f64, q); q * q];
+        let (w, h) = (40 * TILE_PX, 24);
+        let image = |imager: &CoherentImager, first_level: usize| {
+            let mut field = LaserField::new(q);
+            for tile in 0..40 {
+                let defocus = (first_level + tile) as f64 * DEFOCUS_STEP_PX;
+                for x in 0..TILE_PX {
+                    field.add_defocused_pixel(tile * TILE_PX + x, 8, &cells, defocus);
+                }
+            }
+            let mut out = vec![0.0; w * h];
+            imager.image_into(&field, &mut out, w, h, 5);
+            out
+        };
+        let first = image(&imager, 0);
+        image(&imager, 40);
+        let kept = imager.levels.lock().unwrap().1.len();
+        assert!(kept <= CACHED_LEVELS + 40, "{kept} levels kept");
+        assert_eq!(first, image(&imager, 0));
+        assert_eq!(first, image(&CoherentImager::with_margin(&optics, MARGIN_PX), 0));
     }
 }

@@ -450,8 +450,6 @@ struct CornerKey {
     /// The slice whose plane is nearest in units of its σ, and the plane distance (mm).
     nearest: u32,
     dist: f64,
-    /// The hit's distance along the ray (mm); NaN for no hit.
-    distance: f64,
 }
 
 impl Shader<'_> {
@@ -465,7 +463,6 @@ impl Shader<'_> {
             laser: 0.0,
             nearest: u32::MAX,
             dist: 0.0,
-            distance: f64::NAN,
         };
         let Some(ray) = camera.pixel_to_ray(&px) else { return none };
         let Some(hit) = self.scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY) else { return none };
@@ -501,7 +498,6 @@ impl Shader<'_> {
             laser,
             nearest,
             dist,
-            distance: hit.t,
         }
     }
 
@@ -663,7 +659,7 @@ fn render_light(
         })
         .collect();
     let n = opts.supersample.max(1) as usize;
-    let defocus = opts.imaging.field_optics().map(|optics| pixel_defocus(camera, optics, &corners, w, h));
+    let defocus = opts.imaging.field_optics().map(|optics| pixel_defocus(camera, scene, optics, w, h));
     let sigmas = defocus.as_ref().map(|d| {
         let diffraction = opts.imaging.psf_sigma_px();
         d.par_iter().map(|d| diffraction.hypot(0.25 * d)).collect::<Vec<f64>>()
@@ -831,38 +827,43 @@ fn coherent_imager(optics: &Optics, margin: usize) -> Arc<CoherentImager> {
 }
 
 /// Each pixel's blur circle diameter (px) through `optics` focused at its focus distance: the
-/// camera's defocus at the pixel's centre for the mean distance of what its corners see; where
-/// the centre has no ray (a pixel across the mirror's rim or blind centre), the mean of its
-/// seeing corners' own; 0 where no corner sees anything.
-fn pixel_defocus(
-    camera: &dyn omni_model::CameraModel,
-    optics: &Optics,
-    corners: &[CornerKey],
-    w: usize,
-    h: usize,
-) -> Vec<f64> {
+/// camera's defocus at the pixel's centre for the mean distance (along their rays) of what its
+/// corners see; where the centre has no ray (a pixel across the mirror's rim or blind centre),
+/// the mean of its seeing corners' own; 0 where no corner sees anything.
+fn pixel_defocus(camera: &dyn omni_model::CameraModel, scene: &Scene, optics: &Optics, w: usize, h: usize) -> Vec<f64> {
+    // The corners' distances (NaN: nothing seen), kept apart from the corners' keys, which every
+    // frame holds.
     let cw = w + 1;
+    let distances: Vec<f32> = (0..=h)
+        .into_par_iter()
+        .flat_map_iter(|cy| {
+            (0..=w).map(move |cx| {
+                let px = Vector2::new(cx as f64 - 0.5, cy as f64 - 0.5);
+                camera
+                    .pixel_to_ray(&px)
+                    .and_then(|ray| scene.cast(&ray.origin, &ray.dir, 1e-6, f64::INFINITY))
+                    .map_or(f32::NAN, |hit| hit.t as f32)
+            })
+        })
+        .collect();
     (0..h)
         .into_par_iter()
         .flat_map_iter(|y| {
+            let distances = &distances;
             (0..w).map(move |x| {
-                let c = [
-                    corners[y * cw + x],
-                    corners[y * cw + x + 1],
-                    corners[(y + 1) * cw + x],
-                    corners[(y + 1) * cw + x + 1],
-                ];
-                let seeing = || c.iter().enumerate().filter(|(_, k)| k.distance.is_finite());
+                let c =
+                    [y * cw + x, y * cw + x + 1, (y + 1) * cw + x, (y + 1) * cw + x + 1].map(|i| distances[i] as f64);
+                let seeing = || c.iter().copied().enumerate().filter(|(_, d)| d.is_finite());
                 let count = seeing().count();
                 if count == 0 {
                     return 0.0;
                 }
-                let mean = seeing().map(|(_, k)| k.distance).sum::<f64>() / count as f64;
+                let mean = seeing().map(|(_, d)| d).sum::<f64>() / count as f64;
                 let centre = Vector2::new(x as f64, y as f64);
                 let sigma = camera.defocus_sigma_px(&centre, mean, optics).unwrap_or_else(|| {
                     let corner = |i: usize| centre + Vector2::new((i % 2) as f64 - 0.5, (i / 2) as f64 - 0.5);
                     let sigmas: Vec<f64> =
-                        seeing().filter_map(|(i, k)| camera.defocus_sigma_px(&corner(i), k.distance, optics)).collect();
+                        seeing().filter_map(|(i, d)| camera.defocus_sigma_px(&corner(i), d, optics)).collect();
                     sigmas.iter().sum::<f64>() / sigmas.len().max(1) as f64
                 });
                 (4.0 * sigma).min(MAX_DEFOCUS_PX)
@@ -1372,15 +1373,9 @@ mod tests {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../testdata/scenes/room.json");
         let scene = Scene::load(std::path::Path::new(path)).unwrap();
         let optics = Optics { defocus_px: 0.0, focus_mm: Some(91.0), ..Optics::paper() };
-        let opts = RenderOptions::default().with_optics(optics);
-        let shader = Shader { scene: &scene, slices: &[], shape: None, flat_across: false, opts: &opts };
         let camera = sensor.camera.as_ref();
         let (w, h) = (1024usize, 1024usize);
-        let corners: Vec<CornerKey> = (0..=h)
-            .flat_map(|cy| (0..=w).map(move |cx| (cx, cy)))
-            .map(|(cx, cy)| shader.corner(camera, Vector2::new(cx as f64 - 0.5, cy as f64 - 0.5)))
-            .collect();
-        let defocus = pixel_defocus(camera, &optics, &corners, w, h);
+        let defocus = pixel_defocus(camera, &scene, &optics, w, h);
         let circle = camera.mirror_circle();
         let (mut across, mut inside) = (vec![], vec![]);
         for y in 0..h {

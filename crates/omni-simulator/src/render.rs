@@ -667,6 +667,9 @@ fn render_light(
     let psf = FramePsfs::new(opts.imaging.psf_sigma_px(), sigmas.as_deref(), n, w);
     let coherent = opts.imaging.coherent().filter(|_| !slices.is_empty());
     let q = coherent.map(CoherentImager::samples_per_px);
+    // One defocus for the frame: its imager is known before the light is (and made, the first
+    // time, before the frame's large buffers, which keeps the heap's peak where it was).
+    let one_imager = coherent.filter(|_| defocus.is_none()).map(|o| coherent_imager(o, crate::coherent::MARGIN_PX));
     // A sheet wide against the pixel (its plane distance changing by less than σ/2 across it)
     // is smooth there: 2 × 2 samples (the coherent imager's q × q) integrate it, each box-filtered.
     let n_coarse = q.unwrap_or(2).min(n);
@@ -777,13 +780,10 @@ fn render_light(
             }
         }
         // With the defocus varying, the PSF reaches as far as the laser's widest blur needs.
-        let imager = match &defocus {
-            None => coherent_imager(optics, crate::coherent::MARGIN_PX),
-            Some(_) => {
-                let flat = Optics { defocus_px: 0.0, focus_mm: None, ..*optics };
-                coherent_imager(&flat, CoherentImager::margin_for(field.max_tile_defocus_px()))
-            }
-        };
+        let imager = one_imager.unwrap_or_else(|| {
+            let flat = Optics { defocus_px: 0.0, focus_mm: None, ..*optics };
+            coherent_imager(&flat, CoherentImager::margin_for(field.max_tile_defocus_px()))
+        });
         imager.image_into(&field, laser_out.as_mut().unwrap_or(&mut out), w, h, surface_seed(opts.seed));
     }
     (out, laser_out)

@@ -161,8 +161,8 @@ struct RenderArgs {
     /// Focus the lens on the plane this far ahead of it (mm, along its axis; default:
     /// camera.json's optics) instead of one --defocus-px for the whole image: the mirror's
     /// virtual image of the scene is curved, so the frame is sharp along one ring and blurs on
-    /// either side of it, more for nearer surfaces. The paper's sensor is sharpest at 250 px
-    /// from the centre when focused at 91 mm and at 310 px at 100 mm. Needs a hyperbolic camera;
+    /// either side of it, more for nearer surfaces. The paper's sensor is sharpest about 243 px
+    /// from the centre when focused at 91 mm and 320 px at 100 mm. Needs a hyperbolic camera;
     /// --defocus-px or --blur-px instead sets one blur for the frame, whatever camera.json says.
     #[arg(long, value_name = "MM", allow_negative_numbers = true)]
     focus_mm: Option<f64>,
@@ -202,7 +202,8 @@ struct StripeArgs {
     beam_fwhm_mm: Option<f64>,
     /// Make each laser's stripe this wide (FWHM in px, the optics' blur and the pixel included)
     /// at the middle of its stripe, frame by frame, by setting the sheet's width (2–20 px are
-    /// what real sensors show).
+    /// what real sensors show). With a lens focused at a distance (--focus-mm), a stripe whose
+    /// middle the lens alone blurs wider keeps the sheet of --beam-fwhm-mm.
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     stripe_fwhm_px: Option<f64>,
     /// Blooming: charge above the full well spills along the `columns` or `rows` into the next
@@ -403,6 +404,15 @@ impl RenderArgs {
         let base = RenderOptions::calibration();
         let base = if self.ideal { RenderOptions { imaging: RenderOptions::ideal().imaging, ..base } } else { base };
         self.options_from(base, camera_optics)
+    }
+
+    /// Checks that the camera in `camera_path` can render `opts` ([`RenderOptions::check_sensor`]):
+    /// a usage error when the focus came from --focus-mm, else a data error naming the file.
+    fn check_sensor(&self, opts: &RenderOptions, sensor: &Sensor, camera_path: &Path) -> CliResult {
+        opts.check_sensor(sensor).map_err(|e| match self.focus_mm {
+            Some(_) => CliError::usage(format!("--focus-mm: {e}")),
+            None => CliError::new(format!("{}: {e}", camera_path.display())),
+        })
     }
 
     /// Options on top of `d`.
@@ -645,7 +655,7 @@ fn sensor(a: SensorArgs) -> CliResult {
     let (cam, tx) = paper_preset(a.width, &imp).map_err(CliError::usage)?;
     // A smaller image keeps the pixel (and so its blur and speckle in pixels) with a shorter lens.
     let optics = match a.focus_mm {
-        Some(focus) => Optics { defocus_px: 0.0, focus_mm: Some(focus), ..Optics::paper() },
+        Some(focus) => Optics::paper().focused_at(focus),
         None => Optics::paper(),
     };
     optics.validate().map_err(|e| CliError::usage(format!("--focus-mm: {e}")))?;
@@ -725,7 +735,7 @@ fn scan(a: ScanArgs) -> CliResult {
     let (sensor, optics) = Sensor::load_with_optics(&a.camera, &a.scanner)?;
     let colour = CameraFile::load(&a.camera)?.0.colour;
     let opts = a.render.options(optics, colour.as_ref())?;
-    opts.check_sensor(&sensor).map_err(CliError::usage)?;
+    a.render.check_sensor(&opts, &sensor, &a.camera)?;
     let format = a.render.stripe.frame_format()?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
     check_facet_and_angles(&sensor, a.facet, &angles)?;
@@ -753,7 +763,7 @@ fn boards(a: BoardsArgs) -> CliResult {
     }
     // The transmitter plays no part in board images; the paper's stands in.
     let sensor = Sensor { camera, transmitter: Sensor::paper().transmitter };
-    opts.check_sensor(&sensor).map_err(CliError::usage)?;
+    a.render.check_sensor(&opts, &sensor, &a.camera)?;
     let poses = random_board_poses(&sensor, &board, a.count, opts.seed).map_err(CliError::new)?;
     omni_cli::create_output_dir("--out", &a.out)?;
     let bar = omni_cli::progress(Some(poses.len() as u64), "boards");
@@ -780,7 +790,7 @@ fn rig(a: RigArgs) -> CliResult {
     let (sensor, optics) = Sensor::load_with_optics(&a.camera, &a.scanner)?;
     let colour = CameraFile::load(&a.camera)?.0.colour;
     let opts = a.render.options(optics, colour.as_ref())?;
-    opts.check_sensor(&sensor).map_err(CliError::usage)?;
+    a.render.check_sensor(&opts, &sensor, &a.camera)?;
     let format = a.render.stripe.frame_format()?;
     let angles = parse_angles(&a.angles).map_err(|e| CliError::usage(format!("--angles: {e}")))?;
     check_facet_and_angles(&sensor, a.facet, &angles)?;

@@ -403,7 +403,8 @@ impl CameraModel for HyperbolicCamera {
     /// The thin lens focused on the plane at `focus_mm` blurs a point at axial distance z into a
     /// disc of diameter 2R·f·|1/focus − 1/z| (px). [`HyperbolicCamera::defocus_spot`] traces it
     /// exactly. Exact for the ideal build: with the camera off the focus the pencil is
-    /// astigmatic and this lies between its two foci.
+    /// astigmatic and this lies between its two foci. A distance that does not reach past the
+    /// mirror (0, say) gives the blur of the mirror's own surface, where its rim cuts the view.
     fn defocus_sigma_px(&self, px: &Vector2<f64>, distance_mm: f64, optics: &crate::Optics) -> Option<f64> {
         let focus = optics.focus_mm?;
         let f_px = 0.5 * (self.params.fx_px + self.params.fy_px);
@@ -411,8 +412,9 @@ impl CameraModel for HyperbolicCamera {
         let m = self.mirror_point(px)?;
         let to_mirror = m - self.centre;
         let (mo, mf) = (to_mirror.norm(), (m - self.viewpoint()).norm());
-        let d = (ray.at(distance_mm) - m).norm();
-        let v = 1.0 / (1.0 / mf - 1.0 / mo + 1.0 / d);
+        let point = ray.at(distance_mm);
+        let v =
+            if (point - m).dot(&ray.dir) > 0.0 { 1.0 / (1.0 / mf - 1.0 / mo + 1.0 / (point - m).norm()) } else { 0.0 };
         let axial = (to_mirror * (1.0 + v / mo)).dot(&(self.rot * Vector3::z()));
         let diameter = 2.0 * optics.pupil_radius_mm(f_px) * f_px * (1.0 / focus - 1.0 / axial).abs();
         Some(diameter / 4.0)
@@ -504,7 +506,7 @@ mod defocus_tests {
     use crate::Optics;
 
     fn focused(focus_mm: f64) -> Optics {
-        Optics { defocus_px: 0.0, focus_mm: Some(focus_mm), ..Optics::paper() }
+        Optics::paper().focused_at(focus_mm)
     }
 
     /// The closed form (Coddington's mirror equation and a thin lens) against the exact trace of
@@ -555,5 +557,15 @@ mod defocus_tests {
         assert!(near.0 < 0.02 && far.0 < 0.02, "{near:?} {far:?}");
         assert!(near.1 < far.1, "{near:?} {far:?}");
         assert!(cam.defocus_sigma_px(&Vector2::new(800.0, 511.5), 1000.0, &Optics::paper()).is_none());
+        // At distance 0 the mirror's own surface: a real object at the mirror point's height.
+        let px = Vector2::new(511.5 + 480.0, 511.5);
+        let optics = focused(91.0);
+        let m = cam.mirror_point(&px).unwrap();
+        let want = 2.0 * optics.pupil_radius_mm(1950.0) * 1950.0 * (1.0 / 91.0 - 1.0 / m.z).abs() / 4.0;
+        let got = cam.defocus_sigma_px(&px, 0.0, &optics).unwrap();
+        assert!(
+            (got - want).abs() < 1e-9 && got < 0.5 * cam.defocus_sigma_px(&px, 1000.0, &optics).unwrap(),
+            "{got} {want}"
+        );
     }
 }

@@ -128,6 +128,18 @@ impl Optics {
         self.focal_length_mm(f_px) / (2.0 * self.f_number)
     }
 
+    /// The same optics focused on the plane `focus_mm` ahead of the lens (mm), the defocus then
+    /// varying over the image (`defocus_px` 0).
+    pub fn focused_at(self, focus_mm: f64) -> Optics {
+        Optics { defocus_px: 0.0, focus_mm: Some(focus_mm), ..self }
+    }
+
+    /// σ of the optical PSF (px) with a blur circle of `defocus_px` across: diffraction and
+    /// that defocus.
+    pub fn psf_sigma_with_defocus(&self, defocus_px: f64) -> f64 {
+        self.diffraction_sigma_px().hypot(defocus_px / 4.0)
+    }
+
     /// Whether the defocus varies over the image (a focus distance is given) rather than being
     /// the one figure `defocus_px`.
     pub fn field_dependent(&self) -> bool {
@@ -137,7 +149,7 @@ impl Optics {
     /// σ of the optical PSF, diffraction and the constant defocus `defocus_px` (px); the pixel
     /// area comes on top. With a focus distance this is the sharpest the image gets.
     pub fn psf_sigma_px(&self) -> f64 {
-        self.diffraction_sigma_px().hypot(self.defocus_sigma_px())
+        self.psf_sigma_with_defocus(self.defocus_px)
     }
 
     /// The same optics with the defocus that makes the optical PSF's σ equal `sigma_px`; an error

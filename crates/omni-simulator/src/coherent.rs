@@ -43,8 +43,32 @@ pub(crate) const WIDE_MARGIN_PX: usize = TILE_PX;
 /// The largest blur circle (px across) the wide margin holds.
 pub(crate) const MAX_DEFOCUS_PX: f64 = 24.0;
 /// A tile's defocus is rounded to this step (px of blur circle diameter; a wavefront error of
-/// 0.045 waves at F/4, 4.65 µm pixels and 650 nm).
+/// 0.045 waves at F/4, 4.65 µm pixels and 650 nm) up to [`LINEAR_LEVELS`] steps, and beyond to
+/// a ratio of [`DEFOCUS_RATIO`]: a wide blur needs no finer grading, and fewer levels keep
+/// fewer transfers.
 pub(crate) const DEFOCUS_STEP_PX: f64 = 0.2;
+const LINEAR_LEVELS: u32 = 20;
+const DEFOCUS_RATIO: f64 = 1.05;
+
+/// The defocus level of a blur circle `diameter` px across ([`DEFOCUS_STEP_PX`]).
+fn defocus_level(diameter: f64) -> u32 {
+    let linear_end = LINEAR_LEVELS as f64 * DEFOCUS_STEP_PX;
+    if diameter <= linear_end {
+        (diameter / DEFOCUS_STEP_PX).round() as u32
+    } else {
+        LINEAR_LEVELS + ((diameter / linear_end).ln() / DEFOCUS_RATIO.ln()).round() as u32
+    }
+}
+
+/// The blur circle (px across) of defocus level `level`.
+fn level_diameter(level: u32) -> f64 {
+    let linear_end = LINEAR_LEVELS as f64 * DEFOCUS_STEP_PX;
+    if level <= LINEAR_LEVELS {
+        level as f64 * DEFOCUS_STEP_PX
+    } else {
+        linear_end * DEFOCUS_RATIO.powi((level - LINEAR_LEVELS) as i32)
+    }
+}
 /// How many defocus levels' transfers an imager keeps beyond those of the frame it images.
 const CACHED_LEVELS: usize = 32;
 
@@ -143,18 +167,17 @@ impl LaserField {
         acc.1 += energy;
     }
 
-    /// Tile `key`'s blur circle diameter (px): its light's mean, rounded to
-    /// [`DEFOCUS_STEP_PX`] and at most [`MAX_DEFOCUS_PX`]; `None` if the field's defocus is
-    /// one for the whole image.
+    /// Tile `key`'s defocus level ([`defocus_level`]): its light's mean blur circle, at most
+    /// [`MAX_DEFOCUS_PX`]; `None` if the field's defocus is one for the whole image.
     fn tile_defocus_level(&self, key: (u32, u32)) -> Option<u32> {
         let (sum, energy) = *self.defocus.get(&key)?;
         let diameter = if energy > 0.0 { (sum / energy).min(MAX_DEFOCUS_PX) } else { 0.0 };
-        Some((diameter / DEFOCUS_STEP_PX).round() as u32)
+        Some(defocus_level(diameter))
     }
 
     /// The largest blur circle (px across) of any tile; 0 for one defocus over the image.
     pub fn max_tile_defocus_px(&self) -> f64 {
-        self.tiles.keys().filter_map(|k| self.tile_defocus_level(*k)).max().unwrap_or(0) as f64 * DEFOCUS_STEP_PX
+        level_diameter(self.tiles.keys().filter_map(|k| self.tile_defocus_level(*k)).max().unwrap_or(0))
     }
 
     /// Adds pixel (x, y)'s q × q cells (row-major).
@@ -191,7 +214,7 @@ pub(crate) struct CoherentImager {
     optics: Optics,
     /// The transfers of the optics' own defocus.
     transfers: Transfers,
-    /// Those of other defocus levels (blur circle diameter in [`DEFOCUS_STEP_PX`]), made when a
+    /// Those of other defocus levels ([`defocus_level`]), made when a
     /// field with defocus varying over the image first needs them, each with when it was last
     /// used (the count of frames imaged).
     levels: Mutex<LevelCache>,
@@ -282,8 +305,7 @@ impl CoherentImager {
         ])
     }
 
-    /// The transfers of defocus levels `levels` (blur circles of `level` · [`DEFOCUS_STEP_PX`] px
-    /// across): those kept from earlier frames, the others made in parallel. The least recently
+    /// The transfers of defocus levels `levels` ([`level_diameter`]): those kept from earlier frames, the others made in parallel. The least recently
     /// used beyond [`CACHED_LEVELS`] are dropped, never one of `levels`; the transfers are a
     /// function of the level alone, so what is kept changes no image.
     fn level_transfers(&self, levels: &std::collections::BTreeSet<u32>) -> BTreeMap<u32, Arc<Transfers>> {
@@ -296,7 +318,7 @@ impl CoherentImager {
         let made: Vec<(u32, Arc<Transfers>)> = missing
             .par_iter()
             .map(|&level| {
-                let optics = Optics { defocus_px: level as f64 * DEFOCUS_STEP_PX, focus_mm: None, ..self.optics };
+                let optics = Optics { defocus_px: level_diameter(level), focus_mm: None, ..self.optics };
                 (level, Arc::new(Self::transfers(&optics, self.q, self.margin, &self.fft, &mut FftPlanner::new())))
             })
             .collect();
@@ -739,20 +761,25 @@ mod tests {
         assert!(((blurred - sharp) / 25.0 - 1.0).abs() < 0.1, "variance across {sharp:.3} → {blurred:.3} px²");
     }
 
-    /// Two frames of 40 tiles each, every tile with its own defocus level, more than the imager
-    /// keeps: the first frame imaged again after the second (some of its levels dropped and made
-    /// again) and by a fresh imager gives the same image.
+    /// Three frames of 19 tiles each, every tile with its own defocus level, more than the
+    /// imager keeps: the first frame imaged again after the others (some of its levels dropped
+    /// and made again) and by a fresh imager gives the same image. The levels step by 0.2 px up
+    /// to 4 px and by 5 % beyond, up to 24 px.
     #[test]
     fn the_defocus_levels_kept_change_no_image() {
+        assert_eq!((defocus_level(4.0), defocus_level(4.2), defocus_level(24.0)), (20, 21, 57));
+        for level in 0..=57 {
+            assert_eq!(defocus_level(level_diameter(level)), level);
+        }
         let optics = Optics { defocus_px: 0.0, speckle_patterns: 1, ..Optics::paper() };
-        let imager = CoherentImager::with_margin(&optics, MARGIN_PX);
+        let imager = CoherentImager::with_margin(&optics, WIDE_MARGIN_PX);
         let q = imager.q();
         let cells = vec![CellLight::uniform(100.0 / (q * q) as f64, q); q * q];
-        let (w, h) = (40 * TILE_PX, 24);
-        let image = |imager: &CoherentImager, first_level: usize| {
+        let (w, h) = (19 * TILE_PX, 24);
+        let image = |imager: &CoherentImager, first_level: u32| {
             let mut field = LaserField::new(q);
-            for tile in 0..40 {
-                let defocus = (first_level + tile) as f64 * DEFOCUS_STEP_PX;
+            for tile in 0..19 {
+                let defocus = level_diameter(first_level + tile as u32);
                 for x in 0..TILE_PX {
                     field.add_defocused_pixel(tile * TILE_PX + x, 8, &cells, defocus);
                 }
@@ -762,10 +789,11 @@ mod tests {
             out
         };
         let first = image(&imager, 0);
-        image(&imager, 40);
+        image(&imager, 19);
+        image(&imager, 38);
         let kept = imager.levels.lock().unwrap().1.len();
-        assert!(kept <= CACHED_LEVELS + 40, "{kept} levels kept");
+        assert!(kept <= CACHED_LEVELS + 19, "{kept} levels kept of 57 made");
         assert_eq!(first, image(&imager, 0));
-        assert_eq!(first, image(&CoherentImager::with_margin(&optics, MARGIN_PX), 0));
+        assert_eq!(first, image(&CoherentImager::with_margin(&optics, WIDE_MARGIN_PX), 0));
     }
 }

@@ -12,7 +12,8 @@ fn room() -> (Sensor, Scene) {
 /// The paper's lens, no noise, no ambient light, 16 bits, the laser imaged incoherently unless
 /// `speckle`, focused at `focus_mm` or in focus everywhere.
 fn lens(focus_mm: Option<f64>, speckle: bool) -> RenderOptions {
-    let optics = Optics { defocus_px: 0.0, focus_mm, speckle_patterns: 16, ..Optics::paper() };
+    let sharp = Optics { defocus_px: 0.0, speckle_patterns: 16, ..Optics::paper() };
+    let optics = focus_mm.map_or(sharp, |f| sharp.focused_at(f));
     RenderOptions {
         noise: false,
         ambient_e: 0.0,

@@ -912,7 +912,7 @@ fn curved_stripes_keep_their_centre_under_any_blur() {
 /// 0.070) on the plane, the cylinder and the sphere, the plane's stripe covered ≥ 95 % (99.7).
 #[test]
 fn a_lens_focused_at_a_distance_keeps_the_centres_unbiased() {
-    let optics = omni_simulator::Optics { defocus_px: 0.0, focus_mm: Some(100.0), ..omni_simulator::Optics::paper() };
+    let optics = omni_simulator::Optics::paper().focused_at(100.0);
     let opts = RenderOptions { imaging: Imaging::Lens { optics, speckle: false }, ..RenderOptions::ideal() };
     for (object, max_rms) in [(BenchObject::Plane, 0.05), (BenchObject::Cylinder, 0.08), (BenchObject::Sphere, 0.09)] {
         let t = bench_at(object, &opts, &[RidgeParams::default()], &positions(12), true).pop().unwrap();

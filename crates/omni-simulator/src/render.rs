@@ -644,12 +644,13 @@ fn render_light(
         .collect();
     let n = opts.supersample.max(1) as usize;
     let defocus = opts.imaging.field_optics().map(|optics| pixel_defocus(camera, scene, optics, w, h));
-    let sigmas = opts
+    // Each pixel's σ level, shared by the PSFs of supersampled and of coarsely sampled pixels.
+    let levels: Option<Vec<u16>> = opts
         .imaging
         .field_optics()
         .zip(defocus.as_ref())
-        .map(|(optics, d)| d.par_iter().map(|d| optics.psf_sigma_with_defocus(*d)).collect::<Vec<f64>>());
-    let psf = FramePsfs::new(opts.imaging.psf_sigma_px(), sigmas.as_deref(), n, w);
+        .map(|(optics, d)| d.par_iter().map(|d| sigma_level(optics.psf_sigma_with_defocus(*d))).collect());
+    let psf = FramePsfs::new(opts.imaging.psf_sigma_px(), levels.as_deref(), n, w);
     let coherent = opts.imaging.coherent().filter(|_| !slices.is_empty());
     let q = coherent.map(CoherentImager::samples_per_px);
     // One defocus for the frame: its imager is known before the light is (and made, the first
@@ -658,7 +659,7 @@ fn render_light(
     // A sheet wide against the pixel (its plane distance changing by less than σ/2 across it)
     // is smooth there: 2 × 2 samples (the coherent imager's q × q) integrate it, each box-filtered.
     let n_coarse = q.unwrap_or(2).min(n);
-    let psf_coarse = FramePsfs::new(opts.imaging.psf_sigma_px(), sigmas.as_deref(), n_coarse, w);
+    let psf_coarse = FramePsfs::new(opts.imaging.psf_sigma_px(), levels.as_deref(), n_coarse, w);
     let coarse = |c: &[CornerKey; 4]| {
         if !shader.flat_across
             || c.iter().any(|k| k.nearest != c[0].nearest || k.surface != c[0].surface || k.class != c[0].class)
@@ -899,25 +900,29 @@ type Patch = (usize, usize, Vec<f64>);
 
 /// The optical PSF of each pixel integrated over a pixel ([`PixelPsf`]): one for the frame, or,
 /// where the defocus varies over the image, each pixel's own (σ rounded to [`SIGMA_STEP_PX`]).
-struct FramePsfs {
+struct FramePsfs<'a> {
     /// Indexed by σ level; only the levels in use are made.
     psfs: Vec<Option<PixelPsf>>,
-    /// Each pixel's σ level (w × h); `None`: `psfs[0]` everywhere.
-    levels: Option<Vec<u16>>,
+    /// Each pixel's σ level ([`sigma_level`], w × h); `None`: `psfs[0]` everywhere.
+    levels: Option<&'a [u16]>,
     w: usize,
 }
 
 /// The step of the per-pixel PSFs' σ (px).
 const SIGMA_STEP_PX: f64 = 0.01;
 
-impl FramePsfs {
-    /// The PSF of σ `sigma` px everywhere, or, with `sigmas` (px, w × h), each pixel's; `n`
-    /// sub-samples per axis for supersampled pixels.
-    fn new(sigma: f64, sigmas: Option<&[f64]>, n: usize, w: usize) -> Self {
-        let Some(sigmas) = sigmas else {
+/// The level of a PSF of σ `sigma` px: σ in [`SIGMA_STEP_PX`].
+fn sigma_level(sigma: f64) -> u16 {
+    (sigma / SIGMA_STEP_PX).round() as u16
+}
+
+impl<'a> FramePsfs<'a> {
+    /// The PSF of σ `sigma` px everywhere, or, with `levels` ([`sigma_level`], w × h), each
+    /// pixel's; `n` sub-samples per axis for supersampled pixels.
+    fn new(sigma: f64, levels: Option<&'a [u16]>, n: usize, w: usize) -> Self {
+        let Some(levels) = levels else {
             return FramePsfs { psfs: vec![Some(PixelPsf::new(sigma, n))], levels: None, w };
         };
-        let levels: Vec<u16> = sigmas.iter().map(|s| (s / SIGMA_STEP_PX).round() as u16).collect();
         let mut used = vec![false; levels.iter().copied().max().unwrap_or(0) as usize + 1];
         levels.iter().for_each(|l| used[*l as usize] = true);
         let psfs = used
@@ -930,7 +935,7 @@ impl FramePsfs {
 
     /// The PSF of pixel (x, y).
     fn at(&self, x: usize, y: usize) -> &PixelPsf {
-        let level = self.levels.as_ref().map_or(0, |l| l[y * self.w + x] as usize);
+        let level = self.levels.map_or(0, |l| l[y * self.w + x] as usize);
         self.psfs[level].as_ref().expect("every pixel's level has its PSF")
     }
 

@@ -4,11 +4,19 @@ use omni_geom::Vector2;
 use omni_simulator::TruthPoint;
 
 /// Bilinear intensity centroid of the stripe profile along `dir` (unit) through the truth pixel:
-/// its offset (px) from the truth pixel.
+/// its offset (px) from the truth pixel, from samples within ±4 px.
 pub fn centroid_along(img: &[f64], w: u32, h: u32, t: &TruthPoint, dir: Vector2<f64>) -> Option<f64> {
+    centroid_within(img, w, h, t, dir, 4.0)
+}
+
+/// As [`centroid_along`], from samples within ±`reach_px` (0.1 px apart): wide or defocused
+/// stripes need more than ±4 px.
+#[allow(dead_code)] // used by some of the test binaries that include this module
+pub fn centroid_within(img: &[f64], w: u32, h: u32, t: &TruthPoint, dir: Vector2<f64>, reach_px: f64) -> Option<f64> {
     let p = Vector2::from(t.pixel);
     let at = |q: Vector2<f64>| bilinear(img, w, h, q);
-    let offsets: Vec<f64> = (-40..=40).map(|i| i as f64 * 0.1).collect();
+    let steps = (10.0 * reach_px).round() as i32;
+    let offsets: Vec<f64> = (-steps..=steps).map(|i| i as f64 * 0.1).collect();
     let values: Vec<f64> = offsets.iter().map(|s| at(p + dir * *s)).collect::<Option<_>>()?;
     let peak = values.iter().cloned().fold(0.0, f64::max);
     if peak < 20.0 {

@@ -117,13 +117,13 @@ fn speckle_matches_the_dorsch_limit_at_three_f_numbers() {
 /// (`scripts/speckle_line_model.py`, numpy, sharing no code with the renderer: a rough surface's
 /// random phases on a 1/8 px grid under a Gaussian sheet, a circular pupil of cutoff NA/λ with a
 /// defocus phase, intensities integrated over the pixels; docs/DECISIONS.md, 2026-12-06). Unlike
-/// Dorsch's spot, a line
-/// wider than the speckle grain scatters as the root of its width, and a blur circle of d px
-/// adds (k·C·d)² to the variance. The model's figures at F/4, two patterns (C 0.71): a sheet of
-/// σ 1.7 px (11 mm here) in focus 0.185 px; σ 0.083 px (0.5 mm) under a 6 px circle 0.220 px;
-/// σ 0.8 px (5 mm) under a 6 px circle 0.308 px. The renderer, measured with a window wide
-/// enough for the blurred stripe: 0.183 / 0.242 / 0.275 px (the sheets' widths in px vary a
-/// little along the stripe); asserted within 15 % of the model.
+/// Dorsch's spot, a line wider than the speckle grain scatters as the root of its width, and a
+/// blur circle of d px adds (k·C·d)² to the variance. The model's figures at F/4, two patterns
+/// (C 0.71), its centroid taken without a threshold: a sheet of σ 1.7 px (11 mm here) in focus
+/// 0.185 px; σ 0.083 px (0.5 mm) under a 6 px circle 0.220 px; σ 0.8 px (5 mm) under a 6 px
+/// circle 0.308 px. The renderer, its centroid above 5 % of the peak within ±12 px: 0.183 /
+/// 0.242 / 0.275 px (the sheets' widths in px vary a little along the stripe); asserted within
+/// 15 % of the model.
 #[test]
 fn speckle_on_a_line_follows_an_independent_model_of_width_and_defocus() {
     for (beam_mm, defocus_px, model_px) in [(11.0, 0.0, 0.185), (0.5, 6.0, 0.220), (5.0, 6.0, 0.308)] {

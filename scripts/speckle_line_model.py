@@ -40,7 +40,6 @@ LAM = LAM_UM / P_UM  # wavelength (px)
 HY = 1.0 / 8  # field and intensity grid spacing along the line (px)
 HX = 1.0 / 8  # and across it
 HXO_INV = 64.0  # scatterer columns per px across a thin sheet
-LXMUL = 1.0  # window size multiplier (a margin check)
 MY = int(round(1 / HY))
 MX = int(round(1 / HX))
 
@@ -49,16 +48,15 @@ def nice_len(n, step=16):
     return int(step * np.ceil(n / step))
 
 
-def run_case(N, s, d, ly=256, n_groups=8, n_per_group=16, seed=0, fc_factor=0.5,
-             extra_win=3.0):
+def run_case(N, s, d, ly=256, n_groups=8, n_per_group=16, seed=0, extra_win=3.0):
     rng = np.random.default_rng(seed)
-    fc = fc_factor / (LAM * N)               # coherent cutoff, cycles/px
+    fc = 0.5 / (LAM * N)                     # coherent cutoff NA/λ, cycles/px
     dz = N * d                               # image-space defocus (px)
     sig_diff = 0.42 * LAM * N
     sig_tot = np.sqrt(s**2 + sig_diff**2 + d**2 / 16.0)
     W = 5 * sig_tot + d
     W2 = W + extra_win
-    lx = nice_len(LXMUL * (2 * W2 + 2 * d + 16))
+    lx = nice_len(2 * W2 + 2 * d + 16)
     ny, nx = ly * MY, lx * MX
     fy = np.fft.fftfreq(ny, HY)
     fx = np.fft.fftfreq(nx, HX)
@@ -152,9 +150,9 @@ def run_case(N, s, d, ly=256, n_groups=8, n_per_group=16, seed=0, fc_factor=0.5,
                 res_err_truth[npat].append(c - x0)
                 res_err_w2[npat].append(c2 - cm2)
 
-    out = dict(N=N, s=s, d=d, fc_factor=fc_factor, W=W, lx=lx, ly=ly,
+    out = dict(N=N, s=s, d=d, W=W, lx=lx, ly=ly,
                sig_tot=sig_tot,
-               dorsch_px=LAM * N / np.pi * (2 * fc_factor) ** -1 * 1.0)
+               dorsch_px=LAM * N / np.pi)
     for npat in (1, 2, 16):
         e = np.array(res_err[npat])            # (nreal, ly)
         et = np.array(res_err_truth[npat])

@@ -117,11 +117,6 @@ impl Optics {
         AIRY_GAUSS_SIGMA * self.lambda_n_px()
     }
 
-    /// σ of the defocus blur circle (px).
-    pub fn defocus_sigma_px(&self) -> f64 {
-        self.defocus_px / 4.0
-    }
-
     /// Radius (mm) of the lens's entrance pupil for a camera whose focal length is `f_px`
     /// pixels: the working F-number is image-side, N = f / (2 R).
     pub fn pupil_radius_mm(&self, f_px: f64) -> f64 {

@@ -643,11 +643,10 @@ fn render_light(
         })
         .collect();
     let n = opts.supersample.max(1) as usize;
-    let defocus = opts.imaging.field_optics().map(|optics| pixel_defocus(camera, scene, optics, w, h));
+    let field_optics = opts.imaging.field_optics();
+    let defocus = field_optics.map(|optics| pixel_defocus(camera, scene, optics, w, h));
     // Each pixel's σ level, shared by the PSFs of supersampled and of coarsely sampled pixels.
-    let levels: Option<Vec<u16>> = opts
-        .imaging
-        .field_optics()
+    let levels: Option<Vec<u16>> = field_optics
         .zip(defocus.as_ref())
         .map(|(optics, d)| d.par_iter().map(|d| sigma_level(optics.psf_sigma_with_defocus(*d))).collect());
     let psf = FramePsfs::new(opts.imaging.psf_sigma_px(), levels.as_deref(), n, w);

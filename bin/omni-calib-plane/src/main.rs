@@ -115,6 +115,12 @@ struct FixedArgs {
     /// omni-ridge].
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     optics_blur: Option<f64>,
+    /// Stripe detector: the laser's cross-section, if known (a core with a one-sided tail
+    /// holding SHARE of the light, LENGTH core σ long; as omni-ridge): the stripe's pieces
+    /// between the board's squares, too short for their own top shape, are then led to the
+    /// sheet's peak too.
+    #[arg(long, value_name = "SHARE,LENGTH")]
+    laser_tail: Option<omni_model::LaserProfile>,
     /// Keep stripe points up to this far outside the printed pattern (mm; negative: inside).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     margin_mm: f64,
@@ -463,6 +469,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         max_width: a.max_width,
         max_scale: a.max_scale,
         optics_blur_px: a.optics_blur,
+        laser_profile: a.laser_tail,
         ..Default::default()
     };
     ridge.validate().map_err(CliError::usage)?;
@@ -544,6 +551,8 @@ fn fixed(a: &FixedArgs) -> CliResult {
         // The lens's blur the stripe detector removed from curved stripes; null: measured on each
         // frame's stripes (or the centres came from --stripes).
         "optics_blur_px": if a.stripes.is_some() { None } else { ridge.optics_blur_px },
+        // The laser's cross-section the stripe detector was told ([share, length]); null: none.
+        "laser_tail": ridge.laser_profile.filter(|_| a.stripes.is_none()).map(|p| [p.tail_weight, p.tail_length]),
     });
     let mut params = omni_model::FixedPlanesParams::single(&fit.plane);
     params.planes[0].laser = a.laser_id;

@@ -100,6 +100,16 @@ struct Args {
     /// is undone at a lopsided peak].
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     optics_blur: Option<f64>,
+    /// The laser's cross-section, if known: a Gaussian core with a one-sided exponential tail
+    /// holding SHARE of the light, LENGTH core σ long (0,1: a symmetric laser). Each point is
+    /// then led from its profile's top to the sheet's peak by what this cross-section, blurred
+    /// by the lens (--optics-blur or the camera's; give it), the pixel and the sampling,
+    /// predicts at the stripe's width, wherever the stripe's own top shape cannot tell: pieces
+    /// too short or too speckled for it, and stripes narrower than about twice the blur. The
+    /// tail's side comes from the stripe. The red line laser of the hand-held photographs in
+    /// ../shared/data/real-laser-handheld measures 0.17,4.
+    #[arg(long, value_name = "SHARE,LENGTH")]
+    laser_tail: Option<omni_model::LaserProfile>,
     /// Coarsest scale at which stripes wider than --max-width are searched: 1 (off), 2, 4, 8 or
     /// 16, frames binned that many pixels square. A stripe is found at the scale where it is a
     /// few pixels wide and re-measured on the frame's own pixels (a 20 px stripe at 4, a
@@ -224,6 +234,7 @@ fn main() -> ExitCode {
             optics_blur_px: args.optics_blur,
             max_scale: args.max_scale,
             mosaic: args.bayer.is_some(),
+            laser_profile: args.laser_tail,
         };
         params.validate().map_err(CliError::usage)?;
         let (camera, params) = match &args.camera {

@@ -294,6 +294,11 @@ fn help_teaches_and_bad_usage_exits_2() {
     assert_eq!(out.status.code(), Some(2));
     let out = run(&["--min-width", "5", "--max-width", "3"], "");
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    for (tail, says) in [("0.17", "SHARE,LENGTH"), ("0.95,4", "tail_weight"), ("0.2,x", "tail length \"x\"")] {
+        let out = run(&["--laser-tail", tail], "");
+        assert_eq!(out.status.code(), Some(2), "{tail}: {}", stderr(&out));
+        assert!(stderr(&out).contains("--laser-tail") && stderr(&out).contains(says), "{tail}: {}", stderr(&out));
+    }
 }
 
 #[test]

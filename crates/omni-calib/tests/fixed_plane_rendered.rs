@@ -77,7 +77,8 @@ fn render_and_fit(
     n: usize,
     seed: u64,
     dir: &std::path::Path,
-) -> (FixedPlaneFit, FixedPlaneFit) {
+    laser_profiles: &[Option<omni_model::LaserProfile>],
+) -> (Vec<FixedPlaneFit>, FixedPlaneFit) {
     let mut rng = SplitMix64::new(seed);
     let t0 = std::time::Instant::now();
     let mut truth = Vec::new();
@@ -96,7 +97,7 @@ fn render_and_fit(
         .collect();
     eprintln!("rendered {n} frames in {:.2} s", t0.elapsed().as_secs_f64());
     let t0 = std::time::Instant::now();
-    let detect = DetectOptions {
+    let detect = |laser_profile| DetectOptions {
         inner_cols: s.board.inner_cols,
         inner_rows: s.board.inner_rows,
         square_mm: s.board.square_mm,
@@ -109,10 +110,10 @@ fn render_and_fit(
         // The lens's blur known, as `omni-calib-plane fixed` takes it from the camera's optics.
         ridge: omni_vision::stripe::RidgeParams {
             optics_blur_px: Some(opts.imaging.psf_sigma_px()),
+            laser_profile,
             ..Default::default()
         },
     };
-    let frames = detect_frames(&paths, &detect, None).unwrap();
     // As `omni-calib-plane fixed` does: points within 3 px of a square's edge dropped. A board
     // whose stripe runs along a row of squares keeps few points then: 10 make a frame here.
     let opts = FixedPlaneOptions {
@@ -121,13 +122,18 @@ fn render_and_fit(
         min_points: 10,
         ..Default::default()
     };
-    let fit = fit_fixed_plane(s.sensor.camera.as_ref(), &frames, &opts).unwrap();
+    let mut fits = Vec::new();
+    let mut frames = Vec::new();
+    for &profile in laser_profiles {
+        frames = detect_frames(&paths, &detect(profile), None).unwrap();
+        fits.push(fit_fixed_plane(s.sensor.camera.as_ref(), &frames, &opts).unwrap());
+    }
     eprintln!("detected and fitted in {:.2} s", t0.elapsed().as_secs_f64());
     let mut true_stripe = frames;
     for (f, t) in true_stripe.iter_mut().zip(truth) {
         f.stripe = t;
     }
-    (fit, fit_fixed_plane(s.sensor.camera.as_ref(), &true_stripe, &opts).unwrap())
+    (fits, fit_fixed_plane(s.sensor.camera.as_ref(), &true_stripe, &opts).unwrap())
 }
 
 /// The fitted plane against the true one: the normals' angle (degrees) and the largest distance
@@ -204,22 +210,34 @@ fn options() -> RenderOptions {
 /// clearance from the squares' edges (where the stripe's profile falls on white and black at
 /// once, its centres scatter by 0.35-0.76 px) the seeds spread over 0.018-0.17° and 0.021-0.35
 /// mm. The bounds on the detected stripe guard the figure measured here.
+///
+/// With the laser's cross-section known (`--laser-tail 0.17,4`), the pieces are led from their
+/// tops to the sheet's peak by it: 0.013° and 0.041 mm here, the target met; seeds 1 / 2 / 3
+/// 0.015° / 0.073 mm, 0.023° / 0.063 mm, 0.050° / 0.073 mm (without: 0.099 / 0.088 / 0.102 mm),
+/// the clipped red's plateaus still on the tail's side. Its leave-one-out RMS is 1.32 × the
+/// in-sample one (1.25 without): the frame whose partial board's corners fit worst (0.39 px
+/// against 0.03-0.05) lies 0.10 mm off the plane on average and pulls it; asserted ≤ 1.35.
 #[test]
 fn rendered_fixed_plane_from_10_frames_through_the_detectors() {
     let s = setup(1024, 7, 5, 30.0);
     let dir = tempfile::tempdir().unwrap();
-    let (fit, true_stripe) = render_and_fit(&s, &options(), 10, 34, dir.path());
+    let profiles = [None, Some(omni_model::LaserProfile::tailed(0.17, 4.0))];
+    let (fits, true_stripe) = render_and_fit(&s, &options(), 10, 34, dir.path(), &profiles);
     let (angle, worst) = report("true stripe pixels, detected corners", &s, &true_stripe);
     assert!(true_stripe.report.frames.len() >= 9, "{:?}", true_stripe.report.skipped);
     assert!(angle <= 0.02, "normal off by {angle}° with the true stripe");
     assert!(worst <= 0.05, "plane off by {worst} mm at 300 mm with the true stripe");
-    let (angle, worst) = report("rendered, real-shaped 4 px stripe", &s, &fit);
-    let r = &fit.report;
-    assert!(r.frames.len() >= 9, "{} frames used", r.frames.len());
-    let mut points: Vec<usize> = r.frames.iter().map(|f| f.board_points).collect();
-    points.sort_unstable();
-    assert!(points[points.len() / 2] >= 20, "stripe points per frame {points:?}");
-    assert!(angle <= 0.04, "normal off by {angle}°");
-    assert!(worst <= 0.1, "plane off by {worst} mm at 300 mm");
-    assert!(r.leave_one_out_rms_mm <= 1.3 * r.rms_mm, "{} vs {}", r.leave_one_out_rms_mm, r.rms_mm);
+    for (fit, profile) in fits.iter().zip(profiles) {
+        let label = if profile.is_some() { "laser profile known" } else { "rendered, real-shaped 4 px stripe" };
+        let (angle, worst) = report(label, &s, fit);
+        let r = &fit.report;
+        assert!(r.frames.len() >= 9, "{label}: {} frames used", r.frames.len());
+        let mut points: Vec<usize> = r.frames.iter().map(|f| f.board_points).collect();
+        points.sort_unstable();
+        assert!(points[points.len() / 2] >= 20, "{label}: stripe points per frame {points:?}");
+        let (max_angle, max_mm, max_loo) = if profile.is_some() { (0.02, 0.05, 1.35) } else { (0.04, 0.1, 1.3) };
+        assert!(angle <= max_angle, "{label}: normal off by {angle}°");
+        assert!(worst <= max_mm, "{label}: plane off by {worst} mm at 300 mm");
+        assert!(r.leave_one_out_rms_mm <= max_loo * r.rms_mm, "{label}: {} vs {}", r.leave_one_out_rms_mm, r.rms_mm);
+    }
 }

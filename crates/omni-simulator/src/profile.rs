@@ -12,10 +12,9 @@
 //! Placement: the light plane (d = 0, where the ground truth lies) is the **peak** (mode) of the
 //! sheet's irradiance profile; for the Gaussian that is also its centroid.
 
+pub use omni_model::GAUSS_FWHM_PER_SIGMA;
+use omni_model::LaserProfile;
 use serde::{Deserialize, Serialize};
-
-/// FWHM of a Gaussian in units of its σ: √(8 ln 2).
-pub const GAUSS_FWHM_PER_SIGMA: f64 = 2.354_820_045_030_949;
 
 /// Shape of the laser sheet's irradiance across the light plane; its width is
 /// [`crate::RenderOptions::beam_fwhm_mm`] (or set per frame by
@@ -60,24 +59,17 @@ impl SheetProfile {
 
     /// The shape's constants (mode and FWHM of the unit-σ profile).
     pub(crate) fn shape(&self) -> Shape {
-        let (w, r, side) = match *self {
-            SheetProfile::Gaussian => (0.0, 1.0, 1.0),
+        match *self {
+            SheetProfile::Gaussian => Shape { profile: LaserProfile::gaussian(), side: 1.0 },
             SheetProfile::Tailed { tail_weight, tail_length, tail_side } => {
-                (tail_weight, tail_length, f64::from(tail_side))
+                Shape { profile: LaserProfile::tailed(tail_weight, tail_length), side: f64::from(tail_side) }
             }
-        };
-        let mut s = Shape { w, r, side, mode: 0.0, fwhm: GAUSS_FWHM_PER_SIGMA };
-        if w > 0.0 {
-            s.mode = s.mode_at(1.0);
-            let (lo, hi) = s.half_points(1.0);
-            s.fwhm = hi - lo;
         }
-        s
     }
 
     /// FWHM of the sheet in units of its core σ.
     pub fn fwhm_per_sigma(&self) -> f64 {
-        self.shape().fwhm
+        self.shape().profile.fwhm()
     }
 
     /// The profile as a function (unit area) of the offset from the light plane's image, for a
@@ -86,7 +78,7 @@ impl SheetProfile {
     /// once: cheap to call many times.
     pub fn curve(&self, fwhm: f64, blur: f64) -> impl Fn(f64) -> f64 + use<> {
         let shape = self.shape();
-        let sigma = fwhm / shape.fwhm;
+        let sigma = fwhm / shape.profile.fwhm();
         move |x| shape.density(x, sigma, blur)
     }
 
@@ -94,9 +86,9 @@ impl SheetProfile {
     /// a Gaussian blur of σ `blur_px` (the lens's PSF and the pixel's area).
     pub fn image_fwhm_px(&self, fwhm_px: f64, blur_px: f64) -> f64 {
         let shape = self.shape();
-        let sigma = fwhm_px / shape.fwhm;
+        let sigma = fwhm_px / shape.profile.fwhm();
         let s = (1.0 + (blur_px / sigma).powi(2)).sqrt();
-        let (lo, hi) = shape.half_points(s);
+        let (lo, hi) = shape.profile.half_points(s);
         (hi - lo) * sigma
     }
 
@@ -123,143 +115,57 @@ impl SheetProfile {
     /// blur's pull on an asymmetric profile's peak (0 for the Gaussian).
     pub fn blurred_peak_offset_px(&self, fwhm_px: f64, blur_px: f64) -> f64 {
         let shape = self.shape();
-        let sigma = fwhm_px / shape.fwhm;
+        let sigma = fwhm_px / shape.profile.fwhm();
         let s = (1.0 + (blur_px / sigma).powi(2)).sqrt();
-        (shape.mode_at(s) - shape.mode) * sigma
+        (shape.profile.mode_at(s) - shape.profile.mode()) * sigma
     }
 
     /// The profile's centroid from the light plane (in units of its FWHM, positive towards the
     /// tail): where a centre of mass over the whole profile lands.
     pub fn centroid_offset(&self) -> f64 {
         let shape = self.shape();
-        (shape.w * shape.r - shape.mode) / shape.fwhm
+        (shape.profile.tail_weight * shape.profile.tail_length - shape.profile.mode()) / shape.profile.fwhm()
     }
 }
 
-/// A profile's constants for a core σ of 1: tail weight `w`, tail length `r` (in σ), `side`,
-/// the mode's offset from the core's centre towards the tail, and the FWHM.
+/// A profile placed across the light plane: its shape for a core σ of 1 and the side of the
+/// plane its tail lies on.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Shape {
-    pub w: f64,
-    pub r: f64,
+    pub profile: LaserProfile,
     pub side: f64,
-    pub mode: f64,
-    pub fwhm: f64,
 }
 
 impl Shape {
-    /// Unit-area profile of core σ 1 widened to σ `s` (≥ 1), at `x` from the core's centre
-    /// towards the tail.
-    fn unit(&self, x: f64, s: f64) -> f64 {
-        let core = (-0.5 * (x / s).powi(2)).exp() / (s * (2.0 * std::f64::consts::PI).sqrt());
-        if self.w == 0.0 { core } else { (1.0 - self.w) * core + self.w * emg(x, s, self.r) }
-    }
-
-    /// The mode of the profile widened to σ `s`.
-    fn mode_at(&self, s: f64) -> f64 {
-        if self.w == 0.0 {
-            return 0.0;
-        }
-        // Golden-section search: the mode lies between the core's centre and one core σ towards
-        // the tail for any tail that leaves a single peak, and the profile is unimodal there.
-        let (mut a, mut b) = (-0.5 * s, 2.0 * s);
-        let g = 0.5 * (5f64.sqrt() - 1.0);
-        let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
-        let (mut fc, mut fd) = (self.unit(c, s), self.unit(d, s));
-        for _ in 0..120 {
-            if fc > fd {
-                b = d;
-                d = c;
-                fd = fc;
-                c = b - g * (b - a);
-                fc = self.unit(c, s);
-            } else {
-                a = c;
-                c = d;
-                fc = fd;
-                d = a + g * (b - a);
-                fd = self.unit(d, s);
-            }
-        }
-        0.5 * (a + b)
-    }
-
-    /// The half-maximum points (lower, upper) of the profile widened to σ `s`, from the core's
-    /// centre towards the tail.
-    fn half_points(&self, s: f64) -> (f64, f64) {
-        let m = self.mode_at(s);
-        let half = 0.5 * self.unit(m, s);
-        let solve = |mut inside: f64, mut outside: f64| {
-            for _ in 0..100 {
-                let mid = 0.5 * (inside + outside);
-                if self.unit(mid, s) > half {
-                    inside = mid;
-                } else {
-                    outside = mid;
-                }
-            }
-            0.5 * (inside + outside)
-        };
-        (solve(m, m - 10.0 * s), solve(m, m + 10.0 * s + 20.0 * self.r))
-    }
-
     /// Profile (unit area) at plane distance `d` (mm) for a core σ `sigma` (mm) widened by a
     /// Gaussian of σ `extra` (mm), placed with its unwidened mode on the plane.
     pub fn density(&self, d: f64, sigma: f64, extra: f64) -> f64 {
         let s = (1.0 + (extra / sigma).powi(2)).sqrt();
-        let x = self.side * d / sigma + self.mode;
-        self.unit(x, s) / sigma
+        let x = self.side * d / sigma + self.profile.mode();
+        self.profile.unit(x, s) / sigma
     }
 
     /// The plane distances (mm) outside which the profile is taken as 0: 6 σ on the core's side,
     /// 6 σ + 10 τ on the tail's.
     pub fn support(&self, sigma: f64, extra: f64) -> (f64, f64) {
         let s = (sigma * sigma + extra * extra).sqrt();
-        let tail = if self.w > 0.0 { 10.0 * self.r * sigma } else { 0.0 };
+        let tail = if self.profile.tail_weight > 0.0 { 10.0 * self.profile.tail_length * sigma } else { 0.0 };
         self.range(-6.0 * s, 6.0 * s + tail, sigma)
     }
 
     /// The plane distances (mm) within which pixels are supersampled: 4 σ on the core's side,
     /// 4 σ + τ on the tail's (the tail further out is smooth at the pixel scale).
     pub fn near(&self, sigma: f64) -> (f64, f64) {
-        let tail = if self.w > 0.0 { self.r * sigma } else { 0.0 };
+        let tail = if self.profile.tail_weight > 0.0 { self.profile.tail_length * sigma } else { 0.0 };
         self.range(-4.0 * sigma, 4.0 * sigma + tail, sigma)
     }
 
     /// Plane distances of the offsets `lo`, `hi` (mm) from the core's centre towards the tail.
     fn range(&self, lo: f64, hi: f64, sigma: f64) -> (f64, f64) {
-        let centre = -self.side * self.mode * sigma;
+        let centre = -self.side * self.profile.mode() * sigma;
         let (a, b) = (centre + self.side * lo, centre + self.side * hi);
         (a.min(b), a.max(b))
     }
-}
-
-/// The exponentially modified Gaussian: a unit Gaussian of σ `s` convolved with the exponential
-/// `exp(−x/t)/t` (x > 0), at `x`; evaluated without overflow on both sides.
-fn emg(x: f64, s: f64, t: f64) -> f64 {
-    let z = (s / t - x / s) / std::f64::consts::SQRT_2;
-    let e = if z >= 0.0 {
-        // exp(s²/2t² − x/t)·erfc(z) = exp(−x²/2s²)·erfcx(z)
-        (-0.5 * (x / s).powi(2)).exp() * erfcx(z)
-    } else {
-        (0.5 * (s / t).powi(2) - x / t).exp() * (2.0 - erfcx(-z) * (-z * z).exp())
-    };
-    0.5 / t * e
-}
-
-/// The scaled complementary error function exp(z²)·erfc(z) for z ≥ 0 (Numerical Recipes'
-/// Chebyshev fit of erfc: fractional error below 1.2e-7 everywhere).
-fn erfcx(z: f64) -> f64 {
-    debug_assert!(z >= 0.0);
-    let t = 1.0 / (1.0 + 0.5 * z);
-    let poly = -1.265_512_23
-        + t * (1.000_023_68
-            + t * (0.374_091_96
-                + t * (0.096_784_18
-                    + t * (-0.186_288_06
-                        + t * (0.278_868_07
-                            + t * (-1.135_203_98 + t * (1.488_515_87 + t * (-0.822_152_23 + t * 0.170_872_77))))))));
-    t * poly.exp()
 }
 
 #[cfg(test)]
@@ -292,28 +198,11 @@ mod tests {
             let f = |d: f64| shape.density(d, 1.0, 0.0);
             assert!(f(0.0) > f(1e-3) && f(0.0) > f(-1e-3), "{p:?}: {} {} {}", f(-1e-3), f(0.0), f(1e-3));
             // FWHM in σ: half the peak at the two half points.
-            let (lo, hi) = shape.half_points(1.0);
-            let at = |x: f64| shape.unit(x, 1.0) / shape.unit(shape.mode, 1.0);
+            let (lo, hi) = shape.profile.half_points(1.0);
+            let at = |x: f64| shape.profile.unit(x, 1.0) / shape.profile.unit(shape.profile.mode(), 1.0);
             assert!((at(lo) - 0.5).abs() < 1e-9 && (at(hi) - 0.5).abs() < 1e-9);
         }
         assert!((SheetProfile::Gaussian.fwhm_per_sigma() - GAUSS_FWHM_PER_SIGMA).abs() < 1e-12);
-    }
-
-    #[test]
-    fn the_emg_matches_its_convolution_integral() {
-        let (s, t) = (1.3, 2.0);
-        for x in [-8.0, -2.0, 0.0, 0.5, 3.0, 12.0, 40.0] {
-            let direct = integral(
-                |u| {
-                    let g = (-0.5 * ((x - u) / s).powi(2)).exp() / (s * (2.0 * std::f64::consts::PI).sqrt());
-                    g * (-u / t).exp() / t
-                },
-                0.0,
-                200.0,
-            );
-            let v = emg(x, s, t);
-            assert!((v - direct).abs() <= 1e-6 * direct.max(1e-12) + 1e-15, "x {x}: {v} vs {direct}");
-        }
     }
 
     #[test]

@@ -53,6 +53,7 @@ mod along;
 mod bilinear8;
 mod estimators;
 mod frames;
+mod laser;
 mod normal;
 mod overlay;
 mod rowscan;
@@ -189,6 +190,11 @@ pub struct RidgeParams {
     /// the interpolation, alike all along a stripe that runs with the mosaic's rows or
     /// columns. Such a stripe's centres are not moved by its top's shape to the light's peak.
     pub mosaic: bool,
+    /// The laser's cross-section, if known (a lopsided laser's tail): each stripe point is
+    /// then moved from its profile's top to the sheet's peak by what this profile, blurred by
+    /// the lens (where known), the pixel and the sampling, predicts at the profile's width
+    /// (`laser`), instead of by its stripe's median top shape.
+    pub laser_profile: Option<omni_model::LaserProfile>,
 }
 
 impl Default for RidgeParams {
@@ -204,6 +210,7 @@ impl Default for RidgeParams {
             optics_blur_px: None,
             max_scale: 8,
             mosaic: false,
+            laser_profile: None,
         }
     }
 }
@@ -259,6 +266,9 @@ impl RidgeParams {
         }
         if !(self.max_scale.is_power_of_two() && self.max_scale <= 16) {
             return Err(format!("max scale must be 1, 2, 4, 8 or 16, got {}", self.max_scale));
+        }
+        if let Some(profile) = self.laser_profile {
+            profile.validate().map_err(|e| format!("laser profile: {e}"))?;
         }
         Ok(())
     }
@@ -528,6 +538,9 @@ pub struct RidgeDetector {
     region: Option<SearchRegion>,
     /// The detector for frames binned 2 × 2 (`scales`), built when first needed.
     coarser: std::sync::OnceLock<Box<RidgeDetector>>,
+    /// Where the laser's tops lie from its sheet's peak at this detector's scale, built when
+    /// first needed (only with [`RidgeParams::laser_profile`]).
+    top_offsets: std::sync::OnceLock<laser::TopOffsets>,
 }
 
 /// A part of the frame the user restricts the search to, on top of the camera's annulus.
@@ -640,6 +653,7 @@ impl RidgeDetector {
             seed_normal,
             region: None,
             coarser: std::sync::OnceLock::new(),
+            top_offsets: std::sync::OnceLock::new(),
         }
     }
 

@@ -1030,6 +1030,73 @@ fn real_shaped_stripes_2_to_20_px_wide() {
     }
 }
 
+/// A laser whose cross-section is known (`--laser-tail`, [`RidgeParams::laser_profile`]),
+/// ideal optics with the lens's blur known, bench plane, 8 positions. Where the blur makes most
+/// of a stripe's width, the stripe's own top shape undoes the blur's shift of its lopsided peak
+/// to first order only (+0.030 px left at 2 px, the previous test); the known profile predicts
+/// where the top lies from the sheet's peak at the stripe's width instead. Measured (RMS /
+/// offset, px; without the profile in brackets): the measured real shape (17 % in a tail 4 σ
+/// long) 2 px 0.0143 / +0.0029 (0.0335 / +0.0303), 5 / 10 / 20 px unchanged (−0.0007 to
+/// +0.0022, their own top shapes lead them); a shorter, heavier tail on the other side (40 %,
+/// 1.5 σ) 2 px 0.0143 / +0.0044 (0.0668 / −0.0654). Asserted at the ideal-optics
+/// targets: RMS ≤ 0.015 px, |offset| ≤ 0.005 px. A profile given wrong moves the offset by
+/// what it mispredicts (the real shape read as 25 % in 3 σ: −0.026 px; as 10 % in 5 σ:
+/// +0.035 px), so it is the laser's, measured, or none.
+#[test]
+fn a_known_laser_profile_leads_narrow_lopsided_stripes_to_the_sheets_peak() {
+    use omni_simulator::SheetProfile;
+    let cases = [
+        (SheetProfile::real(), omni_model::LaserProfile::tailed(0.17, 4.0), [2.0, 5.0, 10.0, 20.0].as_slice()),
+        (
+            SheetProfile::Tailed { tail_weight: 0.4, tail_length: 1.5, tail_side: -1 },
+            omni_model::LaserProfile::tailed(0.4, 1.5),
+            &[2.0],
+        ),
+    ];
+    for (sheet, given, widths) in cases {
+        for &fwhm in widths {
+            let ideal = RenderOptions::ideal();
+            let laser_strength = ideal.laser_strength * fwhm / 2.0;
+            let opts = RenderOptions { profile: sheet, stripe_fwhm_px: Some(fwhm), laser_strength, ..ideal };
+            let params = RidgeParams { optics_blur_px: Some(0.7), laser_profile: Some(given), ..Default::default() };
+            let tally = bench_at(BenchObject::Plane, &opts, &[params], &positions(8), false).remove(0);
+            let label = format!("{sheet:?} {fwhm} px, profile known");
+            eprintln!("{}", tally.line(&label));
+            let (rms, bias) = tally.rms_bias();
+            assert!(tally.coverage(8).unwrap() >= 0.9, "{label}: coverage {:?}", tally.coverage(8));
+            assert_eq!(tally.false_points, 0, "{label}");
+            assert!(bias.abs() <= 0.005, "{label}: offset {bias:+.4} px");
+            if fwhm <= 2.0 {
+                assert!(rms <= 0.015, "{label}: rms {rms:.4} px");
+            }
+        }
+    }
+}
+
+/// Real-shaped 4 px stripes under speckle (C 0.25, the realistic sensor, laser-off frames, the
+/// lens's blur known, 8 positions): too speckled for their top shape's median to stand out from
+/// the noise, so without the laser's profile their centres stay at their tops' centroids, off
+/// towards the tail; with it, led on to the sheet's peak. Measured, alone and along ±3 px,
+/// RMS / offset (px): without 0.124 / +0.034, 0.094 / +0.034; with 0.121 / +0.015, 0.089 /
+/// +0.015. Asserted: the offset along ±3 within 0.02 px with the profile and at least 0.015 px
+/// smaller than without; the spread stays the speckle's (the 0.05 px is not met).
+#[test]
+fn a_known_laser_profile_takes_most_of_a_speckled_stripes_offset() {
+    let optics = omni_simulator::Optics { speckle_patterns: 16, ..omni_simulator::Optics::paper() };
+    let opts = RenderOptions::default().with_optics(optics).with_real_stripe(4.0);
+    let known =
+        RidgeParams { optics_blur_px: Some(opts.imaging.psf_sigma_px()), along_stripe_px: 3.0, ..Default::default() };
+    let profile = RidgeParams { laser_profile: Some(omni_model::LaserProfile::tailed(0.17, 4.0)), ..known };
+    let scene = Scene::from_file(paper_bench(BenchObject::Plane)).unwrap();
+    let tallies = bench_scene(&scene, &opts, &[known, profile], &positions(8), true, false, &grey);
+    eprintln!("{}", tallies[0].line("speckled real 4 px, along ±3"));
+    eprintln!("{}", tallies[1].line("  profile known"));
+    let (_, without) = tallies[0].rms_bias();
+    let (rms, with) = tallies[1].rms_bias();
+    assert!(with.abs() <= 0.02 && with.abs() <= without.abs() - 0.015, "offset {with:+.4} px, without {without:+.4}");
+    assert!(rms <= 0.095, "rms {rms:.4} px");
+}
+
 /// Real-shaped stripes (2 and 5 px, as above) through a colour camera, read by their laser colour
 /// (R − (G+B)/2, `--laser red`): the raw RGGB mosaic demosaiced (`--bayer rggb`), and the
 /// camera's RGB frame saved as JPEG of quality 90 with 4:2:0 chroma. The camera's colour matrix

@@ -32,6 +32,8 @@
 //!   top shape from there to the image's peak and back by the blur's shift of a lopsided peak,
 //!   −(s/2)·L‴/L″ for a blur of variance s and L the profile's logarithm
 //!   ([`Centre::top_shape`]; the lens's blur where known, else the pixel's and the kernel's);
+//!   with the laser's cross-section known, by what it predicts from the top's centroid where
+//!   the top shape cannot tell (`super::laser`);
 //! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): over
 //!   ±3 px a line through the neighbours once a wider parabola's curvature is taken out, so that
 //!   a curved stripe keeps its centre, and over longer arcs a parabola, each taken only while it
@@ -134,6 +136,10 @@ const LEAN_MIN_PROFILES: usize = 8;
 const LEAN_MAX_FLATNESS: f64 = 0.41;
 /// A fit that moves its point farther than this (px) is not trusted (a kink, another stripe).
 const MAX_MOVE_PX: f64 = 0.5;
+/// The share of a profile's variance the blur makes beyond which a known laser profile, not
+/// the top's own shape, leads a point to the sheet's peak ([`lean_to_sheet_peak`]): the
+/// shape's undoing of the blur is a first-order rule in the blur's share.
+const BLUR_DOMINATED_SHARE: f64 = 0.5;
 /// FWHM / σ of a Gaussian.
 const FWHM_PER_SIGMA: f64 = 2.354_820_045;
 
@@ -189,6 +195,10 @@ pub(super) struct Linked {
     /// The profile's top shape ([`Centre::top_shape`]) where the lean has not taken its
     /// stripe's yet (points re-measured from a coarser scale).
     top_shape: Option<[f64; 2]>,
+    /// How far (px) the sheet's peak still lies beyond where the lean leads, on the tail's
+    /// side: with the laser's profile known, the top centroid's predicted offset where the
+    /// stripe has no top shape of its own to lead the lean to the peak; else 0.
+    tail_offset: f64,
 }
 
 /// A measured centre before linking.
@@ -246,7 +256,12 @@ impl RidgeDetector {
         if let Some(coarse) = self.coarser_stripes(frame, threshold, scale, wide, kept.len()) {
             let mut refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
             drop_tapering(&mut refined);
-            lean_to_the_lights_peak(&mut refined, self.peak_blur_variance(scale), self.mosaic_at(scale));
+            lean_to_the_lights_peak(
+                &mut refined,
+                self.peak_blur_variance(scale),
+                self.mosaic_at(scale),
+                self.top_offsets(scale),
+            );
             fit_along_stripe(&mut refined, self.params.along_stripe_px);
             kept.extend(refined);
         }
@@ -637,6 +652,13 @@ impl RidgeDetector {
         super::known_blur_variance(self.params.optics_blur_px.unwrap_or(0.0), scale)
     }
 
+    /// Where the laser's tops lie from its sheet's peak at this scale, by their width, if its
+    /// profile is known ([`super::RidgeParams::laser_profile`]).
+    fn top_offsets(&self, scale: u32) -> Option<&super::laser::TopOffsets> {
+        let profile = self.params.laser_profile?;
+        Some(self.top_offsets.get_or_init(|| super::laser::TopOffsets::new(&profile, self.peak_blur_variance(scale))))
+    }
+
     /// Whether this scale's stripes are read through a colour mosaic's interpolation
     /// ([`super::RidgeParams::mosaic`]): binned 2 × 2 or more, each coarse pixel holds every
     /// colour of the mosaic.
@@ -747,6 +769,7 @@ impl RidgeDetector {
         // noisy (a cubic's third derivative); along a bend or a step they are not the laser's.
         let shapes: Vec<(usize, [f64; 2])> =
             kept.iter().filter_map(|k| Some((k.index, centres[k.index].top_shape?))).collect();
+        let top_offsets = self.top_offsets(scale);
         let placed = |i: usize| (centres[i].point.u, centres[i].point.v, centres[i].normal);
         let stripe_shape = stripe_shapes(stripes, &shapes, self.mosaic_at(scale), placed);
         let peak_blur = self.peak_blur_variance(scale);
@@ -768,11 +791,15 @@ impl RidgeDetector {
             p.u += shift * c.normal.0;
             p.v += shift * c.normal.1;
             let shape = stripe_shape.of(stripes, i);
-            let lean = c
-                .lean
-                .filter(|_| c.flatness <= LEAN_MAX_FLATNESS)
-                .map(|lean| lean_to_peak(lean, c.half_width, shape, peak_blur));
-            out.push(Linked { point: p, lean, top_shape: None, ..c.linked() });
+            let lean = c.lean.filter(|_| c.flatness <= LEAN_MAX_FLATNESS);
+            let (lean, tail_offset) = match lean {
+                Some(lean) => {
+                    let (lean, tail) = lean_to_sheet_peak(lean, c.half_width, shape, peak_blur, top_offsets);
+                    (Some(lean), tail)
+                }
+                None => (None, 0.0),
+            };
+            out.push(Linked { point: p, lean, top_shape: None, tail_offset, ..c.linked() });
         }
         out
     }
@@ -889,6 +916,7 @@ impl Centre {
             half_width: self.half_width,
             lean: self.lean,
             top_shape: self.top_shape,
+            tail_offset: 0.0,
         }
     }
 }
@@ -897,31 +925,70 @@ impl Centre {
 /// ±[`LEAN_HALF_ARC_PX`]: from the estimator's centre to the peak of the light. A laser's tail
 /// lies on the same side of its stripe all along it, so the mean keeps the tail's pull and
 /// averages away each profile's noise, which at the top alone is 1.5–3 times the estimator's.
+/// With the laser's profile known (`top_offsets`), the leans lead to the tops' centroids, and
+/// the profile's predicted offset of a top from the sheet's peak (the same mean over the
+/// neighbours' widths) is added on the side the mean lean gives the tail.
 fn remove_steady_lean(points: &mut [Linked]) {
     let grid = Grid::from_placed(points.iter().map(Linked::placed), LEAN_HALF_ARC_PX);
+    let sides = tail_sides(points);
     let shifts: Vec<f64> = points
         .iter()
-        .map(|l| {
+        .enumerate()
+        .map(|(i, l)| {
             if l.point.quality & quality::SATURATED != 0 {
                 return 0.0;
             }
             let here = l.placed();
-            let (mut sum, mut count) = (0.0, 0usize);
+            let (mut sum, mut offset_sum, mut count) = (0.0, 0.0, 0usize);
             grid.visit(here[0], here[1], |j, other| {
                 if let Some(lean) = points[j].lean
                     && let Some((_, _, same_way)) = on_the_stripe(&here, other, LEAN_HALF_ARC_PX)
                 {
                     sum += if same_way { lean } else { -lean };
+                    offset_sum += points[j].tail_offset;
                     count += 1;
                 }
             });
-            if count >= LEAN_MIN_PROFILES { sum / count as f64 } else { 0.0 }
+            if count < LEAN_MIN_PROFILES {
+                return 0.0;
+            }
+            let side = sides.get(i).copied().unwrap_or(0.0);
+            sum / count as f64 + side * offset_sum / count as f64
         })
         .collect();
     for (l, shift) in points.iter_mut().zip(shifts) {
         l.point.u -= shift * l.normal.0;
         l.point.v -= shift * l.normal.1;
     }
+}
+
+/// Half the arc (px) over which a stripe's leans tell on which side its tail lies.
+const TAIL_SIDE_HALF_ARC_PX: f64 = 48.0;
+
+/// The side of each point's stripe (±1 along its normal) where the laser's tail lies, where
+/// a point still has a [`Linked::tail_offset`] to go: the side its stripe's leans within
+/// ±[`TAIL_SIDE_HALF_ARC_PX`] point to on average (a lopsided profile's centre lies beyond its
+/// top on the tail's side). Empty where no point has one.
+fn tail_sides(points: &[Linked]) -> Vec<f64> {
+    if points.iter().all(|l| l.tail_offset == 0.0) {
+        return Vec::new();
+    }
+    let grid = Grid::from_placed(points.iter().map(Linked::placed), TAIL_SIDE_HALF_ARC_PX);
+    points
+        .iter()
+        .map(|l| {
+            let here = l.placed();
+            let mut sum = 0.0;
+            grid.visit(here[0], here[1], |j, other| {
+                if let Some(lean) = points[j].lean
+                    && let Some((_, _, same_way)) = on_the_stripe(&here, other, TAIL_SIDE_HALF_ARC_PX)
+                {
+                    sum += if same_way { lean } else { -lean };
+                }
+            });
+            sum.signum()
+        })
+        .collect()
 }
 
 /// Drops the points re-measured from a coarser scale whose chain (points within
@@ -1046,7 +1113,12 @@ fn on_the_stripe(&[px, py, nx0, ny0]: &[f64; 4], &[u, v, nx, ny]: &[f64; 4], rea
 /// and back by the blur's shift of a lopsided peak (`blur_variance`, px²). For points
 /// re-measured from a coarser scale, whose stripes are the chains of points within
 /// [`super::along::STRIPE_LINK_PX`] of each other with nearly parallel normals.
-fn lean_to_the_lights_peak(points: &mut [Linked], blur_variance: f64, mosaic: bool) {
+fn lean_to_the_lights_peak(
+    points: &mut [Linked],
+    blur_variance: f64,
+    mosaic: bool,
+    top_offsets: Option<&super::laser::TopOffsets>,
+) {
     let grid = Grid::from_placed(points.iter().map(Linked::placed), super::along::STRIPE_LINK_PX);
     let mut stripes = Stripes::new(points.len());
     for (i, l) in points.iter().enumerate() {
@@ -1065,7 +1137,10 @@ fn lean_to_the_lights_peak(points: &mut [Linked], blur_variance: f64, mosaic: bo
         stripe_shapes(&mut stripes, &shapes, mosaic, |i| (points[i].point.u, points[i].point.v, points[i].normal));
     for (i, l) in points.iter_mut().enumerate() {
         let shape = stripe_shape.of(&mut stripes, i);
-        l.lean = l.lean.map(|lean| lean_to_peak(lean, l.half_width, shape, blur_variance));
+        if let Some(lean) = l.lean {
+            let (lean, tail) = lean_to_sheet_peak(lean, l.half_width, shape, blur_variance, top_offsets);
+            (l.lean, l.tail_offset) = (Some(lean), tail);
+        }
         l.top_shape = None;
     }
 }
@@ -1098,6 +1173,31 @@ fn stripe_shapes(
 fn lean_to_peak(lean: f64, half_width: f64, [top_offset, skew]: [f64; 2], blur_variance: f64) -> f64 {
     let sigma = half_width / FWHM_PER_SIGMA;
     lean + top_offset * sigma - 0.5 * blur_variance * skew / sigma
+}
+
+/// A lean ([`lean_to_peak`]'s arguments) carried towards the sheet's peak, and how far beyond
+/// it the peak still lies on the tail's side (px), left to [`remove_steady_lean`], which knows
+/// that side from the stripe's mean lean. A stripe with a top shape of its own is led to the
+/// peak by it ([`lean_to_peak`]), unless the laser's profile is known (`top_offsets`) and the
+/// blur makes most of the profile's width: the shape's undoing of the blur holds to first
+/// order only. Otherwise, with the profile known, the lean leads to the top's centroid and
+/// the profile's offset of that centroid from the sheet's peak remains: it needs no stretch
+/// of stripe for a median, only the profile's width, but it misses what the image does to a
+/// wide sheet's shape (a thick sheet's perspective), which the top's own shape sees.
+fn lean_to_sheet_peak(
+    lean: f64,
+    half_width: f64,
+    shape: [f64; 2],
+    blur_variance: f64,
+    top_offsets: Option<&super::laser::TopOffsets>,
+) -> (f64, f64) {
+    let blur_share = blur_variance / (half_width / FWHM_PER_SIGMA).powi(2);
+    match top_offsets {
+        Some(model) if shape == [0.0, 0.0] || blur_share > BLUR_DOMINATED_SHARE => {
+            (lean, model.centroid_at(half_width))
+        }
+        _ => (lean_to_peak(lean, half_width, shape, blur_variance), 0.0),
+    }
 }
 
 /// The top of a profile (`q` above its background, half-maximum width `half_width` px; `top`

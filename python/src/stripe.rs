@@ -125,7 +125,10 @@ fn image_of(w: usize, h: usize, bit_depth: u8, data: Vec<u16>, what: &str) -> Py
 /// which stripes too wide for `max_width` are searched. `optics_blur_px` is the lens's PSF σ
 /// whose pull on curved stripes is removed and whose shift of a lopsided laser's peak is
 /// undone (default: from `camera`, its lens_blur_px or its
-/// optics, else measured on the frame's stripes, as omni-ridge). Settings left as None keep
+/// optics, else measured on the frame's stripes, as omni-ridge). `laser_tail` = (share,
+/// length) is the laser's cross-section if known, a core with a one-sided tail holding that
+/// share of the light, that many core σ long (omni-ridge --laser-tail; give the lens's blur
+/// too). Settings left as None keep
 /// omni-ridge's defaults (method windowed, sampling normal, threshold 4 % of full scale; widths
 /// in px; `threshold` in the image's units). Returns an (n, 5) float64 array of
 /// (u, v, intensity, width, quality) rows: u, v in px, quality a bit set (1 saturated, 2 weak,
@@ -133,7 +136,7 @@ fn image_of(w: usize, h: usize, bit_depth: u8, data: Vec<u16>, what: &str) -> Py
 #[pyfunction]
 #[pyo3(signature = (image, camera = None, *, ambient = None, method = None, sampling = None, threshold = None,
     min_width = None, max_width = None, hessian_sigma = None, along_stripe_px = None, optics_blur_px = None,
-    channel = None, laser = None, bayer = None, bayer_sites = false, max_scale = None))]
+    channel = None, laser = None, bayer = None, bayer_sites = false, max_scale = None, laser_tail = None))]
 pub fn detect_stripe<'py>(
     py: Python<'py>,
     image: &Bound<'py, PyAny>,
@@ -152,6 +155,7 @@ pub fn detect_stripe<'py>(
     bayer: Option<&str>,
     bayer_sites: bool,
     max_scale: Option<u32>,
+    laser_tail: Option<(f64, f64)>,
 ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let mut params = RidgeParams::default();
     if let Some(m) = method {
@@ -168,6 +172,7 @@ pub fn detect_stripe<'py>(
     params.optics_blur_px = optics_blur_px.or(params.optics_blur_px);
     params.max_scale = max_scale.unwrap_or(params.max_scale);
     params.mosaic = bayer.is_some();
+    params.laser_profile = laser_tail.map(|(share, length)| omni_model::LaserProfile::tailed(share, length));
     params.validate().map_err(crate::value_error)?;
     let spec = colour_spec(channel, laser, bayer, bayer_sites)?;
     // As omni-ridge does after the detector: points on stripes shorter than the fit's window go.

@@ -149,3 +149,55 @@ def test_the_along_stripe_fit_refuses_short_stripes_as_omni_ridge_does(tmp_path)
     near_short = lambda pts: np.abs(pts[:, 0] - 120) < 3
     assert near_short(omniscan.detect_stripe(img)).any(), "the short stripe is found without the fit"
     assert not near_short(ours).any() and len(ours) > 80, ours[:, :2]
+
+
+def lopsided_stripe(centre, sheet_fwhm, share=0.17, length=4.0, blur=0.7, size=96):
+    """A vertical stripe whose sheet is a Gaussian core with `share` of its light in a one-sided
+    exponential tail `length` core sigma long (towards +x), its peak at x = `centre`, blurred by
+    a Gaussian lens of sigma `blur` px and integrated over the pixels: computed here by numerical
+    convolution on a 1/64 px grid, independently of omniscan's own model of the profile."""
+    # An odd grid centred on 0, so that np.convolve's "same" keeps every profile in place.
+    h = 1.0 / 64
+    x = np.arange(-40 * 64, 40 * 64 + 1) * h
+    gauss = lambda s: np.exp(-0.5 * (x / s) ** 2) / (s * np.sqrt(2 * np.pi))
+    # The core sigma that gives the sheet its FWHM, and the sheet's peak, found numerically.
+    def sheet(core):
+        tail = np.where(x >= 0, np.exp(-x / (length * core)) / (length * core), 0.0)
+        return (1 - share) * gauss(core) + share * np.convolve(gauss(core), tail, mode="same") * h
+    lo, hi = 0.01, sheet_fwhm
+    for _ in range(50):
+        core = 0.5 * (lo + hi)
+        s = sheet(core)
+        above = x[s >= 0.5 * s.max()]
+        lo, hi = (core, hi) if above[-1] - above[0] < sheet_fwhm else (lo, core)
+    s = sheet(core)
+    k = np.argmax(s)
+    # The sheet's peak between grid points: the vertex of a parabola through the top three.
+    peak = x[k] + 0.5 * h * (s[k - 1] - s[k + 1]) / (s[k - 1] - 2 * s[k] + s[k + 1])
+    image = np.convolve(s, gauss(blur), mode="same") * h
+    # Pixel k covers [k - 0.5, k + 0.5] about the stripe's peak at `centre`.
+    at = x - peak + centre
+    columns = np.array([image[(at >= k - 0.5) & (at < k + 0.5)].sum() * h for k in range(size)])
+    row = np.round(20 + 200 * columns / columns.max())
+    return np.tile(row, (size, 1)).astype(np.uint8)
+
+
+def test_a_known_laser_tail_leads_a_narrow_lopsided_stripe_to_its_peak():
+    # A sheet 0.6 px wide under a 0.7 px lens: the blur makes most of the stripe's width, and the
+    # stripe's own top shape undoes its shift of the lopsided peak to first order only.
+    errors = {}
+    for given in [None, (0.17, 4.0)]:
+        found = []
+        for centre in np.linspace(40.0, 41.0, 16, endpoint=False):
+            pts = omniscan.detect_stripe(lopsided_stripe(centre, 0.6), optics_blur_px=0.7, laser_tail=given)
+            inner = pts[(pts[:, 1] > 10) & (pts[:, 1] < 86)]
+            assert len(inner) > 60
+            found.append(np.mean(inner[:, 0]) - centre)
+        errors[given] = np.mean(found)
+    # Measured: +0.03 px towards the tail without the laser's profile, +0.008 with it (sheets of
+    # 0.5 / 0.8 / 1.2 / 2 px: +0.033 / +0.025 / +0.004 / +0.002 without, +0.008 / +0.007 /
+    # -0.006 / +0.006 with; from 3 px on the stripe's own top shape leads it either way).
+    assert errors[None] > 0.02, errors
+    assert abs(errors[(0.17, 4.0)]) < 0.012, errors
+    with pytest.raises(ValueError, match="tail_weight"):
+        omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), laser_tail=(0.95, 4.0))

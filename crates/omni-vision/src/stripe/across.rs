@@ -925,9 +925,8 @@ impl Centre {
 /// ±[`LEAN_HALF_ARC_PX`]: from the estimator's centre to the peak of the light. A laser's tail
 /// lies on the same side of its stripe all along it, so the mean keeps the tail's pull and
 /// averages away each profile's noise, which at the top alone is 1.5–3 times the estimator's.
-/// With the laser's profile known (`top_offsets`), the leans lead to the tops' centroids, and
-/// the profile's predicted offset of a top from the sheet's peak (the same mean over the
-/// neighbours' widths) is added on the side the mean lean gives the tail.
+/// Where the leans lead only to the tops' centroids ([`Linked::tail_offset`], a laser's profile
+/// known), the neighbours' mean tail offset is added on the tail's side ([`tail_sides`]).
 fn remove_steady_lean(points: &mut [Linked]) {
     let grid = Grid::from_placed(points.iter().map(Linked::placed), LEAN_HALF_ARC_PX);
     let sides = tail_sides(points);
@@ -968,7 +967,7 @@ const TAIL_SIDE_HALF_ARC_PX: f64 = 48.0;
 /// The side of each point's stripe (±1 along its normal) where the laser's tail lies, where
 /// a point still has a [`Linked::tail_offset`] to go: the side its stripe's leans within
 /// ±[`TAIL_SIDE_HALF_ARC_PX`] point to on average (a lopsided profile's centre lies beyond its
-/// top on the tail's side). Empty where no point has one.
+/// top on the tail's side); 0 where they do not tell. Empty where no point has one.
 fn tail_sides(points: &[Linked]) -> Vec<f64> {
     if points.iter().all(|l| l.tail_offset == 0.0) {
         return Vec::new();
@@ -986,7 +985,7 @@ fn tail_sides(points: &[Linked]) -> Vec<f64> {
                     sum += if same_way { lean } else { -lean };
                 }
             });
-            sum.signum()
+            if sum == 0.0 { 0.0 } else { sum.signum() }
         })
         .collect()
 }

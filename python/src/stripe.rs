@@ -155,7 +155,7 @@ pub fn detect_stripe<'py>(
     bayer: Option<&str>,
     bayer_sites: bool,
     max_scale: Option<u32>,
-    laser_tail: Option<(f64, f64)>,
+    laser_tail: Option<Vec<f64>>,
 ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let mut params = RidgeParams::default();
     if let Some(m) = method {
@@ -172,7 +172,20 @@ pub fn detect_stripe<'py>(
     params.optics_blur_px = optics_blur_px.or(params.optics_blur_px);
     params.max_scale = max_scale.unwrap_or(params.max_scale);
     params.mosaic = bayer.is_some();
-    params.laser_profile = laser_tail.map(|(share, length)| omni_model::LaserProfile::tailed(share, length));
+    params.laser_profile = match laser_tail.as_deref() {
+        None => None,
+        Some(&[share, length]) => {
+            let p = omni_model::LaserProfile::tailed(share, length);
+            p.validate().map_err(|e| crate::value_error(format!("laser_tail: {e}")))?;
+            Some(p)
+        }
+        Some(other) => {
+            return Err(crate::value_error(format!(
+                "laser_tail: expected (share, length), got {} numbers",
+                other.len()
+            )));
+        }
+    };
     params.validate().map_err(crate::value_error)?;
     let spec = colour_spec(channel, laser, bayer, bayer_sites)?;
     // As omni-ridge does after the detector: points on stripes shorter than the fit's window go.

@@ -199,5 +199,11 @@ def test_a_known_laser_tail_leads_a_narrow_lopsided_stripe_to_its_peak():
     # -0.006 / +0.006 with; from 3 px on the stripe's own top shape leads it either way).
     assert errors[None] > 0.02, errors
     assert abs(errors[(0.17, 4.0)]) < 0.012, errors
-    with pytest.raises(ValueError, match="tail_weight"):
+    # A list does as well as a tuple.
+    listed = omniscan.detect_stripe(lopsided_stripe(40.3, 0.6), optics_blur_px=0.7, laser_tail=[0.17, 4.0])
+    np.testing.assert_array_equal(listed, omniscan.detect_stripe(lopsided_stripe(40.3, 0.6), optics_blur_px=0.7,
+                                                                 laser_tail=(0.17, 4.0)))
+    with pytest.raises(ValueError, match="laser_tail: tail_weight"):
         omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), laser_tail=(0.95, 4.0))
+    with pytest.raises(ValueError, match="laser_tail: expected"):
+        omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), laser_tail=(0.2, 4.0, 1.0))

@@ -552,7 +552,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         // frame's stripes (or the centres came from --stripes).
         "optics_blur_px": if a.stripes.is_some() { None } else { ridge.optics_blur_px },
         // The laser's cross-section the stripe detector was told ([share, length]); null: none.
-        "laser_tail": ridge.laser_profile.filter(|_| a.stripes.is_none()).map(|p| [p.tail_weight, p.tail_length]),
+        "laser_tail": ridge.laser_profile.filter(|_| a.stripes.is_none()).map(|p| [p.tail_weight(), p.tail_length()]),
     });
     let mut params = omni_model::FixedPlanesParams::single(&fit.plane);
     params.planes[0].laser = a.laser_id;

@@ -101,13 +101,15 @@ struct Args {
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     optics_blur: Option<f64>,
     /// The laser's cross-section, if known: a Gaussian core with a one-sided exponential tail
-    /// holding SHARE of the light, LENGTH core σ long (0,1: a symmetric laser). Each point is
-    /// then led from its profile's top to the sheet's peak by what this cross-section, blurred
-    /// by the lens (--optics-blur or the camera's; give it), the pixel and the sampling,
-    /// predicts at the stripe's width, wherever the stripe's own top shape cannot tell: pieces
-    /// too short or too speckled for it, and stripes narrower than about twice the blur. The
-    /// tail's side comes from the stripe. The red line laser of the hand-held photographs in
-    /// ../shared/data/real-laser-handheld measures 0.17,4.
+    /// holding SHARE (0-0.9) of the light, LENGTH (0.05-50) core σ long (0,1: a symmetric
+    /// laser). Points are then led from their profiles' tops to the sheet's peak by what this
+    /// cross-section, blurred by the lens (--optics-blur or the camera's; give it), the pixel and
+    /// the sampling, predicts at the stripe's width, wherever the stripe's own top shape cannot
+    /// tell: pieces too short or too speckled for it, and stripes whose width is mostly the
+    /// blur's (FWHM under about 1.4 × the blur's with the sampling: 3.7 px behind a 0.7 px
+    /// lens). The tail's side comes from the stripe. The red line laser of the hand-held
+    /// photographs in ../shared/data/real-laser-handheld measures 0.17,4. Not with --sampling
+    /// rays.
     #[arg(long, value_name = "SHARE,LENGTH")]
     laser_tail: Option<omni_model::LaserProfile>,
     /// Coarsest scale at which stripes wider than --max-width are searched: 1 (off), 2, 4, 8 or

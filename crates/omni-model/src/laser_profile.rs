@@ -11,10 +11,8 @@
 /// A laser sheet's cross-section (module docs), with its mode and FWHM for a core σ of 1.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LaserProfile {
-    /// Share of the light in the tail (0 ≤ w ≤ 0.9).
-    pub tail_weight: f64,
-    /// The tail's decay length τ in core σ (> 0).
-    pub tail_length: f64,
+    tail_weight: f64,
+    tail_length: f64,
     mode: f64,
     fwhm: f64,
 }
@@ -37,6 +35,16 @@ impl LaserProfile {
     /// A Gaussian sheet.
     pub fn gaussian() -> LaserProfile {
         LaserProfile::tailed(0.0, 1.0)
+    }
+
+    /// Share of the light in the tail (0 ≤ w ≤ 0.9).
+    pub fn tail_weight(&self) -> f64 {
+        self.tail_weight
+    }
+
+    /// The tail's decay length τ in core σ (> 0).
+    pub fn tail_length(&self) -> f64 {
+        self.tail_length
     }
 
     /// Checks the parameters; the message names the field.

@@ -43,12 +43,7 @@ impl SheetProfile {
         match *self {
             SheetProfile::Gaussian => Ok(()),
             SheetProfile::Tailed { tail_weight, tail_length, tail_side } => {
-                if !(tail_weight.is_finite() && (0.0..=0.9).contains(&tail_weight)) {
-                    return Err(format!("tail_weight must be within 0–0.9, got {tail_weight}"));
-                }
-                if !(tail_length.is_finite() && (0.05..=50.0).contains(&tail_length)) {
-                    return Err(format!("tail_length must be within 0.05–50 (in core σ), got {tail_length}"));
-                }
+                LaserProfile::tailed(tail_weight, tail_length).validate()?;
                 if tail_side != 1 && tail_side != -1 {
                     return Err(format!("tail_side must be 1 or -1, got {tail_side}"));
                 }
@@ -124,7 +119,7 @@ impl SheetProfile {
     /// tail): where a centre of mass over the whole profile lands.
     pub fn centroid_offset(&self) -> f64 {
         let shape = self.shape();
-        (shape.profile.tail_weight * shape.profile.tail_length - shape.profile.mode()) / shape.profile.fwhm()
+        (shape.profile.tail_weight() * shape.profile.tail_length() - shape.profile.mode()) / shape.profile.fwhm()
     }
 }
 
@@ -149,14 +144,14 @@ impl Shape {
     /// 6 σ + 10 τ on the tail's.
     pub fn support(&self, sigma: f64, extra: f64) -> (f64, f64) {
         let s = (sigma * sigma + extra * extra).sqrt();
-        let tail = if self.profile.tail_weight > 0.0 { 10.0 * self.profile.tail_length * sigma } else { 0.0 };
+        let tail = if self.profile.tail_weight() > 0.0 { 10.0 * self.profile.tail_length() * sigma } else { 0.0 };
         self.range(-6.0 * s, 6.0 * s + tail, sigma)
     }
 
     /// The plane distances (mm) within which pixels are supersampled: 4 σ on the core's side,
     /// 4 σ + τ on the tail's (the tail further out is smooth at the pixel scale).
     pub fn near(&self, sigma: f64) -> (f64, f64) {
-        let tail = if self.profile.tail_weight > 0.0 { self.profile.tail_length * sigma } else { 0.0 };
+        let tail = if self.profile.tail_weight() > 0.0 { self.profile.tail_length() * sigma } else { 0.0 };
         self.range(-4.0 * sigma, 4.0 * sigma + tail, sigma)
     }
 

@@ -188,12 +188,15 @@ pub struct RidgeParams {
     /// The frame's colour was demosaiced from a colour mosaic (Bayer): the laser's colour is
     /// sampled one pixel in two along each axis, and a profile's top (a few px) is shaped by
     /// the interpolation, alike all along a stripe that runs with the mosaic's rows or
-    /// columns. Such a stripe's centres are not moved by its top's shape to the light's peak.
+    /// columns. Such a stripe's centres are not moved by its top's shape to the light's peak
+    /// (by [`laser_profile`](Self::laser_profile)'s prediction instead, where one is given).
     pub mosaic: bool,
-    /// The laser's cross-section, if known (a lopsided laser's tail): each stripe point is
-    /// then moved from its profile's top to the sheet's peak by what this profile, blurred by
-    /// the lens (where known), the pixel and the sampling, predicts at the profile's width
-    /// (`laser`), instead of by its stripe's median top shape.
+    /// The laser's cross-section, if known (a lopsided laser's tail). Where a stripe's own top
+    /// shape cannot lead its points to the sheet's peak (no significant median: pieces too short
+    /// or too speckled; or a width mostly the blur's), they are moved from their profiles' tops
+    /// by what this profile, blurred by the lens (where known), the pixel and the sampling,
+    /// predicts at the profile's width (`laser`), on the side their stripe's profiles give the
+    /// tail. Across the normal only ([`Sampling::Normal`]).
     pub laser_profile: Option<omni_model::LaserProfile>,
 }
 

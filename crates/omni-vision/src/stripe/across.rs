@@ -189,9 +189,12 @@ pub(super) struct Linked {
     /// Half-maximum width (px).
     pub half_width: f64,
     /// The centre's offset along `normal` from the peak of the light its profile blurs (px;
-    /// [`Centre::lean`] less the blur's shift of a lopsided peak); `None` where it says nothing
-    /// of the laser's shape (saturated or flat-topped profiles).
+    /// [`Centre::lean`] less the blur's shift of a lopsided peak), or from its top's centroid
+    /// where [`Linked::tail_offset`] carries the rest; `None` where it says nothing of the
+    /// laser's shape (saturated or flat-topped profiles).
     pub lean: Option<f64>,
+    /// [`Centre::side_lean`]: the profile's vote on its tail's side.
+    side_lean: Option<f64>,
     /// The profile's top shape ([`Centre::top_shape`]) where the lean has not taken its
     /// stripe's yet (points re-measured from a coarser scale).
     top_shape: Option<[f64; 2]>,
@@ -221,6 +224,9 @@ struct Centre {
     /// `normal` (px): 0 on a symmetric straight stripe, the tail's pull on a lopsided one;
     /// `None` for a saturated profile (its plateau has no top to measure).
     lean: Option<f64>,
+    /// With the laser's profile known, the windowed centroid minus the top's centroid (px
+    /// along `normal`): the side of the tail ([`RidgeDetector::side_lean`]).
+    side_lean: Option<f64>,
     /// The shape of the profile's top in units of the profile's σ (half-maximum width / 2.355):
     /// the top's centroid less the vertex of a cubic through the top's logarithm L, and L‴/L″
     /// there ([`stripe_top`]), both along `normal`. The vertex is the image's peak; a blur of
@@ -590,12 +596,36 @@ impl RidgeDetector {
         // The top: the samples above TOP_LEVEL of the peak, their centroid and shape.
         let top = if saturated { None } else { estimators::top_centroid(q, &seg, TOP_LEVEL * peak) };
         let lean = top.map(|(centre, _)| (index - centre) * SAMPLE_STEP_PX);
+        let side_lean = self.side_lean(q, &seg, t, lean, top.map(|(centre, _)| centre));
         let sigma = half_width / FWHM_PER_SIGMA;
         let top_shape = top.filter(|_| flatness <= LEAN_MAX_FLATNESS).and_then(|(centre, top)| {
             let (vertex, skew) = stripe_top(q, &top, half_width)?;
             Some([(centre - vertex) * SAMPLE_STEP_PX / sigma, skew / SAMPLE_STEP_PX * sigma])
         });
-        Some(Centre { point, normal: (nx, ny), half_width, asymmetry, pull_variance, flatness, lean, top_shape })
+        Some(Centre {
+            point,
+            normal: (nx, ny),
+            half_width,
+            asymmetry,
+            pull_variance,
+            flatness,
+            lean,
+            side_lean,
+            top_shape,
+        })
+    }
+
+    /// With the laser's profile known, the windowed centroid's offset (px) from the top's
+    /// centroid `top` (a sample index): towards the tail whatever the estimator (a Gaussian
+    /// fit or Blais–Rioux finds the top itself, and their lean can have either sign), the
+    /// profile's vote on its tail's side ([`tail_sides`]). `lean` where the estimator is the
+    /// windowed centroid.
+    fn side_lean(&self, q: &[f32], seg: &Segment, t: f32, lean: Option<f64>, top: Option<f64>) -> Option<f64> {
+        self.params.laser_profile?;
+        match self.params.method {
+            super::Method::Windowed | super::Method::Hessian => lean,
+            _ => Some((estimators::windowed_centroid(q, seg, t)? - top?) * SAMPLE_STEP_PX),
+        }
     }
 
     /// The variance σ² (px²) for which the blur moves this profile's centre by σ²κ/2 towards the
@@ -916,6 +946,7 @@ impl Centre {
             half_width: self.half_width,
             lean: self.lean,
             top_shape: self.top_shape,
+            side_lean: self.side_lean,
             tail_offset: 0.0,
         }
     }
@@ -965,9 +996,10 @@ fn remove_steady_lean(points: &mut [Linked]) {
 const TAIL_SIDE_HALF_ARC_PX: f64 = 48.0;
 
 /// The side of each point's stripe (±1 along its normal) where the laser's tail lies, where
-/// a point still has a [`Linked::tail_offset`] to go: the side its stripe's leans within
-/// ±[`TAIL_SIDE_HALF_ARC_PX`] point to on average (a lopsided profile's centre lies beyond its
-/// top on the tail's side); 0 where they do not tell. Empty where no point has one.
+/// a point still has a [`Linked::tail_offset`] to go: the side its stripe's profiles within
+/// ±[`TAIL_SIDE_HALF_ARC_PX`] point to on average ([`Centre::side_lean`]: a lopsided profile's
+/// windowed centroid lies beyond its top on the tail's side); 0 where they do not tell. Empty
+/// where no point has one.
 fn tail_sides(points: &[Linked]) -> Vec<f64> {
     if points.iter().all(|l| l.tail_offset == 0.0) {
         return Vec::new();
@@ -979,7 +1011,7 @@ fn tail_sides(points: &[Linked]) -> Vec<f64> {
             let here = l.placed();
             let mut sum = 0.0;
             grid.visit(here[0], here[1], |j, other| {
-                if let Some(lean) = points[j].lean
+                if let Some(lean) = points[j].side_lean
                     && let Some((_, _, same_way)) = on_the_stripe(&here, other, TAIL_SIDE_HALF_ARC_PX)
                 {
                     sum += if same_way { lean } else { -lean };
@@ -1109,9 +1141,11 @@ fn on_the_stripe(&[px, py, nx0, ny0]: &[f64; 4], &[u, v, nx, ny]: &[f64; 4], rea
 
 /// Adds to each point's lean (from its top's centroid) its stripe's median top shape, as
 /// `link_and_correct` does for the points it links: from the top's centroid to the image's peak
-/// and back by the blur's shift of a lopsided peak (`blur_variance`, px²). For points
-/// re-measured from a coarser scale, whose stripes are the chains of points within
-/// [`super::along::STRIPE_LINK_PX`] of each other with nearly parallel normals.
+/// and back by the blur's shift of a lopsided peak (`blur_variance`, px²), or, with the laser's
+/// profile known (`top_offsets`), sets its [`Linked::tail_offset`] where the shape cannot tell
+/// ([`lean_to_sheet_peak`]). For points re-measured from a coarser scale, whose stripes are the
+/// chains of points within [`super::along::STRIPE_LINK_PX`] of each other with nearly parallel
+/// normals.
 fn lean_to_the_lights_peak(
     points: &mut [Linked],
     blur_variance: f64,

@@ -87,8 +87,9 @@ fn sampled_top(profile: &LaserProfile, core: f64, blur_variance: f64) -> Option<
     let s = (1.0 + blur_variance / (core * core)).sqrt();
     let spread = s * core;
     let peak = profile.mode() * core;
-    // Down to well below the half maximum on the core's side, and along the tail.
-    let tail = if profile.tail_weight > 0.0 { 6.0 * profile.tail_length * core } else { 0.0 };
+    // Past the half maximum on both sides: on the tail's, within 2 τ for any share up to 0.9
+    // (an exponential halves in 0.7 τ).
+    let tail = if profile.tail_weight() > 0.0 { 2.0 * profile.tail_length() * core } else { 0.0 };
     let (from, to) = (-5.0 * spread, 5.0 * spread + tail);
     let n = ((to - from) / SAMPLE_STEP_PX).ceil() as usize + 3;
     let mut sum = SampledTop { half_width: 0.0, centroid: 0.0 };
@@ -124,8 +125,13 @@ mod tests {
         let real = TopOffsets::new(&LaserProfile::tailed(0.17, 4.0), blur);
         let offsets: Vec<f64> = [2.0, 3.0, 5.0, 10.0, 20.0, 50.0, 100.0].map(|h| real.centroid_at(h)).to_vec();
         assert!(offsets.iter().all(|&o| o > 0.0), "{offsets:?}");
-        // Wide sheets: the blur no longer matters and the offset grows with the width.
+        // Wide sheets: the blur no longer matters and the offset grows with the width, also past
+        // the table; below it (narrower than the blur alone: noise) the narrowest sheet's.
         assert!((real.centroid_at(100.0) / real.centroid_at(50.0) - 2.0).abs() < 0.15, "{offsets:?}");
+        let widest = *real.half_widths.last().unwrap();
+        assert!((real.centroid_at(2.0 * widest) / real.centroid_at(widest) - 2.0).abs() < 1e-9);
+        assert_eq!(real.centroid_at(0.5), real.centroids[0]);
+        assert_eq!(real.centroid_at(f64::NAN), real.centroids[0]);
     }
 
     /// The table against the top centroid of the continuous profile, computed directly.

@@ -1210,13 +1210,13 @@ fn lean_to_peak(lean: f64, half_width: f64, [top_offset, skew]: [f64; 2], blur_v
 
 /// A lean ([`lean_to_peak`]'s arguments) carried towards the sheet's peak, and how far beyond
 /// it the peak still lies on the tail's side (px), left to [`remove_steady_lean`], which knows
-/// that side from the stripe's mean lean. A stripe with a top shape of its own is led to the
-/// peak by it ([`lean_to_peak`]), unless the laser's profile is known (`top_offsets`) and the
-/// blur makes most of the profile's width: the shape's undoing of the blur holds to first
-/// order only. Otherwise, with the profile known, the lean leads to the top's centroid and
-/// the profile's offset of that centroid from the sheet's peak remains: it needs no stretch
-/// of stripe for a median, only the profile's width, but it misses what the image does to a
-/// wide sheet's shape (a thick sheet's perspective), which the top's own shape sees.
+/// that side ([`tail_sides`]). A stripe with a top shape of its own is led to the peak by it
+/// ([`lean_to_peak`]), unless the laser's profile is known (`top_offsets`) and the blur makes
+/// most of the profile's width: the shape's undoing of the blur holds to first order only.
+/// Otherwise, with the profile known, the lean leads to the top's centroid and the profile's
+/// offset of that centroid from the sheet's peak remains: it needs no stretch of stripe for a
+/// median, only the profile's width, but it sees only the profile, where a wide stripe's own
+/// top shape sees whatever else shapes it in the image (docs/DECISIONS.md).
 fn lean_to_sheet_peak(
     lean: f64,
     half_width: f64,

@@ -56,13 +56,15 @@ enum Command {
 any kind, e.g. from omni-calib-receiver --model mei), the stripe detector finds the laser's centres over the whole \
 frame, and each centre's ray meets the board plane. Points inside the board's printed pattern (one square beyond \
 the outer inner corners, widened by --margin-mm) are points of the light plane. One plane is fitted to the points \
-of all frames robustly (least median of squares, Tukey reweighting, least squares on the inliers).
+of all frames robustly (least median of squares, Tukey reweighting), then to the inliers by least squares in \
+which each frame's points share its board's pose error (from the corners), so that a board posed less surely \
+pulls the plane less however many points it carries.
 
 It prints, per frame: corners and their RMS under the pose (px), stripe points on the board, inliers, the residual \
 RMS and mean about the plane (mm), the straightness of the frame's stripe (RMS distance from its own best line in \
 3-D, in mm and as imaged in px), and the leave-one-out RMS (the frame's points against the plane fitted without \
-that frame, mm); then the plane (unit normal, distance from the camera in mm) with its σ from the fit (points \
-taken as independent) and from a jackknife over the frames (the honest one when frames carry their own pose \
+that frame, mm); then the plane (unit normal, distance from the camera in mm) with its σ from the fit (the points' \
+scatter and the boards' pose errors) and from a jackknife over the frames (the honest one when frames carry their own pose \
 errors). --report writes all of it as JSON, with each frame's saturated stripe points on the board; \
 scanner.json's report holds it too. Frames where more than a quarter of them are saturated are named in one \
 warning: a clipped stripe is read at its plateau's middle, towards a lopsided laser's tail, so lower the exposure \

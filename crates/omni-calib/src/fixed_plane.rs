@@ -6,20 +6,25 @@
 //! points inside the board's printed outline (the outer squares' edges, widened by
 //! [`FixedPlaneOptions::margin_mm`]) are points of the light plane (mm, world frame). One plane
 //! is fitted to the points of all frames robustly ([`omni_geom::robust_plane`]: least median of
-//! squares, Tukey reweighting, least squares on the inliers). The report gives per frame the
-//! residual RMS (mm) and the stripe's straightness (px and mm: the RMS distance of its points
-//! from their own best line in 3-D, the px being that distance as imaged), the plane with its
-//! uncertainty (from the fit, and from a jackknife over frames), and a leave-one-frame-out check
-//! (each frame's inliers against the plane fitted to the other frames).
+//! squares, Tukey reweighting), then to the inliers by generalised least squares in which each
+//! frame's points share its board's pose error, so that a board posed less surely (a partial
+//! board, corners that fit worse) pulls the plane less, however many points it carries. The
+//! report gives per frame the residual RMS (mm) and the stripe's straightness (px and mm: the
+//! RMS distance of its points from their own best line in 3-D, the px being that distance as
+//! imaged), the plane with its uncertainty (from the fit, and from a jackknife over frames), and
+//! a leave-one-frame-out check (each frame's inliers against the plane fitted to the other
+//! frames).
 //!
 //! [`detect_frames`] reads the frames: corners by [`omni_vision::corners::detect_board`], stripe
 //! centres by [`omni_vision::stripe::RidgeDetector::whole_frame`] on the colour reading given.
 
-use crate::pose::estimate_board_pose;
+use crate::pose::{estimate_board_pose_with_covariance, params_to_pose, pose_to_params};
 use crate::receiver::Observation;
 use crate::receiver::corners_file::{CornersFile, ImageCorners};
+use nalgebra::{Matrix6, Matrix6x3, Vector6};
+use omni_geom::fit::orthonormal_basis;
 use omni_geom::robust_plane::{RobustPlaneFit, fit_plane_robust_grouped};
-use omni_geom::{Isometry3, Plane, Point3, Vector2, Vector3};
+use omni_geom::{Isometry3, Matrix3, Plane, Point3, Vector2, Vector3};
 use omni_model::CameraModel;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -107,8 +112,8 @@ pub struct PlaneReport {
     /// that the distance is ≥ 0.
     pub normal: [f64; 3],
     pub distance_mm: f64,
-    /// σ of the normal's direction (degrees) and of the distance (mm) from the fit, the points
-    /// taken as independent.
+    /// σ of the normal's direction (degrees) and of the distance (mm) from the fit: the points'
+    /// scatter and each board's pose error (from its corners), which its points share.
     pub normal_sigma_deg: f64,
     pub distance_sigma_mm: f64,
     /// σ along the normal at the points' centroid (mm), from the fit.
@@ -167,11 +172,16 @@ struct OnBoard {
     pixels: Vec<[f64; 2]>,
     /// How many of `points` are saturated, where known ([`FrameInput::saturated`]).
     saturated: Option<usize>,
+    /// Each point's moves (mm) when the board's pose moves by one σ along each principal axis
+    /// of its covariance (half the difference of the ± steps): their outer products summed give
+    /// the covariance the pose's error adds to the points. All zero where the pose fit gave no
+    /// covariance.
+    pose_spread: Vec<[Vector3<f64>; 6]>,
 }
 
 fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptions) -> Result<OnBoard, String> {
     let obs = f.corners.as_ref().map_err(|r| r.clone())?;
-    let pose = estimate_board_pose(camera, &obs.board_mm, &obs.pixels)
+    let (pose, pose_covariance) = estimate_board_pose_with_covariance(camera, &obs.board_mm, &obs.pixels)
         .ok_or_else(|| format!("board pose failed ({} corners)", obs.pixels.len()))?;
     let mut ss = 0.0;
     let mut n = 0usize;
@@ -194,15 +204,8 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
     let square = opts.square_mm;
     let pattern = (x0 - square, x1 + square, y0 - square, y1 + square);
     let (x0, x1, y0, y1) = (x0 - pad, x1 + pad, y0 - pad, y1 + pad);
-    let normal = pose.rotation * Vector3::z();
-    let offset = normal.dot(&pose.translation.vector);
     let inverse = pose.inverse();
-    let on_board = |u: f64, v: f64| {
-        let ray = camera.pixel_to_ray(&Vector2::new(u, v))?;
-        let denom = normal.dot(&ray.dir);
-        let t = (offset - normal.dot(&ray.origin.coords)) / denom;
-        (denom.abs() >= 1e-9 && t > 0.0).then(|| ray.origin + ray.dir.into_inner() * t)
-    };
+    let on_board = |u: f64, v: f64| board_hit(&pose, &camera.pixel_to_ray(&Vector2::new(u, v))?);
     // Distance (mm) from a board point to the nearest square edge: inside the pattern the lines
     // through the inner corners, which lie at multiples of the square; outside it, its outline.
     let edge_distance = |x: f64, y: f64| {
@@ -238,6 +241,22 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         pixels.push(*px);
         saturated += usize::from(flags.is_some_and(|s| s[k]));
     }
+    let steps = pose_covariance.map_or_else(Vec::new, |c| one_sigma_poses(&pose, &c));
+    let pose_spread = pixels
+        .iter()
+        .map(|px| {
+            let ray = camera.pixel_to_ray(&Vector2::new(px[0], px[1]));
+            let mut spread = [Vector3::zeros(); 6];
+            for (s, (plus, minus)) in spread.iter_mut().zip(&steps) {
+                if let Some(ray) = &ray
+                    && let (Some(a), Some(b)) = (board_hit(plus, ray), board_hit(minus, ray))
+                {
+                    *s = (a - b) / 2.0;
+                }
+            }
+            spread
+        })
+        .collect();
     if points.len() < opts.min_points {
         return Err(format!(
             "the board does not carry the stripe: {} of {} stripe points on the board, fewer than {}",
@@ -255,7 +274,29 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         points,
         pixels,
         saturated: flags.map(|_| saturated),
+        pose_spread,
     })
+}
+
+/// Where `ray` meets the board at `pose` (its z = 0 plane), in front of the ray's origin.
+fn board_hit(pose: &Isometry3<f64>, ray: &omni_geom::Ray) -> Option<Point3<f64>> {
+    let normal = pose.rotation * Vector3::z();
+    let denom = normal.dot(&ray.dir);
+    let t = (normal.dot(&pose.translation.vector) - normal.dot(&ray.origin.coords)) / denom;
+    (denom.abs() >= 1e-9 && t > 0.0).then(|| ray.origin + ray.dir.into_inner() * t)
+}
+
+/// The board's pose moved by ± one σ along each principal axis of its parameters' covariance
+/// ([`pose_to_params`]).
+fn one_sigma_poses(pose: &Isometry3<f64>, covariance: &Matrix6<f64>) -> Vec<(Isometry3<f64>, Isometry3<f64>)> {
+    let params = Vector6::from(pose_to_params(pose));
+    let eig = covariance.symmetric_eigen();
+    (0..6)
+        .map(|k| {
+            let step = eig.eigenvectors.column(k) * eig.eigenvalues[k].max(0.0).sqrt();
+            (params_to_pose((params + step).as_slice()), params_to_pose((params - step).as_slice()))
+        })
+        .collect()
 }
 
 /// The robust plane of `frames`' points, oriented with offset ≥ 0.
@@ -266,6 +307,7 @@ fn fit_frames(frames: &[&OnBoard], seed: u64) -> Option<RobustPlaneFit> {
     let group: Vec<usize> =
         frames.iter().enumerate().flat_map(|(k, f)| std::iter::repeat_n(k, f.points.len())).collect();
     let mut fit = fit_plane_robust_grouped(&pts, &group, seed)?;
+    weigh_board_poses(frames, &mut fit);
     if fit.plane.offset < 0.0 {
         fit.plane = fit.plane.flipped();
         fit.basis = (-fit.basis.0, -fit.basis.1);
@@ -274,21 +316,128 @@ fn fit_frames(frames: &[&OnBoard], seed: u64) -> Option<RobustPlaneFit> {
     Some(fit)
 }
 
+/// One frame's inlier points (mm) and their pose spreads ([`OnBoard::pose_spread`]).
+type FrameInliers = (Vec<Point3<f64>>, Vec<[Vector3<f64>; 6]>);
+
+/// Refits `fit`'s plane to its inliers by generalised least squares: each frame's points share
+/// its board's pose error (`pose_spread`), which moves them together, so a frame whose board is
+/// posed less surely weighs less however many points it has; beside it each point's own scatter
+/// about its frame's line (pooled over the frames). The covariance is the fit's, scaled up by
+/// its χ² per degree of freedom where that exceeds 1 (errors neither term holds, such as a
+/// stripe's offset that differs between frames). Where the system is singular (points without
+/// scatter, whose frames then tell nothing beyond their boards' poses) the robust fit stays.
+fn weigh_board_poses(frames: &[&OnBoard], fit: &mut RobustPlaneFit) {
+    // Each frame's inliers with their pose spreads.
+    let mut groups: Vec<FrameInliers> = Vec::with_capacity(frames.len());
+    let mut at = 0;
+    for f in frames {
+        let inliers = &fit.inliers[at..at + f.points.len()];
+        at += f.points.len();
+        let kept = || f.points.iter().zip(&f.pose_spread).zip(inliers).filter(|(_, k)| **k).map(|(p, _)| p);
+        groups.push((kept().map(|(p, _)| *p).collect(), kept().map(|(_, s)| *s).collect()));
+    }
+    let Some(noise) = scatter_about_lines(&groups, &fit.plane) else { return };
+    let (mut plane, mut basis, mut covariance) = (fit.plane, fit.basis, fit.covariance);
+    for _ in 0..GLS_ITERATIONS {
+        // The covariance is taken in the basis at the plane before the step, which the last,
+        // tiny step moves by far less than the covariance resolves.
+        basis = orthonormal_basis(&plane.normal);
+        let Some((step, normal_inverse, chi2, dof)) = gls_step(&groups, &plane, basis, noise) else { return };
+        covariance = normal_inverse * (chi2 / dof).max(1.0);
+        let n = plane.normal.into_inner() + basis.0 * step.x + basis.1 * step.y;
+        let Some(next) = Plane::from_normal_offset(&n, plane.offset + step.z) else { return };
+        plane = next;
+        if step.norm() < 1e-12 {
+            break;
+        }
+    }
+    (fit.plane, fit.basis, fit.covariance) = (plane, basis, covariance);
+}
+
+/// Gauss–Newton steps of [`weigh_board_poses`]; each moves the plane by what is left of its
+/// linearisation's error, which the second step already leaves far below the fit's σ.
+const GLS_ITERATIONS: usize = 4;
+
+/// The variance (mm²) of the points' distances from `plane` about each frame's own straight line
+/// of them, pooled over the frames: the points' scatter without what their frame shares.
+fn scatter_about_lines(groups: &[FrameInliers], plane: &Plane) -> Option<f64> {
+    let (mut ss, mut dof) = (0.0, 0.0);
+    for (points, _) in groups.iter().filter(|(p, _)| p.len() >= 3) {
+        let (c, along) = best_line(points);
+        // The distances' least-squares line over the position along the frame's line.
+        let at: Vec<(f64, f64)> = points.iter().map(|p| ((p - c).dot(&along), plane.signed_distance(p))).collect();
+        let m = at.len() as f64;
+        let (mean_s, mean_r) = (at.iter().map(|a| a.0).sum::<f64>() / m, at.iter().map(|a| a.1).sum::<f64>() / m);
+        let (mut sss, mut ssr, mut srr) = (0.0, 0.0, 0.0);
+        for (s, r) in &at {
+            (sss, ssr, srr) =
+                (sss + (s - mean_s).powi(2), ssr + (s - mean_s) * (r - mean_r), srr + (r - mean_r).powi(2));
+        }
+        ss += if sss > 0.0 { srr - ssr * ssr / sss } else { srr };
+        dof += m - 2.0;
+    }
+    let variance = ss / dof;
+    (variance > 0.0 && variance.is_finite()).then_some(variance)
+}
+
+/// One generalised least-squares step for the plane's change (a, b, c) in `basis` ([`RobustPlaneFit`]'s
+/// parametrisation), its covariance, the χ² at `plane` and its degrees of freedom. Per frame the
+/// points' covariance is σ²·I + U·Uᵀ, U their distances' pose spreads; its inverse by Woodbury's
+/// identity, σ⁻²(I − U (σ²I + UᵀU)⁻¹ Uᵀ), needs only 6 × 6 systems.
+fn gls_step(
+    groups: &[FrameInliers],
+    plane: &Plane,
+    basis: (Vector3<f64>, Vector3<f64>),
+    noise: f64,
+) -> Option<(Vector3<f64>, Matrix3<f64>, f64, f64)> {
+    let (mut normal_matrix, mut gradient, mut chi2, mut count) = (Matrix3::zeros(), Vector3::zeros(), 0.0, 0usize);
+    let n = plane.normal.into_inner();
+    for (points, spreads) in groups {
+        let (mut xx, mut xr, mut rr) = (Matrix3::zeros(), Vector3::zeros(), 0.0);
+        let (mut ux, mut uu, mut ur) = (Matrix6x3::zeros(), Matrix6::zeros(), Vector6::zeros());
+        for (p, spread) in points.iter().zip(spreads) {
+            let x = Vector3::new(basis.0.dot(&p.coords), basis.1.dot(&p.coords), -1.0);
+            let r = plane.signed_distance(p);
+            let u = Vector6::from_fn(|k, _| spread[k].dot(&n));
+            xx += x * x.transpose();
+            xr += x * r;
+            rr += r * r;
+            ux += u * x.transpose();
+            uu += u * u.transpose();
+            ur += u * r;
+        }
+        let inner = (Matrix6::identity() * noise + uu).cholesky()?;
+        let (solved_x, solved_r) = (inner.solve(&ux), inner.solve(&ur));
+        normal_matrix += (xx - ux.transpose() * solved_x) / noise;
+        gradient += (xr - ux.transpose() * solved_r) / noise;
+        chi2 += (rr - ur.dot(&solved_r)) / noise;
+        count += points.len();
+    }
+    let covariance = normal_matrix.try_inverse()?;
+    let step = -(covariance * gradient);
+    Some((step, covariance, chi2, (count as f64 - 3.0).max(1.0)))
+}
+
+/// The best 3-D line through `points` (mm): their centroid and the direction of their largest
+/// spread.
+fn best_line(points: &[Point3<f64>]) -> (Point3<f64>, Vector3<f64>) {
+    let c = omni_geom::fit::centroid(points);
+    let mut s = Matrix3::zeros();
+    for p in points {
+        s += (p - c) * (p - c).transpose();
+    }
+    let eig = s.symmetric_eigen();
+    let i = (0..3).max_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b])).unwrap_or(0);
+    (c, eig.eigenvectors.column(i).into_owned())
+}
+
 /// RMS distance of `points` from their own best 3-D line (mm), and that distance as imaged
 /// (px; each point against its foot on the line, both projected).
 fn straightness(camera: &dyn CameraModel, points: &[Point3<f64>]) -> (f64, f64) {
     if points.len() < 3 {
         return (f64::NAN, f64::NAN);
     }
-    let c = omni_geom::fit::centroid(points);
-    let mut s = omni_geom::Matrix3::zeros();
-    for p in points {
-        let d = p - c;
-        s += d * d.transpose();
-    }
-    let eig = s.symmetric_eigen();
-    let i = (0..3).max_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b])).unwrap_or(0);
-    let u = eig.eigenvectors.column(i).into_owned();
+    let (c, u) = best_line(points);
     let (mut ss_mm, mut ss_px, mut n_px) = (0.0, 0.0, 0usize);
     for p in points {
         let foot = c + u * (p - c).dot(&u);

@@ -197,47 +197,54 @@ fn options() -> RenderOptions {
     o
 }
 
-/// Issue 34's virtual target, 0.02° and 0.05 mm at 300 mm from 10 frames, is met by the chain
-/// up to the stripe: with the detected corners and the true stripe pixels the plane comes back
-/// within 0.006° and 0.020 mm (measured 2026-12-04, docs/DECISIONS.md). With omni-ridge's
-/// stripe points (the lens's blur known, as from a camera file's optics) it is not: 0.013° and
-/// 0.073 mm here, 0.005-0.034° and 0.060-0.102 mm over seeds 1-5. What is left is the detector's
-/// offset towards the real profile's tail, 0.05 px at 1.9 mm per px: the board's squares cut the
-/// stripe into pieces too short for their top's shape to be told from noise, so only the
-/// profiles' tops, not the light's peak under the blur, are found; the colour camera's clipped
-/// red and its noisier laser contrast keep the offset even on a plain board (0.04-0.07 mm there
-/// against 0.02-0.035 mm through a grey camera; docs/DECISIONS.md). Without the 3 px
+/// Issue 34's virtual target, 0.02° and 0.05 mm at 300 mm from 10 frames, over five scenes
+/// (seeds 34, 1-4: board poses, noise, speckle). The chain up to the stripe meets it: with the
+/// detected corners and the true stripe pixels the plane comes back within 0.017° and 0.020 mm.
+/// With omni-ridge's stripe points (the lens's blur known, as from a camera file's optics) it
+/// does not: 0.008-0.027° and 0.072-0.095 mm. What is left is the detector's offset towards the
+/// real profile's tail, 0.05 px at 1.9 mm per px: the board's squares cut the stripe into pieces
+/// too short for their top's shape to be told from noise, so only the profiles' tops, not the
+/// light's peak under the blur, are found; the colour camera's clipped red and its noisier laser
+/// contrast keep the offset even on a plain board (docs/DECISIONS.md). Without the 3 px
 /// clearance from the squares' edges (where the stripe's profile falls on white and black at
 /// once, its centres scatter by 0.35-0.76 px) the seeds spread over 0.018-0.17° and 0.021-0.35
-/// mm. The bounds on the detected stripe guard the figure measured here.
-///
-/// With the laser's cross-section known (`--laser-tail 0.17,4`), the pieces are led from their
-/// tops to the sheet's peak by it: 0.013° and 0.041 mm here, the target met; seeds 1 / 2 / 3
-/// 0.015° / 0.073 mm, 0.023° / 0.063 mm, 0.050° / 0.073 mm (without: 0.099 / 0.088 / 0.102 mm),
-/// the clipped red's plateaus still on the tail's side. Its leave-one-out RMS is 1.32 × the
-/// in-sample one (1.25 without): the frame whose partial board's corners fit worst (0.39 px
-/// against 0.03-0.05) lies 0.10 mm off the plane on average and pulls it; asserted ≤ 1.35.
+/// mm. With the laser's cross-section known (`--laser-tail 0.17,4`) the pieces are led from their
+/// tops to the sheet's peak by it: 0.010-0.043° and 0.039-0.068 mm (the clipped red's plateaus
+/// still on the tail's side), two of the five within the target. Every frame's board is posed
+/// from its corners, and a partial board whose corners fit at 0.39 px (the others 0.03-0.05)
+/// weighs little in the fit, so no frame pulls the plane: leave-one-out RMS 1.02-1.14 × the
+/// in-sample one. The bounds guard these figures.
 #[test]
 fn rendered_fixed_plane_from_10_frames_through_the_detectors() {
     let s = setup(1024, 7, 5, 30.0);
-    let dir = tempfile::tempdir().unwrap();
     let profiles = [None, Some(omni_model::LaserProfile::tailed(0.17, 4.0))];
-    let (fits, true_stripe) = render_and_fit(&s, &options(), 10, 34, dir.path(), &profiles);
-    let (angle, worst) = report("true stripe pixels, detected corners", &s, &true_stripe);
-    assert!(true_stripe.report.frames.len() >= 9, "{:?}", true_stripe.report.skipped);
-    assert!(angle <= 0.02, "normal off by {angle}° with the true stripe");
-    assert!(worst <= 0.05, "plane off by {worst} mm at 300 mm with the true stripe");
-    for (fit, profile) in fits.iter().zip(profiles) {
-        let label = if profile.is_some() { "laser profile known" } else { "rendered, real-shaped 4 px stripe" };
-        let (angle, worst) = report(label, &s, fit);
-        let r = &fit.report;
-        assert!(r.frames.len() >= 9, "{label}: {} frames used", r.frames.len());
-        let mut points: Vec<usize> = r.frames.iter().map(|f| f.board_points).collect();
-        points.sort_unstable();
-        assert!(points[points.len() / 2] >= 20, "{label}: stripe points per frame {points:?}");
-        let (max_angle, max_mm, max_loo) = if profile.is_some() { (0.02, 0.05, 1.35) } else { (0.04, 0.1, 1.3) };
-        assert!(angle <= max_angle, "{label}: normal off by {angle}°");
-        assert!(worst <= max_mm, "{label}: plane off by {worst} mm at 300 mm");
-        assert!(r.leave_one_out_rms_mm <= max_loo * r.rms_mm, "{label}: {} vs {}", r.leave_one_out_rms_mm, r.rms_mm);
+    let mut worst_mm = [Vec::new(), Vec::new()];
+    for seed in [34, 1, 2, 3, 4] {
+        let dir = tempfile::tempdir().unwrap();
+        let opts = RenderOptions { seed, ..options() };
+        let (fits, true_stripe) = render_and_fit(&s, &opts, 10, seed, dir.path(), &profiles);
+        let (angle, worst) = report(&format!("seed {seed}, true stripe pixels, detected corners"), &s, &true_stripe);
+        assert!(true_stripe.report.frames.len() >= 9, "{:?}", true_stripe.report.skipped);
+        assert!(angle <= 0.02, "seed {seed}: normal off by {angle}° with the true stripe");
+        assert!(worst <= 0.05, "seed {seed}: plane off by {worst} mm at 300 mm with the true stripe");
+        for ((fit, profile), worst_mm) in fits.iter().zip(profiles).zip(&mut worst_mm) {
+            let label = if profile.is_some() { "laser profile known" } else { "rendered, real-shaped 4 px stripe" };
+            let label = format!("seed {seed}, {label}");
+            let (angle, worst) = report(&label, &s, fit);
+            let r = &fit.report;
+            assert!(r.frames.len() >= 9, "{label}: {} frames used", r.frames.len());
+            let mut points: Vec<usize> = r.frames.iter().map(|f| f.board_points).collect();
+            points.sort_unstable();
+            assert!(points[points.len() / 2] >= 20, "{label}: stripe points per frame {points:?}");
+            let (max_angle, max_mm) = if profile.is_some() { (0.05, 0.08) } else { (0.035, 0.11) };
+            assert!(angle <= max_angle, "{label}: normal off by {angle}°");
+            assert!(worst <= max_mm, "{label}: plane off by {worst} mm at 300 mm");
+            assert!(r.leave_one_out_rms_mm <= 1.3 * r.rms_mm, "{label}: {} vs {}", r.leave_one_out_rms_mm, r.rms_mm);
+            worst_mm.push(worst);
+        }
     }
+    // The profile takes a third of the offset off: means over the seeds 0.082 → 0.054 mm.
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let (without, with) = (mean(&worst_mm[0]), mean(&worst_mm[1]));
+    assert!(with <= 0.8 * without, "mean over the seeds {without} mm without the profile, {with} mm with it");
 }

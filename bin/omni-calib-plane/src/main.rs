@@ -64,8 +64,8 @@ It prints, per frame: corners and their RMS under the pose (px), stripe points o
 RMS and mean about the plane (mm), the straightness of the frame's stripe (RMS distance from its own best line in \
 3-D, in mm and as imaged in px), and the leave-one-out RMS (the frame's points against the plane fitted without \
 that frame, mm); then the plane (unit normal, distance from the camera in mm) with its σ from the fit (the points' \
-scatter and the boards' pose errors) and from a jackknife over the frames (the honest one when frames carry their own pose \
-errors). --report writes all of it as JSON, with each frame's saturated stripe points on the board; \
+scatter and the boards' pose errors) and from a jackknife over the frames (the honest one when frames differ by more than \
+their boards' poses explain). --report writes all of it as JSON, with each frame's saturated stripe points on the board; \
 scanner.json's report holds it too. Frames where more than a quarter of them are saturated are named in one \
 warning: a clipped stripe is read at its plateau's middle, towards a lopsided laser's tail, so lower the exposure \
 or the laser's power for calibration.

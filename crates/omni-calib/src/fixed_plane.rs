@@ -113,7 +113,8 @@ pub struct PlaneReport {
     pub normal: [f64; 3],
     pub distance_mm: f64,
     /// σ of the normal's direction (degrees) and of the distance (mm) from the fit: the points'
-    /// scatter and each board's pose error (from its corners), which its points share.
+    /// scatter and each board's pose error (from its corners), which its points share; not
+    /// what differs between frames beyond that (the jackknife's below holds it).
     pub normal_sigma_deg: f64,
     pub distance_sigma_mm: f64,
     /// σ along the normal at the points' centroid (mm), from the fit.
@@ -174,9 +175,9 @@ struct OnBoard {
     saturated: Option<usize>,
     /// Each point's moves (mm) when the board's pose moves by one σ along each principal axis
     /// of its covariance (half the difference of the ± steps): their outer products summed give
-    /// the covariance the pose's error adds to the points. All zero where the pose fit gave no
+    /// the covariance the pose's error adds to the points. `None` where the pose fit gave no
     /// covariance.
-    pose_spread: Vec<[Vector3<f64>; 6]>,
+    pose_spread: Option<Vec<[Vector3<f64>; 6]>>,
 }
 
 fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptions) -> Result<OnBoard, String> {
@@ -241,22 +242,24 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         pixels.push(*px);
         saturated += usize::from(flags.is_some_and(|s| s[k]));
     }
-    let steps = pose_covariance.map_or_else(Vec::new, |c| one_sigma_poses(&pose, &c));
-    let pose_spread = pixels
-        .iter()
-        .map(|px| {
-            let ray = camera.pixel_to_ray(&Vector2::new(px[0], px[1]));
-            let mut spread = [Vector3::zeros(); 6];
-            for (s, (plus, minus)) in spread.iter_mut().zip(&steps) {
-                if let Some(ray) = &ray
-                    && let (Some(a), Some(b)) = (board_hit(plus, ray), board_hit(minus, ray))
-                {
-                    *s = (a - b) / 2.0;
+    let steps = pose_covariance.map(|c| one_sigma_poses(&pose, &c));
+    let pose_spread = steps.map(|steps| {
+        pixels
+            .iter()
+            .map(|px| {
+                let ray = camera.pixel_to_ray(&Vector2::new(px[0], px[1]));
+                let mut spread = [Vector3::zeros(); 6];
+                for (s, (plus, minus)) in spread.iter_mut().zip(&steps) {
+                    if let Some(ray) = &ray
+                        && let (Some(a), Some(b)) = (board_hit(plus, ray), board_hit(minus, ray))
+                    {
+                        *s = (a - b) / 2.0;
+                    }
                 }
-            }
-            spread
-        })
-        .collect();
+                spread
+            })
+            .collect()
+    });
     if points.len() < opts.min_points {
         return Err(format!(
             "the board does not carry the stripe: {} of {} stripe points on the board, fewer than {}",
@@ -311,7 +314,11 @@ fn fit_frames(frames: &[&OnBoard], seed: u64) -> Option<RobustPlaneFit> {
     if fit.plane.offset < 0.0 {
         fit.plane = fit.plane.flipped();
         fit.basis = (-fit.basis.0, -fit.basis.1);
-        // (a, b) change sign with the basis and c with the offset: the covariance is unchanged.
+        // With the normal and the basis both negated, a and b keep their sign and c changes its
+        // own: the covariance of c with a and b changes sign.
+        for (i, j) in [(0, 2), (1, 2), (2, 0), (2, 1)] {
+            fit.covariance[(i, j)] = -fit.covariance[(i, j)];
+        }
     }
     Some(fit)
 }
@@ -323,9 +330,11 @@ type FrameInliers = (Vec<Point3<f64>>, Vec<[Vector3<f64>; 6]>);
 /// its board's pose error (`pose_spread`), which moves them together, so a frame whose board is
 /// posed less surely weighs less however many points it has; beside it each point's own scatter
 /// about its frame's line (pooled over the frames). The covariance is the fit's, scaled up by
-/// its χ² per degree of freedom where that exceeds 1 (errors neither term holds, such as a
-/// stripe's offset that differs between frames). Where the system is singular (points without
-/// scatter, whose frames then tell nothing beyond their boards' poses) the robust fit stays.
+/// its χ² per degree of freedom where that exceeds 1 (the points' own errors larger than their
+/// scatter about the lines says). What differs between frames beyond their boards' poses (a stripe read
+/// a little off in one frame) adds a term or two a frame against thousands of points, so this σ
+/// leaves it out; the jackknife over frames holds it. Where a board has no pose covariance, or
+/// the system is singular, the robust fit stays.
 fn weigh_board_poses(frames: &[&OnBoard], fit: &mut RobustPlaneFit) {
     // Each frame's inliers with their pose spreads.
     let mut groups: Vec<FrameInliers> = Vec::with_capacity(frames.len());
@@ -333,10 +342,13 @@ fn weigh_board_poses(frames: &[&OnBoard], fit: &mut RobustPlaneFit) {
     for f in frames {
         let inliers = &fit.inliers[at..at + f.points.len()];
         at += f.points.len();
-        let kept = || f.points.iter().zip(&f.pose_spread).zip(inliers).filter(|(_, k)| **k).map(|(p, _)| p);
+        let Some(spread) = &f.pose_spread else { return };
+        let kept = || f.points.iter().zip(spread).zip(inliers).filter(|(_, k)| **k).map(|(p, _)| p);
         groups.push((kept().map(|(p, _)| *p).collect(), kept().map(|(_, s)| *s).collect()));
     }
     let Some(noise) = scatter_about_lines(&groups, &fit.plane) else { return };
+    // Exact points (rendered truth) scatter by rounding alone; a floor keeps the weights finite.
+    let noise = noise.max(MIN_SCATTER_MM2);
     let (mut plane, mut basis, mut covariance) = (fit.plane, fit.basis, fit.covariance);
     for _ in 0..GLS_ITERATIONS {
         // The covariance is taken in the basis at the plane before the step, which the last,
@@ -353,6 +365,9 @@ fn weigh_board_poses(frames: &[&OnBoard], fit: &mut RobustPlaneFit) {
     }
     (fit.plane, fit.basis, fit.covariance) = (plane, basis, covariance);
 }
+
+/// The smallest point scatter (mm², about a frame's line) the weights assume: 0.1 µm.
+const MIN_SCATTER_MM2: f64 = 1e-8;
 
 /// Gauss–Newton steps of [`weigh_board_poses`]; each moves the plane by what is left of its
 /// linearisation's error, which the second step already leaves far below the fit's σ.
@@ -376,8 +391,8 @@ fn scatter_about_lines(groups: &[FrameInliers], plane: &Plane) -> Option<f64> {
         ss += if sss > 0.0 { srr - ssr * ssr / sss } else { srr };
         dof += m - 2.0;
     }
-    let variance = ss / dof;
-    (variance > 0.0 && variance.is_finite()).then_some(variance)
+    let variance = (ss / dof).max(0.0);
+    variance.is_finite().then_some(variance)
 }
 
 /// One generalised least-squares step for the plane's change (a, b, c) in `basis` ([`RobustPlaneFit`]'s

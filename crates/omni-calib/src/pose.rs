@@ -126,8 +126,9 @@ impl lm::Problem for PoseProblem<'_> {
 }
 
 /// Refines a board pose by minimising the pixel reprojection error; returns the pose, the RMS
-/// error (px) and the covariance of the pose's parameters ([`pose_to_params`]: rotation vector
-/// in rad, translation in mm), the corners' errors taken as independent (`None` if singular).
+/// error (px) and the covariance of the pose's parameters as [`pose_to_params`] gives them
+/// (rotation vector in rad, its angle at most π; translation in mm), the corners' errors taken
+/// as independent (`None` if singular).
 pub fn refine_pose(
     project: &dyn Fn(&Point3<f64>) -> Option<Vector2<f64>>,
     board_mm: &[[f64; 2]],
@@ -139,7 +140,26 @@ pub fn refine_pose(
     let opts = lm::Options { max_iterations: iterations, huber: Some(3.0), ..Default::default() };
     let report = lm::minimize(&problem, &pose_to_params(initial), &opts);
     let covariance = report.covariance.as_ref().map(|c| Matrix6::from_fn(|i, j| c[(i, j)]));
-    (params_to_pose(&report.params), report.rms, covariance)
+    let pose = params_to_pose(&report.params);
+    let rotation = Vector3::new(report.params[0], report.params[1], report.params[2]);
+    (pose, report.rms, covariance.map(|c| in_shortest_rotation(&rotation, &c)))
+}
+
+/// A pose covariance taken at rotation vector `r` re-expressed for the same rotation's shortest
+/// vector (angle at most π, as [`pose_to_params`] gives it). The solver may end past π, where
+/// r' = r·(1 − 2πk/|r|) and the sideways components change sign: Jacobian
+/// (1 − 2πk/|r|)·I + 2πk·r·rᵀ/|r|³ on the rotation's rows.
+fn in_shortest_rotation(r: &Vector3<f64>, covariance: &Matrix6<f64>) -> Matrix6<f64> {
+    let angle = r.norm();
+    let turns = ((angle + std::f64::consts::PI) / std::f64::consts::TAU).floor();
+    if turns == 0.0 {
+        return *covariance;
+    }
+    let k = std::f64::consts::TAU * turns;
+    let mut jacobian = Matrix6::identity();
+    let rotation = Matrix3::identity() * (1.0 - k / angle) + r * r.transpose() * (k / angle.powi(3));
+    jacobian.fixed_view_mut::<3, 3>(0, 0).copy_from(&rotation);
+    jacobian * covariance * jacobian.transpose()
 }
 
 /// The pose (board → world) of a planar board from its detected corners: `board_points_mm` are
@@ -185,6 +205,29 @@ pub fn estimate_board_pose_with_covariance(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The covariance moved to the shortest rotation vector is the solver's carried through the
+    /// chart change r → pose_to_params(params_to_pose(r)), differentiated numerically.
+    #[test]
+    fn a_covariance_past_half_a_turn_is_carried_to_the_shortest_rotation() {
+        for angle in [1.0, 3.3, 9.5] {
+            let p = [0.6 * angle, -0.48 * angle, 0.64 * angle, 10.0, -20.0, 300.0];
+            let r = Vector3::new(p[0], p[1], p[2]);
+            let a = Matrix6::from_fn(|i, j| ((i * 7 + j * 3) % 5) as f64 * 0.1 + if i == j { 1.0 } else { 0.0 });
+            let covariance = a * a.transpose() * 1e-4;
+            let h = 1e-6;
+            let jacobian = Matrix6::from_fn(|i, j| {
+                let (mut up, mut down) = (p, p);
+                up[j] += h;
+                down[j] -= h;
+                let (u, d) = (pose_to_params(&params_to_pose(&up)), pose_to_params(&params_to_pose(&down)));
+                (u[i] - d[i]) / (2.0 * h)
+            });
+            let expected = jacobian * covariance * jacobian.transpose();
+            let got = in_shortest_rotation(&r, &covariance);
+            assert!((got - expected).abs().max() < 1e-8, "angle {angle}: {got} vs {expected}");
+        }
+    }
     use omni_model::{HyperbolicCamera, HyperbolicParams};
 
     #[test]

@@ -9,7 +9,8 @@ squares (nominal) in view:
 1. omni-calib-receiver --model mei on the board frames im18-im36 -> camera.json;
 2. omni-calib-plane fixed on the stripe frames im1-im17 (omni-ridge's detector, red laser
    contrast) -> scanner.json (kind fixed_planes), plane.json (report), points.jsonl;
-   and again with the laser's cross-section given (--laser-tail 0.17,4);
+   and again with the laser's cross-section given (--laser-tail 0.17,4), and with the one
+   omni-calib-plane tail measures on the same frames;
 3. the same plane from a reference estimator's centres: per column, the centroid of
    R - (G+B)/2 within +-10 px of the column's maximum, if it exceeds 20 levels (what open laser
    scanners do), given to omni-calib-plane fixed --stripes;
@@ -150,6 +151,12 @@ def main() -> int:
     ridge = plane_fit(a.bin, out, "", [str(DATA / n) for n in STRIPE_FRAMES])
     # The same with the laser's cross-section given (measured on these frames, docs/DECISIONS.md).
     tailed = plane_fit(a.bin, out, "-tail", ["--laser-tail", LASER_TAIL, *[str(DATA / n) for n in STRIPE_FRAMES]])
+    # And with the cross-section omni-calib-plane tail measures on the same frames.
+    measured_tail = subprocess.run([str(a.bin / "omni-calib-plane"), "tail", "-q", "--report", str(out / "tail.json"),
+                                    *[str(DATA / n) for n in STRIPE_FRAMES]],
+                                   check=True, capture_output=True, text=True).stdout.strip()
+    measured = plane_fit(a.bin, out, "-measured-tail",
+                         ["--laser-tail", measured_tail, *[str(DATA / n) for n in STRIPE_FRAMES]])
     write_reference_stream(out / "reference.jsonl")
     ref = plane_fit(a.bin, out, "-reference", ["--stripes", str(out / "reference.jsonl")])
     png = picture(out, ridge)
@@ -161,11 +168,13 @@ def main() -> int:
     receiver_models.print_table("receiver RMS per corner (px) per model, beside OpenCV's on the same corners "
                                 "(im18-im36, omniscan's detection):", models)
     print("plane from stripe frames im1-im17 (9 x 6 board, 5 mm squares nominal; mm):")
-    print(f"{'centres':<20} {'frames':>6} {'points':>7} {'rms_mm':>8} {'loo_mm':>8} {'loo/rms':>7} "
+    print(f"{'centres':<22} {'frames':>6} {'points':>7} {'rms_mm':>8} {'loo_mm':>8} {'loo/rms':>7} "
           f"{'normal_sd_deg':>13} {'dist_sd_mm':>10}  (sigma: jackknife over frames)")
-    for label, r in (("omni-ridge", ridge), (f" --laser-tail {LASER_TAIL}", tailed), ("column centroid", ref)):
+    rows = (("omni-ridge", ridge), (f" --laser-tail {LASER_TAIL}", tailed),
+            (f" --laser-tail {measured_tail}", measured), ("column centroid", ref))
+    for label, r in rows:
         p = r["plane"]
-        print(f"{label:<20} {len(r['frames']):>6} {r['inliers']:>7} {r['rms_mm']:>8.4f} "
+        print(f"{label:<22} {len(r['frames']):>6} {r['inliers']:>7} {r['rms_mm']:>8.4f} "
               f"{r['leave_one_out_rms_mm']:>8.4f} {r['leave_one_out_rms_mm'] / r['rms_mm']:>7.2f} "
               f"{p['jackknife_normal_sigma_deg']:>13.4f} {p['jackknife_distance_sigma_mm']:>10.4f}")
     p = ridge["plane"]

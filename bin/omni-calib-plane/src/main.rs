@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
         at once and writes scanner.json. `table` prints the light plane of any mirror angle. \
         `fixed` fits one fixed light plane (a line laser rigid with the camera, or the polygon \
         stopped) from stripe frames with a checkerboard in view and writes scanner.json of kind \
-        fixed_planes.",
+        fixed_planes. `tail` measures the laser's cross-section for omni-ridge's --laser-tail.",
     after_help = "Examples:\n  \
         omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose.png --stripes stripes.jsonl -o scanner.json\n  \
         omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose*.png --stripes stripes.jsonl -o scanner.json   # several pose images, averaged\n  \
@@ -33,7 +33,8 @@ use std::path::{Path, PathBuf};
         omni-calib-plane fit --camera camera.json --rig rig.json --board-poses poses.json --stripes - --initial nominal.json -o scanner.json\n  \
         omni-calib-plane table --scanner scanner.json --alpha 0:30:1\n  \
         omni-calib-plane table --scanner scanner.json --alpha 0:30:0.5 --laser 0 --facet 3 --json\n  \
-        omni-calib-plane fixed --camera camera.json --board board.json --report plane.json -o scanner.json stripes/*.png"
+        omni-calib-plane fixed --camera camera.json --board board.json --report plane.json -o scanner.json stripes/*.png\n  \
+        omni-calib-plane tail --laser red wall/*.png"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -49,6 +50,70 @@ enum Command {
     /// Fit one fixed light plane to stripe frames with a checkerboard in view; writes
     /// scanner.json of kind fixed_planes.
     Fixed(FixedArgs),
+    /// Measure the laser's cross-section (the share of its light in a one-sided tail and the
+    /// tail's length) from stripe frames, for omni-ridge's --laser-tail.
+    Tail(TailArgs),
+}
+
+#[derive(Args)]
+#[command(after_help = "Why: a real line laser's cross-section is not a Gaussian: part of its light lies in a faint \
+tail on one side of the sheet, which moves a narrow stripe's centre towards it (a few hundredths of a px at 2 px \
+wide). Given the tail (--laser-tail SHARE,LENGTH), omni-ridge and omni-calib-plane fixed lead such stripes back to \
+the sheet's peak.
+
+How: in each frame the stripe detector finds the stripe over the whole frame; each unsaturated point's profile is \
+sampled along the stripe's normal over six times the stripe's FWHM either side, its background (the line through \
+the window's ends) taken out, aligned on its own peak and scaled to it. Windows whose ends differ or whose flanks \
+step (a board's squares, an edge, another light) are left out. The median of a frame's profiles is fitted by a \
+Gaussian core with a one-sided exponential tail, widened by the lens's blur, the tail on either side; a frame \
+counts where that fits clearly better than a Gaussian and tells the share from the length. The laser's figures \
+are the medians over the frames that count, printed with their range and as the --laser-tail argument.
+
+Frames: the stripe on a plain, matte, evenly lit target (a white wall, paper), 20 or more px from any edge, not \
+saturated, at least a few px wide (FWHM 5-20 px: the tail must be wider than the blur). Board frames work where \
+the stripe crosses large white squares; most of their windows hold squares and are left out.
+
+Prints one line per frame (profiles used, core σ and FWHM in px, share and length with their σ, the tail's side \
+along the frame's normals, the fit's residual against a Gaussian's), the frames left out and why, then the \
+result. Exit 1 when no frame counts.
+
+Examples:
+  omni-calib-plane tail --laser red wall/*.png
+  omni-calib-plane tail --laser red --optics-blur 0.8 --report tail.json stripes/
+  omni-ridge --laser red --laser-tail $(omni-calib-plane tail --laser red --quiet wall/*.png) frames.jsonl")]
+struct TailArgs {
+    /// Stripe frames (files or directories of png/jpg/pgm).
+    #[arg(required = true)]
+    frames: Vec<PathBuf>,
+    /// The laser's colour: frames are read as that channel minus the mean of the other two
+    /// (red: R - (G+B)/2) [default: red].
+    #[arg(long, value_name = "COLOUR", value_parser = ["red", "green", "blue"], conflicts_with = "channel")]
+    laser: Option<String>,
+    /// Read one channel (or luma) instead of the laser's colour contrast.
+    #[arg(long, value_name = "CHANNEL", value_parser = ["luma", "red", "green", "blue"])]
+    channel: Option<String>,
+    /// Stripe detector: intensity threshold in the read channel's units [default: 4 % of full scale].
+    #[arg(long, allow_negative_numbers = true)]
+    threshold: Option<f64>,
+    /// Stripe detector: widest stripe (px) at full resolution.
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+    max_width: f64,
+    /// The lens's blur (Gaussian PSF σ, px): it widens the core, not the tail [default: from
+    /// --camera, else 0].
+    #[arg(long, value_name = "PX", allow_negative_numbers = true)]
+    optics_blur: Option<f64>,
+    /// A camera file whose lens_blur_px (or optics) gives the lens's blur.
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    /// Fewest profiles with a clean background for a frame to count.
+    #[arg(long, default_value_t = 30)]
+    min_profiles: usize,
+    /// Write the report (JSON, format omniscan.laser_tail_report) here as well.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Print only the result as SHARE,LENGTH (for --laser-tail); the frames' lines go to stderr.
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -233,6 +298,7 @@ fn main() -> std::process::ExitCode {
         Command::Fit(a) => fit(&a),
         Command::Table(a) => table(&a),
         Command::Fixed(a) => fixed(&a),
+        Command::Tail(a) => tail(&a),
     })
 }
 
@@ -589,6 +655,99 @@ fn fixed(a: &FixedArgs) -> CliResult {
         stdout.write_all(table.as_bytes()).and_then(|_| stdout.flush()).map_err(omni_cli::stdout_error)?;
     }
     Ok(())
+}
+
+fn tail(a: &TailArgs) -> CliResult {
+    use omni_calib::laser_tail::{self, TailOptions};
+    use omni_vision::colour::{Channel, ColourSpec};
+    let channel = match (a.laser.as_deref(), a.channel.as_deref()) {
+        (Some(c), _) => Channel::Laser(c.parse().map_err(CliError::usage)?),
+        (None, None) => Channel::Laser(omni_vision::colour::Colour::Red),
+        (None, Some("luma")) => Channel::Luma,
+        (None, Some(c)) => Channel::Single(c.parse().map_err(CliError::usage)?),
+    };
+    let mut ridge = omni_vision::stripe::RidgeParams {
+        threshold: a.threshold,
+        max_width: a.max_width,
+        optics_blur_px: a.optics_blur,
+        ..Default::default()
+    };
+    ridge.validate().map_err(CliError::usage)?;
+    if a.min_profiles < 5 {
+        return Err(CliError::usage("--min-profiles must be at least 5"));
+    }
+    if let Some(path) = &a.camera {
+        let (camera_file, _) = CameraFile::load(path)?;
+        ridge = ridge.with_lens_blur_of(&camera_file).map_err(|e| format!("{}: {e}", path.display()))?;
+    }
+    let paths = expand_frames(&a.frames)?;
+    if paths.is_empty() {
+        return Err(CliError::new("no frames given (the directories hold no png/jpg/pgm)"));
+    }
+    let opts = TailOptions { blur_px: ridge.optics_blur_px.unwrap_or(0.0), min_profiles: a.min_profiles };
+    let colour = ColourSpec { channel, bayer: None, sites: false };
+    let report = laser_tail::measure_frames(&paths, &colour, &ridge, &opts).map_err(CliError::new)?;
+    if let Some(path) = &a.report {
+        let mut doc = serde_json::json!({"format": "omniscan.laser_tail_report", "version": 1});
+        doc["report"] = serde_json::to_value(&report)?;
+        doc["report"]["inputs"] = serde_json::json!({
+            "channel": colour.channel.to_string(),
+            "optics_blur_px": opts.blur_px,
+            "min_profiles": a.min_profiles,
+        });
+        write_doc(path, &doc)?;
+    }
+    let argument = format!("{:.2},{:.1}", report.tail_weight, report.tail_length);
+    let table = tail_table(&report, &argument);
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    let out = if a.quiet {
+        eprint!("{table}");
+        format!("{argument}\n")
+    } else {
+        table
+    };
+    stdout.write_all(out.as_bytes()).and_then(|_| stdout.flush()).map_err(omni_cli::stdout_error)?;
+    Ok(())
+}
+
+/// The human table of a tail measurement, ending with the `--laser-tail` argument.
+fn tail_table(r: &omni_calib::laser_tail::TailReport, argument: &str) -> String {
+    let mut t = format!(
+        "{:<24} {:>8} {:>8} {:>8} {:>14} {:>16} {:>5} {:>9} {:>9}\n",
+        "frame", "profiles", "sigma_px", "fwhm_px", "share", "length_sigma", "side", "residual", "gaussian"
+    );
+    for f in &r.frames {
+        t += &format!(
+            "{:<24} {:>8} {:>8.2} {:>8.2} {:>6.3} ± {:<5.3} {:>7.2} ± {:<6.2} {:>+5.0} {:>9.4} {:>9.4}\n",
+            file_name(&f.name),
+            f.profiles,
+            f.core_sigma_px,
+            f.fwhm_px,
+            f.tail_weight,
+            f.tail_weight_sigma,
+            f.tail_length,
+            f.tail_length_sigma,
+            f.side,
+            f.residual_rms,
+            f.gaussian_residual_rms
+        );
+    }
+    for s in &r.skipped {
+        t += &format!("left out {}: {}\n", file_name(&s.name), s.reason);
+    }
+    t += &format!(
+        "laser tail from {} of {} frames: share {:.3} ({:.3}-{:.3}), length {:.2} core sigma ({:.2}-{:.2}); give it as --laser-tail {argument}\n",
+        r.frames.len(),
+        r.frames_total,
+        r.tail_weight,
+        r.tail_weight_range[0],
+        r.tail_weight_range[1],
+        r.tail_length,
+        r.tail_length_range[0],
+        r.tail_length_range[1]
+    );
+    t
 }
 
 /// A leave-one-frame-out RMS above this multiple of the in-sample RMS draws a warning: with

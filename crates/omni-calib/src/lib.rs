@@ -3,6 +3,7 @@
 //! or a fixed light plane ([`fixed_plane`]) from stripe frames with a board in view.
 
 pub mod fixed_plane;
+pub mod laser_tail;
 pub mod plane;
 pub mod pose;
 pub mod receiver;

@@ -52,6 +52,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<scanner::Scanner>()?;
     m.add_function(wrap_pyfunction!(scanner::triangulate, m)?)?;
     m.add_function(wrap_pyfunction!(stripe::detect_stripe, m)?)?;
+    m.add_function(wrap_pyfunction!(stripe::measure_laser_tail, m)?)?;
     m.add_function(wrap_pyfunction!(readers::read_stream, m)?)?;
     m.add_function(wrap_pyfunction!(readers::read_ply, m)?)?;
     m.add("DEFAULT_MIN_INCIDENCE_DEG", omni_cloud::triangulate::DEFAULT_MIN_INCIDENCE_DEG)?;

@@ -228,3 +228,44 @@ pub fn detect_stripe<'py>(
     let table: Vec<[f64; 5]> = points.into_iter().map(<[f64; 5]>::from).collect();
     rows(py, &table)
 }
+
+/// The laser's cross-section measured on one frame's stripe (`omni-calib-plane tail` per frame):
+/// `image` read as `detect_stripe` reads it (the same `channel=` / `laser=`), `stripe` its points
+/// (an `(n, 5)` array from `detect_stripe`). Returns a dict: `tail_weight`, `tail_length` (core σ),
+/// their σ, `core_sigma_px`, `fwhm_px`, `side`, `profiles`, `residual_rms`,
+/// `gaussian_residual_rms`; a ValueError says why a frame shows no tail to measure.
+#[pyfunction]
+#[pyo3(signature = (image, stripe, *, optics_blur_px = 0.0, min_profiles = 30, channel = None, laser = None))]
+pub fn measure_laser_tail<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    stripe: &Bound<'py, PyAny>,
+    optics_blur_px: f64,
+    min_profiles: usize,
+    channel: Option<&str>,
+    laser: Option<&str>,
+) -> PyResult<Bound<'py, PyAny>> {
+    if !(optics_blur_px.is_finite() && optics_blur_px >= 0.0) {
+        return Err(crate::value_error(format!("optics_blur_px: expected a finite number >= 0, got {optics_blur_px}")));
+    }
+    if min_profiles < 5 {
+        return Err(crate::value_error(format!("min_profiles: expected at least 5, got {min_profiles}")));
+    }
+    let spec = colour_spec(channel, laser, None, false)?;
+    let img = frame_image(image, "image", &spec)?;
+    let rows = crate::arrays::Vectors::<5>::extract(stripe, "stripe")?;
+    let points = (0..rows.len())
+        .map(|i| {
+            omni_formats::stream::StripePoint::try_from(rows.get(i))
+                .map_err(|e| crate::value_error(format!("stripe row {i}: {e}")))
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    let opts = omni_calib::laser_tail::TailOptions { blur_px: optics_blur_px, min_profiles };
+    let tail = py
+        .detach(|| omni_calib::laser_tail::measure_frame("image", &img, &points, &opts))
+        .map_err(crate::value_error)?;
+    let json = serde_json::to_string(&tail).map_err(|e| crate::value_error(e.to_string()))?;
+    let dict = py.import("json")?.call_method1("loads", (json,))?;
+    dict.del_item("name")?;
+    Ok(dict)
+}

@@ -207,3 +207,21 @@ def test_a_known_laser_tail_leads_a_narrow_lopsided_stripe_to_its_peak():
         omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), laser_tail=(0.95, 4.0))
     with pytest.raises(ValueError, match="laser_tail: expected"):
         omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), laser_tail=(0.2, 4.0, 1.0))
+
+
+def test_a_laser_tail_is_measured_from_an_independently_drawn_stripe():
+    # Stripes drawn by numpy's own convolution (lopsided_stripe), 6 px wide, 8-bit.
+    for share, length in [(0.17, 4.0), (0.4, 1.5)]:
+        img = lopsided_stripe(80.3, 6.0, share=share, length=length, size=160)
+        stripe = omniscan.detect_stripe(img, optics_blur_px=0.7, max_width=30)
+        tail = omniscan.measure_laser_tail(img, stripe, optics_blur_px=0.7)
+        assert abs(tail["tail_weight"] - share) <= 0.03, tail
+        assert abs(tail["tail_length"] / length - 1) <= 0.15, tail
+        assert tail["profiles"] >= 100 and tail["residual_rms"] < 0.5 * tail["gaussian_residual_rms"], tail
+    gaussian = lopsided_stripe(80.3, 6.0, share=0.0, size=160)
+    with pytest.raises(ValueError, match="no tail stands out"):
+        omniscan.measure_laser_tail(gaussian, omniscan.detect_stripe(gaussian, max_width=30), optics_blur_px=0.7)
+    with pytest.raises(ValueError, match=r"stripe: expected an array of shape \(\.\.\., 5\)"):
+        omniscan.measure_laser_tail(img, stripe[:, :2])
+    with pytest.raises(ValueError, match="min_profiles"):
+        omniscan.measure_laser_tail(img, stripe, min_profiles=2)

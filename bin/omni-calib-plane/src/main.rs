@@ -69,8 +69,8 @@ Gaussian core with a one-sided exponential tail, widened by the lens's blur, the
 counts where that fits clearly better than a Gaussian and tells the share from the length. The laser's figures \
 are the medians over the frames that count, printed with their range and as the --laser-tail argument.
 
-Frames: the stripe on a plain, matte, evenly lit target (a white wall, paper), 20 or more px from any edge, not \
-saturated, at least a few px wide (FWHM 5-20 px: the tail must be wider than the blur). Board frames work where \
+Frames: the stripe on a plain, matte, evenly lit target (a white wall, paper) that reaches six times the \
+stripe's width to either side of it, not saturated, at least a few px wide (FWHM 5-20 px: the tail must be wider than the blur). Board frames work where \
 the stripe crosses large white squares; most of their windows hold squares and are left out.
 
 Prints one line per frame (profiles used, core σ and FWHM in px, share and length with their σ, the tail's side \

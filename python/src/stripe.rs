@@ -231,15 +231,19 @@ pub fn detect_stripe<'py>(
 
 /// The laser's cross-section measured on one frame's stripe (`omni-calib-plane tail` per frame):
 /// `image` read as `detect_stripe` reads it (the same `channel=` / `laser=`), `stripe` its points
-/// (an `(n, 5)` array from `detect_stripe`). Returns a dict: `tail_weight`, `tail_length` (core σ),
-/// their σ, `core_sigma_px`, `fwhm_px`, `side`, `profiles`, `residual_rms`,
-/// `gaussian_residual_rms`; a ValueError says why a frame shows no tail to measure.
+/// (an `(n, 5)` array from `detect_stripe`); a catadioptric `camera`'s mirror centre turns a ring
+/// stripe's normals away from it. Returns a dict: `tail_weight`, `tail_length` (core σ), their
+/// σ, `core_sigma_px`, `fwhm_px`, `side`, `profiles`, `residual_rms`, `gaussian_residual_rms`; a
+/// ValueError says why a frame shows no tail to measure.
 #[pyfunction]
-#[pyo3(signature = (image, stripe, *, optics_blur_px = 0.0, min_profiles = 30, channel = None, laser = None))]
+#[pyo3(signature = (image, stripe, camera = None, *, optics_blur_px = 0.0, min_profiles = 30, channel = None,
+    laser = None))]
+#[allow(clippy::too_many_arguments)]
 pub fn measure_laser_tail<'py>(
     py: Python<'py>,
     image: &Bound<'py, PyAny>,
     stripe: &Bound<'py, PyAny>,
+    camera: Option<&Camera>,
     optics_blur_px: f64,
     min_profiles: usize,
     channel: Option<&str>,
@@ -260,7 +264,8 @@ pub fn measure_laser_tail<'py>(
                 .map_err(|e| crate::value_error(format!("stripe row {i}: {e}")))
         })
         .collect::<PyResult<Vec<_>>>()?;
-    let opts = omni_calib::laser_tail::TailOptions { blur_px: optics_blur_px, min_profiles };
+    let mirror = camera.map(|c| c.model.mirror_circle());
+    let opts = omni_calib::laser_tail::TailOptions { blur_px: optics_blur_px, min_profiles, mirror };
     let tail = py
         .detach(|| omni_calib::laser_tail::measure_frame("image", &img, &points, &opts))
         .map_err(crate::value_error)?;

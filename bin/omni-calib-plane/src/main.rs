@@ -64,7 +64,9 @@ the sheet's peak.
 How: in each frame the stripe detector finds the stripe over the whole frame; each unsaturated point's profile is \
 sampled along the stripe's normal over six times the stripe's FWHM either side, its background (the line through \
 the window's ends) taken out, aligned on its own peak and scaled to it. Windows whose ends differ or whose flanks \
-step (a board's squares, an edge, another light) are left out. The median of a frame's profiles is fitted by a \
+step (a board's squares, an edge, another light) are left out. A frame's normals are turned to one side of \
+the stripe: a straight or gently curved stripe's to the side of their mean direction, a ring's (a catadioptric \
+camera's stripe about its mirror's axis) away from the mirror's centre (--camera; else the image's centre). The median of a frame's profiles is fitted by a \
 Gaussian core with a one-sided exponential tail, widened by the lens's blur, the tail on either side; a frame \
 counts where that fits clearly better than a Gaussian and tells the share from the length. The laser's figures \
 are the medians over the frames that count, printed with their range and as the --laser-tail argument.
@@ -102,7 +104,8 @@ struct TailArgs {
     /// --camera, else 0].
     #[arg(long, value_name = "PX", allow_negative_numbers = true)]
     optics_blur: Option<f64>,
-    /// A camera file whose lens_blur_px (or optics) gives the lens's blur.
+    /// A camera file: its lens_blur_px (or optics) gives the lens's blur; a catadioptric
+    /// camera's mirror gives the annulus searched and the centre its ring stripes curve about.
     #[arg(long)]
     camera: Option<PathBuf>,
     /// Fewest profiles with a clean background for a frame to count.
@@ -676,15 +679,17 @@ fn tail(a: &TailArgs) -> CliResult {
     if a.min_profiles < 5 {
         return Err(CliError::usage("--min-profiles must be at least 5"));
     }
+    let mut mirror = None;
     if let Some(path) = &a.camera {
-        let (camera_file, _) = CameraFile::load(path)?;
+        let (camera_file, camera) = CameraFile::load(path)?;
         ridge = ridge.with_lens_blur_of(&camera_file).map_err(|e| format!("{}: {e}", path.display()))?;
+        mirror = Some(camera.mirror_circle());
     }
     let paths = expand_frames(&a.frames)?;
     if paths.is_empty() {
         return Err(CliError::new("no frames given (the directories hold no png/jpg/pgm)"));
     }
-    let opts = TailOptions { blur_px: ridge.optics_blur_px.unwrap_or(0.0), min_profiles: a.min_profiles };
+    let opts = TailOptions { blur_px: ridge.optics_blur_px.unwrap_or(0.0), min_profiles: a.min_profiles, mirror };
     let colour = ColourSpec { channel, bayer: None, sites: false };
     let report = laser_tail::measure_frames(&paths, &colour, &ridge, &opts).map_err(CliError::new)?;
     if let Some(path) = &a.report {

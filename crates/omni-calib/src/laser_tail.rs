@@ -17,7 +17,7 @@
 use crate::fixed_plane::Skipped;
 use omni_formats::stream::{StripePoint, quality};
 use omni_geom::lm;
-use omni_model::LaserProfile;
+use omni_model::{LaserProfile, MirrorCircle};
 use omni_vision::colour::ColourSpec;
 use omni_vision::image_io::{GrayImage, load_frame_channel};
 use omni_vision::stripe::{RidgeDetector, RidgeParams};
@@ -32,11 +32,15 @@ pub struct TailOptions {
     pub blur_px: f64,
     /// Fewest usable profiles for a frame to be measured.
     pub min_profiles: usize,
+    /// A catadioptric camera's mirror (px): its annulus is searched, and stripes that curve
+    /// around its centre (rings about the mirror's axis) have their normals turned away from it.
+    /// `None`: the whole frame, turned about the image's centre.
+    pub mirror: Option<MirrorCircle>,
 }
 
 impl Default for TailOptions {
     fn default() -> Self {
-        TailOptions { blur_px: 0.0, min_profiles: 30 }
+        TailOptions { blur_px: 0.0, min_profiles: 30, mirror: None }
     }
 }
 
@@ -106,7 +110,11 @@ pub fn measure_frame(
             points.len() - usable.len()
         ));
     }
-    let normals = oriented_normals(&usable)?;
+    let centre =
+        opts.mirror.map_or((0.5 * (f64::from(image.width) - 1.0), 0.5 * (f64::from(image.height) - 1.0)), |m| {
+            (m.centre.x, m.centre.y)
+        });
+    let normals = oriented_normals(&usable, centre)?;
     let profiles_over = |half: usize, clean: bool| -> Vec<Vec<f64>> {
         let profile =
             |(p, n): (&&StripePoint, &Option<(f64, f64)>)| aligned_profile(image, (p.u, p.v), (*n)?, half, clean);
@@ -126,7 +134,8 @@ pub fn measure_frame(
             opts.min_profiles
         ));
     }
-    let fwhm = half_maximum_width(&median_profile(&first))
+    let median_first = median_profile(&first);
+    let fwhm = half_maximum_width(&median_first, median_first.len() / 2)
         .ok_or_else(|| format!("the median profile does not fall to half its peak within ±{first_half:.0} px"))?;
     let half = window_half_px(fwhm).round() as usize;
     let profiles = profiles_over(half, true);
@@ -182,25 +191,31 @@ pub fn measure_frame(
 }
 
 /// Each point's unit normal (px) from the line through its neighbours within
-/// [`NORMAL_REACH_PX`], all turned to the side of the frame's mean normal direction; `None` for
-/// points with too few neighbours. An error where the normals spread too widely for one side.
-fn oriented_normals(points: &[&StripePoint]) -> Result<Vec<Option<(f64, f64)>>, String> {
+/// [`NORMAL_REACH_PX`], all turned to one side of the stripe; `None` for points with too few
+/// neighbours. A stripe whose normals agree (a straight or gently curved one) is turned to the
+/// side of their mean direction; one that bends further (a ring about a catadioptric camera's
+/// axis) away from `centre` (px), which keeps one side of a ring about it, as of any line that
+/// misses it. An error where neither holds: normals that spread, and neighbours' normals that
+/// disagree once turned away from the centre (more than [`MAX_FLIPPED_SHARE`] of them).
+fn oriented_normals(points: &[&StripePoint], centre: (f64, f64)) -> Result<Vec<Option<(f64, f64)>>, String> {
     let mut order: Vec<usize> = (0..points.len()).collect();
     order.sort_by(|&a, &b| points[a].u.total_cmp(&points[b].u));
     let mut normals = vec![None; points.len()];
+    let mut neighbours = vec![Vec::new(); points.len()];
     for (k, &i) in order.iter().enumerate() {
         let p = points[i];
         let near = |j: &&usize| (points[**j].u - p.u).abs() <= NORMAL_REACH_PX;
         let before = order[..k].iter().rev().take_while(near);
         let after = order[k + 1..].iter().take_while(near);
-        let (mut sxx, mut sxy, mut syy, mut count) = (0.0, 0.0, 0.0, 0usize);
+        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
         for &j in before.chain(after) {
             let (dx, dy) = (points[j].u - p.u, points[j].v - p.v);
             if dx * dx + dy * dy <= NORMAL_REACH_PX * NORMAL_REACH_PX {
-                (sxx, sxy, syy, count) = (sxx + dx * dx, sxy + dx * dy, syy + dy * dy, count + 1);
+                (sxx, sxy, syy) = (sxx + dx * dx, sxy + dx * dy, syy + dy * dy);
+                neighbours[i].push(j);
             }
         }
-        if count >= 3 {
+        if neighbours[i].len() >= 3 {
             // The tangent is the scatter's major axis; the normal is square to it.
             let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
             normals[i] = Some((-angle.sin(), angle.cos()));
@@ -211,15 +226,41 @@ fn oriented_normals(points: &[&StripePoint]) -> Result<Vec<Option<(f64, f64)>>, 
         (c + doubled.cos(), s + doubled.sin(), n + 1)
     });
     let agreement = c.hypot(s) / n.max(1) as f64;
-    if !(agreement >= MIN_NORMAL_AGREEMENT) {
+    if agreement >= MIN_NORMAL_AGREEMENT {
+        let mean = 0.5 * s.atan2(c);
+        let (mx, my) = (mean.cos(), mean.sin());
+        return Ok(normals
+            .into_iter()
+            .map(|n| n.map(|(x, y)| if x * mx + y * my < 0.0 { (-x, -y) } else { (x, y) }))
+            .collect());
+    }
+    // Turned away from the centre, neighbours' normals must agree: they do along a ring about
+    // it and a line that misses it, and flip where the stripe's tangent passes the centre.
+    let away = |p: &StripePoint, (x, y): (f64, f64)| {
+        if x * (p.u - centre.0) + y * (p.v - centre.1) < 0.0 { (-x, -y) } else { (x, y) }
+    };
+    let turned: Vec<Option<(f64, f64)>> = points.iter().zip(normals).map(|(p, n)| n.map(|n| away(p, n))).collect();
+    let flipped = turned
+        .iter()
+        .zip(&neighbours)
+        .filter(|(n, near)| {
+            n.is_some_and(|(x, y)| near.iter().any(|&j| turned[j].is_some_and(|(a, b)| x * a + y * b < 0.0)))
+        })
+        .count();
+    if flipped as f64 > MAX_FLIPPED_SHARE * turned.len() as f64 {
         return Err(format!(
-            "the stripe's normals spread too widely to put its profiles on one side (agreement {agreement:.2} of 1, at least {MIN_NORMAL_AGREEMENT})"
+            "the stripe's normals spread too widely to put its profiles on one side (agreement {agreement:.2} of 1, at least {MIN_NORMAL_AGREEMENT}), and turned away from the centre ({:.0}, {:.0}) {flipped} of {} disagree with a neighbour",
+            centre.0,
+            centre.1,
+            turned.len()
         ));
     }
-    let mean = 0.5 * s.atan2(c);
-    let (mx, my) = (mean.cos(), mean.sin());
-    Ok(normals.into_iter().map(|n| n.map(|(x, y)| if x * mx + y * my < 0.0 { (-x, -y) } else { (x, y) })).collect())
+    Ok(turned)
 }
+
+/// At most this share of a curved stripe's normals, turned away from the centre, may disagree
+/// with a neighbour's.
+const MAX_FLIPPED_SHARE: f64 = 0.02;
 
 /// The profile through (`u`, `v`) along `normal`, sampled every 1 px over ±`half` px
 /// (bilinear), its background line taken out, resampled onto its own peak (a parabola through
@@ -289,9 +330,8 @@ fn has_step(q: &[f64], top: usize, half: usize, height: f64) -> bool {
 }
 
 /// The width (px) between the half-maximum crossings of a profile sampled every 1 px with its
-/// peak of 1 in the middle; `None` where it does not fall to half on both sides.
-fn half_maximum_width(profile: &[f64]) -> Option<f64> {
-    let mid = profile.len() / 2;
+/// peak of 1 at sample `mid`; `None` where it does not fall to half on both sides.
+fn half_maximum_width(profile: &[f64], mid: usize) -> Option<f64> {
     let crossing = |step: isize| {
         let mut k = mid as isize;
         loop {
@@ -467,7 +507,11 @@ pub fn measure_frames(
         .map(|path| {
             let name = path.display().to_string();
             let image = load_frame_channel(path, colour).map_err(|e| e.to_string())?;
-            let points = RidgeDetector::whole_frame(image.width, image.height, *ridge).detect(&image);
+            let detector = match opts.mirror {
+                Some(m) => RidgeDetector::new(image.width, image.height, m, *ridge),
+                None => RidgeDetector::whole_frame(image.width, image.height, *ridge),
+            };
+            let points = detector.detect(&image);
             Ok(measure_frame(&name, &image, &points, opts).map_err(|reason| Skipped { name, reason }))
         })
         .collect();
@@ -508,17 +552,17 @@ mod tests {
     fn a_sampled_gaussians_half_maximum_width_is_its_fwhm() {
         let sigma = 2.5;
         let profile: Vec<f64> = (-30..=30).map(|k| (-0.5 * (f64::from(k) / sigma).powi(2)).exp()).collect();
-        let width = half_maximum_width(&profile).unwrap();
+        let width = half_maximum_width(&profile, 30).unwrap();
         // Linear interpolation between samples reads the crossing a little short of it.
         assert!((width - 2.3548 * sigma).abs() < 0.05, "{width}");
-        assert!(half_maximum_width(&profile[28..33]).is_none());
+        assert!(half_maximum_width(&profile[28..33], 2).is_none());
     }
 
     #[test]
-    fn a_straight_stripes_normals_all_point_one_way_and_a_ring_is_refused() {
+    fn a_straight_stripes_normals_point_one_way_and_a_rings_away_from_its_centre() {
         let line: Vec<StripePoint> = (0..100).map(|k| point(10.0 + f64::from(k), 50.0 + 0.3 * f64::from(k))).collect();
         let refs: Vec<&StripePoint> = line.iter().collect();
-        let normals = oriented_normals(&refs).unwrap();
+        let normals = oriented_normals(&refs, (0.0, 0.0)).unwrap();
         let expected = (-0.3f64, 1.0f64);
         let norm = expected.0.hypot(expected.1);
         let first = normals[50].unwrap();
@@ -531,7 +575,13 @@ mod tests {
             .map(|t| point(200.0 + 100.0 * t.cos(), 200.0 + 100.0 * t.sin()))
             .collect();
         let refs: Vec<&StripePoint> = ring.iter().collect();
-        assert!(oriented_normals(&refs).unwrap_err().contains("spread too widely"));
+        // About its own centre a ring's normals all point outwards; about a point outside it,
+        // some tangents pass on its other side.
+        for (p, n) in ring.iter().zip(oriented_normals(&refs, (200.0, 200.0)).unwrap()) {
+            let (x, y) = n.unwrap();
+            assert!((x * (p.u - 200.0) + y * (p.v - 200.0) - 100.0).abs() < 0.1);
+        }
+        assert!(oriented_normals(&refs, (400.0, 200.0)).unwrap_err().contains("disagree with a neighbour"));
     }
 
     #[test]

@@ -155,6 +155,55 @@ mod rendered {
         }
     }
 
+    /// The paper sensor in a 1.6 × 1.6 × 1.0 m room, one laser: its stripe is a ring about the
+    /// mirror's axis, whose normals are turned away from the mirror's centre. Tailed sheet (0.17,
+    /// 4) 6 px wide at its middle, two mirror angles. Measured 2026-12-06: (0.184, 1.98 σ) and
+    /// (0.195, 2.50 σ), median (0.189, 2.24): the share holds, the length comes out short. The
+    /// ring's width changes with the walls' distance around it (5.0 and 5.8 px FWHM against the
+    /// 6 px at its middle), and the median of profiles of several widths is not one tailed
+    /// profile; a plain target at one distance gives the length within 10 % (above). Asserted:
+    /// share within 0.045, length within 1.5-6 σ.
+    #[test]
+    fn a_ring_about_the_mirrors_axis_gives_back_its_tail() {
+        use omni_formats::scene::Shape;
+        let sensor = Sensor::paper();
+        let room = SceneObject {
+            name: Some("room".into()),
+            albedo: 0.8,
+            texture: None,
+            shape: Shape::Room { centre_mm: [0.0, 0.0, 0.0], size_mm: [1600.0, 1600.0, 1000.0] },
+        };
+        let scene = Scene::from_file(SceneFile::new(vec![room])).unwrap();
+        let profile = SheetProfile::Tailed { tail_weight: 0.17, tail_length: 4.0, tail_side: 1 };
+        let opts = RenderOptions { profile, stripe_fwhm_px: Some(6.0), seed: 5, ..RenderOptions::ideal() };
+        let blur = opts.imaging.psf_sigma_px();
+        let mirror = sensor.camera.mirror_circle();
+        let frames: Vec<FrameTail> = [16.0f64, 24.0]
+            .iter()
+            .filter_map(|alpha| {
+                let frame = render_laser_frame(&sensor, &scene, alpha.to_radians(), 0, &[0], &opts);
+                let img = GrayImage {
+                    width: frame.image.width,
+                    height: frame.image.height,
+                    bit_depth: 8,
+                    data: frame.image.data,
+                };
+                let params = RidgeParams { max_width: 30.0, optics_blur_px: Some(blur), ..Default::default() };
+                let points = RidgeDetector::new(img.width, img.height, mirror, params).detect(&img);
+                let tail_opts = TailOptions { blur_px: blur, mirror: Some(mirror), ..Default::default() };
+                let measured = measure_frame(&format!("alpha {alpha}"), &img, &points, &tail_opts);
+                match &measured {
+                    Ok(f) => print(f),
+                    Err(e) => eprintln!("alpha {alpha}: {e}"),
+                }
+                measured.ok()
+            })
+            .collect();
+        let (share, length) = combine(&frames).expect("a frame measured");
+        eprintln!("ring: measured ({share:.3}, {length:.2}) over {} frames", frames.len());
+        assert!((share - 0.17).abs() <= 0.045 && (1.5..=6.0).contains(&length), "({share}, {length})");
+    }
+
     /// A Gaussian sheet has no tail to measure: every frame is refused as fitting a Gaussian as
     /// well (none of its tail fits tells a share from a length either).
     #[test]

@@ -87,16 +87,8 @@ struct TailArgs {
     /// Stripe frames (files or directories of png/jpg/pgm).
     #[arg(required = true)]
     frames: Vec<PathBuf>,
-    /// The laser's colour: frames are read as that channel minus the mean of the other two
-    /// (red: R - (G+B)/2) [default: red].
-    #[arg(long, value_name = "COLOUR", value_parser = ["red", "green", "blue"], conflicts_with = "channel")]
-    laser: Option<String>,
-    /// Read one channel (or luma) instead of the laser's colour contrast.
-    #[arg(long, value_name = "CHANNEL", value_parser = ["luma", "red", "green", "blue"])]
-    channel: Option<String>,
-    /// Stripe detector: intensity threshold in the read channel's units [default: 4 % of full scale].
-    #[arg(long, allow_negative_numbers = true)]
-    threshold: Option<f64>,
+    #[command(flatten)]
+    read: ReadArgs,
     /// Stripe detector: widest stripe (px) at full resolution.
     #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
     max_width: f64,
@@ -117,6 +109,34 @@ struct TailArgs {
     /// Print only the result as SHARE,LENGTH (for --laser-tail); the frames' lines go to stderr.
     #[arg(long, short)]
     quiet: bool,
+}
+
+/// How a stripe frame is read and its stripe found (`fixed` and `tail`).
+#[derive(Args)]
+struct ReadArgs {
+    /// The laser's colour: frames are read as that channel minus the mean of the other two
+    /// (red: R - (G+B)/2) [default: red].
+    #[arg(long, value_name = "COLOUR", value_parser = ["red", "green", "blue"], conflicts_with = "channel")]
+    laser: Option<String>,
+    /// Read one channel (or luma) instead of the laser's colour contrast.
+    #[arg(long, value_name = "CHANNEL", value_parser = ["luma", "red", "green", "blue"])]
+    channel: Option<String>,
+    /// Stripe detector: intensity threshold in the read channel's units [default: 4 % of full scale].
+    #[arg(long, allow_negative_numbers = true)]
+    threshold: Option<f64>,
+}
+
+impl ReadArgs {
+    /// What the frames are read as: the laser's colour contrast (red by default) or a channel.
+    fn channel(&self) -> CliResult<omni_vision::colour::Channel> {
+        use omni_vision::colour::{Channel, Colour};
+        Ok(match (self.laser.as_deref(), self.channel.as_deref()) {
+            (Some(c), _) => Channel::Laser(c.parse().map_err(CliError::usage)?),
+            (None, None) => Channel::Laser(Colour::Red),
+            (None, Some("luma")) => Channel::Luma,
+            (None, Some(c)) => Channel::Single(c.parse().map_err(CliError::usage)?),
+        })
+    }
 }
 
 #[derive(Args)]
@@ -163,16 +183,8 @@ struct FixedArgs {
     /// `stripe` points used. Frames without a `stripe` field are errors.
     #[arg(long)]
     stripes: Option<PathBuf>,
-    /// The laser's colour: frames are read as that channel minus the mean of the other two
-    /// (red: R - (G+B)/2) [default: red].
-    #[arg(long, value_name = "COLOUR", value_parser = ["red", "green", "blue"], conflicts_with = "channel")]
-    laser: Option<String>,
-    /// Read one channel (or luma) instead of the laser's colour contrast.
-    #[arg(long, value_name = "CHANNEL", value_parser = ["luma", "red", "green", "blue"])]
-    channel: Option<String>,
-    /// Stripe detector: intensity threshold in the read channel's units [default: 4 % of full scale].
-    #[arg(long, allow_negative_numbers = true)]
-    threshold: Option<f64>,
+    #[command(flatten)]
+    read: ReadArgs,
     /// Stripe detector: widest stripe (px) at full resolution.
     #[arg(long, default_value_t = 12.0, allow_negative_numbers = true)]
     max_width: f64,
@@ -534,9 +546,9 @@ fn expand_frames(paths: &[PathBuf]) -> CliResult<Vec<PathBuf>> {
 
 fn fixed(a: &FixedArgs) -> CliResult {
     use omni_calib::fixed_plane::{self, DetectOptions, FixedPlaneOptions};
-    use omni_vision::colour::{Channel, ColourSpec};
+    use omni_vision::colour::ColourSpec;
     let ridge = omni_vision::stripe::RidgeParams {
-        threshold: a.threshold,
+        threshold: a.read.threshold,
         max_width: a.max_width,
         max_scale: a.max_scale,
         optics_blur_px: a.optics_blur,
@@ -557,12 +569,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         return Err(CliError::usage("--min-corners must be at least 4"));
     }
     omni_cli::positive("--max-residual-mm", a.max_residual_mm)?;
-    let channel = match (a.laser.as_deref(), a.channel.as_deref()) {
-        (Some(c), _) => Channel::Laser(c.parse().map_err(CliError::usage)?),
-        (None, None) => Channel::Laser(omni_vision::colour::Colour::Red),
-        (None, Some("luma")) => Channel::Luma,
-        (None, Some(c)) => Channel::Single(c.parse().map_err(CliError::usage)?),
-    };
+    let channel = a.read.channel()?;
     let (camera_file, camera) = CameraFile::load(&a.camera)?;
     let ridge = ridge.with_lens_blur_of(&camera_file).map_err(|e| format!("{}: {e}", a.camera.display()))?;
     let board: omni_formats::BoardFile = read_doc(&a.board)?;
@@ -662,15 +669,10 @@ fn fixed(a: &FixedArgs) -> CliResult {
 
 fn tail(a: &TailArgs) -> CliResult {
     use omni_calib::laser_tail::{self, TailOptions};
-    use omni_vision::colour::{Channel, ColourSpec};
-    let channel = match (a.laser.as_deref(), a.channel.as_deref()) {
-        (Some(c), _) => Channel::Laser(c.parse().map_err(CliError::usage)?),
-        (None, None) => Channel::Laser(omni_vision::colour::Colour::Red),
-        (None, Some("luma")) => Channel::Luma,
-        (None, Some(c)) => Channel::Single(c.parse().map_err(CliError::usage)?),
-    };
+    use omni_vision::colour::ColourSpec;
+    let channel = a.read.channel()?;
     let mut ridge = omni_vision::stripe::RidgeParams {
-        threshold: a.threshold,
+        threshold: a.read.threshold,
         max_width: a.max_width,
         optics_blur_px: a.optics_blur,
         ..Default::default()

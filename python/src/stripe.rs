@@ -257,6 +257,11 @@ pub fn measure_laser_tail<'py>(
     }
     let spec = colour_spec(channel, laser, None, false)?;
     let img = frame_image(image, "image", &spec)?;
+    // A laser colour's own channel, where the contrast compresses (`measure_frame`).
+    let laser_channel = match spec.channel {
+        Channel::Laser(c) => Some(frame_image(image, "image", &ColourSpec { channel: Channel::Single(c), ..spec })?),
+        _ => None,
+    };
     let rows = crate::arrays::Vectors::<5>::extract(stripe, "stripe")?;
     let points = (0..rows.len())
         .map(|i| {
@@ -267,7 +272,7 @@ pub fn measure_laser_tail<'py>(
     let mirror = camera.map(|c| c.model.mirror_circle());
     let opts = omni_calib::laser_tail::TailOptions { blur_px: optics_blur_px, min_profiles, mirror };
     let tail = py
-        .detach(|| omni_calib::laser_tail::measure_frame("image", &img, &points, &opts))
+        .detach(|| omni_calib::laser_tail::measure_frame("image", &img, &points, laser_channel.as_ref(), &opts))
         .map_err(crate::value_error)?;
     let json = serde_json::to_string(&tail).map_err(|e| crate::value_error(e.to_string()))?;
     let dict = py.import("json")?.call_method1("loads", (json,))?;

@@ -75,9 +75,15 @@ Frames: the stripe on a plain, matte, evenly lit target (a white wall, paper) th
 stripe's width to either side of it, not saturated, at least a few px wide (FWHM 5-20 px: the tail must be wider than the blur). Board frames work where \
 the stripe crosses large white squares; most of their windows hold squares and are left out.
 
-Prints one line per frame (profiles used, core σ and FWHM in px, share and length with their σ, the tail's side \
-along the frame's normals, the fit's residual against a Gaussian's), the frames left out and why, then the \
-result. Exit 1 when no frame counts.
+Prints one line per frame (profiles used, core σ and FWHM in px, share and length with their σ from the fit, the \
+image direction the tail lies towards (x right, y down; a ring's outwards or inwards), the fit's residual against a \
+Gaussian's), the frames left out and why, then the result with the frames' range (the honest spread: the fit's σ \
+take the profiles' median as exact). Exit 1 when no frame counts.
+
+Pixel values are taken as proportional to light: frames from a camera that gamma-encodes (sRGB, most colour \
+cameras' PNG and JPEG) read the tail heavier (a (0.17, 4) tail encoded with gamma 2.2 over a background of 8 % \
+of full scale reads (0.28, 4.7)); use linear (raw) frames. Profiles whose contrast the laser colour reading compresses (a channel above 3/4 of full \
+scale) are kept: keep the stripe well below saturation.
 
 Examples:
   omni-calib-plane tail --laser red wall/*.png
@@ -705,6 +711,9 @@ fn tail(a: &TailArgs) -> CliResult {
         write_doc(path, &doc)?;
     }
     let argument = format!("{:.2},{:.1}", report.tail_weight, report.tail_length);
+    argument
+        .parse::<omni_model::LaserProfile>()
+        .map_err(|e| CliError::new(format!("the tail measured, {argument}: {e}")))?;
     let table = tail_table(&report, &argument);
     use std::io::Write;
     let mut stdout = std::io::stdout().lock();
@@ -721,12 +730,17 @@ fn tail(a: &TailArgs) -> CliResult {
 /// The human table of a tail measurement, ending with the `--laser-tail` argument.
 fn tail_table(r: &omni_calib::laser_tail::TailReport, argument: &str) -> String {
     let mut t = format!(
-        "{:<24} {:>8} {:>8} {:>8} {:>14} {:>16} {:>5} {:>9} {:>9}\n",
-        "frame", "profiles", "sigma_px", "fwhm_px", "share", "length_sigma", "side", "residual", "gaussian"
+        "{:<24} {:>8} {:>8} {:>8} {:>14} {:>16} {:>14} {:>9} {:>9}\n",
+        "frame", "profiles", "sigma_px", "fwhm_px", "share ± σ", "length ± σ", "tail towards", "residual", "gaussian"
     );
     for f in &r.frames {
+        let towards = match f.tail_direction {
+            Some([x, y]) => format!("({x:+.2}, {y:+.2})"),
+            None if f.side > 0.0 => "outwards".into(),
+            None => "inwards".into(),
+        };
         t += &format!(
-            "{:<24} {:>8} {:>8.2} {:>8.2} {:>6.3} ± {:<5.3} {:>7.2} ± {:<6.2} {:>+5.0} {:>9.4} {:>9.4}\n",
+            "{:<24} {:>8} {:>8.2} {:>8.2} {:>6.3} ± {:<5.3} {:>7.2} ± {:<6.2} {:>14} {:>9.4} {:>9.4}\n",
             file_name(&f.name),
             f.profiles,
             f.core_sigma_px,
@@ -735,7 +749,7 @@ fn tail_table(r: &omni_calib::laser_tail::TailReport, argument: &str) -> String 
             f.tail_weight_sigma,
             f.tail_length,
             f.tail_length_sigma,
-            f.side,
+            towards,
             f.residual_rms,
             f.gaussian_residual_rms
         );

@@ -21,8 +21,9 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
-/// im7, im11 and im15 show a tail (library test: shares 0.18-0.25); im1's stripe fits a Gaussian
-/// as well and is left out, named.
+/// im7 and im15 show a tail (library test: shares 0.21-0.25); im11's windows hold the board's
+/// squares once its points above 3/4 of full scale are out, and im1's stripe fits a Gaussian as
+/// well: both left out, named.
 #[test]
 fn the_tail_is_printed_for_laser_tail_and_reported() {
     let dir = tempfile::tempdir().unwrap();
@@ -32,19 +33,19 @@ fn the_tail_is_printed_for_laser_tail_and_reported() {
     assert!(out.status.success(), "{se}");
     assert!(so.contains("left out im1.png: no tail stands out"), "{so}");
     let last = so.lines().last().unwrap();
-    assert!(last.starts_with("laser tail from 3 of 4 frames: share "), "{last}");
+    assert!(last.starts_with("laser tail from 2 of 4 frames: share "), "{last}");
     let argument = last.rsplit(' ').next().unwrap();
     let profile: omni_model::LaserProfile = argument.parse().unwrap();
-    assert!((0.15..=0.25).contains(&profile.tail_weight()), "{argument}");
+    assert!((0.15..=0.3).contains(&profile.tail_weight()), "{argument}");
     let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!((doc["format"].as_str(), doc["version"].as_u64()), (Some("omniscan.laser_tail_report"), Some(1)));
-    assert_eq!(doc["report"]["frames"].as_array().unwrap().len(), 3);
-    assert_eq!(doc["report"]["skipped"][0]["name"].as_str().unwrap(), frame(1));
+    assert_eq!(doc["report"]["frames"].as_array().unwrap().len(), 2);
+    assert_eq!(doc["report"]["skipped"][1]["name"].as_str().unwrap(), frame(1));
     // --quiet prints the argument alone on stdout, the table on stderr.
-    let quiet = run(&["-q"], &[7, 11, 15]);
+    let quiet = run(&["-q"], &[7, 11, 15, 1]);
     assert!(quiet.status.success());
     assert_eq!(text(&quiet.stdout), format!("{argument}\n"));
-    assert!(text(&quiet.stderr).contains("laser tail from 3 of 3 frames"));
+    assert!(text(&quiet.stderr).contains("laser tail from 2 of 4 frames"));
 }
 
 #[test]

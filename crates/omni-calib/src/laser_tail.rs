@@ -10,15 +10,16 @@
 //! centre, core σ, tail share and length, height, a linear background), with the tail on either
 //! side. The normals of a frame are turned to one side of the stripe's mean direction, never by
 //! a profile's own shape: a side chosen per profile by its heavier flank would make a tail out
-//! of noise. A laser's tail lies on one side of its sheet, so one frame's stripe, straight or
-//! gently curved, has it on one side; which side differs between poses and does not matter to
-//! the detector, which finds it per stripe. The frames' medians are the laser's figures.
+//! of noise. A laser's tail lies on one side of its sheet, so one frame's stripe has it on one
+//! side; the report gives it as an image direction, and the detector finds it per stripe
+//! itself. The frames' medians are the laser's figures. The pixel values are taken as
+//! proportional to the light: a gamma-encoded frame (sRGB) makes the tail look heavier.
 
 use crate::fixed_plane::Skipped;
 use omni_formats::stream::{StripePoint, quality};
 use omni_geom::lm;
 use omni_model::{LaserProfile, MirrorCircle};
-use omni_vision::colour::ColourSpec;
+use omni_vision::colour::{Channel, ColourSpec};
 use omni_vision::image_io::{GrayImage, load_frame_channel};
 use omni_vision::stripe::{RidgeDetector, RidgeParams};
 use rayon::prelude::*;
@@ -59,8 +60,11 @@ pub struct FrameTail {
     pub tail_weight_sigma: f64,
     pub tail_length: f64,
     pub tail_length_sigma: f64,
-    /// The tail's side along the frame's oriented normals (±1).
+    /// The tail's side along the frame's oriented normals (±1), and the image direction (unit,
+    /// x right, y down) it lies towards on average: `None` for a ring, whose normals are turned
+    /// away from the centre (+1: the tail lies outwards).
     pub side: f64,
+    pub tail_direction: Option<[f64; 2]>,
     /// RMS of the fit's residuals over the median profile (its peak is 1), and the same for a
     /// Gaussian (no tail) for comparison.
     pub residual_rms: f64,
@@ -81,6 +85,17 @@ const MAX_RESIDUAL_RATIO: f64 = 0.85;
 const MAX_WEIGHT_SIGMA: f64 = 0.1;
 const MAX_LENGTH_SIGMA: f64 = 0.5;
 
+/// The level (share of full scale) above which the laser colour's contrast weighs the other two
+/// channels less (`omni_vision::colour`).
+const COMPRESSED_LEVEL: f64 = 0.75;
+
+/// A fitted share at or above this (near its bound of 0.9), or a length outside these (core σ),
+/// is a core of another shape taken for a tail: a tail shorter than half the core's σ is the
+/// core's own flank, one longer than 50 σ the background's.
+const MAX_FITTED_WEIGHT: f64 = 0.85;
+const MIN_TAIL_LENGTH: f64 = 0.5;
+const MAX_TAIL_LENGTH: f64 = 50.0;
+
 /// Neighbours (px) whose line gives a point's normal.
 const NORMAL_REACH_PX: f64 = 4.0;
 /// Samples at each end of a window whose line is the profile's background.
@@ -93,21 +108,35 @@ const MAX_END_SCATTER: f64 = 0.05;
 const MIN_NORMAL_AGREEMENT: f64 = 0.7;
 
 /// Measures the laser's cross-section on one frame's stripe: `image` is what the detector read
-/// (a colour's laser contrast, a channel), `points` its stripe points there.
+/// (a colour's laser contrast, a channel), `points` its stripe points there. Where `image` is a
+/// laser colour's contrast, `laser_channel` is that colour's own channel: the contrast weighs the
+/// other two channels less above [`COMPRESSED_LEVEL`] of full scale, which flattens a profile's
+/// top, so points brighter than that there are left out like saturated ones.
 pub fn measure_frame(
     name: &str,
     image: &GrayImage,
     points: &[StripePoint],
+    laser_channel: Option<&GrayImage>,
     opts: &TailOptions,
 ) -> Result<FrameTail, String> {
-    let usable: Vec<&StripePoint> =
-        points.iter().filter(|p| p.quality & quality::SATURATED == 0 && p.width.is_finite()).collect();
+    let compressed = |p: &StripePoint| {
+        laser_channel.is_some_and(|c| {
+            let (x, y) =
+                (p.u.round().clamp(0.0, f64::from(c.width) - 1.0), p.v.round().clamp(0.0, f64::from(c.height) - 1.0));
+            f64::from(c.get(x as u32, y as u32)) > COMPRESSED_LEVEL * f64::from(c.max_value())
+        })
+    };
+    let usable: Vec<&StripePoint> = points
+        .iter()
+        .filter(|p| p.quality & quality::SATURATED == 0 && p.width.is_finite() && !compressed(p))
+        .collect();
     if usable.len() < opts.min_profiles {
         return Err(format!(
-            "{} unsaturated stripe points, fewer than {} ({} saturated)",
+            "{} unsaturated stripe points, fewer than {} ({} saturated or above {:.0} % of full scale)",
             usable.len(),
             opts.min_profiles,
-            points.len() - usable.len()
+            points.len() - usable.len(),
+            100.0 * COMPRESSED_LEVEL
         ));
     }
     let centre =
@@ -150,9 +179,11 @@ pub fn measure_frame(
     let median = median_profile(&profiles);
     let reach = median.len() / 2;
     let xs: Vec<f64> = (0..median.len()).map(|k| k as f64 - reach as f64).collect();
-    // The blur of the frame's median profile: the lens's, the pixel's area, the bilinear
-    // sampling across the stripe and the resampling onto the peak (a triangle each, 1/6 px²).
-    let blur_variance = opts.blur_px * opts.blur_px + 1.0 / 12.0 + 2.0 / 6.0;
+    // The blur of the frame's median profile: the lens's and the pixel's area (the stripe's
+    // own), and the bilinear sampling across the stripe (a triangle at any phase, 1/6 px²); the
+    // resampling onto the peak adds little, its phase the detector's small error.
+    let own_blur = opts.blur_px * opts.blur_px + 1.0 / 12.0;
+    let blur_variance = own_blur + 1.0 / 6.0;
     let fits: Vec<TailFit> =
         [1.0, -1.0].iter().filter_map(|&side| fit_tail(&xs, &median, side, blur_variance, fwhm)).collect();
     let best = fits
@@ -166,6 +197,12 @@ pub fn measure_frame(
             best.rms, gaussian
         ));
     }
+    if !(best.weight < MAX_FITTED_WEIGHT && (MIN_TAIL_LENGTH..=MAX_TAIL_LENGTH).contains(&best.length)) {
+        return Err(format!(
+            "the fit ends at its bounds (share {:.2}, length {:.2} core σ): a core of another shape, not a tail",
+            best.weight, best.length
+        ));
+    }
     if !(best.weight_sigma <= MAX_WEIGHT_SIGMA && best.length_sigma <= MAX_LENGTH_SIGMA * best.length) {
         return Err(format!(
             "the tail's share and length are not told apart (share {:.2} ± {:.2}, length {:.1} ± {:.1} core σ)",
@@ -173,7 +210,7 @@ pub fn measure_frame(
         ));
     }
     let profile = LaserProfile::tailed(best.weight, best.length);
-    let s = (1.0 + blur_variance / (best.sigma * best.sigma)).sqrt();
+    let s = (1.0 + own_blur / (best.sigma * best.sigma)).sqrt();
     let (lo, hi) = profile.half_points(s);
     Ok(FrameTail {
         name: name.to_string(),
@@ -185,6 +222,7 @@ pub fn measure_frame(
         tail_length: best.length,
         tail_length_sigma: best.length_sigma,
         side: best.side,
+        tail_direction: mean_direction(&normals).map(|(x, y)| [best.side * x, best.side * y]),
         residual_rms: best.rms,
         gaussian_residual_rms: gaussian,
     })
@@ -258,6 +296,13 @@ fn oriented_normals(points: &[&StripePoint], centre: (f64, f64)) -> Result<Vec<O
     Ok(turned)
 }
 
+/// The unit mean of the oriented `normals`; `None` where they cancel (a ring).
+fn mean_direction(normals: &[Option<(f64, f64)>]) -> Option<(f64, f64)> {
+    let (x, y, n) = normals.iter().flatten().fold((0.0, 0.0, 0usize), |(x, y, n), (a, b)| (x + a, y + b, n + 1));
+    let length = x.hypot(y);
+    (length >= 0.5 * n as f64 && n > 0).then(|| (x / length, y / length))
+}
+
 /// At most this share of a curved stripe's normals, turned away from the centre, may disagree
 /// with a neighbour's.
 const MAX_FLIPPED_SHARE: f64 = 0.02;
@@ -310,8 +355,7 @@ fn aligned_profile(
             let x = peak + k as f64 - reach as f64;
             let i = x.floor();
             let f = x - i;
-            let i = i as usize;
-            (i + 1 < n).then(|| ((1.0 - f) * q[i] + f * q[i + 1]) / height)
+            (i >= 0.0 && (i as usize) + 1 < n).then(|| ((1.0 - f) * q[i as usize] + f * q[i as usize + 1]) / height)
         })
         .collect()
 }
@@ -398,16 +442,6 @@ struct TailProblem<'a> {
     blur_variance: f64,
 }
 
-impl TailProblem<'_> {
-    fn model(&self, p: &[f64], x: f64) -> f64 {
-        let [x0, ls, lw, ll, a, b, c] = [p[0], p[1], p[2], p[3], p[4], p[5], p[6]];
-        let sigma = ls.exp();
-        let profile = LaserProfile::tailed(MAX_TAIL_WEIGHT / (1.0 + (-lw).exp()), ll.exp());
-        let s = (1.0 + self.blur_variance / (sigma * sigma)).sqrt();
-        a * profile.unit(self.side * (x - x0) / sigma, s) / sigma + b + c * x
-    }
-}
-
 impl lm::Problem for TailProblem<'_> {
     fn num_params(&self) -> usize {
         7
@@ -416,8 +450,12 @@ impl lm::Problem for TailProblem<'_> {
         self.xs.len()
     }
     fn residuals(&self, p: &[f64], out: &mut [f64]) {
+        let [x0, ls, lw, ll, a, b, c] = [p[0], p[1], p[2], p[3], p[4], p[5], p[6]];
+        let sigma = ls.exp();
+        let profile = LaserProfile::tailed(MAX_TAIL_WEIGHT / (1.0 + (-lw).exp()), ll.exp());
+        let s = (1.0 + self.blur_variance / (sigma * sigma)).sqrt();
         for ((r, &x), &y) in out.iter_mut().zip(self.xs).zip(self.ys) {
-            *r = self.model(p, x) - y;
+            *r = a * profile.unit(self.side * (x - x0) / sigma, s) / sigma + b + c * x - y;
         }
     }
 }
@@ -427,12 +465,18 @@ fn fit_tail(xs: &[f64], ys: &[f64], side: f64, blur_variance: f64, fwhm: f64) ->
     let problem = TailProblem { xs, ys, side, blur_variance };
     let sigma = (fwhm / 2.3548).powi(2) - blur_variance;
     let sigma = sigma.max(0.25).sqrt();
-    let start = [0.0, sigma.ln(), -1.0, 3f64.ln(), sigma * (2.0 * std::f64::consts::PI).sqrt(), 0.0, 0.0];
-    let report = lm::minimize(&problem, &start, &lm::Options { max_iterations: 200, ..Default::default() });
+    // A few starts over share and length: a single one can settle where the tail vanishes.
+    let logit = |w: f64| (w / (MAX_TAIL_WEIGHT - w)).ln();
+    let report = [0.1, 0.3, 0.6]
+        .iter()
+        .flat_map(|&w| [1.0f64, 3.0, 8.0].map(|l| (w, l)))
+        .map(|(w, l)| {
+            let start = [0.0, sigma.ln(), logit(w), l.ln(), sigma * (2.0 * std::f64::consts::PI).sqrt(), 0.0, 0.0];
+            lm::minimize(&problem, &start, &lm::Options { max_iterations: 200, ..Default::default() })
+        })
+        .filter(|r| r.params.iter().all(|x| x.is_finite()) && r.rms.is_finite())
+        .min_by(|a, b| a.rms.total_cmp(&b.rms))?;
     let p = &report.params;
-    if !p.iter().all(|x| x.is_finite()) {
-        return None;
-    }
     let logistic = 1.0 / (1.0 + (-p[2]).exp());
     let weight = MAX_TAIL_WEIGHT * logistic;
     let length = p[3].exp();
@@ -507,12 +551,20 @@ pub fn measure_frames(
         .map(|path| {
             let name = path.display().to_string();
             let image = load_frame_channel(path, colour).map_err(|e| e.to_string())?;
+            let laser_channel = match colour.channel {
+                Channel::Laser(c) => {
+                    let own = ColourSpec { channel: Channel::Single(c), ..*colour };
+                    Some(load_frame_channel(path, &own).map_err(|e| e.to_string())?)
+                }
+                _ => None,
+            };
             let detector = match opts.mirror {
                 Some(m) => RidgeDetector::new(image.width, image.height, m, *ridge),
                 None => RidgeDetector::whole_frame(image.width, image.height, *ridge),
             };
             let points = detector.detect(&image);
-            Ok(measure_frame(&name, &image, &points, opts).map_err(|reason| Skipped { name, reason }))
+            Ok(measure_frame(&name, &image, &points, laser_channel.as_ref(), opts)
+                .map_err(|reason| Skipped { name, reason }))
         })
         .collect();
     let (mut frames, mut skipped) = (Vec::new(), Vec::new());

@@ -28,12 +28,13 @@ fn print(f: &FrameTail) {
 }
 
 /// The real hand-held laser's frames (../shared/data/real-laser-handheld, im1-im17: the stripe
-/// across a checkerboard, 7-15 px wide). Most frames' windows across the stripe hold the board's
-/// squares or fit without a tail; the three measured, 2026-12-06: im7 (0.25, 1.6 σ), im11
-/// (0.19, 2.3), im15 (0.18, 2.3), median (0.19, 2.3). An independent
-/// measurement of 2026-12-03 (numpy, per column, docs/DECISIONS.md) gave shares 0.14-0.20 and
-/// lengths 0.7-6 σ over six frames. Asserted: at least two frames measured, each share within
-/// 0.12-0.32 and the median within 0.15-0.25, lengths within 1-8 σ.
+/// across a checkerboard, 7-15 px wide; sRGB-encoded, so these figures are of encoded values,
+/// heavier than the light's). Most frames' windows across the stripe hold the board's squares,
+/// are brighter than the laser contrast reads in proportion, or fit without a tail; the two
+/// measured, 2026-12-06: im7 (0.25, 1.5 σ), im15 (0.21, 1.4). An independent measurement of
+/// 2026-12-03 (numpy, per column, docs/DECISIONS.md) gave shares 0.14-0.20 and lengths 0.7-6 σ
+/// over six frames. Asserted: at least two frames measured, each share within 0.12-0.32 and the
+/// median within 0.15-0.25, lengths within 1-8 σ.
 #[test]
 fn real_frames_give_a_tail_like_the_independent_measurement() {
     let spec = ColourSpec { channel: Channel::Laser(Colour::Red), bayer: None, sites: false };
@@ -67,7 +68,7 @@ mod rendered {
     /// The stopped polygon's mirror angle (rad), as in the fixed-plane tests.
     const ALPHA: f64 = 0.4;
 
-    /// A plain white target 120 × 80 mm facing the viewpoint, `d` mm out along the light plane.
+    /// A plain white target 600 × 450 mm facing the viewpoint, `d` mm out along the light plane.
     fn target(plane: &Plane, d: f64, rng: &mut SplitMix64) -> SceneObject {
         let azimuth = (rng.uniform() - 0.5) * 40f64.to_radians();
         let (x, y) = (d * azimuth.cos(), d * azimuth.sin());
@@ -116,7 +117,7 @@ mod rendered {
                 let det = RidgeDetector::whole_frame(img.width, img.height, params);
                 let points = det.detect(&img);
                 let tail_opts = TailOptions { blur_px: blur, ..Default::default() };
-                match measure_frame(&format!("f{k}"), &img, &points, &tail_opts) {
+                match measure_frame(&format!("f{k}"), &img, &points, None, &tail_opts) {
                     Ok(f) => {
                         print(&f);
                         Some(f)
@@ -130,28 +131,29 @@ mod rendered {
             .collect()
     }
 
-    /// Tailed sheets of two shapes (the real laser's, 17 % in a tail 4 core σ long; and 40 % in
-    /// one 1.5 σ long), 6 and 10 px wide, on a plain target 150-300 mm out, ideal optics (the
-    /// lens's σ 0.7 px known), four frames each (a frame's windows may run off the target
-    /// and some fit as well without a tail). Measured 2026-12-06 at 6 / 10 px: (0.174, 3.88) /
-    /// (0.176, 3.63) for the first, (0.408, 1.55) / (0.434, 1.52) for the second (a wide
-    /// rendered stripe is a little more lopsided than its sheet: the oblique view across it).
-    /// Asserted: share within 0.045, length within 15 %.
+    /// Tailed sheets of two shapes (the real laser's, 17 % in a tail 4 core σ long, on either
+    /// side; and 40 % in one 1.5 σ long), 6 and 10 px wide, on a plain target 180-330 mm out,
+    /// ideal optics (the lens's σ 0.7 px known), four frames each (a frame's windows may run off
+    /// the target into the mirror's hole and are refused). Asserted: share within 0.015 and
+    /// length within 10 % at 6 px; at 10 px, where a wide rendered stripe is a little more
+    /// lopsided than its sheet (the oblique view across it), share within 0.04. Measured
+    /// figures in docs/DECISIONS.md.
     #[test]
     fn rendered_tailed_sheets_give_back_their_tail() {
-        for (w, l) in [(0.17, 4.0), (0.4, 1.5)] {
-            for fwhm in [6.0, 10.0] {
-                let profile = SheetProfile::Tailed { tail_weight: w, tail_length: l, tail_side: 1 };
-                let frames = measure(profile, fwhm, 4, 3);
-                let (share, length) = combine(&frames).expect("a frame measured");
-                eprintln!(
-                    "truth ({w}, {l}) at {fwhm} px: measured ({share:.3}, {length:.2}) over {} frames",
-                    frames.len()
-                );
-                assert!(frames.len() >= 2, "{} frames measured", frames.len());
-                assert!((share - w).abs() <= 0.045, "({w}, {l}) at {fwhm} px: share {share}");
-                assert!((length / l - 1.0).abs() <= 0.15, "({w}, {l}) at {fwhm} px: length {length}");
-            }
+        for (w, l, side, fwhm) in
+            [(0.17, 4.0, 1, 6.0), (0.17, 4.0, -1, 6.0), (0.4, 1.5, 1, 6.0), (0.17, 4.0, 1, 10.0), (0.4, 1.5, 1, 10.0)]
+        {
+            let profile = SheetProfile::Tailed { tail_weight: w, tail_length: l, tail_side: side };
+            let frames = measure(profile, fwhm, 4, 3);
+            let (share, length) = combine(&frames).expect("a frame measured");
+            eprintln!(
+                "truth ({w}, {l}, side {side}) at {fwhm} px: measured ({share:.3}, {length:.2}) over {} frames",
+                frames.len()
+            );
+            assert!(frames.len() >= 2, "{} frames measured", frames.len());
+            let (max_share, max_length) = if fwhm < 8.0 { (0.015, 0.1) } else { (0.04, 0.15) };
+            assert!((share - w).abs() <= max_share, "({w}, {l}) at {fwhm} px: share {share}");
+            assert!((length / l - 1.0).abs() <= max_length, "({w}, {l}) at {fwhm} px: length {length}");
         }
     }
 
@@ -191,7 +193,7 @@ mod rendered {
                 let params = RidgeParams { max_width: 30.0, optics_blur_px: Some(blur), ..Default::default() };
                 let points = RidgeDetector::new(img.width, img.height, mirror, params).detect(&img);
                 let tail_opts = TailOptions { blur_px: blur, mirror: Some(mirror), ..Default::default() };
-                let measured = measure_frame(&format!("alpha {alpha}"), &img, &points, &tail_opts);
+                let measured = measure_frame(&format!("alpha {alpha}"), &img, &points, None, &tail_opts);
                 match &measured {
                     Ok(f) => print(f),
                     Err(e) => eprintln!("alpha {alpha}: {e}"),

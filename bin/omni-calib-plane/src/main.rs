@@ -601,7 +601,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         if m.starts_with("the board file says") {
             CliError::new(format!("{}: {m}", name(&a.board)))
         } else {
-            CliError::new(m)
+            CliError::new(grey_hint(m))
         }
     })?;
     let opts = FixedPlaneOptions {
@@ -699,7 +699,7 @@ fn tail(a: &TailArgs) -> CliResult {
     }
     let opts = TailOptions { blur_px: ridge.optics_blur_px.unwrap_or(0.0), min_profiles: a.min_profiles, mirror };
     let colour = ColourSpec { channel, bayer: None, sites: false };
-    let report = laser_tail::measure_frames(&paths, &colour, &ridge, &opts).map_err(CliError::new)?;
+    let report = laser_tail::measure_frames(&paths, &colour, &ridge, &opts).map_err(|m| CliError::new(grey_hint(m)))?;
     if let Some(path) = &a.report {
         let mut doc = serde_json::json!({"format": "omniscan.laser_tail_report", "version": 1});
         doc["report"] = serde_json::to_value(&report)?;
@@ -725,6 +725,17 @@ fn tail(a: &TailArgs) -> CliResult {
     };
     stdout.write_all(out.as_bytes()).and_then(|_| stdout.flush()).map_err(omni_cli::stdout_error)?;
     Ok(())
+}
+
+/// A frame-reading error, with this tool's way to read a grey frame where the laser's colour
+/// was asked of one (the reader's own hint names omni-ridge's raw-mosaic option).
+fn grey_hint(message: String) -> String {
+    match message.split_once(" (a raw Bayer mosaic needs --bayer ORDER)") {
+        Some((head, tail)) if message.contains("the frame is grey") => {
+            format!("{head} (read a grey frame with --channel luma){tail}")
+        }
+        _ => message,
+    }
 }
 
 /// The human table of a tail measurement, ending with the `--laser-tail` argument.

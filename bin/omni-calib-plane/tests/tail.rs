@@ -62,6 +62,12 @@ fn no_tail_and_bad_input_are_one_line_errors() {
     let out = Command::new(BIN).args(["tail", "missing.png"]).output().unwrap();
     assert_eq!(out.status.code(), Some(1));
     assert!(text(&out.stderr).contains("missing.png"), "{}", text(&out.stderr));
+    // A grey frame read as the laser's colour (the default): the hint names --channel luma.
+    let grey = tempfile::NamedTempFile::with_suffix(".pgm").unwrap();
+    std::fs::write(grey.path(), [b"P5\n4 4\n255\n".as_slice(), &[0u8; 16]].concat()).unwrap();
+    let out = Command::new(BIN).args(["tail".as_ref(), grey.path().as_os_str()]).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(text(&out.stderr).contains("the frame is grey") && text(&out.stderr).contains("--channel luma"));
     let broken = tempfile::NamedTempFile::with_suffix(".png").unwrap();
     std::fs::write(broken.path(), b"\x89PNG\r\n\x1a\nnot a png").unwrap();
     let out = Command::new(BIN).args(["tail".as_ref(), broken.path().as_os_str()]).output().unwrap();

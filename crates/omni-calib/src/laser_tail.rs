@@ -170,7 +170,7 @@ pub fn measure_frame(
     let profiles = profiles_over(half, true);
     if profiles.len() < opts.min_profiles {
         return Err(format!(
-            "{} of {} profiles have a clean background over ±{half} px, fewer than {}",
+            "{} of {} profiles lie in the image with a clean background over ±{half} px, fewer than {}",
             profiles.len(),
             usable.len(),
             opts.min_profiles

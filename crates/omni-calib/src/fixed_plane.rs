@@ -331,10 +331,10 @@ type FrameInliers = (Vec<Point3<f64>>, Vec<[Vector3<f64>; 6]>);
 /// posed less surely weighs less however many points it has; beside it each point's own scatter
 /// about its frame's line (pooled over the frames). The covariance is the fit's, scaled up by
 /// its χ² per degree of freedom where that exceeds 1 (the points' own errors larger than their
-/// scatter about the lines says). What differs between frames beyond their boards' poses (a stripe read
-/// a little off in one frame) adds a term or two a frame against thousands of points, so this σ
-/// leaves it out; the jackknife over frames holds it. Where a board has no pose covariance, or
-/// the system is singular, the robust fit stays.
+/// scatter about the lines says). What differs between frames beyond their boards' poses (a
+/// stripe read a little off in one frame) adds a term or two a frame against thousands of
+/// points, so this σ leaves it out; the jackknife over frames holds it. Where a board has no
+/// pose covariance, or the system is singular, the robust fit stays.
 fn weigh_board_poses(frames: &[&OnBoard], fit: &mut RobustPlaneFit) {
     // Each frame's inliers with their pose spreads.
     let mut groups: Vec<FrameInliers> = Vec::with_capacity(frames.len());
@@ -395,10 +395,10 @@ fn scatter_about_lines(groups: &[FrameInliers], plane: &Plane) -> Option<f64> {
     variance.is_finite().then_some(variance)
 }
 
-/// One generalised least-squares step for the plane's change (a, b, c) in `basis` ([`RobustPlaneFit`]'s
-/// parametrisation), its covariance, the χ² at `plane` and its degrees of freedom. Per frame the
-/// points' covariance is σ²·I + U·Uᵀ, U their distances' pose spreads; its inverse by Woodbury's
-/// identity, σ⁻²(I − U (σ²I + UᵀU)⁻¹ Uᵀ), needs only 6 × 6 systems.
+/// One generalised least-squares step for the plane's change (a, b, c) in `basis`
+/// ([`RobustPlaneFit`]'s parametrisation), its covariance, the χ² at `plane` and its degrees of
+/// freedom. Per frame the points' covariance is σ²·I + U·Uᵀ, U their distances' pose spreads;
+/// its inverse by Woodbury's identity, σ⁻²(I − U (σ²I + UᵀU)⁻¹ Uᵀ), needs only 6 × 6 systems.
 fn gls_step(
     groups: &[FrameInliers],
     plane: &Plane,

@@ -144,38 +144,7 @@ pub fn measure_frame(
             (m.centre.x, m.centre.y)
         });
     let normals = oriented_normals(&usable, centre)?;
-    let profiles_over = |half: usize, clean: bool| -> Vec<Vec<f64>> {
-        let profile =
-            |(p, n): (&&StripePoint, &Option<(f64, f64)>)| aligned_profile(image, (p.u, p.v), (*n)?, half, clean);
-        usable.iter().zip(&normals).filter_map(profile).collect()
-    };
-    // The stripe's FWHM from a first, narrower window (the detector's width, taken at its
-    // threshold, is wider than the FWHM), where the median alone keeps the core's width and the
-    // window may end in the tail; then the window that holds the tail, its background clean.
-    let widths: Vec<f64> = usable.iter().map(|p| p.width).collect();
-    let first_half = (2.0 * omni_geom::stats::median(&widths).unwrap_or(f64::NAN)).clamp(6.0, 40.0);
-    let first = profiles_over(first_half as usize, false);
-    if first.len() < opts.min_profiles {
-        return Err(format!(
-            "{} of {} profiles peak within ±{first_half:.0} px, fewer than {}",
-            first.len(),
-            usable.len(),
-            opts.min_profiles
-        ));
-    }
-    let median_first = median_profile(&first);
-    let fwhm = half_maximum_width(&median_first, median_first.len() / 2)
-        .ok_or_else(|| format!("the median profile does not fall to half its peak within ±{first_half:.0} px"))?;
-    let half = window_half_px(fwhm).round() as usize;
-    let profiles = profiles_over(half, true);
-    if profiles.len() < opts.min_profiles {
-        return Err(format!(
-            "{} of {} profiles lie in the image with a clean background over ±{half} px, fewer than {}",
-            profiles.len(),
-            usable.len(),
-            opts.min_profiles
-        ));
-    }
+    let (profiles, fwhm) = frame_profiles(image, &usable, &normals, opts.min_profiles)?;
     let median = median_profile(&profiles);
     let reach = median.len() / 2;
     let xs: Vec<f64> = (0..median.len()).map(|k| k as f64 - reach as f64).collect();
@@ -191,6 +160,29 @@ pub fn measure_frame(
         .min_by(|a, b| a.rms.total_cmp(&b.rms))
         .ok_or_else(|| "the tailed profile does not fit the frame's median profile".to_string())?;
     let gaussian = fit_gaussian(&xs, &median, blur_variance, fwhm).unwrap_or(f64::NAN);
+    accept(best, gaussian)?;
+    let profile = LaserProfile::tailed(best.weight, best.length);
+    let s = (1.0 + own_blur / (best.sigma * best.sigma)).sqrt();
+    let (lo, hi) = profile.half_points(s);
+    Ok(FrameTail {
+        name: name.to_string(),
+        profiles: profiles.len(),
+        core_sigma_px: best.sigma,
+        fwhm_px: (hi - lo) * best.sigma,
+        tail_weight: best.weight,
+        tail_weight_sigma: best.weight_sigma,
+        tail_length: best.length,
+        tail_length_sigma: best.length_sigma,
+        side: best.side,
+        tail_direction: mean_direction(&normals).map(|(x, y)| [best.side * x, best.side * y]),
+        residual_rms: best.rms,
+        gaussian_residual_rms: gaussian,
+    })
+}
+
+/// Whether `best` measures a tail: it fits clearly better than a Gaussian (residual `gaussian`),
+/// stays off its bounds and tells share from length.
+fn accept(best: &TailFit, gaussian: f64) -> Result<(), String> {
     if !(best.rms <= MAX_RESIDUAL_RATIO * gaussian) {
         return Err(format!(
             "no tail stands out: the median profile fits a Gaussian as well (residual {:.4} against {:.4} of its peak)",
@@ -209,23 +201,47 @@ pub fn measure_frame(
             best.weight, best.weight_sigma, best.length, best.length_sigma
         ));
     }
-    let profile = LaserProfile::tailed(best.weight, best.length);
-    let s = (1.0 + own_blur / (best.sigma * best.sigma)).sqrt();
-    let (lo, hi) = profile.half_points(s);
-    Ok(FrameTail {
-        name: name.to_string(),
-        profiles: profiles.len(),
-        core_sigma_px: best.sigma,
-        fwhm_px: (hi - lo) * best.sigma,
-        tail_weight: best.weight,
-        tail_weight_sigma: best.weight_sigma,
-        tail_length: best.length,
-        tail_length_sigma: best.length_sigma,
-        side: best.side,
-        tail_direction: mean_direction(&normals).map(|(x, y)| [best.side * x, best.side * y]),
-        residual_rms: best.rms,
-        gaussian_residual_rms: gaussian,
-    })
+    Ok(())
+}
+
+/// The frame's aligned profiles ([`aligned_profile`]) with a clean background over six FWHM
+/// either side, and that FWHM (px): first from a narrower window (the detector's width, taken at
+/// its threshold, is wider than the FWHM), where the median alone keeps the core's width and the
+/// window may end in the tail.
+fn frame_profiles(
+    image: &GrayImage,
+    usable: &[&StripePoint],
+    normals: &[Option<(f64, f64)>],
+    min_profiles: usize,
+) -> Result<(Vec<Vec<f64>>, f64), String> {
+    let profiles_over = |half: usize, clean: bool| -> Vec<Vec<f64>> {
+        let profile =
+            |(p, n): (&&StripePoint, &Option<(f64, f64)>)| aligned_profile(image, (p.u, p.v), (*n)?, half, clean);
+        usable.iter().zip(normals).filter_map(profile).collect()
+    };
+    let widths: Vec<f64> = usable.iter().map(|p| p.width).collect();
+    let first_half = (2.0 * omni_geom::stats::median(&widths).unwrap_or(f64::NAN)).clamp(6.0, 40.0);
+    let first = profiles_over(first_half as usize, false);
+    if first.len() < min_profiles {
+        return Err(format!(
+            "{} of {} profiles peak within ±{first_half:.0} px, fewer than {min_profiles}",
+            first.len(),
+            usable.len()
+        ));
+    }
+    let median_first = median_profile(&first);
+    let fwhm = half_maximum_width(&median_first, median_first.len() / 2)
+        .ok_or_else(|| format!("the median profile does not fall to half its peak within ±{first_half:.0} px"))?;
+    let half = window_half_px(fwhm).round() as usize;
+    let profiles = profiles_over(half, true);
+    if profiles.len() < min_profiles {
+        return Err(format!(
+            "{} of {} profiles lie in the image with a clean background over ±{half} px, fewer than {min_profiles}",
+            profiles.len(),
+            usable.len()
+        ));
+    }
+    Ok((profiles, fwhm))
 }
 
 /// Each point's unit normal (px) from the line through its neighbours within

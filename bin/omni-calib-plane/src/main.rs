@@ -66,14 +66,14 @@ sampled along the stripe's normal over six times the stripe's FWHM either side, 
 the window's ends) taken out, aligned on its own peak and scaled to it. Windows whose ends differ or whose flanks \
 step (a board's squares, an edge, another light) are left out. A frame's normals are turned to one side of \
 the stripe: a straight or gently curved stripe's to the side of their mean direction, a ring's (a catadioptric \
-camera's stripe about its mirror's axis) away from the mirror's centre (--camera; else the image's centre). The median of a frame's profiles is fitted by a \
-Gaussian core with a one-sided exponential tail, widened by the lens's blur, the tail on either side; a frame \
+camera's stripe about its mirror's axis) away from the mirror's centre (--camera; else the image's centre). \
+The median of a frame's profiles is fitted by a Gaussian core with a one-sided exponential tail, widened by the lens's blur, the tail on either side; a frame \
 counts where that fits clearly better than a Gaussian and tells the share from the length. The laser's figures \
 are the medians over the frames that count, printed with their range and as the --laser-tail argument.
 
 Frames: the stripe on a plain, matte, evenly lit target (a white wall, paper) that reaches six times the \
-stripe's width to either side of it, not saturated, at least a few px wide (FWHM 5-20 px: the tail must be wider than the blur). Board frames work where \
-the stripe crosses large white squares; most of their windows hold squares and are left out.
+stripe's width to either side of it, not saturated, at least a few px wide (FWHM 5-20 px: the tail must be wider \
+than the blur). Board frames work where the stripe crosses large white squares; most of their windows hold squares and are left out.
 
 Prints one line per frame (profiles used, core σ and FWHM in px, share and length with their σ from the fit, the \
 image direction the tail lies towards (x right, y down; a ring's outwards or inwards), the fit's residual against a \
@@ -82,8 +82,9 @@ take the profiles' median as exact). Exit 1 when no frame counts.
 
 Pixel values are taken as proportional to light: frames from a camera that gamma-encodes (sRGB, most colour \
 cameras' PNG and JPEG) read the tail heavier (a (0.17, 4) tail encoded with gamma 2.2 over a background of 8 % \
-of full scale reads (0.28, 4.7)); use linear (raw) frames. Profiles whose contrast the laser colour reading compresses (a channel above 3/4 of full \
-scale) are kept: keep the stripe well below saturation.
+of full scale reads (0.28, 4.7)); use linear (raw) frames. Points whose laser colour lies above 3/4 of full scale, \
+where --laser's contrast weighs the other channels less and flattens the top, are left out like saturated ones: \
+keep the stripe below that.
 
 Examples:
   omni-calib-plane tail --laser red wall/*.png

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 /// A serialisable record as a Python object (through the `json` module: the record's own
 /// field names and values, as in the file).
-fn to_python<'py>(py: Python<'py>, value: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
+pub(crate) fn to_python<'py>(py: Python<'py>, value: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
     let text = serde_json::to_string(value).map_err(|e| crate::value_error(e.to_string()))?;
     py.import("json")?.call_method1("loads", (text,))
 }

@@ -29,8 +29,20 @@ fn gray_image(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<GrayImage> {
 /// The detector's grey image of `obj` read as `spec` says: a 2-D array as it is (or, with a Bayer
 /// order, demosaiced and then read), an (h, w, 3) RGB array through its channel or laser contrast.
 fn frame_image(obj: &Bound<'_, PyAny>, what: &str, spec: &ColourSpec) -> PyResult<GrayImage> {
+    Ok(frame_images(obj, what, spec, None)?.0)
+}
+
+/// [`frame_image`], and with `also` that channel of the same colour samples (`None` for a grey
+/// array read as it is), the array converted once.
+fn frame_images(
+    obj: &Bound<'_, PyAny>,
+    what: &str,
+    spec: &ColourSpec,
+    also: Option<Channel>,
+) -> PyResult<(GrayImage, Option<GrayImage>)> {
     let arr = obj.py().import("numpy")?.call_method1("ascontiguousarray", (obj,))?;
     let ndim = arr.getattr("ndim")?.extract::<usize>()?;
+    let read = |rgb: RgbImage| (rgb.channel(spec.channel), also.map(|c| rgb.channel(c)));
     if ndim != 3 {
         let grey = gray_image(&arr, what)?;
         return match spec.bayer {
@@ -38,13 +50,13 @@ fn frame_image(obj: &Bound<'_, PyAny>, what: &str, spec: &ColourSpec) -> PyResul
                 let rgb = spec
                     .read_mosaic(&grey, order)
                     .map_err(|m| crate::value_error(format!("{what}: bayer {}: {m}", order.name())))?;
-                Ok(rgb.channel(spec.channel))
+                Ok(read(rgb))
             }
             None if spec.channel.needs_colour() => Err(crate::value_error(format!(
                 "{what}: a 2-D (grey) array has no colour to read for {}: give an (h, w, 3) RGB array, or bayer= for a raw mosaic",
                 spec.describe()
             ))),
-            None => Ok(grey),
+            None => Ok((grey, None)),
         };
     }
     if spec.bayer.is_some() {
@@ -52,8 +64,7 @@ fn frame_image(obj: &Bound<'_, PyAny>, what: &str, spec: &ColourSpec) -> PyResul
             "{what}: bayer= reads a raw 2-D mosaic, but the array is 3-D (already colour): drop bayer="
         )));
     }
-    let rgb = rgb_image(&arr, what)?;
-    Ok(rgb.channel(spec.channel))
+    Ok(read(rgb_image(&arr, what)?))
 }
 
 /// An (h, w, 3) uint8 or uint16 RGB array.
@@ -256,12 +267,12 @@ pub fn measure_laser_tail<'py>(
         return Err(crate::value_error(format!("min_profiles: expected at least 5, got {min_profiles}")));
     }
     let spec = colour_spec(channel, laser, None, false)?;
-    let img = frame_image(image, "image", &spec)?;
-    // A laser colour's own channel, where the contrast compresses (`measure_frame`).
-    let laser_channel = match spec.channel {
-        Channel::Laser(c) => Some(frame_image(image, "image", &ColourSpec { channel: Channel::Single(c), ..spec })?),
+    // With a laser colour, its own channel too: where the contrast compresses (`measure_frame`).
+    let own = match spec.channel {
+        Channel::Laser(c) => Some(Channel::Single(c)),
         _ => None,
     };
+    let (img, laser_channel) = frame_images(image, "image", &spec, own)?;
     let rows = crate::arrays::Vectors::<5>::extract(stripe, "stripe")?;
     let points = (0..rows.len())
         .map(|i| {
@@ -274,8 +285,7 @@ pub fn measure_laser_tail<'py>(
     let tail = py
         .detach(|| omni_calib::laser_tail::measure_frame("image", &img, &points, laser_channel.as_ref(), &opts))
         .map_err(crate::value_error)?;
-    let json = serde_json::to_string(&tail).map_err(|e| crate::value_error(e.to_string()))?;
-    let dict = py.import("json")?.call_method1("loads", (json,))?;
+    let dict = crate::readers::to_python(py, &tail)?;
     dict.del_item("name")?;
     Ok(dict)
 }

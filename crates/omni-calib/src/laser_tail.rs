@@ -20,7 +20,7 @@ use omni_formats::stream::{StripePoint, quality};
 use omni_geom::lm;
 use omni_model::{LaserProfile, MirrorCircle};
 use omni_vision::colour::{Channel, ColourSpec};
-use omni_vision::image_io::{GrayImage, load_frame_channel};
+use omni_vision::image_io::{GrayImage, load_frame_channels};
 use omni_vision::stripe::{RidgeDetector, RidgeParams};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -566,14 +566,12 @@ pub fn measure_frames(
         .par_iter()
         .map(|path| {
             let name = path.display().to_string();
-            let image = load_frame_channel(path, colour).map_err(|e| e.to_string())?;
-            let laser_channel = match colour.channel {
-                Channel::Laser(c) => {
-                    let own = ColourSpec { channel: Channel::Single(c), ..*colour };
-                    Some(load_frame_channel(path, &own).map_err(|e| e.to_string())?)
-                }
+            // With a laser colour, its own channel too: where the contrast compresses.
+            let own = match colour.channel {
+                Channel::Laser(c) => Some(Channel::Single(c)),
                 _ => None,
             };
+            let (image, laser_channel) = load_frame_channels(path, colour, own).map_err(|e| e.to_string())?;
             let detector = match opts.mirror {
                 Some(m) => RidgeDetector::new(image.width, image.height, m, *ridge),
                 None => RidgeDetector::whole_frame(image.width, image.height, *ridge),

@@ -10,21 +10,9 @@ fn real_dir() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/real-laser-handheld"))
 }
 
+/// A frame's figures, for the test's log.
 fn print(f: &FrameTail) {
-    eprintln!(
-        "{}: {} profiles, core σ {:.2} px, FWHM {:.2} px, share {:.3} ± {:.3}, length {:.2} ± {:.2} σ, side {:+}, residual {:.4} (Gaussian {:.4})",
-        f.name,
-        f.profiles,
-        f.core_sigma_px,
-        f.fwhm_px,
-        f.tail_weight,
-        f.tail_weight_sigma,
-        f.tail_length,
-        f.tail_length_sigma,
-        f.side,
-        f.residual_rms,
-        f.gaussian_residual_rms
-    );
+    eprintln!("{f:?}");
 }
 
 /// The real hand-held laser's frames (../shared/data/real-laser-handheld, im1-im17: the stripe

@@ -242,6 +242,25 @@ pub fn decode_frame_channel(bytes: &[u8], name: &str, spec: &ColourSpec) -> Resu
     Ok(decode_channel(decode_checked(bytes, name)?, name, spec)?.into_gray())
 }
 
+/// [`load_frame_channel`] and, where `also` is given, that channel of the same frame read the
+/// same way (a laser colour's own channel beside its contrast), the file read and decoded once.
+pub fn load_frame_channels(
+    path: &Path,
+    spec: &ColourSpec,
+    also: Option<crate::colour::Channel>,
+) -> Result<(GrayImage, Option<GrayImage>), Error> {
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| Error::io(name.clone(), &e))?;
+    let Some(channel) = also else { return Ok((decode_frame_channel(&bytes, &name, spec)?, None)) };
+    let other = ColourSpec { channel, ..*spec };
+    if *spec == ColourSpec::default() || other == ColourSpec::default() {
+        return Ok((decode_frame_channel(&bytes, &name, spec)?, Some(decode_frame_channel(&bytes, &name, &other)?)));
+    }
+    let dynamic = decode_checked(&bytes, &name)?;
+    let first = decode_channel(dynamic.clone(), &name, spec)?.into_gray();
+    Ok((first, Some(decode_channel(dynamic, &name, &other)?.into_gray())))
+}
+
 /// [`load_frame_channel`], keeping the bytes of a channel read from an 8-bit colour frame as
 /// [`load_gray_decoded`] keeps an 8-bit grey frame's.
 pub fn load_frame_channel_decoded(path: &Path, spec: &ColourSpec) -> Result<DecodedGray, Error> {
@@ -540,6 +559,26 @@ mod tests {
         image::save_buffer(&jp, &rgb, 16, 8, image::ExtendedColorType::Rgb8).unwrap();
         let g = load_gray(&jp).unwrap();
         assert!(g.data.iter().all(|&v| (v as i32 - 100).abs() <= 2), "{:?}", g.data);
+    }
+
+    #[test]
+    fn two_channels_of_one_decode_are_the_two_channels_read_apart() {
+        use crate::colour::{Channel, Colour};
+        let dir = tempfile::tempdir().unwrap();
+        let rgb: Vec<u8> = (0..16 * 8u32).flat_map(|k| [(k * 2) as u8, (k % 7 * 9) as u8, (255 - k) as u8]).collect();
+        let p = dir.path().join("c.png");
+        write_rgb_png(&p, 16, 8, &rgb).unwrap();
+        let laser = ColourSpec { channel: Channel::Laser(Colour::Red), bayer: None, sites: false };
+        for (spec, also) in [
+            (laser, Some(Channel::Single(Colour::Red))),
+            (ColourSpec::default(), Some(Channel::Single(Colour::Blue))),
+            (laser, None),
+        ] {
+            let (first, second) = load_frame_channels(&p, &spec, also).unwrap();
+            assert_eq!(first.data, load_frame_channel(&p, &spec).unwrap().data);
+            let apart = also.map(|c| load_frame_channel(&p, &ColourSpec { channel: c, ..spec }).unwrap().data);
+            assert_eq!(second.map(|g| g.data), apart);
+        }
     }
 
     #[test]

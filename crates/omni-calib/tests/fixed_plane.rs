@@ -111,12 +111,17 @@ fn poses(rng: &mut SplitMix64, light: &Plane, n: usize) -> Vec<Isometry3<f64>> {
         .collect()
 }
 
+/// A laser 60 mm to the side of the camera whose plane crosses the optical axis at 300 mm
+/// (offset ≥ 0).
+fn light_plane() -> Plane {
+    let light = Plane::from_point_normal(&Point3::new(60.0, 0.0, 0.0), &Vector3::new(5.0, 0.0, -1.0));
+    if light.offset < 0.0 { light.flipped() } else { light }
+}
+
 #[test]
 fn virtual_plane_is_recovered_within_0_02_deg_and_0_05_mm_at_300_mm_from_10_frames() {
     let cam = camera();
-    // A laser 60 mm to the side of the camera whose plane crosses the optical axis at 300 mm.
-    let light = Plane::from_point_normal(&Point3::new(60.0, 0.0, 0.0), &Vector3::new(5.0, 0.0, -1.0));
-    let light = if light.offset < 0.0 { light.flipped() } else { light };
+    let light = light_plane();
     let mut rng = SplitMix64::new(34);
     let frames: Vec<FrameInput> = poses(&mut rng, &light, 10)
         .iter()
@@ -161,8 +166,7 @@ fn plane_errors(fit: &Plane, light: &Plane) -> (f64, f64) {
 #[test]
 fn a_board_posed_less_surely_pulls_the_plane_less() {
     let cam = camera();
-    let light = Plane::from_point_normal(&Point3::new(60.0, 0.0, 0.0), &Vector3::new(5.0, 0.0, -1.0));
-    let light = if light.offset < 0.0 { light.flipped() } else { light };
+    let light = light_plane();
     let mut rng = SplitMix64::new(7);
     let poses = poses(&mut rng, &light, 11);
     let frames: Vec<FrameInput> = poses

@@ -207,7 +207,8 @@ struct FixedArgs {
     /// Stripe detector: the laser's cross-section, if known (a core with a one-sided tail
     /// holding SHARE of the light, LENGTH core σ long; as omni-ridge): the stripe's pieces
     /// between the board's squares, too short for their own top shape, are then led to the
-    /// sheet's peak too.
+    /// sheet's peak too, and so are its clipped points on the white squares, by the width of
+    /// its unclipped profiles on the black ones.
     #[arg(long, value_name = "SHARE,LENGTH")]
     laser_tail: Option<omni_model::LaserProfile>,
     /// Keep stripe points up to this far outside the printed pattern (mm; negative: inside).

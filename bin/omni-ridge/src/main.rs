@@ -107,9 +107,12 @@ struct Args {
     /// the sampling, predicts at the stripe's width, wherever the stripe's own top shape cannot
     /// tell: pieces too short or too speckled for it, and stripes whose width is mostly the
     /// blur's (FWHM under about 1.4 × the blur's with the sampling: 3.7 px behind a 0.7 px
-    /// lens). The tail's side comes from the stripe. The red line laser of the hand-held
-    /// photographs in ../shared/data/real-laser-handheld measures 0.17,4. Not with --sampling
-    /// rays.
+    /// lens). Clipped points are led there from their plateau's centre, which lies towards the
+    /// tail the more the brighter the stripe: the cross-section, at the width of the stripe's
+    /// unclipped profiles within 48 px (dimmer parts of the surface), tells how far down the
+    /// plateau's edges were read. The tail's side comes from the stripe. The red line laser of
+    /// the hand-held photographs in ../shared/data/real-laser-handheld measures 0.17,4. Not
+    /// with --sampling rays.
     #[arg(long, value_name = "SHARE,LENGTH")]
     laser_tail: Option<omni_model::LaserProfile>,
     /// Coarsest scale at which stripes wider than --max-width are searched: 1 (off), 2, 4, 8 or

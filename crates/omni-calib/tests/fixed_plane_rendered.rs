@@ -204,16 +204,18 @@ fn options() -> RenderOptions {
 /// does not: 0.008-0.027° and 0.072-0.095 mm. What is left is the detector's offset towards the
 /// real profile's tail, 0.05 px at 1.9 mm per px: the board's squares cut the stripe into pieces
 /// too short for their top's shape to be told from noise, so only the profiles' tops, not the
-/// light's peak under the blur, are found; the colour camera's clipped red and its noisier laser
-/// contrast keep the offset even on a plain board (docs/DECISIONS.md). Without the 3 px
+/// light's peak under the blur, are found; and half the stripe points are clipped in the red,
+/// where a plateau's centre lies towards the tail (docs/DECISIONS.md). Without the 3 px
 /// clearance from the squares' edges (where the stripe's profile falls on white and black at
 /// once, its centres scatter by 0.35-0.76 px) the seeds spread over 0.018-0.17° and 0.021-0.35
-/// mm. With the laser's cross-section known (`--laser-tail 0.17,4`) the pieces are led from their
-/// tops to the sheet's peak by it: 0.010-0.043° and 0.039-0.068 mm (the clipped red's plateaus
-/// still on the tail's side), two of the five within its 0.05 mm, none within both its figures. Every frame's board is posed
-/// from its corners, and a partial board whose corners fit at 0.39 px (the others 0.03-0.05)
-/// weighs little in the fit, so no frame pulls the plane: leave-one-out RMS 1.02-1.14 × the
-/// in-sample one. The bounds guard these figures.
+/// mm. With the laser's cross-section known (`--laser-tail 0.17,4`) the unclipped pieces are
+/// led from their tops to the sheet's peak by it, and the clipped ones from their plateau's
+/// centre by its edges' distance against the width of the stripe's unclipped profiles on the
+/// black squares nearby: 0.008-0.026° and 0.009-0.045 mm, all five within the target's 0.05 mm,
+/// three within its 0.02°. Every frame's board is posed from its corners, and a partial board
+/// whose corners fit at 0.39 px (the others 0.03-0.05) weighs little in the fit, so no frame
+/// pulls the plane: leave-one-out RMS 1.02-1.14 × the in-sample one. The bounds guard these
+/// figures.
 #[test]
 fn rendered_fixed_plane_from_10_frames_through_the_detectors() {
     let s = setup(1024, 7, 5, 30.0);
@@ -236,15 +238,15 @@ fn rendered_fixed_plane_from_10_frames_through_the_detectors() {
             let mut points: Vec<usize> = r.frames.iter().map(|f| f.board_points).collect();
             points.sort_unstable();
             assert!(points[points.len() / 2] >= 20, "{label}: stripe points per frame {points:?}");
-            let (max_angle, max_mm) = if profile.is_some() { (0.05, 0.08) } else { (0.035, 0.11) };
+            let (max_angle, max_mm) = if profile.is_some() { (0.035, 0.05) } else { (0.035, 0.11) };
             assert!(angle <= max_angle, "{label}: normal off by {angle}°");
             assert!(worst <= max_mm, "{label}: plane off by {worst} mm at 300 mm");
             assert!(r.leave_one_out_rms_mm <= 1.3 * r.rms_mm, "{label}: {} vs {}", r.leave_one_out_rms_mm, r.rms_mm);
             worst_mm.push(worst);
         }
     }
-    // The profile takes a third of the offset off: means over the seeds 0.082 → 0.054 mm.
+    // The profile takes two thirds of the offset off: means over the seeds 0.082 → 0.027 mm.
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
     let (without, with) = (mean(&worst_mm[0]), mean(&worst_mm[1]));
-    assert!(with <= 0.8 * without, "mean over the seeds {without} mm without the profile, {with} mm with it");
+    assert!(with <= 0.5 * without, "mean over the seeds {without} mm without the profile, {with} mm with it");
 }

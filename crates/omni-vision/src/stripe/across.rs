@@ -200,8 +200,13 @@ pub(super) struct Linked {
     top_shape: Option<[f64; 2]>,
     /// How far (px) the sheet's peak still lies beyond where the lean leads, on the tail's
     /// side: with the laser's profile known, the top centroid's predicted offset where the
-    /// stripe has no top shape of its own to lead the lean to the peak; else 0.
+    /// stripe has no top shape of its own to lead the lean to the peak; for a saturated
+    /// point, its plateau centre's ([`lead_plateaus_to_sheet_peak`]); else 0.
     tail_offset: f64,
+    /// [`Centre::plateau_edges`].
+    plateau_edges: Option<[f64; 2]>,
+    /// [`Centre::tail_light_share`].
+    tail_light_share: f64,
 }
 
 /// A measured centre before linking.
@@ -233,6 +238,13 @@ struct Centre {
     /// variance s moved the lopsided peak of the light it blurred by −(s/2)·L‴/L″. `None` where
     /// the top fits no cubic.
     top_shape: Option<[f64; 2]>,
+    /// For a saturated profile, the distance (px) between the edges whose midpoint is its
+    /// centre ([`estimators::plateau_edges`]), and the threshold's share of its plateau, both
+    /// counted from the background's level less its excess over the profile's other side
+    /// (light of the laser's tail).
+    plateau_edges: Option<[f64; 2]>,
+    /// That excess's share of the profile's peak (both above the lower side's level).
+    tail_light_share: f64,
 }
 
 impl RidgeDetector {
@@ -271,6 +283,7 @@ impl RidgeDetector {
             fit_along_stripe(&mut refined, self.params.along_stripe_px);
             kept.extend(refined);
         }
+        lead_plateaus_to_sheet_peak(&mut kept, || self.plateau_offsets(scale));
         remove_steady_lean(&mut kept);
         kept
     }
@@ -511,6 +524,8 @@ impl RidgeDetector {
         let min = |v: &[f32]| v.iter().fold(f32::INFINITY, |m, &x| m.min(x));
         let (left_min, right_min) = (min(&coarse[..=reach as usize]), min(&coarse[reach as usize..]));
         let background = left_min.max(right_min);
+        // What the background holds of a lopsided laser's tail: its excess over the other side.
+        let tail_light = background - left_min.min(right_min);
         let t = threshold as f32;
         // Still falling steeply at both ends of the reach, from a peak well above them: a stripe
         // too wide for this scale. A lit surface's top is level and its shading falls slowly.
@@ -570,8 +585,13 @@ impl RidgeDetector {
         }
         let peak = q[seg.peak];
         let saturated = frame.saturated_near(x0, y0);
-        let index =
-            if saturated { estimators::plateau_centre(q, &seg, t, peak)? } else { self.centre_index(raw, q, &seg, t)? };
+        let (index, plateau_edges) = if saturated {
+            let (a, b) = estimators::plateau_edges(q, &seg, t, peak)?;
+            let share = (t + tail_light) / (peak + tail_light);
+            (0.5 * (a + b), Some([(b - a) * SAMPLE_STEP_PX, share as f64]))
+        } else {
+            (self.centre_index(raw, q, &seg, t)?, None)
+        };
         let (ha, hb) = estimators::crossings(q, &seg, 0.5 * peak)?;
         let half_width = (hb - ha) * SAMPLE_STEP_PX;
         // A cut flank falls faster than the whole one: compare the flanks' spans between the
@@ -612,6 +632,8 @@ impl RidgeDetector {
             lean,
             side_lean,
             top_shape,
+            plateau_edges,
+            tail_light_share: (tail_light / (peak + tail_light)) as f64,
         })
     }
 
@@ -687,6 +709,18 @@ impl RidgeDetector {
     fn top_offsets(&self, scale: u32) -> Option<&super::laser::TopOffsets> {
         let profile = self.params.laser_profile?;
         Some(self.top_offsets.get_or_init(|| super::laser::TopOffsets::new(&profile, self.peak_blur_variance(scale))))
+    }
+
+    /// Where the laser's clipped plateaus' centres lie from its sheet's peak at this scale, if
+    /// its profile is known ([`super::RidgeParams::laser_profile`]).
+    fn plateau_offsets(&self, scale: u32) -> Option<&super::laser::PlateauOffsets> {
+        let profile = self.params.laser_profile?;
+        let sample_sigma = super::sampling::SAMPLE_SIGMA_PX;
+        let clipped_variance = self.peak_blur_variance(scale) - sample_sigma * sample_sigma;
+        Some(
+            self.plateau_offsets
+                .get_or_init(|| super::laser::PlateauOffsets::new(&profile, clipped_variance, sample_sigma)),
+        )
     }
 
     /// Whether this scale's stripes are read through a colour mosaic's interpolation
@@ -948,6 +982,8 @@ impl Centre {
             top_shape: self.top_shape,
             side_lean: self.side_lean,
             tail_offset: 0.0,
+            plateau_edges: self.plateau_edges,
+            tail_light_share: self.tail_light_share,
         }
     }
 }
@@ -957,7 +993,9 @@ impl Centre {
 /// lies on the same side of its stripe all along it, so the mean keeps the tail's pull and
 /// averages away each profile's noise, which at the top alone is 1.5–3 times the estimator's.
 /// Where the leans lead only to the tops' centroids ([`Linked::tail_offset`], a laser's profile
-/// known), the neighbours' mean tail offset is added on the tail's side ([`tail_sides`]).
+/// known), the neighbours' mean tail offset is added on the tail's side ([`tail_sides`]). A
+/// saturated point has no lean: it moves by its own tail offset, its plateau centre's
+/// ([`lead_plateaus_to_sheet_peak`]).
 fn remove_steady_lean(points: &mut [Linked]) {
     let grid = Grid::from_placed(points.iter().map(Linked::placed), LEAN_HALF_ARC_PX);
     let sides = tail_sides(points);
@@ -966,7 +1004,7 @@ fn remove_steady_lean(points: &mut [Linked]) {
         .enumerate()
         .map(|(i, l)| {
             if l.point.quality & quality::SATURATED != 0 {
-                return 0.0;
+                return sides.get(i).copied().unwrap_or(0.0) * l.tail_offset;
             }
             let here = l.placed();
             let (mut sum, mut offset_sum, mut count) = (0.0, 0.0, 0usize);
@@ -990,6 +1028,79 @@ fn remove_steady_lean(points: &mut [Linked]) {
         l.point.u -= shift * l.normal.0;
         l.point.v -= shift * l.normal.1;
     }
+}
+
+/// With the laser's profile known (`model`, built when first needed), sets each saturated
+/// point's [`Linked::tail_offset`]: where its plateau centre lies from the sheet's peak
+/// ([`super::laser::PlateauOffsets`]), by its edges' distance and the medians of its stripe's
+/// unsaturated profiles within ±[`TAIL_SIDE_HALF_ARC_PX`] (at least [`LEAN_MIN_PROFILES`] of
+/// them): their half-maximum width, which gives the sheet's width there, and their tail's
+/// share of the background ([`Centre::tail_light_share`]). Without them it stays at its
+/// plateau centre. Each offset is then averaged over the clipped points within
+/// ±[`LEAN_HALF_ARC_PX`]: one plateau's edges are noisy, and its neighbours lie on the same
+/// surface at the same range.
+fn lead_plateaus_to_sheet_peak<'a>(
+    points: &mut [Linked],
+    model: impl FnOnce() -> Option<&'a super::laser::PlateauOffsets>,
+) {
+    let is_saturated = |l: &Linked| l.point.quality & quality::SATURATED != 0;
+    if !points.iter().any(|l| is_saturated(l) && l.plateau_edges.is_some()) {
+        return;
+    }
+    let Some(model) = model() else { return };
+    let grid = Grid::from_placed(points.iter().map(Linked::placed), TAIL_SIDE_HALF_ARC_PX);
+    let (mut widths, mut shares) = (Vec::new(), Vec::new());
+    let offsets: Vec<f64> = points
+        .iter()
+        .map(|l| {
+            let Some([edges, share]) = l.plateau_edges.filter(|_| is_saturated(l)) else { return l.tail_offset };
+            let here = l.placed();
+            widths.clear();
+            shares.clear();
+            grid.visit(here[0], here[1], |j, other| {
+                if !is_saturated(&points[j]) && on_the_stripe(&here, other, TAIL_SIDE_HALF_ARC_PX).is_some() {
+                    widths.push(points[j].half_width);
+                    shares.push(points[j].tail_light_share);
+                }
+            });
+            if widths.len() < LEAN_MIN_PROFILES {
+                return 0.0;
+            }
+            let (half_width, tail_light) = (median(&mut widths), median(&mut shares));
+            model.midpoint_at(half_width, tail_light, edges, share).unwrap_or(0.0)
+        })
+        .collect();
+    let near = Grid::from_placed(points.iter().map(Linked::placed), LEAN_HALF_ARC_PX);
+    let smoothed: Vec<f64> = points
+        .iter()
+        .zip(&offsets)
+        .map(|(l, &own)| {
+            if l.plateau_edges.is_none() || !is_saturated(l) {
+                return own;
+            }
+            let here = l.placed();
+            let (mut sum, mut count) = (0.0, 0usize);
+            near.visit(here[0], here[1], |j, other| {
+                if is_saturated(&points[j])
+                    && points[j].plateau_edges.is_some()
+                    && on_the_stripe(&here, other, LEAN_HALF_ARC_PX).is_some()
+                {
+                    sum += offsets[j];
+                    count += 1;
+                }
+            });
+            sum / count.max(1) as f64
+        })
+        .collect();
+    for (l, offset) in points.iter_mut().zip(smoothed) {
+        l.tail_offset = offset;
+    }
+}
+
+/// The median of `values` (reordered; not empty).
+fn median(values: &mut [f64]) -> f64 {
+    let mid = values.len() / 2;
+    *values.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// Half the arc (px) over which a stripe's leans tell on which side its tail lies.

@@ -226,8 +226,14 @@ pub fn crossings(p: &[f32], s: &Segment, level: f32) -> Option<(f64, f64)> {
 /// crosses half way between the threshold and the plateau level `top` (the steep,
 /// well-sampled part of the edges), never the first saturated sample.
 pub fn plateau_centre(p: &[f32], s: &Segment, t: f32, top: f32) -> Option<f64> {
-    let (a, b) = crossings(p, s, 0.5 * (t + top))?;
+    let (a, b) = plateau_edges(p, s, t, top)?;
     Some(0.5 * (a + b))
+}
+
+/// The two edges of a saturated plateau whose midpoint [`plateau_centre`] is (fractional
+/// indices).
+pub fn plateau_edges(p: &[f32], s: &Segment, t: f32, top: f32) -> Option<(f64, f64)> {
+    crossings(p, s, 0.5 * (t + top))
 }
 
 #[cfg(test)]

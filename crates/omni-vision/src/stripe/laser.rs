@@ -15,6 +15,7 @@
 use super::SAMPLE_STEP_PX;
 use super::estimators::{self, Segment};
 use omni_model::LaserProfile;
+use std::f64::consts::TAU;
 
 /// Sub-sample phases averaged for each width (the samples fall anywhere on the profile).
 const PHASES: usize = 8;
@@ -71,6 +72,237 @@ fn interpolate(xs: &[f64], values: &[f64], x: f64) -> f64 {
     let i = xs.partition_point(|&v| v <= x);
     let f = (x - xs[i - 1]) / (xs[i] - xs[i - 1]);
     values[i - 1] + f * (values[i] - values[i - 1])
+}
+
+/// Clip levels tabulated, as shares of the profile's peak: from the peak itself down by
+/// [`CLIP_RATIO`] each, to 2 % (a stripe 50 times brighter than the clip).
+const CLIPS: usize = 48;
+const CLIP_RATIO: f64 = 0.92;
+/// Levels at which widths are tabulated, as the threshold's share of a clipped profile's
+/// plateau (its edges are read half way between the two, [`estimators::plateau_edges`]) or
+/// the background's share of an unclipped profile's peak (its half maximum above it).
+const THRESHOLD_SHARES: [f64; 6] = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5];
+/// The widest sheet (FWHM, px) tabulated for clipped stripes; wider ones scale from it.
+const WIDEST_CLIPPED_PX: f64 = 32.0;
+
+/// One tabulated sheet width's clipped profiles: for each threshold share and clip level, the
+/// edges' distance (px, growing as the clip deepens; NaN past the sampled reach) and their
+/// midpoint's distance from the sheet's peak (px, towards the tail).
+#[derive(Debug, Clone)]
+struct ClippedWidth {
+    half_width: f64,
+    edges: [[f64; CLIPS]; THRESHOLD_SHARES.len()],
+    midpoints: [[f64; CLIPS]; THRESHOLD_SHARES.len()],
+}
+
+/// Where a clipped stripe's plateau centre (the midpoint of its edges,
+/// [`estimators::plateau_edges`]) lies from its sheet's peak (px, towards the tail), by the
+/// sheet's half-maximum width (px, unclipped), the edges' distance (px) and the threshold's
+/// share of the plateau, for one blur.
+///
+/// Rule: clipping hides how far above the clip the peak lies, and with it how far down the
+/// profile the edges were read; the deeper, the farther their midpoint lies in the tail. The
+/// sheet's unclipped width, taken from the stripe's unclipped profiles nearby (same range,
+/// dimmer surface), fixes the profile, and the edges' distance then fixes the depth: it grows
+/// as the clip falls. The lens and the pixel blur the light before the sensor clips it, the
+/// detector's sampling kernel after.
+#[derive(Debug, Clone)]
+pub(super) struct PlateauOffsets {
+    /// By increasing half-maximum width (px) of the sampled, unclipped profiles.
+    widths: Vec<ClippedWidth>,
+}
+
+impl PlateauOffsets {
+    /// The table for `profile` blurred by variance `clipped_variance` (px²: the lens's and the
+    /// pixel's) before it is clipped, and by a Gaussian of σ `sample_sigma` px (the sampling
+    /// kernel) after.
+    pub fn new(profile: &LaserProfile, clipped_variance: f64, sample_sigma: f64) -> PlateauOffsets {
+        let mut widths: Vec<ClippedWidth> = Vec::new();
+        for k in 0..WIDTHS {
+            let fwhm = NARROWEST_PX * WIDTH_RATIO.powi(k as i32);
+            if fwhm > WIDEST_CLIPPED_PX {
+                break;
+            }
+            if let Some(w) = clipped_width(profile, fwhm / profile.fwhm(), clipped_variance, sample_sigma)
+                && widths.last().is_none_or(|last| w.half_width > last.half_width)
+            {
+                widths.push(w);
+            }
+        }
+        PlateauOffsets { widths }
+    }
+
+    /// The plateau centre's distance from the sheet's peak (px, towards the tail) for a stripe
+    /// whose unclipped profiles are `half_width` px wide at half their maximum above a
+    /// background `background_share` of their peak, and whose plateau's edges lie `edges` px
+    /// apart, read half way between the plateau and `threshold_share` of it; `None` below the
+    /// table's widths or clipped deeper than its levels. Edges closer than an unclipped
+    /// profile's are read as barely clipped. The shares count light from the laser alone:
+    /// where the detector's background holds some of the tail's light, the widths were read
+    /// that much higher up the profile.
+    pub fn midpoint_at(&self, half_width: f64, background_share: f64, edges: f64, threshold_share: f64) -> Option<f64> {
+        let (first, last) = (self.widths.first()?, self.widths.last()?);
+        let (b, bf) = share_index(background_share);
+        let unclipped = |w: &ClippedWidth| w.edges[b - 1][0] + bf * (w.edges[b][0] - w.edges[b - 1][0]);
+        if !(half_width >= unclipped(first)) || !edges.is_finite() {
+            return None;
+        }
+        let (i, g) = share_index(threshold_share);
+        let at = |w: &ClippedWidth, edges: f64| -> Option<f64> {
+            let below = clip_midpoint(&w.edges[i - 1], &w.midpoints[i - 1], edges)?;
+            let above = clip_midpoint(&w.edges[i], &w.midpoints[i], edges)?;
+            Some(below + g * (above - below))
+        };
+        if half_width >= unclipped(last) {
+            // The profile's shape scales with its width once the blur no longer matters.
+            let f = half_width / unclipped(last);
+            return Some(f * at(last, edges / f)?);
+        }
+        let k = self.widths.partition_point(|w| unclipped(w) <= half_width).max(1);
+        let (lo, hi) = (&self.widths[k - 1], &self.widths[k]);
+        let f = (half_width - unclipped(lo)) / (unclipped(hi) - unclipped(lo));
+        let (below, above) = (at(lo, edges)?, at(hi, edges)?);
+        Some(below + f * (above - below))
+    }
+}
+
+/// The interval of [`THRESHOLD_SHARES`] that holds `share` (clamped to them): its upper index
+/// and the fraction of the way to it.
+fn share_index(share: f64) -> (usize, f64) {
+    let last = THRESHOLD_SHARES.len() - 1;
+    let share = if share.is_nan() { 0.0 } else { share.clamp(0.0, THRESHOLD_SHARES[last]) };
+    let i = THRESHOLD_SHARES.partition_point(|&s| s <= share).clamp(1, last);
+    (i, (share - THRESHOLD_SHARES[i - 1]) / (THRESHOLD_SHARES[i] - THRESHOLD_SHARES[i - 1]))
+}
+
+/// The midpoint at the clip level whose edges lie `edges` apart, interpolated over one width's
+/// levels; the unclipped profile's for closer edges, `None` past the deepest level.
+fn clip_midpoint(edges_at: &[f64; CLIPS], midpoints: &[f64; CLIPS], edges: f64) -> Option<f64> {
+    if !(edges > edges_at[0]) {
+        return Some(midpoints[0]);
+    }
+    let j = edges_at.iter().position(|&e| !(e < edges)).filter(|&j| !edges_at[j].is_nan())?;
+    let f = (edges - edges_at[j - 1]) / (edges_at[j] - edges_at[j - 1]);
+    Some(midpoints[j - 1] + f * (midpoints[j] - midpoints[j - 1]))
+}
+
+/// A sheet of core σ `core` px, blurred by variance `clipped_variance` px², clipped at each of
+/// [`CLIPS`] levels, blurred by a Gaussian of σ `sample_sigma` px and sampled
+/// [`SAMPLE_STEP_PX`] apart, its plateau's edges read as the detector reads them; averaged over
+/// [`PHASES`] sub-sample phases. Computed on a grid of 1/[`PHASES`] of a sample, where every
+/// phase's samples lie.
+fn clipped_width(profile: &LaserProfile, core: f64, clipped_variance: f64, sample_sigma: f64) -> Option<ClippedWidth> {
+    let step = SAMPLE_STEP_PX / PHASES as f64;
+    let s_clipped = (1.0 + clipped_variance / (core * core)).sqrt();
+    let s_sampled = (s_clipped * s_clipped + (sample_sigma / core).powi(2)).sqrt();
+    let spread = s_sampled * core;
+    // Down to 1 % of the peak: 6 σ of the core and the blur, and on the tail's side 5 τ.
+    let tail = if profile.tail_weight() > 0.0 { 5.0 * profile.tail_length() * core } else { 0.0 };
+    let from = -6.0 * spread;
+    let n = ((12.0 * spread + tail) / step).ceil() as usize;
+    let x = |m: usize| x_px(from, step, m as f64);
+    // The light as clipped (before the sampling kernel) and as sampled without clipping.
+    let light: Vec<f64> = (0..n).map(|m| profile.unit(x(m) / core, s_clipped)).collect();
+    let sampled: Vec<f64> = (0..n).map(|m| profile.unit(x(m) / core, s_sampled)).collect();
+    let reach = (4.0 * sample_sigma / step).ceil() as usize;
+    let kernel: Vec<f64> = (0..=reach)
+        .map(|d| (-0.5 * (d as f64 * step / sample_sigma).powi(2)).exp() * step / (sample_sigma * TAU.sqrt()))
+        .collect();
+    let peak_light = light.iter().copied().fold(0.0, f64::max);
+    let mode = (0..n).max_by(|&a, &b| sampled[a].total_cmp(&sampled[b]))?;
+    let sheet_peak = profile.mode() * core;
+    let mut w = ClippedWidth {
+        half_width: 0.0,
+        edges: [[0.0; CLIPS]; THRESHOLD_SHARES.len()],
+        midpoints: [[0.0; CLIPS]; THRESHOLD_SHARES.len()],
+    };
+    for j in 0..CLIPS {
+        let clip = peak_light * CLIP_RATIO.powi(j as i32);
+        // The clipped run [a, b) of the light, and the sampled value at grid point m: the
+        // unclipped one less the kernel's sum over what the clip cut off.
+        let a = light.iter().position(|&v| v > clip).unwrap_or(mode);
+        let b = a + light[a..].iter().take_while(|&&v| v > clip).count();
+        let value = |m: usize| {
+            let (lo, hi) = (m.saturating_sub(reach).max(a), (m + reach + 1).min(b));
+            sampled[m] - (lo..hi).map(|y| (light[y] - clip) * kernel[y.abs_diff(m)]).sum::<f64>()
+        };
+        // The plateau: the clip itself where the kernel cannot reach across it.
+        let top = if b - a > 2 * reach + 2 {
+            value((a + b) / 2)
+        } else {
+            (a.saturating_sub(reach)..(b + reach).min(n)).map(value).fold(0.0, f64::max)
+        };
+        // Walks start inside the plateau, where the kernel cannot reach past its edges.
+        let inside = if b - a > 2 * reach + 2 { (a + reach + 1, b - reach - 1) } else { ((a + b) / 2, (a + b) / 2) };
+        for (i, share) in THRESHOLD_SHARES.iter().enumerate() {
+            let level = 0.5 * (1.0 + share) * top;
+            let (mut edges, mut midpoint) = (0.0, 0.0);
+            for phase in 0..PHASES {
+                let (rising, falling) = sampled_crossings(&value, n, inside, phase, level)?;
+                edges += x_px(from, step, falling) - x_px(from, step, rising);
+                midpoint += 0.5 * (x_px(from, step, rising) + x_px(from, step, falling)) - sheet_peak;
+            }
+            let phases = PHASES as f64;
+            w.edges[i][j] = edges / phases;
+            w.midpoints[i][j] = midpoint / phases;
+        }
+    }
+    w.half_width = w.edges[0][0];
+    Some(w)
+}
+/// A grid point's place (px, possibly fractional).
+fn x_px(from: f64, step: f64, m: f64) -> f64 {
+    from + m * step
+}
+
+/// Where the samples of one phase (grid points `phase` mod [`PHASES`]) of a profile (`value`
+/// at each of `n` grid points) cross `level`, walking out from the phase's highest sample next
+/// to each of `inside` (the rising edge's start, the falling edge's), linearly interpolated
+/// between samples as [`estimators::crossings`] does: (rising, falling) as fractional grid
+/// points; `None` where a start lies below `level` or a walk leaves the grid.
+fn sampled_crossings(
+    value: &impl Fn(usize) -> f64,
+    n: usize,
+    (rising_from, falling_from): (usize, usize),
+    phase: usize,
+    level: f64,
+) -> Option<(f64, f64)> {
+    // The phase's highest sample next to each start.
+    let start = |from: usize| {
+        let m = from - from % PHASES + phase;
+        [m.checked_sub(PHASES), Some(m), Some(m + PHASES)]
+            .into_iter()
+            .flatten()
+            .filter(|&m| m < n)
+            .map(|m| (m, value(m)))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .filter(|&(_, v)| v >= level)
+    };
+    let (mut m, mut v) = start(falling_from)?;
+    loop {
+        if m + PHASES >= n {
+            return None;
+        }
+        let next = value(m + PHASES);
+        if next < level {
+            break;
+        }
+        (m, v) = (m + PHASES, next);
+    }
+    let falling = m as f64 + PHASES as f64 * (v - level) / (v - value(m + PHASES));
+    let (mut m, mut v) = start(rising_from)?;
+    loop {
+        if m < PHASES {
+            return None;
+        }
+        let next = value(m - PHASES);
+        if next < level {
+            break;
+        }
+        (m, v) = (m - PHASES, next);
+    }
+    let rising = m as f64 - PHASES as f64 * (v - level) / (v - value(m - PHASES));
+    Some((rising, falling))
 }
 
 /// A sampled profile's half-maximum width and its top centroid's place from the sheet's peak
@@ -153,5 +385,104 @@ mod tests {
         let continuous = swx / sw - p.mode() * core;
         let sampled = sampled_top(&p, core, blur).unwrap().centroid;
         assert!((sampled - continuous).abs() < 0.01, "sampled {sampled}, continuous {continuous}");
+    }
+}
+
+#[cfg(test)]
+mod clipped_tests {
+    use super::*;
+    use crate::stripe::sampling::SAMPLE_SIGMA_PX;
+
+    /// One row across a vertical stripe as the camera and the detector see it: pixels
+    /// integrate the light (`amplitude` × the profile of core σ `core` px blurred by a lens of
+    /// σ `lens` px, sheet's peak at `centre` px; 1 px boxes, 64 points each), clip at 255, and
+    /// the detector's Gaussian sampler (σ [`SAMPLE_SIGMA_PX`] on the pixel grid, taps −2..=3
+    /// about ⌊x⌋) reads them every [`SAMPLE_STEP_PX`] from x = 10.
+    fn detector_row(profile: &LaserProfile, core: f64, lens: f64, amplitude: f64, centre: f64) -> Vec<f32> {
+        let s = (1.0 + lens * lens / (core * core)).sqrt();
+        let pixels: Vec<f64> = (0..120)
+            .map(|i| {
+                let sum: f64 = (0..64)
+                    .map(|k| {
+                        profile.unit((i as f64 - 0.5 + (k as f64 + 0.5) / 64.0 - centre) / core + profile.mode(), s)
+                    })
+                    .sum();
+                (amplitude * sum / 64.0).round().min(255.0)
+            })
+            .collect();
+        (0..200)
+            .map(|k| {
+                let x = 10.0 + k as f64 * SAMPLE_STEP_PX;
+                let base = x.floor();
+                let w: Vec<f64> = (-2..=3)
+                    .map(|d| (-(base + d as f64 - x).powi(2) / (2.0 * SAMPLE_SIGMA_PX.powi(2))).exp())
+                    .collect();
+                let sum: f64 = w.iter().sum();
+                ((-2..=3).zip(&w).map(|(d, w)| w * pixels[(base as i64 + d) as usize]).sum::<f64>() / sum) as f32
+            })
+            .collect()
+    }
+
+    fn segment(q: &[f32]) -> Segment {
+        let peak = (0..q.len()).max_by(|&a, &b| q[a].total_cmp(&q[b])).unwrap();
+        Segment { start: 1, end: q.len() - 1, peak }
+    }
+
+    /// A Gaussian sheet's plateau is centred on its peak at every depth.
+    #[test]
+    fn a_gaussian_sheets_plateau_centre_is_its_peak() {
+        let model = PlateauOffsets::new(&LaserProfile::gaussian(), 0.5, SAMPLE_SIGMA_PX);
+        for h in [3.0, 4.0, 10.0, 30.0, 60.0] {
+            for edges in [0.5, 1.0, 1.4, 1.8].map(|r| r * h) {
+                let m = model.midpoint_at(h, 0.05, edges, 0.1).unwrap();
+                assert!(m.abs() < 2e-3, "{h} px, edges {edges} px: {m}");
+            }
+        }
+        assert_eq!(model.midpoint_at(0.1, 0.0, 1.0, 0.0), None, "narrower than the blur");
+        assert_eq!(model.midpoint_at(4.0, 0.0, 40.0, 0.0), None, "clipped beyond 50 ×");
+    }
+
+    /// The table against a clipped lopsided stripe read as the detector reads it: the sheet's
+    /// width from an unclipped row of the same sheet, the plateau's edges from the clipped one
+    /// (σ 0.8 px kernel on 8-bit pixels, 8 places of the sheet within a pixel). The plateau's
+    /// centre lies 0.11-2.4 px towards the tail; the table takes it to within 0.012 px of the
+    /// sheet's peak up to 8 px wide and 0.025 px at 16 px.
+    #[test]
+    fn the_table_finds_a_clipped_lopsided_stripes_sheet_peak() {
+        let profile = LaserProfile::tailed(0.17, 4.0);
+        let lens = 0.7;
+        let model = PlateauOffsets::new(&profile, lens * lens + 1.0 / 12.0, SAMPLE_SIGMA_PX);
+        for fwhm in [2.5, 4.0, 8.0, 16.0] {
+            let core = fwhm / profile.fwhm();
+            let peak_of = |a: f64| {
+                let q = detector_row(&profile, core, lens, a, 60.3);
+                q.iter().copied().fold(0.0f32, f32::max) as f64
+            };
+            let unit = peak_of(100.0) / 100.0;
+            for over in [1.5, 3.0, 8.0] {
+                let (mut raw, mut led) = (0.0, 0.0);
+                let phases = 8;
+                for phase in 0..phases {
+                    let centre = 60.0 + phase as f64 / phases as f64;
+                    let dim = detector_row(&profile, core, lens, 150.0 / unit, centre);
+                    let seg = segment(&dim);
+                    let (a, b) = estimators::crossings(&dim, &seg, 0.5 * dim[seg.peak]).unwrap();
+                    let half_width = (b - a) * SAMPLE_STEP_PX;
+                    let bright = detector_row(&profile, core, lens, over * 255.0 / unit, centre);
+                    let seg = segment(&bright);
+                    let (t, top) = (10.0, bright[seg.peak]);
+                    let (a, b) = estimators::plateau_edges(&bright, &seg, t, top).unwrap();
+                    let midpoint = 10.0 + 0.5 * (a + b) * SAMPLE_STEP_PX - centre;
+                    let edges = (b - a) * SAMPLE_STEP_PX;
+                    let offset = model.midpoint_at(half_width, 0.0, edges, (t / top) as f64).unwrap();
+                    raw += midpoint / phases as f64;
+                    led += (midpoint - offset) / phases as f64;
+                }
+                eprintln!("FWHM {fwhm} px, {over} × the clip: plateau centre {raw:+.4} px, led {led:+.4} px");
+                assert!(raw > 0.1, "the tail pulls the plateau's centre: {raw} px");
+                let bound = if fwhm > 10.0 { 0.025 } else { 0.012 };
+                assert!(led.abs() <= bound, "FWHM {fwhm} px, {over} × the clip: {led} px from the sheet's peak");
+            }
+        }
     }
 }

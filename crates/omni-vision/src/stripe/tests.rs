@@ -473,3 +473,52 @@ fn stripes_cut_by_a_silhouette_are_rejected_and_whole_ones_kept() {
         assert!(cut * 100 <= whole, "cut stripe: {cut} points reported (whole: {whole})");
     }
 }
+
+/// A ring whose laser is lopsided (the real profile's tail outwards, 4 px wide behind a 0.7 px
+/// lens) and whose surface alternates every 30° between dim (peak 150 DN) and bright (3.3 ×
+/// the 8-bit range, clipped): the clipped plateaus' edges are read far down the profile,
+/// where the tail pulls their midpoint outwards (+0.24 px). With the profile known, the dim
+/// sectors' widths give the sheet's width and the plateaus' edges their depth, and the clipped
+/// points come back to the sheet's peak (−0.002 px, RMS 0.012 px; points within 2 px of a
+/// sector's edge, where the surface changes under the profile, left out).
+#[test]
+fn a_known_laser_profile_leads_clipped_lopsided_plateaus_to_the_sheets_peak() {
+    let profile = omni_model::LaserProfile::tailed(0.17, 4.0);
+    let (blur, radius) = (0.7, 70.0);
+    let core = 4.0 / profile.fwhm();
+    let s = (1.0 + blur * blur / (core * core)).sqrt();
+    let peak = (0..2000).map(|k| profile.unit(-5.0 + k as f64 * 0.01, s)).fold(0.0, f64::max);
+    let img = render(W, H, 8, 1.0, 12, |x, y| {
+        let (dx, dy) = (x - CX, y - CY);
+        let sector = (dy.atan2(dx).rem_euclid(TAU) / 30f64.to_radians()) as usize;
+        let amplitude = if sector.is_multiple_of(2) { 150.0 } else { 850.0 };
+        let d = dx.hypot(dy) - radius;
+        amplitude * profile.unit((d + profile.mode() * core) / core, s) / peak
+    });
+    let bias = |laser_profile| {
+        let params = RidgeParams { optics_blur_px: Some(blur), laser_profile, ..Default::default() };
+        let pts = RidgeDetector::new(W, H, circle(), params).detect(&img);
+        // Away from the sectors' edges, where the surface changes under the profile.
+        let sector = 30f64.to_radians();
+        let inside = |p: &&StripePoint| {
+            let phase = polar(p).0.rem_euclid(sector);
+            phase.min(sector - phase) * radius > 2.0
+        };
+        let (clipped, dim): (Vec<_>, Vec<_>) =
+            pts.iter().filter(inside).partition(|p| p.quality & quality::SATURATED != 0);
+        let errors = |pts: &[&StripePoint]| pts.iter().map(|p| polar(p).1 - radius).collect::<Vec<_>>();
+        let ((rc, bc), (rd, bd)) = (rms_bias(&errors(&clipped)), rms_bias(&errors(&dim)));
+        eprintln!(
+            "profile {}: clipped {} points rms {rc:.4} bias {bc:+.4} px, dim {} points rms {rd:.4} bias {bd:+.4} px",
+            laser_profile.is_some(),
+            clipped.len(),
+            dim.len()
+        );
+        assert!(clipped.len() > 150 && dim.len() > 150, "{} clipped, {} dim", clipped.len(), dim.len());
+        (bc, bd)
+    };
+    let (clipped, _) = bias(None);
+    assert!(clipped > 0.15, "the tail pulls clipped plateaus outwards: {clipped} px");
+    let (clipped, dim) = bias(Some(profile));
+    assert!(clipped.abs() <= 0.015 && dim.abs() <= 0.015, "clipped {clipped} px, dim {dim} px");
+}

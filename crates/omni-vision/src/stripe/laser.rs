@@ -216,15 +216,21 @@ fn clipped_width(profile: &LaserProfile, core: f64, clipped_variance: f64, sampl
         edges: [[0.0; CLIPS]; THRESHOLD_SHARES.len()],
         midpoints: [[0.0; CLIPS]; THRESHOLD_SHARES.len()],
     };
+    let known = vec![std::cell::Cell::new(f64::NAN); n];
     for j in 0..CLIPS {
         let clip = peak_light * CLIP_RATIO.powi(j as i32);
         // The clipped run [a, b) of the light, and the sampled value at grid point m: the
         // unclipped one less the kernel's sum over what the clip cut off.
         let a = light.iter().position(|&v| v > clip).unwrap_or(mode);
         let b = a + light[a..].iter().take_while(|&&v| v > clip).count();
+        // Each grid point once per clip: the shares' and phases' walks share them.
+        known.iter().for_each(|c| c.set(f64::NAN));
         let value = |m: usize| {
-            let (lo, hi) = (m.saturating_sub(reach).max(a), (m + reach + 1).min(b));
-            sampled[m] - (lo..hi).map(|y| (light[y] - clip) * kernel[y.abs_diff(m)]).sum::<f64>()
+            if known[m].get().is_nan() {
+                let (lo, hi) = (m.saturating_sub(reach).max(a), (m + reach + 1).min(b));
+                known[m].set(sampled[m] - (lo..hi).map(|y| (light[y] - clip) * kernel[y.abs_diff(m)]).sum::<f64>());
+            }
+            known[m].get()
         };
         // The plateau: the clip itself where the kernel cannot reach across it.
         let top = if b - a > 2 * reach + 2 {
@@ -250,6 +256,7 @@ fn clipped_width(profile: &LaserProfile, core: f64, clipped_variance: f64, sampl
     w.half_width = w.edges[0][0];
     Some(w)
 }
+
 /// A grid point's place (px, possibly fractional).
 fn x_px(from: f64, step: f64, m: f64) -> f64 {
     from + m * step

@@ -151,11 +151,13 @@ def test_the_along_stripe_fit_refuses_short_stripes_as_omni_ridge_does(tmp_path)
     assert not near_short(ours).any() and len(ours) > 80, ours[:, :2]
 
 
-def lopsided_stripe(centre, sheet_fwhm, share=0.17, length=4.0, blur=0.7, size=96):
+def lopsided_stripe(centre, sheet_fwhm, share=0.17, length=4.0, blur=0.7, size=96, peaks=None):
     """A vertical stripe whose sheet is a Gaussian core with `share` of its light in a one-sided
     exponential tail `length` core sigma long (towards +x), its peak at x = `centre`, blurred by
     a Gaussian lens of sigma `blur` px and integrated over the pixels: computed here by numerical
-    convolution on a 1/64 px grid, independently of omniscan's own model of the profile."""
+    convolution on a 1/64 px grid, independently of omniscan's own model of the profile. The
+    stripe peaks 200 levels above a background of 20, or `peaks` levels, one per row, clipped at
+    255."""
     # An odd grid centred on 0, so that np.convolve's "same" keeps every profile in place.
     h = 1.0 / 64
     x = np.arange(-40 * 64, 40 * 64 + 1) * h
@@ -178,8 +180,11 @@ def lopsided_stripe(centre, sheet_fwhm, share=0.17, length=4.0, blur=0.7, size=9
     # Pixel k covers [k - 0.5, k + 0.5] about the stripe's peak at `centre`.
     at = x - peak + centre
     columns = np.array([image[(at >= k - 0.5) & (at < k + 0.5)].sum() * h for k in range(size)])
-    row = np.round(20 + 200 * columns / columns.max())
-    return np.tile(row, (size, 1)).astype(np.uint8)
+    if peaks is None:
+        row = np.round(20 + 200 * columns / columns.max())
+        return np.tile(row, (size, 1)).astype(np.uint8)
+    rows = 20 + np.asarray(peaks, dtype=float)[:, None] * columns[None, :] / columns.max()
+    return np.clip(np.round(rows), 0, 255).astype(np.uint8)
 
 
 def test_a_known_laser_tail_leads_a_narrow_lopsided_stripe_to_its_peak():
@@ -207,6 +212,25 @@ def test_a_known_laser_tail_leads_a_narrow_lopsided_stripe_to_its_peak():
         omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), laser_tail=(0.95, 4.0))
     with pytest.raises(ValueError, match="laser_tail: expected"):
         omniscan.detect_stripe(np.zeros((20, 30), dtype=np.uint8), laser_tail=(0.2, 4.0, 1.0))
+
+
+def test_a_known_laser_tail_leads_clipped_points_to_the_peak_by_their_unclipped_neighbours():
+    # A 4 px sheet whose upper rows peak 120 levels above the background (unclipped) and whose
+    # lower rows 700 (clipped at 255, 3 times over): the plateau's centre lies towards the tail.
+    peaks = np.where(np.arange(96) < 48, 120.0, 700.0)
+    errors = {}
+    for given in [None, (0.17, 4.0)]:
+        clipped, dim = [], []
+        for centre in np.linspace(40.0, 41.0, 8, endpoint=False):
+            img = lopsided_stripe(centre, 4.0, peaks=peaks)
+            pts = omniscan.detect_stripe(img, optics_blur_px=0.7, laser_tail=given)
+            # Rows that see at least 8 unclipped ones within 48 px along the stripe.
+            clipped.append(np.mean(pts[(pts[:, 1] > 52) & (pts[:, 1] < 80), 0]) - centre)
+            dim.append(np.mean(pts[(pts[:, 1] > 6) & (pts[:, 1] < 44), 0]) - centre)
+        errors[given] = (np.mean(clipped), np.mean(dim))
+    # Measured: clipped +0.231 px without the profile, +0.014 with it; the unclipped rows +0.002.
+    assert errors[None][0] > 0.15, errors
+    assert abs(errors[(0.17, 4.0)][0]) < 0.025 and abs(errors[(0.17, 4.0)][1]) < 0.015, errors
 
 
 def test_a_laser_tail_is_measured_from_an_independently_drawn_stripe():

@@ -756,7 +756,8 @@ impl RidgeDetector {
         if along > SHAPE_HALF_ARC_PX {
             fit_longer_arcs(&mut kept, &along_fits, along);
         }
-        keep_steadily_lopsided(&mut kept, &mut stripes, scale);
+        let saturated = |i: usize| centres[i].point.quality & quality::SATURATED != 0;
+        keep_steadily_lopsided(&mut kept, &mut stripes, scale, saturated);
         self.corrected(centres, kept, &mut stripes, scale)
     }
 
@@ -953,12 +954,24 @@ fn fit_longer_arcs(kept: &mut [OnStripe], along_fits: &AlongFits, along: f64) {
 /// Drops the points whose stretch of stripe is lopsided unlike their stripe. A cut leaves the
 /// profiles along it lopsided; speckle and noise lopsided at random, so the neighbours' mean
 /// tells the two apart. A laser's own shape leaves its whole stripe lopsided the same way: a
-/// cut is a departure from the stripe's steady lopsidedness.
-fn keep_steadily_lopsided(kept: &mut Vec<OnStripe>, stripes: &mut Stripes, scale: u32) {
-    let means: Vec<(usize, f64)> = kept.iter().map(|k| (k.index, k.lopsided.mean)).collect();
-    let steady = stripes.steady(&means, (STEADY_MIN_PX / scale as usize).max(STEADY_MIN_POINTS));
+/// cut is a departure from the stripe's steady lopsidedness. Clipped profiles (`saturated`)
+/// have a steadiness of their own: their flanks are read relative to the plateau, lower down
+/// the light than an unclipped profile's, where a lopsided laser is more lopsided.
+fn keep_steadily_lopsided(
+    kept: &mut Vec<OnStripe>,
+    stripes: &mut Stripes,
+    scale: u32,
+    saturated: impl Fn(usize) -> bool,
+) {
+    let min_points = (STEADY_MIN_PX / scale as usize).max(STEADY_MIN_POINTS);
+    let mut steady_of = |clipped: bool| {
+        let means: Vec<(usize, f64)> =
+            kept.iter().filter(|k| saturated(k.index) == clipped).map(|k| (k.index, k.lopsided.mean)).collect();
+        stripes.steady(&means, min_points)
+    };
+    let (unclipped, clipped) = (steady_of(false), steady_of(true));
     kept.retain(|k| {
-        let [lo, hi] = steady[k.index];
+        let [lo, hi] = if saturated(k.index) { clipped[k.index] } else { unclipped[k.index] };
         let departure = |a: f64| (lo - a).max(a - hi).max(0.0);
         departure(k.lopsided.mean) <= MAX_ASYMMETRY
             && k.lopsided.own.is_none_or(|a| departure(a) <= 2.0 * MAX_ASYMMETRY)

@@ -201,7 +201,7 @@ fn options() -> RenderOptions {
 /// (seeds 34, 1-4: board poses, noise, speckle). The chain up to the stripe meets it: with the
 /// detected corners and the true stripe pixels the plane comes back within 0.012° and 0.011 mm.
 /// With omni-ridge's stripe points (the lens's blur known, as from a camera file's optics) it
-/// does not: 0.008-0.030° and 0.072-0.094 mm. What is left is the detector's offset towards the
+/// does not: 0.008-0.027° and 0.072-0.095 mm. What is left is the detector's offset towards the
 /// real profile's tail, 0.05 px at 1.9 mm per px: the board's squares cut the stripe into pieces
 /// too short for their top's shape to be told from noise, so only the profiles' tops, not the
 /// light's peak under the blur, are found; and half the stripe points are clipped in the red,
@@ -211,7 +211,7 @@ fn options() -> RenderOptions {
 /// mm. With the laser's cross-section known (`--laser-tail 0.17,4`) the unclipped pieces are
 /// led from their tops to the sheet's peak by it, and the clipped ones from their plateau's
 /// centre by its edges' distance against the width of the stripe's unclipped profiles on the
-/// black squares nearby: 0.009-0.026° and 0.007-0.046 mm, all five within the target's 0.05 mm,
+/// black squares nearby: 0.008-0.026° and 0.009-0.045 mm, all five within the target's 0.05 mm,
 /// three within its 0.02°. Every frame's board is posed from its corners, and a partial board
 /// whose corners fit at 0.39 px (the others 0.03-0.05) weighs little in the fit, so no frame
 /// pulls the plane: leave-one-out RMS 1.02-1.14 × the in-sample one. The bounds guard these

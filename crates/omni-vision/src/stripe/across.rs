@@ -955,8 +955,9 @@ fn fit_longer_arcs(kept: &mut [OnStripe], along_fits: &AlongFits, along: f64) {
 /// profiles along it lopsided; speckle and noise lopsided at random, so the neighbours' mean
 /// tells the two apart. A laser's own shape leaves its whole stripe lopsided the same way: a
 /// cut is a departure from the stripe's steady lopsidedness. Clipped profiles (`saturated`)
-/// have a steadiness of their own: their flanks are read relative to the plateau, lower down
-/// the light than an unclipped profile's, where a lopsided laser is more lopsided.
+/// are judged against their stripe's clipped ones where it has enough: their flanks are read
+/// relative to the plateau, lower down the light than an unclipped profile's, where a
+/// lopsided laser is more lopsided.
 fn keep_steadily_lopsided(
     kept: &mut Vec<OnStripe>,
     stripes: &mut Stripes,
@@ -964,14 +965,23 @@ fn keep_steadily_lopsided(
     saturated: impl Fn(usize) -> bool,
 ) {
     let min_points = (STEADY_MIN_PX / scale as usize).max(STEADY_MIN_POINTS);
-    let mut steady_of = |clipped: bool| {
+    let mut steady_of = |only_clipped: bool| {
         let means: Vec<(usize, f64)> =
-            kept.iter().filter(|k| saturated(k.index) == clipped).map(|k| (k.index, k.lopsided.mean)).collect();
+            kept.iter().filter(|k| !only_clipped || saturated(k.index)).map(|k| (k.index, k.lopsided.mean)).collect();
         stripes.steady(&means, min_points)
     };
-    let (unclipped, clipped) = (steady_of(false), steady_of(true));
+    let (all, clipped) = (steady_of(false), steady_of(true));
+    // Clipped points too few on their stripe for a steadiness of their own take the whole
+    // stripe's.
+    let mut clipped_on: std::collections::HashMap<usize, usize> = Default::default();
+    let roots: Vec<usize> = kept.iter().map(|k| stripes.find(k.index).0).collect();
+    for (k, &root) in kept.iter().zip(&roots) {
+        *clipped_on.entry(root).or_default() += usize::from(saturated(k.index));
+    }
+    let mut root = roots.into_iter();
     kept.retain(|k| {
-        let [lo, hi] = if saturated(k.index) { clipped[k.index] } else { unclipped[k.index] };
+        let enough = root.next().is_some_and(|r| clipped_on[&r] >= STEADY_MIN_POINTS);
+        let [lo, hi] = if saturated(k.index) && enough { clipped[k.index] } else { all[k.index] };
         let departure = |a: f64| (lo - a).max(a - hi).max(0.0);
         departure(k.lopsided.mean) <= MAX_ASYMMETRY
             && k.lopsided.own.is_none_or(|a| departure(a) <= 2.0 * MAX_ASYMMETRY)

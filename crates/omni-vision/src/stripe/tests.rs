@@ -474,6 +474,31 @@ fn stripes_cut_by_a_silhouette_are_rejected_and_whole_ones_kept() {
     }
 }
 
+/// The real laser's profile as measured (docs/DECISIONS.md), drawn by [`lopsided_ring`].
+fn lopsided() -> omni_model::LaserProfile {
+    omni_model::LaserProfile::tailed(0.17, 4.0)
+}
+/// The lens's blur (px) and the ring's radius (px) of [`lopsided_ring`].
+const LOPSIDED_BLUR_PX: f64 = 0.7;
+const LOPSIDED_RADIUS_PX: f64 = 70.0;
+
+/// A ring of the lopsided laser's stripe (its tail outwards, 4 px wide behind the lens) on a
+/// surface whose 30° sectors alternate between peaks of `dim` and `bright` levels above
+/// `background` (8 bits: clipped at 255), with 1 level of noise.
+fn lopsided_ring(dim: f64, bright: f64, background: f64) -> GrayImage {
+    let (profile, blur) = (lopsided(), LOPSIDED_BLUR_PX);
+    let core = 4.0 / profile.fwhm();
+    let s = (1.0 + blur * blur / (core * core)).sqrt();
+    let peak = (0..2000).map(|k| profile.unit(-5.0 + k as f64 * 0.01, s)).fold(0.0, f64::max);
+    render(W, H, 8, 1.0, 12, |x, y| {
+        let (dx, dy) = (x - CX, y - CY);
+        let sector = (dy.atan2(dx).rem_euclid(TAU) / 30f64.to_radians()) as usize;
+        let amplitude = if sector.is_multiple_of(2) { dim } else { bright };
+        let d = dx.hypot(dy) - LOPSIDED_RADIUS_PX;
+        background + amplitude * profile.unit((d + profile.mode() * core) / core, s) / peak
+    })
+}
+
 /// A ring whose laser is lopsided (the real profile's tail outwards, 4 px wide behind a 0.7 px
 /// lens) and whose surface alternates every 30° between dim (peak 150 DN) and bright (3.3 ×
 /// the 8-bit range, clipped): the clipped plateaus' edges are read far down the profile,
@@ -483,18 +508,8 @@ fn stripes_cut_by_a_silhouette_are_rejected_and_whole_ones_kept() {
 /// sector's edge, where the surface changes under the profile, left out).
 #[test]
 fn a_known_laser_profile_leads_clipped_lopsided_plateaus_to_the_sheets_peak() {
-    let profile = omni_model::LaserProfile::tailed(0.17, 4.0);
-    let (blur, radius) = (0.7, 70.0);
-    let core = 4.0 / profile.fwhm();
-    let s = (1.0 + blur * blur / (core * core)).sqrt();
-    let peak = (0..2000).map(|k| profile.unit(-5.0 + k as f64 * 0.01, s)).fold(0.0, f64::max);
-    let img = render(W, H, 8, 1.0, 12, |x, y| {
-        let (dx, dy) = (x - CX, y - CY);
-        let sector = (dy.atan2(dx).rem_euclid(TAU) / 30f64.to_radians()) as usize;
-        let amplitude = if sector.is_multiple_of(2) { 150.0 } else { 850.0 };
-        let d = dx.hypot(dy) - radius;
-        amplitude * profile.unit((d + profile.mode() * core) / core, s) / peak
-    });
+    let (profile, blur, radius) = (lopsided(), LOPSIDED_BLUR_PX, LOPSIDED_RADIUS_PX);
+    let img = lopsided_ring(150.0, 850.0, 0.0);
     let bias = |laser_profile| {
         let params = RidgeParams { optics_blur_px: Some(blur), laser_profile, ..Default::default() };
         let pts = RidgeDetector::new(W, H, circle(), params).detect(&img);
@@ -530,19 +545,9 @@ fn a_known_laser_profile_leads_clipped_lopsided_plateaus_to_the_sheets_peak() {
 /// 30` (where they are measured at full resolution) none was kept.
 #[test]
 fn a_stripe_clipped_in_parts_keeps_its_clipped_points() {
-    let profile = omni_model::LaserProfile::tailed(0.17, 4.0);
-    let (blur, radius) = (0.7, 70.0);
-    let core = 4.0 / profile.fwhm();
-    let s = (1.0 + blur * blur / (core * core)).sqrt();
-    let peak = (0..2000).map(|k| profile.unit(-5.0 + k as f64 * 0.01, s)).fold(0.0, f64::max);
-    let img = render(W, H, 8, 1.0, 12, |x, y| {
-        let (dx, dy) = (x - CX, y - CY);
-        let sector = (dy.atan2(dx).rem_euclid(TAU) / 30f64.to_radians()) as usize;
-        let amplitude = if sector.is_multiple_of(2) { 150.0 } else { 2000.0 };
-        20.0 + amplitude * profile.unit((dx.hypot(dy) - radius + profile.mode() * core) / core, s) / peak
-    });
+    let img = lopsided_ring(150.0, 2000.0, 20.0);
     for max_width in [12.0, 30.0] {
-        let params = RidgeParams { optics_blur_px: Some(blur), max_width, ..Default::default() };
+        let params = RidgeParams { optics_blur_px: Some(LOPSIDED_BLUR_PX), max_width, ..Default::default() };
         let pts = RidgeDetector::new(W, H, circle(), params).detect(&img);
         let clipped = pts.iter().filter(|p| p.quality & quality::SATURATED != 0).count();
         eprintln!("max width {max_width} px: {} points, {clipped} clipped", pts.len());

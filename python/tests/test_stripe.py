@@ -228,9 +228,9 @@ def test_a_known_laser_tail_leads_clipped_points_to_the_peak_by_their_unclipped_
             clipped.append(np.mean(pts[(pts[:, 1] > 52) & (pts[:, 1] < 80), 0]) - centre)
             dim.append(np.mean(pts[(pts[:, 1] > 6) & (pts[:, 1] < 44), 0]) - centre)
         errors[given] = (np.mean(clipped), np.mean(dim))
-    # Measured: clipped +0.231 px without the profile, +0.014 with it; the unclipped rows +0.002.
+    # Measured: clipped +0.231 px without the profile, +0.009 with it; the unclipped rows +0.002.
     assert errors[None][0] > 0.15, errors
-    assert abs(errors[(0.17, 4.0)][0]) < 0.025 and abs(errors[(0.17, 4.0)][1]) < 0.015, errors
+    assert abs(errors[(0.17, 4.0)][0]) < 0.02 and abs(errors[(0.17, 4.0)][1]) < 0.015, errors
 
 
 def test_a_laser_tail_is_measured_from_an_independently_drawn_stripe():

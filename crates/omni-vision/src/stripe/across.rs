@@ -205,8 +205,8 @@ pub(super) struct Linked {
     tail_offset: f64,
     /// [`Centre::plateau_edges`].
     plateau_edges: Option<[f64; 2]>,
-    /// [`Centre::tail_light_share`].
-    tail_light_share: f64,
+    /// [`Centre::background_excess`].
+    background_excess: f64,
 }
 
 /// A measured centre before linking.
@@ -239,12 +239,12 @@ struct Centre {
     /// the top fits no cubic.
     top_shape: Option<[f64; 2]>,
     /// For a saturated profile, the distance (px) between the edges whose midpoint is its
-    /// centre ([`estimators::plateau_edges`]), and the threshold's share of its plateau, both
-    /// counted from the background's level less its excess over the profile's other side
-    /// (light of the laser's tail).
+    /// centre ([`estimators::plateau_edges`]), and the threshold they were read with.
     plateau_edges: Option<[f64; 2]>,
-    /// That excess's share of the profile's peak (both above the lower side's level).
-    tail_light_share: f64,
+    /// How far the background (the higher of the two sides' levels) lies above the other
+    /// side's, positive where the side along `normal` is the higher: a lopsided laser's tail
+    /// raises its side's.
+    background_excess: f64,
 }
 
 impl RidgeDetector {
@@ -524,8 +524,6 @@ impl RidgeDetector {
         let min = |v: &[f32]| v.iter().fold(f32::INFINITY, |m, &x| m.min(x));
         let (left_min, right_min) = (min(&coarse[..=reach as usize]), min(&coarse[reach as usize..]));
         let background = left_min.max(right_min);
-        // What the background holds of a lopsided laser's tail: its excess over the other side.
-        let tail_light = background - left_min.min(right_min);
         let t = threshold as f32;
         // Still falling steeply at both ends of the reach, from a peak well above them: a stripe
         // too wide for this scale. A lit surface's top is level and its shading falls slowly.
@@ -587,8 +585,7 @@ impl RidgeDetector {
         let saturated = frame.saturated_near(x0, y0);
         let (index, plateau_edges) = if saturated {
             let (a, b) = estimators::plateau_edges(q, &seg, t, peak)?;
-            let share = (t + tail_light) / (peak + tail_light);
-            (0.5 * (a + b), Some([(b - a) * SAMPLE_STEP_PX, share as f64]))
+            (0.5 * (a + b), Some([(b - a) * SAMPLE_STEP_PX, t as f64]))
         } else {
             (self.centre_index(raw, q, &seg, t)?, None)
         };
@@ -633,7 +630,7 @@ impl RidgeDetector {
             side_lean,
             top_shape,
             plateau_edges,
-            tail_light_share: (tail_light / (peak + tail_light)) as f64,
+            background_excess: (right_min - left_min) as f64,
         })
     }
 
@@ -955,8 +952,8 @@ fn fit_longer_arcs(kept: &mut [OnStripe], along_fits: &AlongFits, along: f64) {
 /// profiles along it lopsided; speckle and noise lopsided at random, so the neighbours' mean
 /// tells the two apart. A laser's own shape leaves its whole stripe lopsided the same way: a
 /// cut is a departure from the stripe's steady lopsidedness. Clipped profiles (`saturated`)
-/// are judged against their stripe's clipped ones where it has enough: their flanks are read
-/// relative to the plateau, lower down the light than an unclipped profile's, where a
+/// are judged against their stripe's clipped ones where those have a steadiness: their flanks
+/// are read relative to the plateau, lower down the light than an unclipped profile's, where a
 /// lopsided laser is more lopsided.
 fn keep_steadily_lopsided(
     kept: &mut Vec<OnStripe>,
@@ -971,17 +968,11 @@ fn keep_steadily_lopsided(
         stripes.steady(&means, min_points)
     };
     let (all, clipped) = (steady_of(false), steady_of(true));
-    // Clipped points too few on their stripe for a steadiness of their own take the whole
-    // stripe's.
-    let mut clipped_on: std::collections::HashMap<usize, usize> = Default::default();
-    let roots: Vec<usize> = kept.iter().map(|k| stripes.find(k.index).0).collect();
-    for (k, &root) in kept.iter().zip(&roots) {
-        *clipped_on.entry(root).or_default() += usize::from(saturated(k.index));
-    }
-    let mut root = roots.into_iter();
     kept.retain(|k| {
-        let enough = root.next().is_some_and(|r| clipped_on[&r] >= STEADY_MIN_POINTS);
-        let [lo, hi] = if saturated(k.index) && enough { clipped[k.index] } else { all[k.index] };
+        // Clipped points without a steadiness of their own (too few on their stripe, or none
+        // that holds) take the whole stripe's.
+        let own = if saturated(k.index) { clipped[k.index] } else { None };
+        let [lo, hi] = own.or(all[k.index]).unwrap_or([0.0, 0.0]);
         let departure = |a: f64| (lo - a).max(a - hi).max(0.0);
         departure(k.lopsided.mean) <= MAX_ASYMMETRY
             && k.lopsided.own.is_none_or(|a| departure(a) <= 2.0 * MAX_ASYMMETRY)
@@ -1006,7 +997,7 @@ impl Centre {
             side_lean: self.side_lean,
             tail_offset: 0.0,
             plateau_edges: self.plateau_edges,
-            tail_light_share: self.tail_light_share,
+            background_excess: self.background_excess,
         }
     }
 }
@@ -1057,11 +1048,13 @@ fn remove_steady_lean(points: &mut [Linked]) {
 /// point's [`Linked::tail_offset`]: where its plateau centre lies from the sheet's peak
 /// ([`super::laser::PlateauOffsets`]), by its edges' distance and the medians of its stripe's
 /// unsaturated profiles within ±[`TAIL_SIDE_HALF_ARC_PX`] (at least [`LEAN_MIN_PROFILES`] of
-/// them): their half-maximum width, which gives the sheet's width there, and their tail's
-/// share of the background ([`Centre::tail_light_share`]). Without them it stays at its
-/// plateau centre. Each offset is then averaged over the clipped points within
-/// ±[`LEAN_HALF_ARC_PX`]: one plateau's edges are noisy, and its neighbours lie on the same
-/// surface at the same range.
+/// them): their half-maximum width, which gives the sheet's width there, and the tail's light
+/// in their background. A background counts the tail's light where it is higher on the tail's
+/// side ([`tail_sides_of`]; an ambient slope the other way is not the laser's). Each offset is
+/// then averaged over the clipped points within ±[`LEAN_HALF_ARC_PX`] whose edges lie as far
+/// apart, give or take [`SAME_CLIP_EDGES`] (one plateau's edges are noisy; the offset grows
+/// steeply with the clip's depth). A point without unsaturated neighbours or beyond the
+/// table stays at its plateau's centre.
 fn lead_plateaus_to_sheet_peak<'a>(
     points: &mut [Linked],
     model: impl FnOnce() -> Option<&'a super::laser::PlateauOffsets>,
@@ -1071,54 +1064,71 @@ fn lead_plateaus_to_sheet_peak<'a>(
         return;
     }
     let Some(model) = model() else { return };
+    let sides = tail_sides_of(points);
+    // The tail's light in a background, from its `excess` along a normal on whose `side` the
+    // tail lies.
+    let tail_light = |excess: f64, side: f64| (side * excess).max(0.0);
     let grid = Grid::from_placed(points.iter().map(Linked::placed), TAIL_SIDE_HALF_ARC_PX);
     let (mut widths, mut shares) = (Vec::new(), Vec::new());
-    let offsets: Vec<f64> = points
+    let offsets: Vec<Option<f64>> = points
         .iter()
-        .map(|l| {
-            let Some([edges, share]) = l.plateau_edges.filter(|_| is_saturated(l)) else { return l.tail_offset };
+        .enumerate()
+        .map(|(i, l)| {
+            let [edges, threshold] = l.plateau_edges.filter(|_| is_saturated(l))?;
+            let side = sides[i];
+            if side == 0.0 {
+                return None;
+            }
             let here = l.placed();
             widths.clear();
             shares.clear();
             grid.visit(here[0], here[1], |j, other| {
-                if !is_saturated(&points[j]) && on_the_stripe(&here, other, TAIL_SIDE_HALF_ARC_PX).is_some() {
-                    widths.push(points[j].half_width);
-                    shares.push(points[j].tail_light_share);
+                let n = &points[j];
+                if !is_saturated(n)
+                    && let Some((_, _, same_way)) = on_the_stripe(&here, other, TAIL_SIDE_HALF_ARC_PX)
+                {
+                    let e = tail_light(n.background_excess, if same_way { side } else { -side });
+                    widths.push(n.half_width);
+                    shares.push(e / (n.point.intensity + e));
                 }
             });
             if widths.len() < LEAN_MIN_PROFILES {
-                return 0.0;
+                return None;
             }
-            let (half_width, tail_light) = (median(&mut widths), median(&mut shares));
-            model.midpoint_at(half_width, tail_light, edges, share).unwrap_or(0.0)
+            let (half_width, background) = (median(&mut widths), median(&mut shares));
+            let e = tail_light(l.background_excess, side);
+            let threshold_share = (threshold + e) / (l.point.intensity + e);
+            model.midpoint_at(half_width, background, edges, threshold_share)
         })
         .collect();
     let near = Grid::from_placed(points.iter().map(Linked::placed), LEAN_HALF_ARC_PX);
     let smoothed: Vec<f64> = points
         .iter()
-        .zip(&offsets)
-        .map(|(l, &own)| {
-            if l.plateau_edges.is_none() || !is_saturated(l) {
-                return own;
-            }
+        .enumerate()
+        .map(|(i, l)| {
+            let (Some(_), Some([edges, _])) = (offsets[i], l.plateau_edges) else { return l.tail_offset };
             let here = l.placed();
             let (mut sum, mut count) = (0.0, 0usize);
             near.visit(here[0], here[1], |j, other| {
-                if is_saturated(&points[j])
-                    && points[j].plateau_edges.is_some()
+                if let (Some(offset), Some([other_edges, _])) = (offsets[j], points[j].plateau_edges)
+                    && (other_edges - edges).abs() <= SAME_CLIP_EDGES.max(0.05 * edges)
                     && on_the_stripe(&here, other, LEAN_HALF_ARC_PX).is_some()
                 {
-                    sum += offsets[j];
+                    sum += offset;
                     count += 1;
                 }
             });
-            sum / count.max(1) as f64
+            sum / count as f64
         })
         .collect();
     for (l, offset) in points.iter_mut().zip(smoothed) {
         l.tail_offset = offset;
     }
 }
+
+/// Plateaus whose edges' distances differ by at most this (px), or 5 % where more, are taken
+/// as clipped alike ([`lead_plateaus_to_sheet_peak`]).
+const SAME_CLIP_EDGES: f64 = 0.3;
 
 /// The median of `values` (reordered; not empty).
 fn median(values: &mut [f64]) -> f64 {
@@ -1138,6 +1148,11 @@ fn tail_sides(points: &[Linked]) -> Vec<f64> {
     if points.iter().all(|l| l.tail_offset == 0.0) {
         return Vec::new();
     }
+    tail_sides_of(points)
+}
+
+/// [`tail_sides`] of every point.
+fn tail_sides_of(points: &[Linked]) -> Vec<f64> {
     let grid = Grid::from_placed(points.iter().map(Linked::placed), TAIL_SIDE_HALF_ARC_PX);
     points
         .iter()

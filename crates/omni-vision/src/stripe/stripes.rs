@@ -96,8 +96,9 @@ impl Stripes {
     /// departs from: the laser's shape where it counts; else from 0 to the stripe's median where
     /// that lies within [`MAX_ASYMMETRY`] (most of the stripe passes as not lopsided, so its
     /// median is the stripe's own baseline, and an end lopsided a little beyond 0's limit in the
-    /// same direction is no change along it); else 0.
-    pub(super) fn steady(&mut self, points: &[(usize, f64)], min_points: usize) -> Vec<[f64; 2]> {
+    /// same direction is no change along it); `None` where the stripe has no median or neither
+    /// holds (judged from 0).
+    pub(super) fn steady(&mut self, points: &[(usize, f64)], min_points: usize) -> Vec<Option<[f64; 2]>> {
         let grouped = self.grouped(points, |asymmetry| -asymmetry);
         let mut scratch = Vec::new();
         let medians: Vec<(usize, f64, usize)> = grouped
@@ -122,21 +123,21 @@ impl Stripes {
             .map_or(0.0, |s| s.0);
         let agrees = |m: f64| m.abs() <= MAX_STEADY_ASYMMETRY && (m.abs() - typical).abs() <= MAX_ASYMMETRY;
         let support: usize = medians.iter().filter(|m| agrees(m.1)).map(|m| m.2).sum();
-        let mut baseline = vec![[0.0; 2]; self.parent.len()];
+        let mut baseline = vec![None; self.parent.len()];
         for (root, m, _) in medians {
             baseline[root] = if support >= min_points && agrees(m) {
-                [m, m]
+                Some([m, m])
             } else if m.abs() <= MAX_ASYMMETRY {
-                [m.min(0.0), m.max(0.0)]
+                Some([m.min(0.0), m.max(0.0)])
             } else {
-                [0.0, 0.0]
+                None
             };
         }
         (0..self.parent.len())
             .map(|i| {
                 let (root, flip) = self.find(i);
-                let [lo, hi] = baseline[root];
-                if flip { [-hi, -lo] } else { [lo, hi] }
+                let [lo, hi] = baseline[root]?;
+                Some(if flip { [-hi, -lo] } else { [lo, hi] })
             })
             .collect()
     }
@@ -293,15 +294,15 @@ mod tests {
         };
         let means: Vec<(usize, f64)> = (0..90).map(|i| (i, lopsided(i))).collect();
         let steady = stripes.steady(&means, 64);
-        assert_eq!(steady[1], [0.0, 0.08]);
-        assert_eq!(steady[20], [-0.08, 0.0], "seen along the point's own normal");
-        assert_eq!(steady[40], [0.0, 0.0]);
-        assert_eq!(steady[70], [-0.05, 0.0]);
+        assert_eq!(steady[1], Some([0.0, 0.08]));
+        assert_eq!(steady[20], Some([-0.08, 0.0]), "seen along the point's own normal");
+        assert_eq!(steady[40], None);
+        assert_eq!(steady[70], Some([-0.05, 0.0]));
         // With the frame's support, the medians that agree with its typical one (0.08) are the
         // laser's shape; 0.3 does not agree and, beyond the cut limit, is judged from 0.
         let steady = stripes.steady(&means, 16);
-        assert_eq!(steady[1], [0.08, 0.08]);
-        assert_eq!(steady[40], [0.0, 0.0]);
-        assert_eq!(steady[70], [-0.05, -0.05]);
+        assert_eq!(steady[1], Some([0.08, 0.08]));
+        assert_eq!(steady[40], None);
+        assert_eq!(steady[70], Some([-0.05, -0.05]));
     }
 }

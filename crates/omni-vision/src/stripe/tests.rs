@@ -500,42 +500,45 @@ fn lopsided_ring(dim: f64, bright: f64, background: f64) -> GrayImage {
 }
 
 /// A ring whose laser is lopsided (the real profile's tail outwards, 4 px wide behind a 0.7 px
-/// lens) and whose surface alternates every 30° between dim (peak 150 DN) and bright (3.3 ×
-/// the 8-bit range, clipped): the clipped plateaus' edges are read far down the profile,
-/// where the tail pulls their midpoint outwards (+0.24 px). With the profile known, the dim
-/// sectors' widths give the sheet's width and the plateaus' edges their depth, and the clipped
-/// points come back to the sheet's peak (−0.002 px, RMS 0.012 px; points within 2 px of a
-/// sector's edge, where the surface changes under the profile, left out).
+/// lens) and whose surface alternates every 30° between dim (peak 150 DN) and bright sectors
+/// clipped 1.6, 3.3 and 8 times over: the clipped plateaus' edges are read far down the
+/// profile, where the tail pulls their midpoint outwards (+0.11, +0.26, +0.78 px). With the
+/// profile known, the dim sectors' widths give the sheet's width and the plateaus' edges their
+/// depth, and the clipped points come back to the sheet's peak (+0.004, −0.004, −0.002 px; RMS
+/// 0.009, 0.009, 0.026 px; points within 2 px of a sector's edge, where the surface changes
+/// under the profile, left out). At 12 times over: +0.044 px, RMS 0.28 px (not asserted).
 #[test]
 fn a_known_laser_profile_leads_clipped_lopsided_plateaus_to_the_sheets_peak() {
-    let (profile, blur, radius) = (lopsided(), LOPSIDED_BLUR_PX, LOPSIDED_RADIUS_PX);
-    let img = lopsided_ring(150.0, 850.0, 0.0);
-    let bias = |laser_profile| {
-        let params = RidgeParams { optics_blur_px: Some(blur), laser_profile, ..Default::default() };
-        let pts = RidgeDetector::new(W, H, circle(), params).detect(&img);
-        // Away from the sectors' edges, where the surface changes under the profile.
-        let sector = 30f64.to_radians();
-        let inside = |p: &&StripePoint| {
-            let phase = polar(p).0.rem_euclid(sector);
-            phase.min(sector - phase) * radius > 2.0
+    for (bright, background) in [(400.0, 20.0), (850.0, 20.0), (2000.0, 20.0)] {
+        let img = lopsided_ring(150.0, bright, background);
+        let bias = |laser_profile| {
+            let params = RidgeParams { optics_blur_px: Some(LOPSIDED_BLUR_PX), laser_profile, ..Default::default() };
+            let pts = RidgeDetector::new(W, H, circle(), params).detect(&img);
+            // Away from the sectors' edges, where the surface changes under the profile.
+            let sector = 30f64.to_radians();
+            let inside = |p: &&StripePoint| {
+                let phase = polar(p).0.rem_euclid(sector);
+                phase.min(sector - phase) * LOPSIDED_RADIUS_PX > 2.0
+            };
+            let (clipped, dim): (Vec<_>, Vec<_>) =
+                pts.iter().filter(inside).partition(|p| p.quality & quality::SATURATED != 0);
+            let errors = |pts: &[&StripePoint]| pts.iter().map(|p| polar(p).1 - LOPSIDED_RADIUS_PX).collect::<Vec<_>>();
+            let ((rc, bc), (rd, bd)) = (rms_bias(&errors(&clipped)), rms_bias(&errors(&dim)));
+            eprintln!(
+                "bright {bright}, profile {}: clipped {} points rms {rc:.4} bias {bc:+.4} px, dim {} points rms {rd:.4} bias {bd:+.4} px",
+                laser_profile.is_some(),
+                clipped.len(),
+                dim.len()
+            );
+            assert!(clipped.len() > 150 && dim.len() > 150, "{} clipped, {} dim", clipped.len(), dim.len());
+            (bc, bd, rc)
         };
-        let (clipped, dim): (Vec<_>, Vec<_>) =
-            pts.iter().filter(inside).partition(|p| p.quality & quality::SATURATED != 0);
-        let errors = |pts: &[&StripePoint]| pts.iter().map(|p| polar(p).1 - radius).collect::<Vec<_>>();
-        let ((rc, bc), (rd, bd)) = (rms_bias(&errors(&clipped)), rms_bias(&errors(&dim)));
-        eprintln!(
-            "profile {}: clipped {} points rms {rc:.4} bias {bc:+.4} px, dim {} points rms {rd:.4} bias {bd:+.4} px",
-            laser_profile.is_some(),
-            clipped.len(),
-            dim.len()
-        );
-        assert!(clipped.len() > 150 && dim.len() > 150, "{} clipped, {} dim", clipped.len(), dim.len());
-        (bc, bd)
-    };
-    let (clipped, _) = bias(None);
-    assert!(clipped > 0.15, "the tail pulls clipped plateaus outwards: {clipped} px");
-    let (clipped, dim) = bias(Some(profile));
-    assert!(clipped.abs() <= 0.015 && dim.abs() <= 0.015, "clipped {clipped} px, dim {dim} px");
+        let (clipped, _, _) = bias(None);
+        assert!(clipped > 0.1, "bright {bright}: the tail pulls clipped plateaus outwards: {clipped} px");
+        let (clipped, dim, rms) = bias(Some(lopsided()));
+        assert!(clipped.abs() <= 0.012 && dim.abs() <= 0.012, "bright {bright}: clipped {clipped} px, dim {dim} px");
+        assert!(rms <= 0.035, "bright {bright}: clipped points' RMS {rms} px");
+    }
 }
 
 /// The lopsided ring of the test above, its bright sectors clipped 8 times over (2000 DN above

@@ -251,6 +251,13 @@ fn main() -> ExitCode {
             }
             None => (None, params),
         };
+        if params.laser_profile.is_some() && params.optics_blur_px.is_none() {
+            omni_cli::warn(
+                "omni-ridge",
+                "--laser-tail without the lens's blur (--optics-blur, or a --camera file with lens_blur_px or optics): \
+                 the cross-section's offsets are computed as if behind a perfect lens",
+            );
+        }
         if let Some(dir) = &args.overlay {
             omni_cli::create_output_dir("--overlay", dir)?;
         }

@@ -302,6 +302,16 @@ fn help_teaches_and_bad_usage_exits_2() {
 }
 
 #[test]
+fn a_laser_tail_without_the_lens_blur_is_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(&["--laser-tail", "0.17,4"], &scene(dir.path()));
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("warning: --laser-tail without the lens's blur"), "{}", stderr(&out));
+    let out = run(&["--laser-tail", "0.17,4", "--optics-blur", "0.7"], &scene(dir.path()));
+    assert!(out.status.success() && stderr(&out).is_empty(), "{}", stderr(&out));
+}
+
+#[test]
 fn a_stream_cut_short_is_warned_about_and_passed_on_incomplete_or_refused_with_strict() {
     let dir = tempfile::tempdir().unwrap();
     let text = scene(dir.path());

@@ -48,6 +48,7 @@ use super::{
     Frame, MAX_CENTRE_GRADIENT, Pixel, RidgeDetector, SAMPLE_STEP_PX, StripePoint, column_contrast, quality,
     row_contrast, stands_out,
 };
+use omni_geom::stats;
 
 /// tan 47°: a seed from a row is measured if the stripe's normal is within 47° of the row (the
 /// stripe within 47° of vertical), one from a column if within 47° of the column; the overlap
@@ -283,8 +284,8 @@ impl RidgeDetector {
             fit_along_stripe(&mut refined, self.params.along_stripe_px);
             kept.extend(refined);
         }
-        lead_plateaus_to_sheet_peak(&mut kept, || self.plateau_offsets(scale));
-        remove_steady_lean(&mut kept);
+        let sides = lead_plateaus_to_sheet_peak(&mut kept, || self.plateau_offsets(scale));
+        remove_steady_lean(&mut kept, sides);
         kept
     }
 
@@ -967,7 +968,8 @@ fn keep_steadily_lopsided(
             kept.iter().filter(|k| !only_clipped || saturated(k.index)).map(|k| (k.index, k.lopsided.mean)).collect();
         stripes.steady(&means, min_points)
     };
-    let (all, clipped) = (steady_of(false), steady_of(true));
+    let all = steady_of(false);
+    let clipped = if kept.iter().any(|k| saturated(k.index)) { steady_of(true) } else { Vec::new() };
     kept.retain(|k| {
         // Clipped points without a steadiness of their own (too few on their stripe, or none
         // that holds) take the whole stripe's.
@@ -1009,10 +1011,11 @@ impl Centre {
 /// Where the leans lead only to the tops' centroids ([`Linked::tail_offset`], a laser's profile
 /// known), the neighbours' mean tail offset is added on the tail's side ([`tail_sides`]). A
 /// saturated point has no lean: it moves by its own tail offset, its plateau centre's
-/// ([`lead_plateaus_to_sheet_peak`]).
-fn remove_steady_lean(points: &mut [Linked]) {
+/// ([`lead_plateaus_to_sheet_peak`]). `sides`: the tails' sides where already known
+/// ([`tail_sides_of`]).
+fn remove_steady_lean(points: &mut [Linked], sides: Option<Vec<f64>>) {
     let grid = Grid::from_placed(points.iter().map(Linked::placed), LEAN_HALF_ARC_PX);
-    let sides = tail_sides(points);
+    let sides = sides.unwrap_or_else(|| tail_sides(points));
     let shifts: Vec<f64> = points
         .iter()
         .enumerate()
@@ -1054,16 +1057,16 @@ fn remove_steady_lean(points: &mut [Linked]) {
 /// then averaged over the clipped points within ±[`LEAN_HALF_ARC_PX`] whose edges lie as far
 /// apart, give or take [`SAME_CLIP_EDGES`] (one plateau's edges are noisy; the offset grows
 /// steeply with the clip's depth). A point without unsaturated neighbours or beyond the
-/// table stays at its plateau's centre.
+/// table stays at its plateau's centre. Returns the tails' sides it found, if it looked.
 fn lead_plateaus_to_sheet_peak<'a>(
     points: &mut [Linked],
     model: impl FnOnce() -> Option<&'a super::laser::PlateauOffsets>,
-) {
+) -> Option<Vec<f64>> {
     let is_saturated = |l: &Linked| l.point.quality & quality::SATURATED != 0;
     if !points.iter().any(|l| is_saturated(l) && l.plateau_edges.is_some()) {
-        return;
+        return None;
     }
-    let Some(model) = model() else { return };
+    let model = model()?;
     let sides = tail_sides_of(points);
     // The tail's light in a background, from its `excess` along a normal on whose `side` the
     // tail lies.
@@ -1095,7 +1098,7 @@ fn lead_plateaus_to_sheet_peak<'a>(
             if widths.len() < LEAN_MIN_PROFILES {
                 return None;
             }
-            let (half_width, background) = (median(&mut widths), median(&mut shares));
+            let (half_width, background) = (stats::median(&widths)?, stats::median(&shares)?);
             let e = tail_light(l.background_excess, side);
             let threshold_share = (threshold + e) / (l.point.intensity + e);
             model.midpoint_at(half_width, background, edges, threshold_share)
@@ -1124,17 +1127,12 @@ fn lead_plateaus_to_sheet_peak<'a>(
     for (l, offset) in points.iter_mut().zip(smoothed) {
         l.tail_offset = offset;
     }
+    Some(sides)
 }
 
 /// Plateaus whose edges' distances differ by at most this (px), or 5 % where more, are taken
 /// as clipped alike ([`lead_plateaus_to_sheet_peak`]).
 const SAME_CLIP_EDGES: f64 = 0.3;
-
-/// The median of `values` (reordered; not empty).
-fn median(values: &mut [f64]) -> f64 {
-    let mid = values.len() / 2;
-    *values.select_nth_unstable_by(mid, f64::total_cmp).1
-}
 
 /// Half the arc (px) over which a stripe's leans tell on which side its tail lies.
 const TAIL_SIDE_HALF_ARC_PX: f64 = 48.0;

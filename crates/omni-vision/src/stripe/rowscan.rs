@@ -50,7 +50,7 @@ type Step<'a> = [&'a [u8; STEP]; 5];
 const STEP: usize = 64;
 
 /// The frame of the SIMD forms: `step_hits` gives each 64-pixel step's hits as a bit mask (bit i
-/// for pixel i of the step), `hit` is called for each; the last `len % 64` pixels take the
+/// for pixel i of the step), `hit` is called for each; a row shorter than a step takes the
 /// generic test.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
@@ -59,23 +59,37 @@ fn for_each_step_hit(rows: [&[u8]; 5], t: u8, mut step_hits: impl FnMut(Step) ->
     let steps = c.chunks_exact(STEP).zip(l.chunks_exact(STEP)).zip(r.chunks_exact(STEP));
     let steps = steps.zip(u.chunks_exact(STEP)).zip(d.chunks_exact(STEP));
     let mut done = 0;
-    for ((((c, l), r), u), d) in steps {
-        let step = [c, l, r, u, d].map(|s| <&[u8; STEP]>::try_from(s).expect("a whole step"));
-        let mut hits = step_hits(step);
+    let mut report = |mut hits: u64, first: usize| {
         while hits != 0 {
-            hit(done + hits.trailing_zeros() as usize);
+            hit(first + hits.trailing_zeros() as usize);
             hits &= hits - 1;
         }
+    };
+    for ((((c, l), r), u), d) in steps {
+        let step = [c, l, r, u, d].map(|s| <&[u8; STEP]>::try_from(s).expect("a whole step"));
+        report(step_hits(step), done);
         done += STEP;
     }
-    for_each_hit_generic(&c[done..], &l[done..], &r[done..], &u[done..], &d[done..], t, |j| hit(done + j));
+    let len = c.len();
+    if done == len {
+        return;
+    }
+    if len < STEP {
+        for_each_hit_generic(c, l, r, u, d, t, |j| hit(j));
+        return;
+    }
+    // The last partial step as the whole step that ends with the row, its pixels before `done`
+    // (already reported) shifted out: a scalar pass over up to 63 pixels cost as much as the
+    // row's SIMD steps.
+    let start = len - STEP;
+    let step = [c, l, r, u, d].map(|s| <&[u8; STEP]>::try_from(&s[start..]).expect("a whole step"));
+    report(step_hits(step) >> (done - start), done);
 }
 
 /// [`for_each_hit_generic`] for 8-bit pixels in SSE2 (part of every x86-64 CPU), 64 pixels per
 /// step: `v > max(a, b) ⊕ t` (saturating addition, as `u8::contrast_above`) is
 /// `v ⊖ (max(a, b) ⊕ t) ≠ 0` (saturating subtraction: SSE2 has no unsigned byte comparison).
-/// The four 16-pixel results of a step are tested together (most steps hold no hit). The last
-/// `len % 64` pixels take the generic test.
+/// The four 16-pixel results of a step are tested together (most steps hold no hit).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "sse2")]
 #[inline]

@@ -294,7 +294,7 @@ fn fast_candidate_test_matches_the_general_one() {
 
 #[test]
 fn row_tests_flag_exactly_the_pixels_the_single_test_flags() {
-    // Every row length up to 140 (the SSE2 path's 64-pixel steps and its scalar tail; the generic
+    // Every row length up to 140 (the SIMD paths' 64-pixel steps and their overlapped last step; the generic
     // path's 64-pixel blocks), thresholds at and near the saturating cases, pixels near 255.
     let mut rng = SplitMix64::new(78);
     let mut bytes = |n: usize| -> Vec<u8> { (0..n).map(|_| (rng.uniform() * 256.0) as u8).collect() };

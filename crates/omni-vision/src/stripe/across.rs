@@ -1056,8 +1056,10 @@ fn remove_steady_lean(points: &mut [Linked], sides: Option<Vec<f64>>) {
 /// side ([`tail_sides_of`]; an ambient slope the other way is not the laser's). Each offset is
 /// then averaged over the clipped points within ±[`LEAN_HALF_ARC_PX`] whose edges lie as far
 /// apart, give or take [`SAME_CLIP_EDGES`] (one plateau's edges are noisy; the offset grows
-/// steeply with the clip's depth). A point without unsaturated neighbours or beyond the
-/// table stays at its plateau's centre. Returns the tails' sides it found, if it looked.
+/// steeply with the clip's depth). A point the table cannot lead (too few unsaturated
+/// neighbours, beyond the table) takes that average where at least [`LEAN_MIN_PROFILES`] of its
+/// alike neighbours were led, else stays at its plateau's centre. Returns the tails' sides it
+/// found, if it looked.
 fn lead_plateaus_to_sheet_peak<'a>(
     points: &mut [Linked],
     model: impl FnOnce() -> Option<&'a super::laser::PlateauOffsets>,
@@ -1109,7 +1111,7 @@ fn lead_plateaus_to_sheet_peak<'a>(
         .iter()
         .enumerate()
         .map(|(i, l)| {
-            let (Some(_), Some([edges, _])) = (offsets[i], l.plateau_edges) else { return l.tail_offset };
+            let Some([edges, _]) = l.plateau_edges.filter(|_| is_saturated(l)) else { return l.tail_offset };
             let here = l.placed();
             let (mut sum, mut count) = (0.0, 0usize);
             near.visit(here[0], here[1], |j, other| {
@@ -1121,6 +1123,13 @@ fn lead_plateaus_to_sheet_peak<'a>(
                     count += 1;
                 }
             });
+            // A point the table could not lead (too few unclipped profiles within its reach on
+            // a tight curve or a long clipped stretch) takes its alike neighbours' offsets
+            // where as many were led as a median would need.
+            let enough = if offsets[i].is_some() { 1 } else { LEAN_MIN_PROFILES };
+            if count < enough {
+                return l.tail_offset;
+            }
             sum / count as f64
         })
         .collect();

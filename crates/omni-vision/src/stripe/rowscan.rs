@@ -56,6 +56,11 @@ const STEP: usize = 64;
 #[inline(always)]
 fn for_each_step_hit(rows: [&[u8]; 5], t: u8, mut step_hits: impl FnMut(Step) -> u64, mut hit: impl FnMut(usize)) {
     let [c, l, r, u, d] = rows;
+    let len = c.len();
+    if len < STEP {
+        for_each_hit_generic(c, l, r, u, d, t, hit);
+        return;
+    }
     let steps = c.chunks_exact(STEP).zip(l.chunks_exact(STEP)).zip(r.chunks_exact(STEP));
     let steps = steps.zip(u.chunks_exact(STEP)).zip(d.chunks_exact(STEP));
     let mut done = 0;
@@ -70,17 +75,11 @@ fn for_each_step_hit(rows: [&[u8]; 5], t: u8, mut step_hits: impl FnMut(Step) ->
         report(step_hits(step), done);
         done += STEP;
     }
-    let len = c.len();
     if done == len {
         return;
     }
-    if len < STEP {
-        for_each_hit_generic(c, l, r, u, d, t, |j| hit(j));
-        return;
-    }
     // The last partial step as the whole step that ends with the row, its pixels before `done`
-    // (already reported) shifted out: a scalar pass over up to 63 pixels cost as much as the
-    // row's SIMD steps.
+    // (already reported) shifted out, instead of a scalar pass over up to 63 pixels.
     let start = len - STEP;
     let step = [c, l, r, u, d].map(|s| <&[u8; STEP]>::try_from(&s[start..]).expect("a whole step"));
     report(step_hits(step) >> (done - start), done);

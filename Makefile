@@ -3,7 +3,7 @@ CARGO ?= cargo
 OUT ?= out/demo
 FUZZ_SECONDS ?= 60
 
-.PHONY: all build test test-suite test-build test-rust test-rust-main test-rust-side deps lint tools fmt bench demo fuzz clean
+.PHONY: all build test test-suite test-build test-rust test-rust-main test-rust-side deps lint tools fmt bench bench-run demo fuzz clean
 
 # One cargo feature set for every command of `make test`, so that each crate is compiled once
 # and the parts below reuse the workspace's debug build: the GenICam frame source is on wherever
@@ -77,7 +77,12 @@ deps:
 fmt:
 	$(CARGO) fmt --all
 
-bench: build
+# The installs first, as for `make test`: the Open3D checks read through the venv, the live
+# bench needs its cyclonedds, and FEATURES must see libaravis for the fake-camera scan.
+bench: deps
+	$(MAKE) --no-print-directory bench-run
+
+bench-run: build
 	CARGO_TARGET_DIR=$(TARGET_DIR) scripts/bench.sh
 
 # The demo profile (Cargo.toml): no LTO, parallel codegen, a fraction of the release build time.

@@ -279,7 +279,7 @@ fn a_timed_scan_stops_the_controller_and_accounts_for_every_trigger() {
 /// A scan on the emulator with `stop` (e.g. `--revolutions 20`), sent SIGTERM after its third
 /// frame: its output.
 fn scan_terminated_after_three_frames(emu: &Emulator, stop: &[&str]) -> std::process::Output {
-    let scan = Command::new(BIN)
+    let mut scan = Command::new(BIN)
         .args(["scan", "--port", &emu.port, "--angles", "0,15"])
         .args(stop)
         .arg("--frames")
@@ -290,7 +290,6 @@ fn scan_terminated_after_three_frames(emu: &Emulator, stop: &[&str]) -> std::pro
         .spawn()
         .unwrap();
     let started = Instant::now();
-    let mut scan = scan;
     while std::fs::read_to_string(emu.manifest_path()).map(|t| t.matches("\"frame\"").count()).unwrap_or(0) < 3 {
         if scan.try_wait().unwrap().is_some() {
             let out = scan.wait_with_output().unwrap();

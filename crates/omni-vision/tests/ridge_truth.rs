@@ -437,10 +437,12 @@ fn bench_scene(
 /// Ideal optics (Gaussian blur 0.7 px, no speckle), the room lit: the stripe centre within
 /// 0.015 px RMS and 0.005 px of bias on plane, cylinder and sphere over 48 stripe positions,
 /// the plane's stripe covered. The along-stripe fit up to ±10 px takes its longer arcs only
-/// where the stripe's shape allows them: on the plane 0.0087 px RMS (±3: 0.0095, alone
-/// 0.0114), on the cylinder and sphere what ±3 gives (0.0263 / 0.0226 against 0.0257 / 0.0225
-/// px; a single arc of ±10 px gave 0.10 px). Asserted: ±10 within 1.1 × ±3's RMS, the plane's
-/// ≤ 0.8 × its RMS alone.
+/// where the stripe's shape allows them, through the stripe's kept points only: alone / ±3 /
+/// ±10, plane 0.0114 / 0.0082 / 0.0056 px, cylinder 0.0122 / 0.0100 / 0.0119, sphere 0.0141 /
+/// 0.0143 / 0.0152 (a single arc of ±10 px gave 0.10 px; fitted through the profiles a
+/// stripe's end refused too, ±3 gave 0.0257 on the cylinder and 0.0225 on the sphere).
+/// Asserted: either fit within 1.1 × the RMS alone and ±10 within 1.25 × ±3's, the plane's ±10
+/// ≤ 0.6 × its RMS alone.
 #[test]
 fn ideal_optics_accuracy_on_the_bench() {
     for object in [BenchObject::Plane, BenchObject::Cylinder, BenchObject::Sphere] {
@@ -456,13 +458,14 @@ fn ideal_optics_accuracy_on_the_bench() {
             longer.line("  along ±10")
         );
         // The fit's longer arcs are taken only where the stripe's shape allows them.
-        let ((rms3, _), (rms10, bias10)) = (along.rms_bias(), longer.rms_bias());
+        let ((rms3, _), (rms10, bias10), (alone, _)) = (along.rms_bias(), longer.rms_bias(), t.rms_bias());
         assert!(
-            rms10 <= 1.1 * rms3 && bias10.abs() <= 0.01,
+            rms10 <= 1.25 * rms3 && rms10 <= 1.1 * alone && bias10.abs() <= 0.01,
             "{object:?}, along ±10: rms {rms10:.4} bias {bias10:+.4} px"
         );
+        assert!(rms3 <= 1.1 * alone, "{object:?}, along ±3: rms {rms3:.4} px, alone {alone:.4}");
         if object == BenchObject::Plane {
-            assert!(rms10 <= 0.8 * t.rms_bias().0, "plane, along ±10: rms {rms10:.4} px");
+            assert!(rms10 <= 0.6 * alone, "plane, along ±10: rms {rms10:.4} px");
         }
         let (rms, bias) = t.rms_bias();
         assert!(t.errors.len() > 400, "{object:?}: {} points", t.errors.len());

@@ -738,21 +738,22 @@ impl RidgeDetector {
         let grid = Grid::new(centres, reach);
         let mut kept: Vec<OnStripe> = Vec::with_capacity(centres.len());
         let mut stripes = Stripes::new(centres.len());
-        let mut neighbours = Vec::new();
-        // Each kept point's neighbours, for the along-stripe fit once the frame's noise is known.
+        let (mut neighbours, mut indices) = (Vec::new(), Vec::new());
+        // Each kept point's neighbours, for the along-stripe fit once the points kept (and the
+        // frame's noise) are known.
         let mut along_fits = AlongFits::default();
         for i in 0..centres.len() {
-            if !neighbours_on_the_stripe(&grid, centres, i, reach, &mut stripes, &mut neighbours) {
+            if !neighbours_on_the_stripe(&grid, centres, i, reach, &mut stripes, (&mut neighbours, &mut indices)) {
                 continue;
             }
             let Some(point) = self.on_its_stripe(i, &centres[i], &neighbours, widest) else { continue };
-            if along > SHAPE_HALF_ARC_PX {
-                along_fits.push(&neighbours);
+            if along > 0.0 {
+                along_fits.push(&neighbours, &indices);
             }
             kept.push(point);
         }
-        if along > SHAPE_HALF_ARC_PX {
-            fit_longer_arcs(&mut kept, &along_fits, along);
+        if along > 0.0 {
+            fit_along_kept(&mut kept, along_fits, centres.len(), along);
         }
         let saturated = |i: usize| centres[i].point.quality & quality::SATURATED != 0;
         keep_steadily_lopsided(&mut kept, &mut stripes, scale, saturated);
@@ -773,6 +774,8 @@ impl RidgeDetector {
         // How many neighbours (within the shape's arc) there are, and how many of them are
         // narrow enough that this profile is not too narrow beside them.
         let (mut count, mut not_wider) = (0usize, 0usize);
+        // How many of them lie on either side (beyond ±0.5 px), as a parabola needs.
+        let (mut before, mut after) = (0usize, 0usize);
         for n in neighbours {
             (first, last) = (first.min(n.0), last.max(n.0));
             if n.0.abs() <= shape_half_arc {
@@ -781,6 +784,8 @@ impl RidgeDetector {
             if n.0.abs() <= SHAPE_HALF_ARC_PX {
                 asymmetry_sum += n.3;
                 count += 1;
+                before += usize::from(n.0 < -0.5);
+                after += usize::from(n.0 > 0.5);
                 not_wider += usize::from(MIN_WIDTH_RATIO * n.2 <= c.half_width);
                 width_line.add(n.0, n.2);
             }
@@ -811,15 +816,15 @@ impl RidgeDetector {
         let factors = sums.factors();
         let curvature = sums.parabola(&factors).map(|f| f[2]);
         // Too few neighbours on one side for the stripe's shape are too few to outvote a
-        // profile's own lopsidedness either: it is judged alone too, at twice the limit.
-        let lopsided = Lopsided { mean: asymmetry_sum / count as f64, own: curvature.is_none().then_some(c.asymmetry) };
-        // One arc (±3 px or less) uses the wider parabola's bend at hand; longer ones wait
-        // for the frame's noise.
-        let offset = match curvature {
-            Some(c) if along > 0.0 && along <= SHAPE_HALF_ARC_PX => bent_line_offset(neighbours, c, along),
-            _ => 0.0,
-        };
-        Some(OnStripe { index: i, curvature, offset, local: sums.local_stripe(&factors), lopsided })
+        // profile's own lopsidedness either: it is judged alone too, at twice the limit. The
+        // neighbours that count are those within ±SHAPE_HALF_ARC_PX, as for the mean, even where
+        // the along-stripe fit takes its shape over a longer arc: at a stripe's end that arc
+        // reaches the dimmer, narrower profiles beyond, which say nothing of this one's cut.
+        let shape_near = count >= 5 && before >= 2 && after >= 2;
+        let own = (curvature.is_none() || !shape_near).then_some(c.asymmetry);
+        let lopsided = Lopsided { mean: asymmetry_sum / count as f64, own };
+        // The along-stripe fit's offset waits for the points kept ([`fit_along_kept`]).
+        Some(OnStripe { index: i, curvature, offset: 0.0, local: sums.local_stripe(&factors), lopsided })
     }
 
     /// The stripe's points as measured, moved by the along-stripe fit's offset less the blur's
@@ -880,7 +885,8 @@ struct OnStripe {
     lopsided: Lopsided,
 }
 
-/// Fills `out` with centre `i`'s neighbours on its stripe within `reach` px and joins it to
+/// Fills `out` with centre `i`'s neighbours on its stripe within `reach` px (`indices` with
+/// theirs) and joins it to
 /// those within [`SHAPE_HALF_ARC_PX`] in `stripes`; `false` where another centre measured the
 /// same crossing and is kept instead (two seeds of one crossing: a run broken by speckle, a
 /// stripe at 45° seen from a row and a column; the brighter, then the first, is kept).
@@ -890,13 +896,14 @@ fn neighbours_on_the_stripe(
     i: usize,
     reach: f64,
     stripes: &mut Stripes,
-    out: &mut Vec<Neighbour>,
+    (out, indices): (&mut Vec<Neighbour>, &mut Vec<usize>),
 ) -> bool {
     let c = &centres[i];
     let (px, py) = (c.point.u, c.point.v);
     let (nx, ny) = c.normal;
     let reach2 = reach * reach;
     out.clear();
+    indices.clear();
     let mut duplicate = false;
     grid.visit(px, py, |j, &[ou, ov, onx, ony]| {
         let (ex, ey) = (ou - px, ov - py);
@@ -920,12 +927,36 @@ fn neighbours_on_the_stripe(
             // The asymmetry as seen along this point's normal.
             let asymmetry = if cos > 0.0 { o.asymmetry } else { -o.asymmetry };
             out.push((t, d, o.half_width, asymmetry, o.point.intensity));
+            indices.push(j);
             if t.abs() <= SHAPE_HALF_ARC_PX {
                 stripes.join(i, j, cos < 0.0);
             }
         }
     });
     !duplicate
+}
+
+/// The along-stripe fit's offset of each of `kept` (whose neighbours are `along_fits`, one entry
+/// each, among `centres` centres) over up to ±`along` px, through the neighbours that were kept
+/// themselves: the centres a stripe's end refused (its last profiles, those beyond it that a
+/// silhouette's edge or a surface's turn spoils) would pull the fit towards them.
+fn fit_along_kept(kept: &mut [OnStripe], along_fits: AlongFits, centres: usize, along: f64) {
+    let mut is_kept = vec![false; centres];
+    for k in kept.iter() {
+        is_kept[k.index] = true;
+    }
+    let along_fits = along_fits.of_kept(&is_kept);
+    if along > SHAPE_HALF_ARC_PX {
+        fit_longer_arcs(kept, &along_fits, along);
+        return;
+    }
+    // One arc (±3 px or less): the line once the bend of the parabola over twice the arc is
+    // taken out.
+    for (k, point) in kept.iter_mut().enumerate() {
+        if point.curvature.is_some() {
+            point.offset = arc_offset(along_fits.of(k), along).map_or(0.0, |(offset, _)| offset);
+        }
+    }
 }
 
 /// The along-stripe fit over arcs longer than ±[`SHAPE_HALF_ARC_PX`] (`along` px at most), once
@@ -1258,17 +1289,19 @@ fn fit_along_stripe(points: &mut [Linked], along: f64) {
     }
     let reach = SHAPE_HALF_ARC_PX.max(2.0 * along) + 1.0;
     let grid = Grid::from_placed(points.iter().map(Linked::placed), reach);
-    let mut neighbours: Vec<Neighbour> = Vec::new();
+    let (mut neighbours, mut indices): (Vec<Neighbour>, Vec<usize>) = (Vec::new(), Vec::new());
     let mut along_fits = AlongFits::default();
     for l in points.iter() {
         let here = l.placed();
         neighbours.clear();
-        grid.visit(here[0], here[1], |_, other| {
+        indices.clear();
+        grid.visit(here[0], here[1], |j, other| {
             if let Some((t, d, _)) = on_the_stripe(&here, other, reach) {
                 neighbours.push((t, d, 0.0, 0.0, 0.0));
+                indices.push(j);
             }
         });
-        along_fits.push(&neighbours);
+        along_fits.push(&neighbours, &indices);
     }
     let shifts: Vec<f64> = along_fits
         .offsets(along)
@@ -1761,12 +1794,6 @@ fn arc_offset(neighbours: &[Neighbour], arc: f64) -> Option<(f64, f64)> {
     Some((offset, line.intercept_spread()))
 }
 
-/// The offset at t = 0 (px) of the line through the neighbours' offsets within ±`arc` px once
-/// the bend c (d = c·t²) is taken out; 0 where the line has too few points.
-fn bent_line_offset(neighbours: &[Neighbour], bend: f64, arc: f64) -> f64 {
-    bent_line(neighbours, bend, arc).fit().map_or(0.0, |f| f.0)
-}
-
 fn bent_line(neighbours: &[Neighbour], bend: f64, arc: f64) -> LineSums {
     let mut line = LineSums::default();
     neighbours.iter().filter(|n| n.0.abs() <= arc).for_each(|n| line.add(n.0, n.1 - bend * n.0 * n.0));
@@ -1787,13 +1814,31 @@ const ARC_AGREEMENT: f64 = 3.0;
 #[derive(Default)]
 struct AlongFits {
     neighbours: Vec<Neighbour>,
+    /// The centre of each of `neighbours`.
+    indices: Vec<usize>,
     ends: Vec<usize>,
 }
 
 impl AlongFits {
-    fn push(&mut self, neighbours: &[Neighbour]) {
+    fn push(&mut self, neighbours: &[Neighbour], indices: &[usize]) {
         self.neighbours.extend_from_slice(neighbours);
+        self.indices.extend_from_slice(indices);
         self.ends.push(self.neighbours.len());
+    }
+
+    /// The same fits with only the neighbours whose centre is `kept`.
+    fn of_kept(self, kept: &[bool]) -> AlongFits {
+        let mut out = AlongFits::default();
+        let mut start = 0;
+        for &end in &self.ends {
+            for k in (start..end).filter(|&k| kept[self.indices[k]]) {
+                out.neighbours.push(self.neighbours[k]);
+                out.indices.push(self.indices[k]);
+            }
+            out.ends.push(out.neighbours.len());
+            start = end;
+        }
+        out
     }
 
     /// The neighbours of the `k`-th point pushed.

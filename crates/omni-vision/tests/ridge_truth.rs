@@ -438,8 +438,8 @@ fn bench_scene(
 /// 0.015 px RMS and 0.005 px of bias on plane, cylinder and sphere over 48 stripe positions,
 /// the plane's stripe covered. The along-stripe fit up to ±10 px takes its longer arcs only
 /// where the stripe's shape allows them, through the stripe's kept points only: alone / ±3 /
-/// ±10, plane 0.0114 / 0.0082 / 0.0056 px, cylinder 0.0122 / 0.0100 / 0.0119, sphere 0.0141 /
-/// 0.0143 / 0.0152 (a single arc of ±10 px gave 0.10 px; fitted through the profiles a
+/// ±10, plane 0.0114 / 0.0082 / 0.0056 px, cylinder 0.0122 / 0.0097 / 0.0109, sphere 0.0141 /
+/// 0.0135 / 0.0143 (a single arc of ±10 px gave 0.10 px; fitted through the profiles a
 /// stripe's end refused too, ±3 gave 0.0257 on the cylinder and 0.0225 on the sphere).
 /// Asserted: either fit within 1.1 × the RMS alone and ±10 within 1.25 × ±3's, the plane's ±10
 /// ≤ 0.6 × its RMS alone.

@@ -743,7 +743,7 @@ impl RidgeDetector {
         // frame's noise) are known.
         let mut along_fits = AlongFits::default();
         for i in 0..centres.len() {
-            if !neighbours_on_the_stripe(&grid, centres, i, reach, &mut stripes, (&mut neighbours, &mut indices)) {
+            if !neighbours_on_the_stripe(&grid, centres, i, reach, &mut stripes, &mut neighbours, &mut indices) {
                 continue;
             }
             let Some(point) = self.on_its_stripe(i, &centres[i], &neighbours, widest) else { continue };
@@ -752,18 +752,20 @@ impl RidgeDetector {
             }
             kept.push(point);
         }
-        if along > 0.0 {
-            fit_along_kept(&mut kept, along_fits, centres.len(), along);
-        }
+        let fitted = kept.iter().map(|k| k.index).collect::<Vec<usize>>();
         let saturated = |i: usize| centres[i].point.quality & quality::SATURATED != 0;
         keep_steadily_lopsided(&mut kept, &mut stripes, scale, saturated);
+        if along > 0.0 {
+            let along_fits = along_fits.of_kept(&fitted, &kept, centres.len());
+            fit_along_kept(&mut kept, along_fits, along);
+        }
         self.corrected(centres, kept, &mut stripes, scale)
     }
 
     /// The stripe's point at `centre` (index `i`) with its `neighbours` on the stripe, if it
     /// passes the checks that need them: a stripe long enough, going on past it, a width like
     /// its neighbours' and not a lit area's; with the stripe's bend, shape and lopsidedness
-    /// there, and the along-stripe fit's offset where one arc does.
+    /// there (the along-stripe fit's offset comes once the points kept are known).
     fn on_its_stripe(&self, i: usize, c: &Centre, neighbours: &[Neighbour], widest: f64) -> Option<OnStripe> {
         let along = self.params.along_stripe_px;
         let shape_half_arc = SHAPE_HALF_ARC_PX.max(2.0 * along);
@@ -886,8 +888,7 @@ struct OnStripe {
 }
 
 /// Fills `out` with centre `i`'s neighbours on its stripe within `reach` px (`indices` with
-/// theirs) and joins it to
-/// those within [`SHAPE_HALF_ARC_PX`] in `stripes`; `false` where another centre measured the
+/// their centres) and joins it to those within [`SHAPE_HALF_ARC_PX`] in `stripes`; `false` where another centre measured the
 /// same crossing and is kept instead (two seeds of one crossing: a run broken by speckle, a
 /// stripe at 45° seen from a row and a column; the brighter, then the first, is kept).
 fn neighbours_on_the_stripe(
@@ -896,7 +897,8 @@ fn neighbours_on_the_stripe(
     i: usize,
     reach: f64,
     stripes: &mut Stripes,
-    (out, indices): (&mut Vec<Neighbour>, &mut Vec<usize>),
+    out: &mut Vec<Neighbour>,
+    indices: &mut Vec<usize>,
 ) -> bool {
     let c = &centres[i];
     let (px, py) = (c.point.u, c.point.v);
@@ -936,22 +938,19 @@ fn neighbours_on_the_stripe(
     !duplicate
 }
 
-/// The along-stripe fit's offset of each of `kept` (whose neighbours are `along_fits`, one entry
-/// each, among `centres` centres) over up to ±`along` px, through the neighbours that were kept
-/// themselves: the centres a stripe's end refused (its last profiles, those beyond it that a
-/// silhouette's edge or a surface's turn spoils) would pull the fit towards them.
-fn fit_along_kept(kept: &mut [OnStripe], along_fits: AlongFits, centres: usize, along: f64) {
-    let mut is_kept = vec![false; centres];
-    for k in kept.iter() {
-        is_kept[k.index] = true;
-    }
-    let along_fits = along_fits.of_kept(&is_kept);
+/// The along-stripe fit's offset of each of `kept` over up to ±`along` px, through its
+/// neighbours that were kept themselves (`along_fits`, one entry each, [`AlongFits::of_kept`]):
+/// the centres a stripe's end refused (its last profiles, those beyond it that a silhouette's
+/// edge or a surface's turn spoils) would pull the fit towards them. The blur's pull still
+/// takes the stripe's bend from every measured neighbour: beyond an end they trace its course
+/// well enough, though not where its last points lie.
+fn fit_along_kept(kept: &mut [OnStripe], along_fits: AlongFits, along: f64) {
     if along > SHAPE_HALF_ARC_PX {
         fit_longer_arcs(kept, &along_fits, along);
         return;
     }
-    // One arc (±3 px or less): the line once the bend of the parabola over twice the arc is
-    // taken out.
+    // One arc (±3 px or less): the line once the bend of the parabola over ±max(3, 2 × the
+    // arc) px is taken out.
     for (k, point) in kept.iter_mut().enumerate() {
         if point.curvature.is_some() {
             point.offset = arc_offset(along_fits.of(k), along).map_or(0.0, |(offset, _)| offset);
@@ -1814,7 +1813,7 @@ const ARC_AGREEMENT: f64 = 3.0;
 #[derive(Default)]
 struct AlongFits {
     neighbours: Vec<Neighbour>,
-    /// The centre of each of `neighbours`.
+    /// The index of each of `neighbours` among the points linked.
     indices: Vec<usize>,
     ends: Vec<usize>,
 }
@@ -1826,16 +1825,24 @@ impl AlongFits {
         self.ends.push(self.neighbours.len());
     }
 
-    /// The same fits with only the neighbours whose centre is `kept`.
-    fn of_kept(self, kept: &[bool]) -> AlongFits {
+    /// The fits of the points of `kept` (a subset of `fitted`, the centres whose fits these are,
+    /// in the same order), each with only the neighbours that are in `kept` too; `centres`
+    /// centres in all.
+    fn of_kept(self, fitted: &[usize], kept: &[OnStripe], centres: usize) -> AlongFits {
+        let mut is_kept = vec![false; centres];
+        for k in kept {
+            is_kept[k.index] = true;
+        }
         let mut out = AlongFits::default();
         let mut start = 0;
-        for &end in &self.ends {
-            for k in (start..end).filter(|&k| kept[self.indices[k]]) {
-                out.neighbours.push(self.neighbours[k]);
-                out.indices.push(self.indices[k]);
+        for (&end, &owner) in self.ends.iter().zip(fitted) {
+            if is_kept[owner] {
+                for k in (start..end).filter(|&k| is_kept[self.indices[k]]) {
+                    out.neighbours.push(self.neighbours[k]);
+                    out.indices.push(self.indices[k]);
+                }
+                out.ends.push(out.neighbours.len());
             }
-            out.ends.push(out.neighbours.len());
             start = end;
         }
         out

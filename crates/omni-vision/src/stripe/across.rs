@@ -752,7 +752,8 @@ impl RidgeDetector {
             }
             kept.push(point);
         }
-        let fitted = kept.iter().map(|k| k.index).collect::<Vec<usize>>();
+        // The centres whose neighbours `along_fits` holds, before the judgement below drops some.
+        let fitted: Vec<usize> = if along > 0.0 { kept.iter().map(|k| k.index).collect() } else { Vec::new() };
         let saturated = |i: usize| centres[i].point.quality & quality::SATURATED != 0;
         keep_steadily_lopsided(&mut kept, &mut stripes, scale, saturated);
         if along > 0.0 {
@@ -888,9 +889,10 @@ struct OnStripe {
 }
 
 /// Fills `out` with centre `i`'s neighbours on its stripe within `reach` px (`indices` with
-/// their centres) and joins it to those within [`SHAPE_HALF_ARC_PX`] in `stripes`; `false` where another centre measured the
-/// same crossing and is kept instead (two seeds of one crossing: a run broken by speckle, a
-/// stripe at 45° seen from a row and a column; the brighter, then the first, is kept).
+/// their centres) and joins it to those within [`SHAPE_HALF_ARC_PX`] in `stripes`; `false`
+/// where another centre measured the same crossing and is kept instead (two seeds of one
+/// crossing: a run broken by speckle, a stripe at 45° seen from a row and a column; the
+/// brighter, then the first, is kept).
 fn neighbours_on_the_stripe(
     grid: &Grid,
     centres: &[Centre],

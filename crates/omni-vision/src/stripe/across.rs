@@ -748,16 +748,14 @@ impl RidgeDetector {
             }
             let Some(point) = self.on_its_stripe(i, &centres[i], &neighbours, widest) else { continue };
             if along > 0.0 {
-                along_fits.push(&neighbours, &indices);
+                along_fits.push(i, &neighbours, &indices);
             }
             kept.push(point);
         }
-        // The centres whose neighbours `along_fits` holds, before the judgement below drops some.
-        let fitted: Vec<usize> = if along > 0.0 { kept.iter().map(|k| k.index).collect() } else { Vec::new() };
         let saturated = |i: usize| centres[i].point.quality & quality::SATURATED != 0;
         keep_steadily_lopsided(&mut kept, &mut stripes, scale, saturated);
         if along > 0.0 {
-            let along_fits = along_fits.of_kept(&fitted, &kept, centres.len());
+            let along_fits = along_fits.of_kept(&kept, centres.len());
             fit_along_kept(&mut kept, along_fits, along);
         }
         self.corrected(centres, kept, &mut stripes, scale)
@@ -1302,7 +1300,7 @@ fn fit_along_stripe(points: &mut [Linked], along: f64) {
                 indices.push(j);
             }
         });
-        along_fits.push(&neighbours, &indices);
+        along_fits.push(along_fits.ends.len(), &neighbours, &indices);
     }
     let shifts: Vec<f64> = along_fits
         .offsets(along)
@@ -1818,32 +1816,35 @@ struct AlongFits {
     /// The index of each of `neighbours` among the points linked.
     indices: Vec<usize>,
     ends: Vec<usize>,
+    /// The point whose neighbours end at each of `ends`.
+    owners: Vec<usize>,
 }
 
 impl AlongFits {
-    fn push(&mut self, neighbours: &[Neighbour], indices: &[usize]) {
+    fn push(&mut self, owner: usize, neighbours: &[Neighbour], indices: &[usize]) {
         self.neighbours.extend_from_slice(neighbours);
         self.indices.extend_from_slice(indices);
         self.ends.push(self.neighbours.len());
+        self.owners.push(owner);
     }
 
-    /// The fits of the points of `kept` (a subset of `fitted`, the centres whose fits these are,
-    /// in the same order), each with only the neighbours that are in `kept` too; `centres`
-    /// centres in all.
-    fn of_kept(self, fitted: &[usize], kept: &[OnStripe], centres: usize) -> AlongFits {
+    /// The fits of the points of `kept` (pushed in the same order, some of them since dropped),
+    /// each with only the neighbours that are in `kept` too; `centres` centres in all.
+    fn of_kept(self, kept: &[OnStripe], centres: usize) -> AlongFits {
         let mut is_kept = vec![false; centres];
         for k in kept {
             is_kept[k.index] = true;
         }
         let mut out = AlongFits::default();
         let mut start = 0;
-        for (&end, &owner) in self.ends.iter().zip(fitted) {
+        for (&end, &owner) in self.ends.iter().zip(&self.owners) {
             if is_kept[owner] {
                 for k in (start..end).filter(|&k| is_kept[self.indices[k]]) {
                     out.neighbours.push(self.neighbours[k]);
                     out.indices.push(self.indices[k]);
                 }
                 out.ends.push(out.neighbours.len());
+                out.owners.push(owner);
             }
             start = end;
         }

@@ -244,8 +244,9 @@ fn options() -> RenderOptions {
 /// mm. With the laser's cross-section known (`--laser-tail 0.17,4`) the unclipped pieces are
 /// led from their tops to the sheet's peak by it, and the clipped ones from their plateau's
 /// centre by its edges' distance against the width of the stripe's unclipped profiles on the
-/// black squares nearby: 0.007-0.027° and 0.007-0.044 mm, all five within the target's 0.05 mm,
-/// three within its 0.02°; the frames' mean offsets then spread from -0.07 to +0.14 px. Every
+/// black squares nearby: 0.003-0.028° and 0.011-0.043 mm, all five within the target's 0.05 mm,
+/// three within its 0.02°; the frames' mean offsets still differ, by -0.07 to +0.14 px before
+/// the tail's side was voted by signs (docs/DECISIONS.md). Every
 /// frame's board is posed from its corners, and a partial board whose corners fit at 0.39 px
 /// (the others 0.03-0.05) weighs little in the fit, so no frame pulls the plane: leave-one-out
 /// RMS 1.02-1.14 × the in-sample one. The bounds guard these figures.

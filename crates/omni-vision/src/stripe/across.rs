@@ -1173,14 +1173,18 @@ fn lead_plateaus_to_sheet_peak<'a>(
 /// as clipped alike ([`lead_plateaus_to_sheet_peak`]).
 const SAME_CLIP_EDGES: f64 = 0.3;
 
-/// Half the arc (px) over which a stripe's leans tell on which side its tail lies.
+/// Half the arc (px) over which a stripe's profiles tell on which side its tail lies.
 const TAIL_SIDE_HALF_ARC_PX: f64 = 48.0;
 
 /// The side of each point's stripe (±1 along its normal) where the laser's tail lies, where
-/// a point still has a [`Linked::tail_offset`] to go: the side its stripe's profiles within
-/// ±[`TAIL_SIDE_HALF_ARC_PX`] point to on average ([`Centre::side_lean`]: a lopsided profile's
-/// windowed centroid lies beyond its top on the tail's side); 0 where they do not tell. Empty
-/// where no point has one.
+/// a point still has a [`Linked::tail_offset`] to go: the side most of its stripe's profiles
+/// within ±[`TAIL_SIDE_HALF_ARC_PX`] point to, each casting two votes, the signs of its
+/// [`Centre::side_lean`] (a lopsided profile's windowed centroid lies beyond its top on the
+/// tail's side) and of its [`Centre::background_excess`] (the tail's light raises the
+/// background on its side); 0 where the votes tie. Signs, not sizes: under speckle a few
+/// profiles' tops lean far the wrong way and would outweigh the rest, and the background
+/// tells the side more often than the top does (docs/DECISIONS.md). Empty where no point has
+/// one.
 fn tail_sides(points: &[Linked]) -> Vec<f64> {
     if points.iter().all(|l| l.tail_offset == 0.0) {
         return Vec::new();
@@ -1191,19 +1195,29 @@ fn tail_sides(points: &[Linked]) -> Vec<f64> {
 /// [`tail_sides`] of every point.
 fn tail_sides_of(points: &[Linked]) -> Vec<f64> {
     let grid = Grid::from_placed(points.iter().map(Linked::placed), TAIL_SIDE_HALF_ARC_PX);
+    let sign = |x: f64| {
+        if x > 0.0 {
+            1.0
+        } else if x < 0.0 {
+            -1.0
+        } else {
+            0.0
+        }
+    };
     points
         .iter()
         .map(|l| {
             let here = l.placed();
-            let mut sum = 0.0;
+            let mut votes = 0.0;
             grid.visit(here[0], here[1], |j, other| {
                 if let Some(lean) = points[j].side_lean
                     && let Some((_, _, same_way)) = on_the_stripe(&here, other, TAIL_SIDE_HALF_ARC_PX)
                 {
-                    sum += if same_way { lean } else { -lean };
+                    let vote = sign(lean) + sign(points[j].background_excess);
+                    votes += if same_way { vote } else { -vote };
                 }
             });
-            if sum == 0.0 { 0.0 } else { sum.signum() }
+            sign(votes)
         })
         .collect()
 }

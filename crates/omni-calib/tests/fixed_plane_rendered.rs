@@ -245,11 +245,11 @@ fn options() -> RenderOptions {
 /// led from their tops to the sheet's peak by it, and the clipped ones from their plateau's
 /// centre by its edges' distance against the width of the stripe's unclipped profiles on the
 /// black squares nearby: 0.003-0.028° and 0.011-0.043 mm, all five within the target's 0.05 mm,
-/// three within its 0.02°; the frames' mean offsets still differ, by -0.07 to +0.14 px before
-/// the tail's side was voted by signs (docs/DECISIONS.md). Every
-/// frame's board is posed from its corners, and a partial board whose corners fit at 0.39 px
-/// (the others 0.03-0.05) weighs little in the fit, so no frame pulls the plane: leave-one-out
-/// RMS 1.02-1.14 × the in-sample one. The bounds guard these figures.
+/// three within its 0.02°; the frames' mean offsets still differ from frame to frame
+/// (docs/DECISIONS.md). Every frame's board is posed from its corners, and a partial board
+/// whose corners fit at 0.39 px (the others 0.03-0.05) weighs little in the fit, so no frame
+/// pulls the plane: leave-one-out RMS 1.02-1.14 × the in-sample one. The bounds guard these
+/// figures.
 #[test]
 fn rendered_fixed_plane_from_10_frames_through_the_detectors() {
     let s = setup(1024, 7, 5, 30.0);

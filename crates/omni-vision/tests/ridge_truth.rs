@@ -1087,10 +1087,9 @@ fn a_known_laser_profile_leads_narrow_lopsided_stripes_to_the_sheets_peak() {
 /// lens's blur known, 8 positions): too speckled for their top shape's median to stand out from
 /// the noise, so without the laser's profile their centres stay at their tops' centroids, off
 /// towards the tail; with it, led on to the sheet's peak. Measured along ±3 px, RMS / offset
-/// (px): without 0.096 / +0.034; with 0.089 / +0.012 (0.092 / +0.015 while the tail's side was
-/// voted by the sizes of the tops' leans: a stretch of 51 points in one frame had it wrong).
-/// Asserted: the offset along ±3 within 0.02 px with the profile and at least 0.015 px smaller
-/// than without; the spread stays the speckle's (the 0.05 px is not met).
+/// (px): without 0.096 / +0.034; with 0.089 / +0.012. Asserted: the offset along ±3 within
+/// 0.02 px with the profile and at least 0.015 px smaller than without; the spread stays the
+/// speckle's (the 0.05 px is not met).
 #[test]
 fn a_known_laser_profile_takes_most_of_a_speckled_stripes_offset() {
     let optics = omni_simulator::Optics { speckle_patterns: 16, ..omni_simulator::Optics::paper() };

@@ -227,19 +227,19 @@ fn options() -> RenderOptions {
 }
 
 /// Issue 34's virtual target, 0.02° and 0.05 mm at 300 mm from 10 frames, over five scenes
-/// (seeds 34, 1-4: board poses and photon noise; the idealised sensor has no speckle). The chain
-/// up to the stripe meets it: with the detected corners and the true stripe pixels the plane
-/// comes back within 0.012° and 0.011 mm, and so it does from the detector's own points moved
-/// onto the true stripe (asserted): which points it finds, and how many, do not limit the plane.
-/// With omni-ridge's stripe points as found (the lens's blur known, as from a camera file's
-/// optics) it does not: 0.008-0.027° and 0.072-0.095 mm. Their offset towards the real
+/// (seeds 34, 1-4: board poses and photon noise; the idealised sensor has no speckle). The
+/// chain up to the stripe meets it: with the detected corners and the true stripe pixels the
+/// plane comes back within 0.012° and 0.011 mm, and so it does from the detector's own points
+/// moved onto the true stripe (asserted): which points it finds, and how many, do not limit the
+/// plane. With omni-ridge's stripe points as found (the lens's blur known, as from a camera
+/// file's optics) it does not: 0.008-0.027° and 0.072-0.095 mm. Their offset towards the real
 /// profile's tail, about 0.05 px at 1.9 mm per px, moves the plane; how that offset differs
 /// from frame to frame tilts it (a uniform shift of 0.05 px moves the snapped points' plane by
-/// 0.07-0.08 mm, its normal by under 0.01°). The board's squares cut the stripe into pieces too
-/// short for their top's shape to be told from noise, so only the profiles' tops, not the
-/// light's peak under the blur, are found; and half the stripe points are clipped in the red,
-/// where a plateau's centre lies towards the tail (docs/DECISIONS.md). Without the 3 px
-/// clearance from the squares' edges (where the stripe's profile falls on white and black at
+/// 0.07-0.08 mm and leaves its normal within 0.01°). The board's squares cut the stripe into
+/// pieces too short for their top's shape to be told from noise, so only the profiles' tops,
+/// not the light's peak under the blur, are found; and half the stripe points are clipped in
+/// the red, where a plateau's centre lies towards the tail (docs/DECISIONS.md). Without the 3
+/// px clearance from the squares' edges (where the stripe's profile falls on white and black at
 /// once, its centres scatter by 0.35-0.76 px) the seeds spread over 0.018-0.17° and 0.021-0.35
 /// mm. With the laser's cross-section known (`--laser-tail 0.17,4`) the unclipped pieces are
 /// led from their tops to the sheet's peak by it, and the clipped ones from their plateau's

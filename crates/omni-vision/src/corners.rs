@@ -543,36 +543,40 @@ fn canonical_handedness(pos: HashMap<Cell, [f64; 2]>) -> HashMap<Cell, [f64; 2]>
 }
 
 /// Colour of each complete grid cell (keyed by its lowest corner): true = dark. `None` if the
-/// colours do not alternate like a checkerboard.
+/// colours do not alternate like a checkerboard: fewer than 85 % of the pairs of side-by-side
+/// cells have the darker one where the parity pattern puts it. Each cell is compared with its
+/// neighbours, not with one threshold over the board: the light falls off across a board (a
+/// lamp to one side, vignetting), so a white square at one end can be darker than the mean of
+/// the whites, and a laser stripe across the board lights the black squares it crosses
+/// brighter than any white one; neither changes which of two adjacent squares is darker,
+/// except across the stripe.
 fn cell_colours(img: &GrayF32, pos: &HashMap<Cell, [f64; 2]>) -> Option<HashMap<Cell, bool>> {
-    let mut values = Vec::new();
+    let mut values = HashMap::new();
     for (&(i, j), a) in pos {
         let (Some(b), Some(c), Some(d)) = (pos.get(&(i + 1, j)), pos.get(&(i, j + 1)), pos.get(&(i + 1, j + 1))) else {
             continue;
         };
         let cx = 0.25 * (a[0] + b[0] + c[0] + d[0]);
         let cy = 0.25 * (a[1] + b[1] + c[1] + d[1]);
-        values.push(((i, j), img.bilinear(cx, cy)));
+        values.insert((i, j), img.bilinear(cx, cy));
     }
-    if values.len() < 2 {
+    // Over the pairs of side-by-side cells: how many have their even-parity cell the darker.
+    let (mut pairs, mut even_darker) = (0usize, 0usize);
+    for (&(i, j), &v) in &values {
+        for next in [(i + 1, j), (i, j + 1)] {
+            if let Some(&w) = values.get(&next) {
+                let (even, odd) = if (i + j).rem_euclid(2) == 0 { (v, w) } else { (w, v) };
+                pairs += 1;
+                even_darker += usize::from(even < odd);
+            }
+        }
+    }
+    let even_dark = 2 * even_darker >= pairs;
+    let agree = if even_dark { even_darker } else { pairs - even_darker };
+    if pairs == 0 || (agree as f64) < 0.85 * pairs as f64 {
         return None;
     }
-    // Split dark/bright so that the parity pattern explains the most cells.
-    let even_mean = mean(values.iter().filter(|v| (v.0.0 + v.0.1).rem_euclid(2) == 0).map(|v| v.1));
-    let odd_mean = mean(values.iter().filter(|v| (v.0.0 + v.0.1).rem_euclid(2) == 1).map(|v| v.1));
-    let threshold = 0.5 * (even_mean + odd_mean);
-    let even_dark = even_mean < odd_mean;
-    let agree =
-        values.iter().filter(|v| ((v.1 < threshold) == ((v.0.0 + v.0.1).rem_euclid(2) == 0)) == even_dark).count();
-    if (agree as f64) < 0.85 * values.len() as f64 {
-        return None;
-    }
-    Some(values.into_iter().map(|(c, _)| (c, ((c.0 + c.1).rem_euclid(2) == 0) == even_dark)).collect())
-}
-
-fn mean(it: impl Iterator<Item = f32>) -> f32 {
-    let (s, n) = it.fold((0.0, 0), |(s, n), v| (s + v, n + 1));
-    if n == 0 { f32::NAN } else { s / n as f32 }
+    Some(values.into_keys().map(|c| (c, ((c.0 + c.1).rem_euclid(2) == 0) == even_dark)).collect())
 }
 
 /// The four proper rotations of grid indices.

@@ -208,3 +208,39 @@ fn the_lens_blur_is_read_off_rendered_boards() {
         }
     }
 }
+
+/// A 9 × 6 grid of corners 20 px apart over cells whose grey `value(i, j)` takes, as an image.
+fn cells_image(value: impl Fn(i32, i32) -> f32) -> (GrayF32, HashMap<Cell, [f64; 2]>) {
+    let (side, origin) = (20usize, 10usize);
+    let mut img = GrayF32::new(origin * 2 + 8 * side, origin * 2 + 5 * side);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let cell = |v: usize| ((v.saturating_sub(origin)) / side).min(7) as i32;
+            img.data[y * img.width + x] = value(cell(x), cell(y).min(4));
+        }
+    }
+    let corner = |k: i32| (origin + k as usize * side) as f64;
+    let pos = (0..=8).flat_map(|i| (0..=5).map(move |j| ((i, j), [corner(i), corner(j)]))).collect();
+    (img, pos)
+}
+
+/// The light falls off across the board (its white squares from 250 to 40 grey levels) and a
+/// laser stripe lights one row of squares (its black ones to 140): a threshold between the
+/// mean black and the mean white square puts a quarter of the squares on the wrong side, but
+/// side by side the darker square is where the pattern puts it in 63 of 67 pairs. Cells that
+/// do not alternate (a plain ramp) are refused.
+#[test]
+fn checker_colours_are_told_by_neighbours_under_uneven_light_and_a_laser_stripe() {
+    let lit_and_falling = |i: i32, j: i32| match ((i + j) % 2 == 0, j == 2) {
+        (true, true) => 140.0,
+        (true, false) => 10.0,
+        (false, true) => 250.0,
+        (false, false) => 250.0 - 30.0 * i as f32,
+    };
+    let (img, pos) = cells_image(lit_and_falling);
+    let colours = cell_colours(&img, &pos).expect("a checkerboard");
+    assert_eq!(colours.len(), 40);
+    assert!(colours.iter().all(|(&(i, j), &dark)| dark == ((i + j) % 2 == 0)), "{colours:?}");
+    let (ramp, pos) = cells_image(|i, j| 20.0 * (i + j) as f32);
+    assert!(cell_colours(&ramp, &pos).is_none());
+}

@@ -8,6 +8,7 @@
 //! * Point clouds as PLY ([`ply`]): binary little-endian or ASCII, `x y z` float or double plus
 //!   typed scalars; for other programs also PCD ([`pcd`]) and LAS 1.4 ([`las`]), chosen by
 //!   [`export::CloudFormat`], and ROS 2 bags of `PointCloud2` messages ([`rosbag`]).
+//! * Frames as PNG ([`png`]: written to be read fast).
 //! * [`io`]: `-` for stdin/stdout and atomic writes (temporary file, then rename; devices and
 //!   FIFOs written straight into).
 //!
@@ -22,6 +23,7 @@ pub mod las;
 pub mod odometry;
 pub mod pcd;
 pub mod ply;
+pub mod png;
 pub mod rig;
 pub mod rosbag;
 pub mod scene;

@@ -50,10 +50,11 @@ pub struct BlankRenderer {
 
 impl FrameRenderer for BlankRenderer {
     fn render(&mut self, _shot: &Shot) -> Result<Vec<u8>, String> {
-        let img = image::GrayImage::from_pixel(self.width, self.height, image::Luma([40]));
-        let mut bytes = std::io::Cursor::new(Vec::new());
-        img.write_to(&mut bytes, image::ImageFormat::Png).map_err(|e| e.to_string())?;
-        Ok(bytes.into_inner())
+        let pixels = vec![40u8; (self.width * self.height) as usize];
+        let mut bytes = Vec::new();
+        omni_formats::png::write_png(&mut bytes, &pixels, self.width, self.height, image::ExtendedColorType::L8)
+            .map_err(|e| e.to_string())?;
+        Ok(bytes)
     }
 }
 

@@ -112,7 +112,7 @@ fn encode_parts(frame: &RawFrame, format: FrameFormat) -> std::io::Result<(Vec<u
             Ok((head, body))
         }
         FrameFormat::Png => {
-            let mut buf = std::io::Cursor::new(Vec::new());
+            let mut buf = Vec::new();
             let (bytes, color) = if frame.bit_depth == 16 {
                 let ne: Vec<u8> = frame.data[..2 * n]
                     .chunks_exact(2)
@@ -122,16 +122,9 @@ fn encode_parts(frame: &RawFrame, format: FrameFormat) -> std::io::Result<(Vec<u
             } else {
                 (Cow::Borrowed(&frame.data[..n]), image::ExtendedColorType::L8)
             };
-            image::write_buffer_with_format(
-                &mut buf,
-                &bytes,
-                frame.width,
-                frame.height,
-                color,
-                image::ImageFormat::Png,
-            )
-            .map_err(std::io::Error::other)?;
-            Ok((buf.into_inner(), Cow::Borrowed(&[])))
+            omni_formats::png::write_png(&mut buf, &bytes, frame.width, frame.height, color)
+                .map_err(std::io::Error::other)?;
+            Ok((buf, Cow::Borrowed(&[])))
         }
     }
 }

@@ -2,7 +2,6 @@
 //! colour frame's luma) and colour frames ([`RgbFrame`]), and their files: PNG, binary PGM, and
 //! JPEG with 4:2:0 chroma ([`FrameFormat`]).
 
-use image::ImageEncoder;
 use std::path::Path;
 
 /// A grey image as the camera delivers it: values in 0..=2^bit_depth − 1, row-major.
@@ -48,14 +47,13 @@ impl Frame16 {
     }
 
     fn encode_png<W: std::io::Write>(&self, w: W) -> image::ImageResult<()> {
-        let enc = image::codecs::png::PngEncoder::new(w);
         if self.bit_depth == 8 {
             let bytes: Vec<u8> = self.data.iter().map(|&v| v.min(255) as u8).collect();
-            enc.write_image(&bytes, self.width, self.height, image::ExtendedColorType::L8)
+            omni_formats::png::write_png(w, &bytes, self.width, self.height, image::ExtendedColorType::L8)
         } else {
             // The encoder takes 16-bit samples in native byte order.
             let bytes: Vec<u8> = self.data.iter().flat_map(|v| v.to_ne_bytes()).collect();
-            enc.write_image(&bytes, self.width, self.height, image::ExtendedColorType::L16)
+            omni_formats::png::write_png(w, &bytes, self.width, self.height, image::ExtendedColorType::L16)
         }
     }
 
@@ -148,13 +146,24 @@ impl RgbFrame {
         match format {
             FrameFormat::Png => {
                 let mut out = Vec::new();
-                let enc = image::codecs::png::PngEncoder::new(&mut out);
                 let result = if self.bit_depth == 8 {
                     let bytes: Vec<u8> = self.data.iter().map(|v| (*v).min(255) as u8).collect();
-                    enc.write_image(&bytes, self.width, self.height, image::ExtendedColorType::Rgb8)
+                    omni_formats::png::write_png(
+                        &mut out,
+                        &bytes,
+                        self.width,
+                        self.height,
+                        image::ExtendedColorType::Rgb8,
+                    )
                 } else {
                     let bytes: Vec<u8> = self.data.iter().flat_map(|v| v.to_ne_bytes()).collect();
-                    enc.write_image(&bytes, self.width, self.height, image::ExtendedColorType::Rgb16)
+                    omni_formats::png::write_png(
+                        &mut out,
+                        &bytes,
+                        self.width,
+                        self.height,
+                        image::ExtendedColorType::Rgb16,
+                    )
                 };
                 result.map_err(|e| e.to_string())?;
                 Ok(out)

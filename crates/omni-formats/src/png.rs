@@ -20,6 +20,25 @@ pub fn write_png<W: std::io::Write>(
     PngEncoder::new_with_quality(out, CompressionType::Fast, FilterType::Up).write_image(pixels, width, height, colour)
 }
 
+/// `samples` (row-major, of `bit_depth` bits: 8 or fewer written as 8-bit samples, more as
+/// 16-bit ones) as a PNG of `width` × `height` px to `out`, of colour type `types[0]` for 8-bit
+/// samples and `types[1]` for 16-bit ones (grey or RGB).
+pub fn write_samples_png<W: std::io::Write>(
+    out: W,
+    samples: &[u16],
+    bit_depth: u8,
+    (width, height): (u32, u32),
+    types: [image::ExtendedColorType; 2],
+) -> image::ImageResult<()> {
+    if bit_depth <= 8 {
+        let bytes: Vec<u8> = samples.iter().map(|&v| v.min(255) as u8).collect();
+        write_png(out, &bytes, width, height, types[0])
+    } else {
+        let bytes: Vec<u8> = samples.iter().flat_map(|v| v.to_ne_bytes()).collect();
+        write_png(out, &bytes, width, height, types[1])
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -48,7 +48,7 @@ impl Frame16 {
 
     fn encode_png<W: std::io::Write>(&self, w: W) -> image::ImageResult<()> {
         use image::ExtendedColorType::{L8, L16};
-        write_samples_png(w, &self.data, self.bit_depth, (self.width, self.height), [L8, L16])
+        omni_formats::png::write_samples_png(w, &self.data, self.bit_depth, (self.width, self.height), [L8, L16])
     }
 
     /// Writes the PNG atomically (temporary file, then rename; `-` = stdout).
@@ -141,8 +141,14 @@ impl RgbFrame {
             FrameFormat::Png => {
                 use image::ExtendedColorType::{Rgb8, Rgb16};
                 let mut out = Vec::new();
-                write_samples_png(&mut out, &self.data, self.bit_depth, (self.width, self.height), [Rgb8, Rgb16])
-                    .map_err(|e| e.to_string())?;
+                omni_formats::png::write_samples_png(
+                    &mut out,
+                    &self.data,
+                    self.bit_depth,
+                    (self.width, self.height),
+                    [Rgb8, Rgb16],
+                )
+                .map_err(|e| e.to_string())?;
                 Ok(out)
             }
             FrameFormat::Pgm => Err("PGM holds grey frames only: write a colour frame as PNG or JPEG".into()),
@@ -176,25 +182,6 @@ impl RgbFrame {
                 RgbFrame { width, height, data, bit_depth: 8 }
             }
         })
-    }
-}
-
-/// `samples` (row-major, `bit_depth` 8 or 16 bits) written as a PNG of `width` × `height` px
-/// whose colour type is `types[0]` for 8-bit samples, `types[1]` for 16-bit ones.
-fn write_samples_png<W: std::io::Write>(
-    out: W,
-    samples: &[u16],
-    bit_depth: u8,
-    (width, height): (u32, u32),
-    types: [image::ExtendedColorType; 2],
-) -> image::ImageResult<()> {
-    if bit_depth == 8 {
-        let bytes: Vec<u8> = samples.iter().map(|&v| v.min(255) as u8).collect();
-        omni_formats::png::write_png(out, &bytes, width, height, types[0])
-    } else {
-        // The encoder takes 16-bit samples in native byte order.
-        let bytes: Vec<u8> = samples.iter().flat_map(|v| v.to_ne_bytes()).collect();
-        omni_formats::png::write_png(out, &bytes, width, height, types[1])
     }
 }
 

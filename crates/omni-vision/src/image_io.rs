@@ -411,15 +411,10 @@ pub fn write_rgb_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result
 /// Writes a grey image as PNG (8- or 16-bit as its `bit_depth` says), atomically.
 pub fn write_gray_png(path: &Path, img: &GrayImage) -> Result<(), Error> {
     omni_formats::io::write_atomic(path, |w| {
+        use image::ExtendedColorType::{L8, L16};
         let mut buf = Vec::new();
-        if img.bit_depth <= 8 {
-            let bytes: Vec<u8> = img.data.iter().map(|&v| v.min(255) as u8).collect();
-            omni_formats::png::write_png(&mut buf, &bytes, img.width, img.height, image::ExtendedColorType::L8)
-        } else {
-            let bytes: Vec<u8> = img.data.iter().flat_map(|v| v.to_ne_bytes()).collect();
-            omni_formats::png::write_png(&mut buf, &bytes, img.width, img.height, image::ExtendedColorType::L16)
-        }
-        .map_err(std::io::Error::other)?;
+        omni_formats::png::write_samples_png(&mut buf, &img.data, img.bit_depth, (img.width, img.height), [L8, L16])
+            .map_err(std::io::Error::other)?;
         w.write_all(&buf)
     })
 }

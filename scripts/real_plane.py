@@ -41,7 +41,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_laser import BOARD_FRAMES, DATA, ROOT, STRIPE_FRAMES, reference_centres  # noqa: E402
 import receiver_models  # noqa: E402
 
-BOARD = {"format": "omniscan.board", "version": 1, "inner_cols": 9, "inner_rows": 6, "square_mm": 5, "margin_mm": 0}
+# The printed sheet's white border is flat and carries the stripe in five frames (im1, im2, im5,
+# im9, im15: 4-7 mm beyond the pattern); the sheet reaches 1.5 squares beyond the pattern or
+# more on the sides the stripe crosses (docs/DECISIONS.md, 2026-12-07).
+BOARD = {"format": "omniscan.board", "version": 1, "inner_cols": 9, "inner_rows": 6, "square_mm": 5, "margin_mm": 7.5}
 # The red laser's cross-section, measured on these frames (docs/DECISIONS.md, 2026-12-03):
 # 17 % of the light in a tail 4 core σ long.
 LASER_TAIL = "0.17,4"

@@ -150,7 +150,7 @@ impl ReadArgs {
 #[command(after_help = "How: in each frame the board's corners give its pose through the camera model (camera.json, \
 any kind, e.g. from omni-calib-receiver --model mei), the stripe detector finds the laser's centres over the whole \
 frame, and each centre's ray meets the board plane. Points inside the board's printed pattern (one square beyond \
-the outer inner corners, widened by --margin-mm) are points of the light plane. One plane is fitted to the points \
+the outer inner corners, widened by the board's white border: margin_mm in board.json, or --margin-mm) are points of the light plane. One plane is fitted to the points \
 of all frames robustly (least median of squares, Tukey reweighting), then to the inliers by least squares in \
 which each frame's points share its board's pose error (from the corners), so that a board posed less surely \
 pulls the plane less however many points it carries.
@@ -166,7 +166,8 @@ warning: a clipped stripe is read at its plateau's middle, towards a lopsided la
 or the laser's power for calibration.
 
 Frames whose board is not found, or whose board does not carry the stripe (fewer than --min-points points on it), \
-are named and skipped; fewer than two usable frames is an error (exit 1). A board file whose size most frames \
+are named and skipped, the latter with how many stripe points lie on the board's plane just beyond the pattern \
+(a stripe along the white border); fewer than two usable frames is an error (exit 1). A board file whose size most frames \
 contradict is an error naming the likely size.
 
 Examples:
@@ -212,8 +213,10 @@ struct FixedArgs {
     #[arg(long, value_name = "SHARE,LENGTH")]
     laser_tail: Option<omni_model::LaserProfile>,
     /// Keep stripe points up to this far outside the printed pattern (mm; negative: inside).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    margin_mm: f64,
+    /// Default: the board file's margin_mm, its white border, where a flat board carries the
+    /// stripe as well as on its squares.
+    #[arg(long, allow_negative_numbers = true)]
+    margin_mm: Option<f64>,
     /// Drop stripe points closer than this (px, as imaged) to a square's edge, where the stripe
     /// falls on a white and a black square at once and its centre moves (0: keep them).
     #[arg(long, default_value_t = 3.0, value_name = "PX", allow_negative_numbers = true)]
@@ -564,7 +567,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         ..Default::default()
     };
     ridge.validate().map_err(CliError::usage)?;
-    if !a.margin_mm.is_finite() {
+    if a.margin_mm.is_some_and(|m| !m.is_finite()) {
         return Err(CliError::usage("--margin-mm must be a finite number"));
     }
     if !(a.edge_clearance_px.is_finite() && a.edge_clearance_px >= 0.0) {
@@ -581,6 +584,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
     let (camera_file, camera) = CameraFile::load(&a.camera)?;
     let ridge = ridge.with_lens_blur_of(&camera_file).map_err(|e| format!("{}: {e}", a.camera.display()))?;
     let board: omni_formats::BoardFile = read_doc(&a.board)?;
+    let margin_mm = a.margin_mm.unwrap_or(board.margin_mm);
     let (paths, given) = match &a.stripes {
         Some(path) => {
             let (paths, stripes) = read_stripe_stream(path)?;
@@ -608,7 +612,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
     })?;
     let opts = FixedPlaneOptions {
         square_mm: board.square_mm,
-        margin_mm: a.margin_mm,
+        margin_mm,
         edge_clearance_px: a.edge_clearance_px,
         min_points: a.min_points,
         seed: 1,
@@ -631,7 +635,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         "frames": paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
         "channel": detect.colour.channel.to_string(),
         "stripes": a.stripes.as_deref().map(name),
-        "margin_mm": a.margin_mm,
+        "margin_mm": margin_mm,
         "edge_clearance_px": a.edge_clearance_px,
         "min_points": a.min_points,
         // The lens's blur the stripe detector removed from curved stripes; null: measured on each

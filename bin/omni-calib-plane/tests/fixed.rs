@@ -40,6 +40,10 @@ fn no_board_frame(dir: &Path) -> String {
 }
 
 fn run(dir: &Path, board_text: &str, frames: &[u32]) -> Output {
+    run_with(dir, board_text, frames, &[])
+}
+
+fn run_with(dir: &Path, board_text: &str, frames: &[u32], extra: &[&str]) -> Output {
     std::fs::write(dir.join("camera.json"), CAMERA).unwrap();
     std::fs::write(dir.join("board.json"), board_text).unwrap();
     let mut args: Vec<String> =
@@ -48,6 +52,7 @@ fn run(dir: &Path, board_text: &str, frames: &[u32]) -> Output {
             .map(|s| s.to_string())
             .collect();
     args.extend(["-o".into(), "scanner.json".into()]);
+    args.extend(extra.iter().map(|s| s.to_string()));
     args.extend(frames.iter().map(|&k| if k == NO_BOARD { no_board_frame(dir) } else { frame(k) }));
     Command::new(BIN).current_dir(dir).args(&args).output().unwrap()
 }
@@ -118,20 +123,48 @@ fn a_board_file_that_does_not_match_is_named() {
     assert!(!dir.path().join("scanner.json").exists());
 }
 
-/// im1's stripe runs on the paper's margin, off the printed pattern: its board is found but does
-/// not carry the stripe, so the frame is named with the reason and skipped. The two frames left
-/// give the plane (each frame's stripe lies in its board's plane, and im4 holds most points: the
-/// robust fit scores planes frame by frame, or it took im4's board plane for the light's).
+/// im1's stripe runs on the paper's white border, 6 mm above the printed pattern: with a board
+/// file that gives no border its board is found but does not carry the stripe, so the frame is
+/// named with the reason, and with how many stripe points lie how far beyond the pattern, and
+/// skipped. The two frames left give the plane (each frame's stripe lies in its board's plane,
+/// and im4 holds most points: the robust fit scores planes frame by frame, or it took im4's board
+/// plane for the light's). A board file that gives the border (margin_mm 7.5) uses im1 too, and
+/// `--margin-mm` overrides the file.
 #[test]
 fn a_board_that_does_not_carry_the_stripe_is_named_and_skipped() {
     let dir = tempfile::tempdir().unwrap();
+    let frames_used = |dir: &Path| {
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap();
+        report["report"]["frames"].as_array().unwrap().len()
+    };
     let out = run(dir.path(), &board(9, 6), &[3, 4, 1]);
     let (so, se) = (text(&out.stdout), text(&out.stderr));
     assert!(out.status.success(), "{se}");
-    assert!(so.contains("skipped") && so.contains("im1.png: the board does not carry the stripe: "), "{so}");
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
-    assert_eq!(report["report"]["frames"].as_array().unwrap().len(), 2);
+    let skipped = so
+        .lines()
+        .find(|l| l.contains("im1.png: the board does not carry the stripe: "))
+        .unwrap_or_else(|| panic!("{so}"));
+    // "…; 579 more lie beyond the printed pattern on the board's plane, the middle half 6.1 mm out: …"
+    let more: usize =
+        skipped.split("; ").nth(1).and_then(|t| t.split(' ').next()).and_then(|n| n.parse().ok()).unwrap();
+    assert!(more >= 400 && skipped.contains("give its white border as margin_mm"), "{skipped}");
+    let out_mm: f64 = skipped
+        .split("the middle half ")
+        .nth(1)
+        .and_then(|t| t.split(['-', ' ']).next())
+        .and_then(|v| v.parse().ok())
+        .unwrap();
+    assert!((4.0..=8.0).contains(&out_mm), "{skipped}");
+    assert_eq!(frames_used(dir.path()), 2);
+    let bordered = board(9, 6).replace(r#""margin_mm": 0"#, r#""margin_mm": 7.5"#);
+    let out = run(dir.path(), &bordered, &[3, 4, 1]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(!text(&out.stdout).contains("skipped"), "{}", text(&out.stdout));
+    assert_eq!(frames_used(dir.path()), 3);
+    let out = run_with(dir.path(), &bordered, &[3, 4, 1], &["--margin-mm", "0"]);
+    assert!(out.status.success() && text(&out.stdout).contains("im1.png: the board does not carry"));
+    assert_eq!(frames_used(dir.path()), 2);
 }
 
 /// A board file naming more corners than the board has: the frames that show the board whole

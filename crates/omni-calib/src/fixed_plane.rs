@@ -222,10 +222,13 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
     let mut pixels = Vec::new();
     let flags = f.saturated.as_deref().filter(|s| s.len() == f.stripe.len());
     let mut saturated = 0;
+    let mut beyond = Beyond::default();
     for (k, px) in f.stripe.iter().enumerate() {
         let Some(p) = on_board(px[0], px[1]) else { continue };
         let local = inverse * p;
         if !(local.x >= x0 && local.x <= x1 && local.y >= y0 && local.y <= y1) {
+            let (px0, px1, py0, py1) = pattern;
+            beyond.add((px0 - local.x).max(local.x - px1).max(py0 - local.y).max(local.y - py1), square);
             continue;
         }
         if opts.edge_clearance_px > 0.0 {
@@ -261,12 +264,21 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
             .collect()
     });
     if points.len() < opts.min_points {
-        return Err(format!(
+        let mut why = format!(
             "the board does not carry the stripe: {} of {} stripe points on the board, fewer than {}",
             points.len(),
             f.stripe.len(),
             opts.min_points
-        ));
+        );
+        if points.len() + beyond.outside_mm.len() >= opts.min_points {
+            let (near, far) = beyond.quartiles_mm();
+            let out = if far - near < 0.05 { format!("{near:.1}") } else { format!("{near:.1}-{far:.1}") };
+            why += &format!(
+                "; {} more lie beyond the printed pattern on the board's plane, the middle half {out} mm out: if the board is flat there, give its white border as margin_mm",
+                beyond.outside_mm.len()
+            );
+        }
+        return Err(why);
     }
     Ok(OnBoard {
         name: f.name.clone(),
@@ -279,6 +291,37 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         saturated: flags.map(|_| saturated),
         pose_spread,
     })
+}
+
+/// Stripe points on the board's plane beyond the printed pattern by at most
+/// [`BEYOND_SQUARES`] squares: a stripe that runs along the board's white border, named when its
+/// frame is skipped.
+#[derive(Default)]
+struct Beyond {
+    /// How far each lies outside the pattern (mm).
+    outside_mm: Vec<f64>,
+}
+
+/// How far beyond the printed pattern (squares) a stripe point counts as on the board's border.
+const BEYOND_SQUARES: f64 = 3.0;
+
+impl Beyond {
+    /// A point outside the kept outline, `outside_mm` beyond the pattern's (mm; ≤ 0 where a
+    /// negative margin left it out inside the pattern: not on the border).
+    fn add(&mut self, outside_mm: f64, square_mm: f64) {
+        if outside_mm > 0.0 && outside_mm <= BEYOND_SQUARES * square_mm {
+            self.outside_mm.push(outside_mm);
+        }
+    }
+
+    /// How far outside the pattern the middle half of them lie (mm): the stripe's course along
+    /// the border, without the ends that leave the board.
+    fn quartiles_mm(&self) -> (f64, f64) {
+        let mut d = self.outside_mm.clone();
+        d.sort_by(f64::total_cmp);
+        let at = |q: f64| d.get(((d.len() - 1) as f64 * q).round() as usize).copied().unwrap_or(0.0);
+        (at(0.25), at(0.75))
+    }
 }
 
 /// Where `ray` meets the board at `pose` (its z = 0 plane), in front of the ray's origin.

@@ -162,11 +162,40 @@ def calibrate() -> Camera:
     return best
 
 
-def board_outline(corners: np.ndarray, margin_squares: float) -> np.ndarray:
+def omniscan_boards(binary: Path, names: list[str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The boards omniscan's corner detector finds in `names` (frames of DATA), as (grid indices
+    (N x 2: column, row), corners (N x 2, px)) by name: `omni-calib-receiver --save-corners`
+    beside `binary`. For the frames where OpenCV's detector finds no 9 x 6 board (close-ups
+    whose board is cut or crossed by a saturated stripe): the outline only chooses which points
+    are judged, the line and its undistortion stay OpenCV's."""
+    receiver = binary.parent / "omni-calib-receiver"
+    if not names or not receiver.exists():
+        return {}
+    with tempfile.TemporaryDirectory() as tmp:
+        board = Path(tmp) / "board.json"
+        board.write_text(json.dumps({"format": "omniscan.board", "version": 1, "inner_cols": PATTERN[0],
+                                     "inner_rows": PATTERN[1], "square_mm": 5}))
+        corners = Path(tmp) / "corners.json"
+        subprocess.run([str(receiver), "--board", str(board), "--save-corners", str(corners),
+                        "-o", str(Path(tmp) / "camera.json"), *[str(DATA / n) for n in names]],
+                       capture_output=True, check=False)
+        if not corners.exists():
+            return {}
+        found = {}
+        for image in json.loads(corners.read_text())["images"]:
+            c = np.array(image["corners"], np.float64).reshape(-1, 4)
+            if len(c) >= 12:
+                found[Path(image["name"]).name] = (c[:, :2], c[:, 2:])
+        return found
+
+
+def board_outline(corners: np.ndarray, margin_squares: float, grid: np.ndarray | None = None) -> np.ndarray:
     """The board's outline (4 x 2, px, distorted image): the inner-corner grid's outer corners
-    pushed out by `margin_squares` squares along the grid (a homography of the grid)."""
+    pushed out by `margin_squares` squares along the grid (a homography of the grid). `grid`:
+    the corners' (column, row) indices, if not the whole grid in OpenCV's order."""
     nx, ny = PATTERN
-    grid = np.mgrid[0:nx, 0:ny].T.reshape(-1, 2).astype(np.float64)
+    if grid is None:
+        grid = np.mgrid[0:nx, 0:ny].T.reshape(-1, 2).astype(np.float64)
     H, _ = cv2.findHomography(grid, corners)
     m = margin_squares
     quad = np.array([[-m, -m], [nx - 1 + m, -m], [nx - 1 + m, ny - 1 + m], [-m, ny - 1 + m]], np.float64)
@@ -467,6 +496,8 @@ def ridge_points(binary: Path, names: list[str], extra: list[str], frames: Path 
 class FrameResult:
     name: str
     board: bool
+    # The board found by omniscan's corners, where OpenCV's finds none.
+    board_by_omniscan: bool = False
     length_px: float = 0.0
     sagitta_px: float = 0.0
     ridge: Score = field(default_factory=Score)
@@ -482,14 +513,18 @@ def evaluate(
 ) -> tuple[Camera, list[FrameResult]]:
     cam = calibrate()
     ridge = ridge_points(binary, names, extra, frames)
+    boards = {name: find_board(load(name)) for name in names}
+    others = omniscan_boards(binary, [n for n, c in boards.items() if c is None])
     results = []
     for name in names:
         bgr = load(name)
-        corners = find_board(bgr)
+        corners, grid = boards[name], None
+        if corners is None and name in others:
+            grid, corners = others[name]
         if corners is None:
             results.append(FrameResult(name, False))
             continue
-        outline = board_outline(corners, margin_squares)
+        outline = board_outline(corners, margin_squares, grid)
         outline_u = cam.undistort(outline)
         ref = reference_centres(bgr)
         ref_on = ref[inside(outline, ref)]
@@ -498,7 +533,7 @@ def evaluate(
         ref_u, rid_u = cam.undistort(ref_on), cam.undistort(rid_on)
         curve = robust_curve(balanced_union(ref_u, rid_u))
         seg = segment_on_board((curve.n, float(curve.n @ curve.p0)), outline_u) if curve is not None else None
-        fr = FrameResult(name, True)
+        fr = FrameResult(name, True, board_by_omniscan=grid is not None)
         if seg is None:
             results.append(fr)
             continue
@@ -548,12 +583,15 @@ def table(cam: Camera, results: list[FrameResult], label: str = "omni-ridge") ->
         elif r.length_px <= 0:
             rows.append(f"{r.name:<8} no stripe on the board")
         else:
-            rows.append(f"{r.name:<8} {r.length_px:7.0f} {r.sagitta_px:6.2f} | {cells(r.ridge)} | {cells(r.reference)}")
+            name = r.name + ("*" if r.board_by_omniscan else "")
+            rows.append(f"{name:<8} {r.length_px:7.0f} {r.sagitta_px:6.2f} | {cells(r.ridge)} | {cells(r.reference)}")
     length = sum(r.length_px for r in results if r.board)
     rows.append(f"{'total':<8} {length:7.0f} {'':6} | {cells(totals(results, 'ridge'))} | {cells(totals(results, 'reference'))}")
     rows.append("len: the stripe on the board (px along it); bend: its sagitta in the undistorted image (px);")
     rows.append("cover: share of len with a point within 1 px; false: points > 3 px off, of which ghost: > 15 px off")
     rows.append("on laser light (reflections of the stripe: stripes too); rms, med: of the points within 3 px (px)")
+    if any(r.board_by_omniscan for r in results):
+        rows.append("*: the board's outline from omniscan's corners (OpenCV's detector finds no 9 x 6 board there)")
     return "\n".join(rows)
 
 

@@ -207,13 +207,15 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
     let (x0, x1, y0, y1) = (x0 - pad, x1 + pad, y0 - pad, y1 + pad);
     let inverse = pose.inverse();
     let on_board = |u: f64, v: f64| board_hit(&pose, &camera.pixel_to_ray(&Vector2::new(u, v))?);
-    // Distance (mm) from a board point to the nearest square edge: inside the pattern the lines
-    // through the inner corners, which lie at multiples of the square; outside it, its outline.
+    // Distance (mm) from a board point to the nearest edge: inside the pattern the lines through
+    // the inner corners, which lie at multiples of the square; outside it, its outline or the
+    // board's own edge, where its white border ends.
     let edge_distance = |x: f64, y: f64| {
         let (px0, px1, py0, py1) = pattern;
         let (dx, dy) = ((px0 - x).max(x - px1), (py0 - y).max(y - py1));
         if dx > 0.0 || dy > 0.0 {
-            return dx.max(0.0).hypot(dy.max(0.0));
+            let board_edge = (x - x0).min(x1 - x).min(y - y0).min(y1 - y);
+            return dx.max(0.0).hypot(dy.max(0.0)).min(board_edge);
         }
         let off = |c: f64| ((c / square) - (c / square).round()).abs() * square;
         off(x).min(off(y))

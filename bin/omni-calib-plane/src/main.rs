@@ -152,8 +152,9 @@ any kind, e.g. from omni-calib-receiver --model mei), the stripe detector finds 
 frame, and each centre's ray meets the board plane. Points inside the board's printed pattern (one square beyond \
 the outer inner corners, widened by the board's white border: margin_mm in board.json, or --margin-mm) are points of the light plane. One plane is fitted to the points \
 of all frames robustly (least median of squares, Tukey reweighting), then to the inliers by least squares in \
-which each frame's points share its board's pose error (from the corners), so that a board posed less surely \
-pulls the plane less however many points it carries.
+which each frame's points share its board's pose error (from the corners) and weigh by their own scatter about \
+the frame's line, so that a board posed less surely, or a stripe read less surely, pulls the plane less however \
+many points it carries.
 
 It prints, per frame: corners and their RMS under the pose (px), stripe points on the board, inliers, the residual \
 RMS and mean about the plane (mm), the straightness of the frame's stripe (RMS distance from its own best line in \

@@ -7,8 +7,9 @@
 //! [`FixedPlaneOptions::margin_mm`]) are points of the light plane (mm, world frame). One plane
 //! is fitted to the points of all frames robustly ([`omni_geom::robust_plane`]: least median of
 //! squares, Tukey reweighting), then to the inliers by generalised least squares in which each
-//! frame's points share its board's pose error, so that a board posed less surely (a partial
-//! board, corners that fit worse) pulls the plane less, however many points it carries. The
+//! frame's points share its board's pose error and weigh by their own scatter about the frame's
+//! line, so that a board posed less surely (a partial board, corners that fit worse), or a stripe
+//! read less surely, pulls the plane less, however many points it carries. The
 //! report gives per frame the residual RMS (mm) and the stripe's straightness (px and mm: the
 //! RMS distance of its points from their own best line in 3-D, the px being that distance as
 //! imaged), the plane with its uncertainty (from the fit, and from a jackknife over frames), and
@@ -374,7 +375,8 @@ type FrameInliers = (Vec<Point3<f64>>, Vec<[Vector3<f64>; 6]>);
 /// Refits `fit`'s plane to its inliers by generalised least squares: each frame's points share
 /// its board's pose error (`pose_spread`), which moves them together, so a frame whose board is
 /// posed less surely weighs less however many points it has; beside it each point's own scatter
-/// about its frame's line (pooled over the frames). The covariance is the fit's, scaled up by
+/// about its frame's line, the frame's own (a stripe read less surely, dimmer or wider, weighs
+/// less). The covariance is the fit's, scaled up by
 /// its χ² per degree of freedom where that exceeds 1 (the points' own errors larger than their
 /// scatter about the lines says). What differs between frames beyond their boards' poses (a
 /// stripe read a little off in one frame) adds a term or two a frame against thousands of
@@ -391,15 +393,24 @@ fn weigh_board_poses(frames: &[&OnBoard], fit: &mut RobustPlaneFit) {
         let kept = || f.points.iter().zip(spread).zip(inliers).filter(|(_, k)| **k).map(|(p, _)| p);
         groups.push((kept().map(|(p, _)| *p).collect(), kept().map(|(_, s)| *s).collect()));
     }
-    let Some(noise) = scatter_about_lines(&groups, &fit.plane) else { return };
-    // Exact points (rendered truth) scatter by rounding alone; a floor keeps the weights finite.
-    let noise = noise.max(MIN_SCATTER_MM2);
+    let Some(pooled) = scatter_about_lines(&groups, &fit.plane) else { return };
+    // Each frame's own scatter where it has the points to tell it, else the frames' pooled one;
+    // exact points (rendered truth) scatter by rounding alone: a floor keeps the weights finite.
+    let noises: Vec<f64> = groups
+        .iter()
+        .map(|g| {
+            let own = (g.0.len() >= MIN_POINTS_FOR_OWN_SCATTER)
+                .then(|| scatter_about_lines(std::slice::from_ref(g), &fit.plane))
+                .flatten();
+            own.unwrap_or(pooled).max(MIN_SCATTER_MM2)
+        })
+        .collect();
     let (mut plane, mut basis, mut covariance) = (fit.plane, fit.basis, fit.covariance);
     for _ in 0..GLS_ITERATIONS {
         // The covariance is taken in the basis at the plane before the step, which the last,
         // tiny step moves by far less than the covariance resolves.
         basis = orthonormal_basis(&plane.normal);
-        let Some((step, normal_inverse, chi2, dof)) = gls_step(&groups, &plane, basis, noise) else { return };
+        let Some((step, normal_inverse, chi2, dof)) = gls_step(&groups, &plane, basis, &noises) else { return };
         covariance = normal_inverse * (chi2 / dof).max(1.0);
         let n = plane.normal.into_inner() + basis.0 * step.x + basis.1 * step.y;
         let Some(next) = Plane::from_normal_offset(&n, plane.offset + step.z) else { return };
@@ -414,12 +425,17 @@ fn weigh_board_poses(frames: &[&OnBoard], fit: &mut RobustPlaneFit) {
 /// The smallest point scatter (mm², about a frame's line) the weights assume: 0.1 µm.
 const MIN_SCATTER_MM2: f64 = 1e-8;
 
+/// Fewest inliers a frame needs for its own scatter to weigh its points (4 degrees of freedom
+/// about its line: the variance then known to about ±35 %).
+const MIN_POINTS_FOR_OWN_SCATTER: usize = 6;
+
 /// Gauss–Newton steps of [`weigh_board_poses`]; each moves the plane by what is left of its
 /// linearisation's error, which the second step already leaves far below the fit's σ.
 const GLS_ITERATIONS: usize = 4;
 
 /// The variance (mm²) of the points' distances from `plane` about each frame's own straight line
-/// of them, pooled over the frames: the points' scatter without what their frame shares.
+/// of them, pooled over the frames `groups`: the points' scatter without what their frame
+/// shares.
 fn scatter_about_lines(groups: &[FrameInliers], plane: &Plane) -> Option<f64> {
     let (mut ss, mut dof) = (0.0, 0.0);
     for (points, _) in groups.iter().filter(|(p, _)| p.len() >= 3) {
@@ -442,17 +458,18 @@ fn scatter_about_lines(groups: &[FrameInliers], plane: &Plane) -> Option<f64> {
 
 /// One generalised least-squares step for the plane's change (a, b, c) in `basis`
 /// ([`RobustPlaneFit`]'s parametrisation), its covariance, the χ² at `plane` and its degrees of
-/// freedom. Per frame the points' covariance is σ²·I + U·Uᵀ, U their distances' pose spreads;
+/// freedom. Per frame the points' covariance is σ²·I + U·Uᵀ, σ² the frame's scatter (`noises`,
+/// one per group) and U their distances' pose spreads;
 /// its inverse by Woodbury's identity, σ⁻²(I − U (σ²I + UᵀU)⁻¹ Uᵀ), needs only 6 × 6 systems.
 fn gls_step(
     groups: &[FrameInliers],
     plane: &Plane,
     basis: (Vector3<f64>, Vector3<f64>),
-    noise: f64,
+    noises: &[f64],
 ) -> Option<(Vector3<f64>, Matrix3<f64>, f64, f64)> {
     let (mut normal_matrix, mut gradient, mut chi2, mut count) = (Matrix3::zeros(), Vector3::zeros(), 0.0, 0usize);
     let n = plane.normal.into_inner();
-    for (points, spreads) in groups {
+    for ((points, spreads), &noise) in groups.iter().zip(noises) {
         let (mut xx, mut xr, mut rr) = (Matrix3::zeros(), Vector3::zeros(), 0.0);
         let (mut ux, mut uu, mut ur) = (Matrix6x3::zeros(), Matrix6::zeros(), Vector6::zeros());
         for (p, spread) in points.iter().zip(spreads) {

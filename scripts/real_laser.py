@@ -165,26 +165,30 @@ def calibrate() -> Camera:
 def omniscan_boards(binary: Path, names: list[str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """The boards omniscan's corner detector finds in `names` (frames of DATA), as (grid indices
     (N x 2: column, row), corners (N x 2, px)) by name: `omni-calib-receiver --save-corners`
-    beside `binary`. For the frames where OpenCV's detector finds no 9 x 6 board (close-ups
-    whose board is cut or crossed by a saturated stripe): the outline only chooses which points
-    are judged, the line and its undistortion stay OpenCV's."""
-    receiver = binary.parent / "omni-calib-receiver"
-    if not names or not receiver.exists():
+    beside `binary`, given the board frames too so that its calibration, and so its corners
+    file, never fails for want of boards. For the frames where OpenCV's detector finds no 9 x 6
+    board (close-ups whose board is cut or crossed by a saturated stripe): the outline only
+    chooses which points are judged, the line and its undistortion stay OpenCV's."""
+    if not names:
         return {}
+    receiver = binary.parent / "omni-calib-receiver"
+    if not receiver.exists():
+        raise FileNotFoundError(f"{receiver}: the judge needs it beside {binary.name} for the frames "
+                                f"OpenCV finds no board in ({', '.join(names)}); build it")
     with tempfile.TemporaryDirectory() as tmp:
         board = Path(tmp) / "board.json"
         board.write_text(json.dumps({"format": "omniscan.board", "version": 1, "inner_cols": PATTERN[0],
                                      "inner_rows": PATTERN[1], "square_mm": 5}))
         corners = Path(tmp) / "corners.json"
-        subprocess.run([str(receiver), "--board", str(board), "--save-corners", str(corners),
-                        "-o", str(Path(tmp) / "camera.json"), *[str(DATA / n) for n in names]],
-                       capture_output=True, check=False)
-        if not corners.exists():
-            return {}
+        frames = [str(DATA / n) for n in [*names, *BOARD_FRAMES]]
+        p = subprocess.run([str(receiver), "--board", str(board), "--save-corners", str(corners),
+                            "-o", str(Path(tmp) / "camera.json"), *frames], capture_output=True, text=True)
+        if p.returncode != 0 or not corners.exists():
+            raise RuntimeError(f"{receiver.name} failed (exit {p.returncode}): {p.stderr.strip()[-500:]}")
         found = {}
         for image in json.loads(corners.read_text())["images"]:
             c = np.array(image["corners"], np.float64).reshape(-1, 4)
-            if len(c) >= 12:
+            if Path(image["name"]).name in names and len(c) >= 12:
                 found[Path(image["name"]).name] = (c[:, :2], c[:, 2:])
         return found
 

@@ -219,7 +219,8 @@ struct FixedArgs {
     #[arg(long, allow_negative_numbers = true)]
     margin_mm: Option<f64>,
     /// Drop stripe points closer than this (px, as imaged) to a square's edge, where the stripe
-    /// falls on a white and a black square at once and its centre moves (0: keep them).
+    /// falls on a white and a black square at once and its centre moves, or to the board's own
+    /// edge (the pattern widened by the margin) (0: keep them).
     #[arg(long, default_value_t = 3.0, value_name = "PX", allow_negative_numbers = true)]
     edge_clearance_px: f64,
     /// Fewest stripe points on the board for a frame to be used.
@@ -669,7 +670,14 @@ fn fixed(a: &FixedArgs) -> CliResult {
     write_doc(&a.output, &out)?;
     warn_saturated(&fit.report);
     warn_inconsistent(&fit.report);
-    let table = fixed_table(&fit.report);
+    let source = if a.margin_mm.is_some() { "--margin-mm" } else { "margin_mm of the board file" };
+    let table = format!(
+        "board: {} × {} inner corners, {} mm squares; stripe points kept up to {margin_mm} mm beyond the printed pattern ({source})\n{}",
+        board.inner_cols,
+        board.inner_rows,
+        board.square_mm,
+        fixed_table(&fit.report)
+    );
     use std::io::Write;
     if a.output == Path::new("-") {
         eprint!("{table}");

@@ -141,11 +141,12 @@ fn a_board_that_does_not_carry_the_stripe_is_named_and_skipped() {
     let out = run(dir.path(), &board(9, 6), &[3, 4, 1]);
     let (so, se) = (text(&out.stdout), text(&out.stderr));
     assert!(out.status.success(), "{se}");
+    assert!(so.starts_with("board: 9 × 6 inner corners, 5 mm squares; stripe points kept up to 0 mm beyond the printed pattern (margin_mm of the board file)\n"), "{so}");
     let skipped = so
         .lines()
         .find(|l| l.contains("im1.png: the board does not carry the stripe: "))
         .unwrap_or_else(|| panic!("{so}"));
-    // "…; 579 more lie beyond the printed pattern on the board's plane, the middle half 6.1 mm out: …"
+    // "…; 579 more lie on the board's plane beyond the printed pattern, the middle half 6.1 mm out (border kept: 0 mm): …"
     let more: usize =
         skipped.split("; ").nth(1).and_then(|t| t.split(' ').next()).and_then(|n| n.parse().ok()).unwrap();
     assert!(more >= 400 && skipped.contains("give its white border as margin_mm"), "{skipped}");
@@ -164,6 +165,7 @@ fn a_board_that_does_not_carry_the_stripe_is_named_and_skipped() {
     assert_eq!(frames_used(dir.path()), 3);
     let out = run_with(dir.path(), &bordered, &[3, 4, 1], &["--margin-mm", "0"]);
     assert!(out.status.success() && text(&out.stdout).contains("im1.png: the board does not carry"));
+    assert!(text(&out.stdout).contains("kept up to 0 mm beyond the printed pattern (--margin-mm)"));
     assert_eq!(frames_used(dir.path()), 2);
 }
 

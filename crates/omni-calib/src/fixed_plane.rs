@@ -40,8 +40,9 @@ pub struct FixedPlaneOptions {
     /// negative keeps them this far inside it).
     pub margin_mm: f64,
     /// Stripe points are dropped where they lie closer than this (px, as imaged there) to a
-    /// square's edge on the board: there the stripe's profile falls on a white and a black
-    /// square, whose albedos make it lopsided and move its centre. 0 (the default) keeps every
+    /// square's edge on the board, or to the board's own edge (the pattern widened by
+    /// `margin_mm`): there the stripe's profile falls on a white and a black square, or off the
+    /// board, whose albedos make it lopsided and move its centre. 0 (the default) keeps every
     /// point, as exact stripe pixels need; `omni-calib-plane fixed` clears 3 px.
     pub edge_clearance_px: f64,
     /// Fewest stripe points on the board for a frame to be used.
@@ -241,6 +242,8 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
                 .map(|q| q.map_or(f64::INFINITY, |q| (q - p).norm()))
                 .fold(0.0f64, f64::max);
             if edge_distance(local.x, local.y) < opts.edge_clearance_px * footprint {
+                let (px0, px1, py0, py1) = pattern;
+                beyond.add((px0 - local.x).max(local.x - px1).max(py0 - local.y).max(local.y - py1), square);
                 continue;
             }
         }
@@ -277,8 +280,9 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
             let (near, far) = beyond.quartiles_mm();
             let out = if far - near < 0.05 { format!("{near:.1}") } else { format!("{near:.1}-{far:.1}") };
             why += &format!(
-                "; {} more lie beyond the printed pattern on the board's plane, the middle half {out} mm out: if the board is flat there, give its white border as margin_mm",
-                beyond.outside_mm.len()
+                "; {} more lie on the board's plane beyond the printed pattern, the middle half {out} mm out (border kept: {} mm): if the board is flat there, give its white border as margin_mm",
+                beyond.outside_mm.len(),
+                opts.margin_mm
             );
         }
         return Err(why);
@@ -318,11 +322,11 @@ impl Beyond {
     }
 
     /// How far outside the pattern the middle half of them lie (mm): the stripe's course along
-    /// the border, without the ends that leave the board.
+    /// the border, without the ends that leave the board. (0, 0) for none.
     fn quartiles_mm(&self) -> (f64, f64) {
         let mut d = self.outside_mm.clone();
         d.sort_by(f64::total_cmp);
-        let at = |q: f64| d.get(((d.len() - 1) as f64 * q).round() as usize).copied().unwrap_or(0.0);
+        let at = |q: f64| d.get((d.len().saturating_sub(1) as f64 * q).round() as usize).copied().unwrap_or(0.0);
         (at(0.25), at(0.75))
     }
 }
@@ -376,9 +380,8 @@ type FrameInliers = (Vec<Point3<f64>>, Vec<[Vector3<f64>; 6]>);
 /// its board's pose error (`pose_spread`), which moves them together, so a frame whose board is
 /// posed less surely weighs less however many points it has; beside it each point's own scatter
 /// about its frame's line, the frame's own (a stripe read less surely, dimmer or wider, weighs
-/// less). The covariance is the fit's, scaled up by
-/// its χ² per degree of freedom where that exceeds 1 (the points' own errors larger than their
-/// scatter about the lines says). What differs between frames beyond their boards' poses (a
+/// less). The covariance is the fit's, scaled up by its χ² per degree of freedom where that
+/// exceeds 1 (with each frame's scatter taken from its own points it stays near 1). What differs between frames beyond their boards' poses (a
 /// stripe read a little off in one frame) adds a term or two a frame against thousands of
 /// points, so this σ leaves it out; the jackknife over frames holds it. Where a board has no
 /// pose covariance, or the system is singular, the robust fit stays.
@@ -426,7 +429,7 @@ fn weigh_board_poses(frames: &[&OnBoard], fit: &mut RobustPlaneFit) {
 const MIN_SCATTER_MM2: f64 = 1e-8;
 
 /// Fewest inliers a frame needs for its own scatter to weigh its points (4 degrees of freedom
-/// about its line: the variance then known to about ±35 %).
+/// about its line: its σ then known to about ±35 %, its variance to ±70 %).
 const MIN_POINTS_FOR_OWN_SCATTER: usize = 6;
 
 /// Gauss–Newton steps of [`weigh_board_poses`]; each moves the plane by what is left of its
@@ -451,6 +454,9 @@ fn scatter_about_lines(groups: &[FrameInliers], plane: &Plane) -> Option<f64> {
         }
         ss += if sss > 0.0 { srr - ssr * ssr / sss } else { srr };
         dof += m - 2.0;
+    }
+    if !(dof > 0.0) {
+        return None;
     }
     let variance = (ss / dof).max(0.0);
     variance.is_finite().then_some(variance)

@@ -276,7 +276,13 @@ fn real_frames_give_one_plane_that_no_frame_pulls() {
     let twelve = fit_fixed_plane(cam.as_ref(), &frames, &inside).unwrap();
     let on_border: Vec<&str> = twelve.report.skipped.iter().map(|s| s.name.rsplit('/').next().unwrap()).collect();
     assert_eq!(on_border, ["im1.png", "im2.png", "im5.png", "im9.png", "im15.png"], "{:?}", twelve.report.skipped);
-    assert!(twelve.report.skipped.iter().all(|s| s.reason.contains("more lie beyond the printed pattern")));
+    assert!(
+        twelve
+            .report
+            .skipped
+            .iter()
+            .all(|s| s.reason.contains("more lie on the board's plane beyond the printed pattern"))
+    );
     let apart_deg = twelve.plane.normal.angle(&fit.plane.normal).to_degrees();
     eprintln!(
         "without the border: {} frames, {apart_deg:.4}° from the plane of all, jackknife σ {:.4}° → {:.4}°",

@@ -670,6 +670,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
     write_doc(&a.output, &out)?;
     warn_saturated(&fit.report);
     warn_inconsistent(&fit.report);
+    warn_border_off_the_plane(&fit.report, margin_mm);
     let source = if a.margin_mm.is_some() { "--margin-mm" } else { "margin_mm of the board file" };
     let table = format!(
         "board: {} × {} inner corners, {} mm squares; stripe points kept up to {margin_mm} mm beyond the printed pattern ({source})\n{}",
@@ -827,6 +828,34 @@ fn warn_inconsistent(r: &omni_calib::fixed_plane::FixedPlaneReport) {
         ),
     );
 }
+
+/// Warns, in one line, of the frames whose stripe points on the board's white border are mostly
+/// off the plane (the robust fit leaves them out): the border kept (`margin_mm`) is wider than
+/// the board's, whose points beyond its edge lie on whatever is behind it, or print on the
+/// border or its curl moves them.
+fn warn_border_off_the_plane(r: &omni_calib::fixed_plane::FixedPlaneReport, margin_mm: f64) {
+    let off: Vec<String> = r
+        .frames
+        .iter()
+        .filter(|f| f.border_points >= BORDER_WARNING_MIN_POINTS && 2 * f.border_outliers > f.border_points)
+        .map(|f| format!("{} {} of {}", file_name(&f.name), f.border_outliers, f.border_points))
+        .collect();
+    if off.is_empty() {
+        return;
+    }
+    omni_cli::warn(
+        "omni-calib-plane",
+        &format!(
+            "{} of {} frames have most of their stripe points on the board's border off the plane ({}; the fit leaves them out): is the border flat and blank as far as the {margin_mm} mm kept (margin_mm, --margin-mm)?",
+            off.len(),
+            r.frames.len(),
+            off.join(", ")
+        ),
+    );
+}
+
+/// Fewest border points of a frame that [`warn_border_off_the_plane`] judges.
+const BORDER_WARNING_MIN_POINTS: usize = 20;
 
 /// More than this share of a frame's stripe points on the board saturated draws a warning.
 const SATURATED_WARNING_SHARE: f64 = 0.25;

@@ -274,3 +274,27 @@ fn frames_that_disagree_are_named_and_a_residual_above_the_limit_is_refused() {
     );
     assert!(!dir.path().join("refused.json").exists());
 }
+
+/// A border kept wider than the board's (20 mm here, where im8's stripe leaves the paper 10-15
+/// mm beyond the pattern): most of im8's border points lie off the plane, and one warning names
+/// the frame and the border kept; the robust fit leaves them out. Without a border, none.
+#[test]
+fn a_border_wider_than_the_boards_is_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_with(dir.path(), &board(9, 6), &[3, 4, 8], &["--margin-mm", "20"]);
+    let se = text(&out.stderr);
+    assert!(out.status.success(), "{se}");
+    let warning =
+        se.lines().find(|l| l.contains("on the board's border off the plane")).unwrap_or_else(|| panic!("{se}"));
+    assert!(
+        warning.contains("(im8.png ") && !warning.contains("im4.png") && warning.contains("the 20 mm kept"),
+        "{warning}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+    let im8 = &report["report"]["frames"][2];
+    let (border, off) = (im8["border_points"].as_u64().unwrap(), im8["border_outliers"].as_u64().unwrap());
+    assert!(border >= 100 && 2 * off > border, "{im8}");
+    let out = run(dir.path(), &board(9, 6), &[3, 4, 8]);
+    assert!(out.status.success() && !text(&out.stderr).contains("border off the plane"), "{}", text(&out.stderr));
+}

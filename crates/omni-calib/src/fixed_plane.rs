@@ -96,6 +96,11 @@ pub struct FrameReport {
     pub saturated_points: Option<usize>,
     /// Board points within the robust fit's inlier band.
     pub inliers: usize,
+    /// Of the board points, those on its white border (beyond the printed pattern, kept by
+    /// `margin_mm`), and how many of them are outliers: mostly outliers, the border kept is
+    /// probably wider than the board's.
+    pub border_points: usize,
+    pub border_outliers: usize,
     /// RMS and mean signed distance of the inliers from the plane (mm).
     pub residual_rms_mm: f64,
     pub residual_mean_mm: f64,
@@ -175,6 +180,8 @@ struct OnBoard {
     pixels: Vec<[f64; 2]>,
     /// How many of `points` are saturated, where known ([`FrameInput::saturated`]).
     saturated: Option<usize>,
+    /// Whether each of `points` lies on the board's white border, beyond the printed pattern.
+    on_border: Vec<bool>,
     /// Each point's moves (mm) when the board's pose moves by one σ along each principal axis
     /// of its covariance (half the difference of the ± steps): their outer products summed give
     /// the covariance the pose's error adds to the points. `None` where the pose fit gave no
@@ -227,6 +234,7 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
     let flags = f.saturated.as_deref().filter(|s| s.len() == f.stripe.len());
     let mut saturated = 0;
     let mut beyond = Beyond::default();
+    let mut on_border = Vec::new();
     for (k, px) in f.stripe.iter().enumerate() {
         let Some(p) = on_board(px[0], px[1]) else { continue };
         let local = inverse * p;
@@ -247,6 +255,8 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
                 continue;
             }
         }
+        let (px0, px1, py0, py1) = pattern;
+        on_border.push(local.x < px0 || local.x > px1 || local.y < py0 || local.y > py1);
         points.push(p);
         pixels.push(*px);
         saturated += usize::from(flags.is_some_and(|s| s[k]));
@@ -296,6 +306,7 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         points,
         pixels,
         saturated: flags.map(|_| saturated),
+        on_border,
         pose_spread,
     })
 }
@@ -612,6 +623,8 @@ pub fn fit_fixed_plane(
             board_points: f.points.len(),
             saturated_points: f.saturated,
             inliers: r.len(),
+            border_points: f.on_border.iter().filter(|b| **b).count(),
+            border_outliers: f.on_border.iter().zip(&inl).filter(|(b, i)| **b && !**i).count(),
             residual_rms_mm: (ss / n).sqrt(),
             residual_mean_mm: r.iter().sum::<f64>() / n,
             straightness_mm: straight_mm,

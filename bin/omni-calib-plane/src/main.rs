@@ -832,13 +832,17 @@ fn warn_inconsistent(r: &omni_calib::fixed_plane::FixedPlaneReport) {
 /// Warns, in one line, of the frames whose stripe points on the board's white border are mostly
 /// off the plane (the robust fit leaves them out): the border kept (`margin_mm`) is wider than
 /// the board's, whose points beyond its edge lie on whatever is behind it, or print on the
-/// border or its curl moves them.
+/// border, its curl or a reflection of the stripe moves them. Their median distance tells
+/// which.
 fn warn_border_off_the_plane(r: &omni_calib::fixed_plane::FixedPlaneReport, margin_mm: f64) {
     let off: Vec<String> = r
         .frames
         .iter()
         .filter(|f| f.border_points >= BORDER_WARNING_MIN_POINTS && 2 * f.border_outliers > f.border_points)
-        .map(|f| format!("{} {} of {}", file_name(&f.name), f.border_outliers, f.border_points))
+        .map(|f| {
+            let off = f.border_outlier_median_mm.map_or(String::new(), |d| format!(", {d:.1} mm off"));
+            format!("{} {} of {}{off}", file_name(&f.name), f.border_outliers, f.border_points)
+        })
         .collect();
     if off.is_empty() {
         return;
@@ -846,7 +850,7 @@ fn warn_border_off_the_plane(r: &omni_calib::fixed_plane::FixedPlaneReport, marg
     omni_cli::warn(
         "omni-calib-plane",
         &format!(
-            "{} of {} frames have most of their stripe points on the board's border off the plane ({}; the fit leaves them out): is the border flat and blank as far as the {margin_mm} mm kept (margin_mm, --margin-mm)?",
+            "{} of {} frames have most of their stripe points on the board's border off the plane ({}; median distance; the fit leaves them out): is the border flat and blank as far as the {margin_mm} mm kept (margin_mm, --margin-mm), with no reflection of the stripe on it?",
             off.len(),
             r.frames.len(),
             off.join(", ")

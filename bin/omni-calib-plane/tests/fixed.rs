@@ -146,7 +146,7 @@ fn a_board_that_does_not_carry_the_stripe_is_named_and_skipped() {
         .lines()
         .find(|l| l.contains("im1.png: the board does not carry the stripe: "))
         .unwrap_or_else(|| panic!("{so}"));
-    // "…; 579 more lie on the board's plane beyond the printed pattern, the middle half 6.1 mm out (border kept: 0 mm): …"
+    // "…; 579 more lie on the board's plane beyond the border kept (0 mm past the printed pattern), the middle half 6.1 mm past it: …"
     let more: usize =
         skipped.split("; ").nth(1).and_then(|t| t.split(' ').next()).and_then(|n| n.parse().ok()).unwrap();
     assert!(more >= 400 && skipped.contains("give its white border as margin_mm"), "{skipped}");
@@ -276,8 +276,9 @@ fn frames_that_disagree_are_named_and_a_residual_above_the_limit_is_refused() {
 }
 
 /// A border kept wider than the board's (20 mm here, where im8's stripe leaves the paper 10-15
-/// mm beyond the pattern): most of im8's border points lie off the plane, and one warning names
-/// the frame and the border kept; the robust fit leaves them out. Without a border, none.
+/// mm beyond the pattern): most of im8's border points lie off the plane, tens of mm, and one
+/// warning names the frame and the border kept; the robust fit leaves them out. With the real
+/// border (7.5 mm), none.
 #[test]
 fn a_border_wider_than_the_boards_is_warned_of() {
     let dir = tempfile::tempdir().unwrap();
@@ -287,14 +288,18 @@ fn a_border_wider_than_the_boards_is_warned_of() {
     let warning =
         se.lines().find(|l| l.contains("on the board's border off the plane")).unwrap_or_else(|| panic!("{se}"));
     assert!(
-        warning.contains("(im8.png ") && !warning.contains("im4.png") && warning.contains("the 20 mm kept"),
+        warning.contains("im8.png ") && !warning.contains("im4.png") && warning.contains("the 20 mm kept"),
         "{warning}"
     );
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
-    let im8 = &report["report"]["frames"][2];
+    let frames = report["report"]["frames"].as_array().unwrap();
+    let im8 = frames.iter().find(|f| f["name"].as_str().unwrap().ends_with("im8.png")).unwrap();
     let (border, off) = (im8["border_points"].as_u64().unwrap(), im8["border_outliers"].as_u64().unwrap());
     assert!(border >= 100 && 2 * off > border, "{im8}");
-    let out = run(dir.path(), &board(9, 6), &[3, 4, 8]);
+    // Beyond the paper: tens of mm behind the board's plane.
+    assert!(im8["border_outlier_median_mm"].as_f64().unwrap() > 10.0, "{im8}");
+    // The real border, 7.5 mm: the border points lie on the plane, no warning.
+    let out = run_with(dir.path(), &board(9, 6), &[3, 4, 8], &["--margin-mm", "7.5"]);
     assert!(out.status.success() && !text(&out.stderr).contains("border off the plane"), "{}", text(&out.stderr));
 }

@@ -97,10 +97,13 @@ pub struct FrameReport {
     /// Board points within the robust fit's inlier band.
     pub inliers: usize,
     /// Of the board points, those on its white border (beyond the printed pattern, kept by
-    /// `margin_mm`), and how many of them are outliers: mostly outliers, the border kept is
-    /// probably wider than the board's.
+    /// `margin_mm`), how many of them are outliers, and those outliers' median distance from
+    /// the plane (mm; `None` without any): mostly outliers, the border kept is wider than the
+    /// board's (points tens of mm off, on what lies behind it), or print, a curl or a reflection
+    /// of the stripe moves them.
     pub border_points: usize,
     pub border_outliers: usize,
+    pub border_outlier_median_mm: Option<f64>,
     /// RMS and mean signed distance of the inliers from the plane (mm).
     pub residual_rms_mm: f64,
     pub residual_mean_mm: f64,
@@ -250,8 +253,6 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
                 .map(|q| q.map_or(f64::INFINITY, |q| (q - p).norm()))
                 .fold(0.0f64, f64::max);
             if edge_distance(local.x, local.y) < opts.edge_clearance_px * footprint {
-                let (px0, px1, py0, py1) = pattern;
-                beyond.add((px0 - local.x).max(local.x - px1).max(py0 - local.y).max(local.y - py1), square);
                 continue;
             }
         }
@@ -290,7 +291,7 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
             let (near, far) = beyond.quartiles_mm();
             let out = if far - near < 0.05 { format!("{near:.1}") } else { format!("{near:.1}-{far:.1}") };
             why += &format!(
-                "; {} more lie on the board's plane beyond the printed pattern, the middle half {out} mm out (border kept: {} mm): if the board is flat there, give its white border as margin_mm",
+                "; {} more lie on the board's plane beyond the border kept ({} mm past the printed pattern), the middle half {out} mm past it: if the board is flat there, give its white border as margin_mm (or --margin-mm)",
                 beyond.outside_mm.len(),
                 opts.margin_mm
             );
@@ -311,9 +312,9 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
     })
 }
 
-/// Stripe points on the board's plane beyond the printed pattern by at most
-/// [`BEYOND_SQUARES`] squares: a stripe that runs along the board's white border, named when its
-/// frame is skipped.
+/// Stripe points on the board's plane beyond the border kept, and beyond the printed pattern by
+/// at most [`BEYOND_SQUARES`] squares: a stripe that runs along the board's white border, named
+/// when its frame is skipped.
 #[derive(Default)]
 struct Beyond {
     /// How far each lies outside the pattern (mm).
@@ -614,6 +615,10 @@ pub fn fit_fixed_plane(
         ss_loo += ss_k;
         n_in += r.len();
         let (straight_mm, straight_px) = straightness(camera, &kept);
+        let border_off: Vec<f64> = (f.points.iter().zip(&f.on_border).zip(&inl))
+            .filter(|((_, b), i)| **b && !**i)
+            .map(|((p, _), _)| fit.plane.signed_distance(p).abs())
+            .collect();
         reports.push(FrameReport {
             name: f.name.clone(),
             corners: f.corners,
@@ -624,7 +629,8 @@ pub fn fit_fixed_plane(
             saturated_points: f.saturated,
             inliers: r.len(),
             border_points: f.on_border.iter().filter(|b| **b).count(),
-            border_outliers: f.on_border.iter().zip(&inl).filter(|(b, i)| **b && !**i).count(),
+            border_outliers: border_off.len(),
+            border_outlier_median_mm: omni_geom::stats::median(&border_off),
             residual_rms_mm: (ss / n).sqrt(),
             residual_mean_mm: r.iter().sum::<f64>() / n,
             straightness_mm: straight_mm,

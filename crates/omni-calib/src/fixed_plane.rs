@@ -219,6 +219,11 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
     let (x0, x1, y0, y1) = (x0 - pad, x1 + pad, y0 - pad, y1 + pad);
     let inverse = pose.inverse();
     let on_board = |u: f64, v: f64| board_hit(&pose, &camera.pixel_to_ray(&Vector2::new(u, v))?);
+    // How far (mm) a board point lies beyond the printed pattern, along the farther axis; ≤ 0 on it.
+    let beyond_pattern = |x: f64, y: f64| {
+        let (px0, px1, py0, py1) = pattern;
+        (px0 - x).max(x - px1).max(py0 - y).max(y - py1)
+    };
     // Distance (mm) from a board point to the nearest edge: inside the pattern the lines through
     // the inner corners, which lie at multiples of the square; outside it, its outline or the
     // board's own edge, where its white border ends.
@@ -242,8 +247,7 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
         let Some(p) = on_board(px[0], px[1]) else { continue };
         let local = inverse * p;
         if !(local.x >= x0 && local.x <= x1 && local.y >= y0 && local.y <= y1) {
-            let (px0, px1, py0, py1) = pattern;
-            beyond.add((px0 - local.x).max(local.x - px1).max(py0 - local.y).max(local.y - py1), square);
+            beyond.add(beyond_pattern(local.x, local.y), square);
             continue;
         }
         if opts.edge_clearance_px > 0.0 {
@@ -256,8 +260,7 @@ fn board_points(camera: &dyn CameraModel, f: &FrameInput, opts: &FixedPlaneOptio
                 continue;
             }
         }
-        let (px0, px1, py0, py1) = pattern;
-        on_border.push(local.x < px0 || local.x > px1 || local.y < py0 || local.y > py1);
+        on_border.push(beyond_pattern(local.x, local.y) > 0.0);
         points.push(p);
         pixels.push(*px);
         saturated += usize::from(flags.is_some_and(|s| s[k]));
@@ -393,9 +396,10 @@ type FrameInliers = (Vec<Point3<f64>>, Vec<[Vector3<f64>; 6]>);
 /// posed less surely weighs less however many points it has; beside it each point's own scatter
 /// about its frame's line, the frame's own (a stripe read less surely, dimmer or wider, weighs
 /// less). The covariance is the fit's, scaled up by its χ² per degree of freedom where that
-/// exceeds 1 (with each frame's scatter taken from its own points it stays near 1). What differs between frames beyond their boards' poses (a
-/// stripe read a little off in one frame) adds a term or two a frame against thousands of
-/// points, so this σ leaves it out; the jackknife over frames holds it. Where a board has no
+/// exceeds 1 (with each frame's scatter taken from its own points it stays near 1). What differs
+/// between frames beyond their boards' poses (a stripe read a little off in one frame) adds a
+/// term or two a frame against thousands of points, so this σ leaves it out; the jackknife over
+/// frames holds it. Where a board has no
 /// pose covariance, or the system is singular, the robust fit stays.
 fn weigh_board_poses(frames: &[&OnBoard], fit: &mut RobustPlaneFit) {
     // Each frame's inliers with their pose spreads.

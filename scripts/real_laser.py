@@ -517,11 +517,12 @@ def evaluate(
 ) -> tuple[Camera, list[FrameResult]]:
     cam = calibrate()
     ridge = ridge_points(binary, names, extra, frames)
-    boards = {name: find_board(load(name)) for name in names}
+    images = {name: load(name) for name in names}
+    boards = {name: find_board(bgr) for name, bgr in images.items()}
     others = omniscan_boards(binary, [n for n, c in boards.items() if c is None])
     results = []
     for name in names:
-        bgr = load(name)
+        bgr = images[name]
         corners, grid = boards[name], None
         if corners is None and name in others:
             grid, corners = others[name]

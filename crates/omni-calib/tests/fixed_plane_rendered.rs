@@ -247,8 +247,9 @@ fn options() -> RenderOptions {
 /// mm. With the laser's cross-section known (`--laser-tail 0.17,4`) the unclipped pieces are
 /// led from their tops to the sheet's peak by it, and the clipped ones from their plateau's
 /// centre by its edges' distance against the width of the stripe's unclipped profiles on the
-/// black squares nearby: 0.006-0.019° and 0.013-0.043 mm, all five within the target (seed 2:
-/// 0.0192°, asserted); the frames' mean offsets still differ from frame to frame, and each frame
+/// black squares nearby: 0.013-0.018° and 0.018-0.030 mm, all five within the target (seed 2:
+/// 0.0183°, asserted; 0.006-0.019° and 0.013-0.043 mm when every piece was led from its tops,
+/// before the windowed centroid's own offset was predicted where the leans agree); the frames' mean offsets still differ from frame to frame, and each frame
 /// weighs by its stripe's own scatter about its line (docs/DECISIONS.md). The stripe on the
 /// board's white border (one square wide) counts, as `omni-calib-plane fixed` takes it from the
 /// board file: without it the normals reached 0.028°. Every frame's board is posed from its corners, and a partial board

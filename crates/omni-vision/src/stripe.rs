@@ -544,6 +544,9 @@ pub struct RidgeDetector {
     /// Where the laser's tops lie from its sheet's peak at this detector's scale, built when
     /// first needed (only with [`RidgeParams::laser_profile`]).
     top_offsets: std::sync::OnceLock<laser::TopOffsets>,
+    /// Where the laser's windowed centroids lie from its sheet's peak at this scale, built when
+    /// first needed (only with [`RidgeParams::laser_profile`]).
+    windowed_offsets: std::sync::OnceLock<laser::WindowedOffsets>,
     /// Where the laser's clipped plateaus' centres lie from its sheet's peak at this scale,
     /// built when first needed (only with [`RidgeParams::laser_profile`]).
     plateau_offsets: std::sync::OnceLock<laser::PlateauOffsets>,
@@ -660,6 +663,7 @@ impl RidgeDetector {
             region: None,
             coarser: std::sync::OnceLock::new(),
             top_offsets: std::sync::OnceLock::new(),
+            windowed_offsets: std::sync::OnceLock::new(),
             plateau_offsets: std::sync::OnceLock::new(),
         }
     }

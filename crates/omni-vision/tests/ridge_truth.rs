@@ -1086,10 +1086,12 @@ fn a_known_laser_profile_leads_narrow_lopsided_stripes_to_the_sheets_peak() {
 /// Real-shaped 4 px stripes under speckle (C 0.25, the realistic sensor, laser-off frames, the
 /// lens's blur known, 8 positions): too speckled for their top shape's median to stand out from
 /// the noise, so without the laser's profile their centres stay at their tops' centroids, off
-/// towards the tail; with it, led on to the sheet's peak. Measured along ±3 px, RMS / offset
-/// (px): without 0.096 / +0.034; with 0.089 / +0.012. Asserted: the offset along ±3 within
-/// 0.02 px with the profile and at least 0.015 px smaller than without; the spread stays the
-/// speckle's (the 0.05 px is not met).
+/// towards the tail; with it, led on to the sheet's peak: from the windowed centroid itself by
+/// the profile's prediction where the stripe's leans agree with it, else from the tops'
+/// centroids. Measured along ±3 px, RMS / offset (px): without 0.096 / +0.034; with 0.084 /
+/// +0.010 (0.089 / +0.012 led from the tops' centroids alone). Asserted: the offset along ±3
+/// within 0.02 px with the profile and at least 0.015 px smaller than without, RMS ≤ 0.087 px;
+/// the spread stays the speckle's (the 0.05 px is not met).
 #[test]
 fn a_known_laser_profile_takes_most_of_a_speckled_stripes_offset() {
     let optics = omni_simulator::Optics { speckle_patterns: 16, ..omni_simulator::Optics::paper() };
@@ -1104,7 +1106,7 @@ fn a_known_laser_profile_takes_most_of_a_speckled_stripes_offset() {
     let (_, without) = tallies[0].rms_bias();
     let (rms, with) = tallies[1].rms_bias();
     assert!(with.abs() <= 0.02 && with.abs() <= without.abs() - 0.015, "offset {with:+.4} px, without {without:+.4}");
-    assert!(rms <= 0.092, "rms {rms:.4} px");
+    assert!(rms <= 0.087, "rms {rms:.4} px");
 }
 
 /// Real-shaped stripes (2 and 5 px, as above) through a colour camera, read by their laser colour

@@ -33,7 +33,8 @@
 //!   −(s/2)·L‴/L″ for a blur of variance s and L the profile's logarithm
 //!   ([`Centre::top_shape`]; the lens's blur where known, else the pixel's and the kernel's);
 //!   with the laser's cross-section known, by what it predicts from the top's centroid where
-//!   the top shape cannot tell (`super::laser`);
+//!   the top shape cannot tell, or from the windowed centroid itself where the stripe's leans
+//!   agree with that prediction within their noise (`super::laser`);
 //! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): over
 //!   ±3 px a line through the neighbours once a wider parabola's curvature is taken out, so that
 //!   a curved stripe keeps its centre, and over longer arcs a parabola, each taken only while it
@@ -204,6 +205,13 @@ pub(super) struct Linked {
     /// stripe has no top shape of its own to lead the lean to the peak; for a saturated
     /// point, its plateau centre's ([`lead_plateaus_to_sheet_peak`]); else 0.
     tail_offset: f64,
+    /// Whether the laser's profile, not the stripe's top shape, leads this point to the sheet's
+    /// peak ([`lean_to_sheet_peak`]).
+    led_by_profile: bool,
+    /// With the laser's profile known, how far (px) the sheet's peak lies from the windowed
+    /// centroid on the tail's side ([`super::laser::WindowedOffsets`]), where the profile
+    /// leads the point and the windowed centroid locates it; else `None`.
+    window_offset: Option<f64>,
     /// [`Centre::plateau_edges`].
     plateau_edges: Option<[f64; 2]>,
     /// [`Centre::background_excess`].
@@ -283,6 +291,9 @@ impl RidgeDetector {
             );
             fit_along_stripe(&mut refined, self.params.along_stripe_px);
             kept.extend(refined);
+        }
+        if let Some(model) = self.windowed_offsets(scale) {
+            lead_windows_to_sheet_peak(&mut kept, model, threshold);
         }
         let sides = lead_plateaus_to_sheet_peak(&mut kept, || self.plateau_offsets(scale));
         remove_steady_lean(&mut kept, sides);
@@ -709,6 +720,19 @@ impl RidgeDetector {
         Some(self.top_offsets.get_or_init(|| super::laser::TopOffsets::new(&profile, self.peak_blur_variance(scale))))
     }
 
+    /// Where the laser's windowed centroids lie from its sheet's peak at this scale, if its
+    /// profile is known and the windowed centroid locates the stripes.
+    fn windowed_offsets(&self, scale: u32) -> Option<&super::laser::WindowedOffsets> {
+        let profile = self.params.laser_profile?;
+        if !matches!(self.params.method, super::Method::Windowed | super::Method::Hessian) {
+            return None;
+        }
+        Some(
+            self.windowed_offsets
+                .get_or_init(|| super::laser::WindowedOffsets::new(&profile, self.peak_blur_variance(scale))),
+        )
+    }
+
     /// Where the laser's clipped plateaus' centres lie from its sheet's peak at this scale, if
     /// its profile is known ([`super::RidgeParams::laser_profile`]).
     fn plateau_offsets(&self, scale: u32) -> Option<&super::laser::PlateauOffsets> {
@@ -861,14 +885,15 @@ impl RidgeDetector {
             p.v += shift * c.normal.1;
             let shape = stripe_shape.of(stripes, i);
             let lean = c.lean.filter(|_| c.flatness <= LEAN_MAX_FLATNESS);
-            let (lean, tail_offset) = match lean {
+            let (lean, tail_offset, led_by_profile) = match lean {
                 Some(lean) => {
-                    let (lean, tail) = lean_to_sheet_peak(lean, c.half_width, shape, peak_blur, top_offsets);
-                    (Some(lean), tail)
+                    let (lean, tail, by_profile) =
+                        lean_to_sheet_peak(lean, c.half_width, shape, peak_blur, top_offsets);
+                    (Some(lean), tail, by_profile)
                 }
-                None => (None, 0.0),
+                None => (None, 0.0, false),
             };
-            out.push(Linked { point: p, lean, top_shape: None, tail_offset, ..c.linked() });
+            out.push(Linked { point: p, lean, top_shape: None, tail_offset, led_by_profile, ..c.linked() });
         }
         out
     }
@@ -1028,6 +1053,8 @@ impl Centre {
             top_shape: self.top_shape,
             side_lean: self.side_lean,
             tail_offset: 0.0,
+            led_by_profile: false,
+            window_offset: None,
             plateau_edges: self.plateau_edges,
             background_excess: self.background_excess,
         }
@@ -1039,8 +1066,9 @@ impl Centre {
 /// lies on the same side of its stripe all along it, so the mean keeps the tail's pull and
 /// averages away each profile's noise, which at the top alone is 1.5–3 times the estimator's.
 /// Where the leans lead only to the tops' centroids ([`Linked::tail_offset`], a laser's profile
-/// known), the neighbours' mean tail offset is added on the tail's side ([`tail_sides`]). A
-/// saturated point has no lean: it moves by its own tail offset, its plateau centre's
+/// known), the neighbours' mean tail offset is added on the tail's side ([`tail_sides`]); where
+/// the profile also predicts the leans themselves and they agree with it ([`WindowLeans`]), the
+/// point moves by the prediction alone, which has no top's noise. A saturated point has no lean: it moves by its own tail offset, its plateau centre's
 /// ([`lead_plateaus_to_sheet_peak`]). `sides`: the tails' sides where already known
 /// ([`tail_sides_of`]).
 fn remove_steady_lean(points: &mut [Linked], sides: Option<Vec<f64>>) {
@@ -1054,20 +1082,28 @@ fn remove_steady_lean(points: &mut [Linked], sides: Option<Vec<f64>>) {
                 return sides.get(i).copied().unwrap_or(0.0) * l.tail_offset;
             }
             let here = l.placed();
+            let side = sides.get(i).copied().unwrap_or(0.0);
             let (mut sum, mut offset_sum, mut count) = (0.0, 0.0, 0usize);
+            let mut window = WindowLeans::default();
             grid.visit(here[0], here[1], |j, other| {
                 if let Some(lean) = points[j].lean
                     && let Some((_, _, same_way)) = on_the_stripe(&here, other, LEAN_HALF_ARC_PX)
                 {
-                    sum += if same_way { lean } else { -lean };
+                    let lean = if same_way { lean } else { -lean };
+                    sum += lean;
                     offset_sum += points[j].tail_offset;
                     count += 1;
+                    window.add(lean, side, points[j].tail_offset, points[j].window_offset);
                 }
             });
             if count < LEAN_MIN_PROFILES {
                 return 0.0;
             }
-            let side = sides.get(i).copied().unwrap_or(0.0);
+            if l.window_offset.is_some()
+                && let Some(offset) = window.offset(count)
+            {
+                return side * offset;
+            }
             sum / count as f64 + side * offset_sum / count as f64
         })
         .collect();
@@ -1076,6 +1112,53 @@ fn remove_steady_lean(points: &mut [Linked], sides: Option<Vec<f64>>) {
         l.point.v -= shift * l.normal.1;
     }
 }
+
+/// The leans of a point's neighbours against what the laser's profile predicts for them
+/// ([`Linked::window_offset`] less [`Linked::tail_offset`] on the tail's side), for
+/// [`remove_steady_lean`]. A lean measured on a profile's top is noisy under speckle; the
+/// profile's prediction has no noise but sees only the laser, where a lean also sees what else
+/// tilts the profile (the room's light, a checkerboard's squares). So the prediction is taken
+/// where the leans agree with it within their noise.
+#[derive(Default)]
+struct WindowLeans {
+    /// Sum and sum of squares of the leans less their predictions, how many, and the sum of
+    /// the window offsets.
+    residual: f64,
+    squares: f64,
+    count: usize,
+    offsets: f64,
+}
+
+impl WindowLeans {
+    fn add(&mut self, lean: f64, side: f64, top_offset: f64, window_offset: Option<f64>) {
+        if let Some(window) = window_offset {
+            let r = lean - side * (window - top_offset);
+            self.residual += r;
+            self.squares += r * r;
+            self.count += 1;
+            self.offsets += window;
+        }
+    }
+
+    /// The neighbours' mean window offset (px, towards the tail), where every one of the
+    /// `leans` neighbours has one and their leans' mean lies within [`WINDOW_AGREEMENT`]
+    /// standard errors of the prediction's; the leans are correlated along the stripe, so the
+    /// standard error counts [`CORRELATED_NOISE`] times the independent one.
+    fn offset(&self, leans: usize) -> Option<f64> {
+        if self.count != leans || self.count < 2 {
+            return None;
+        }
+        let n = self.count as f64;
+        let mean = self.residual / n;
+        let variance = (self.squares / n - mean * mean).max(0.0);
+        let standard_error = CORRELATED_NOISE * (variance / n).sqrt();
+        (mean.abs() <= WINDOW_AGREEMENT * standard_error).then_some(self.offsets / n)
+    }
+}
+
+/// Standard errors within which a stripe's leans must agree with the laser profile's
+/// prediction for the prediction to lead its points ([`WindowLeans::offset`]).
+const WINDOW_AGREEMENT: f64 = 2.0;
 
 /// With the laser's profile known (`model`, built when first needed), sets each saturated
 /// point's [`Linked::tail_offset`]: where its plateau centre lies from the sheet's peak
@@ -1167,6 +1250,17 @@ fn lead_plateaus_to_sheet_peak<'a>(
         l.tail_offset = offset;
     }
     Some(sides)
+}
+
+/// Sets the [`Linked::window_offset`] of the points the laser's profile leads
+/// ([`Linked::led_by_profile`]): `model`'s offset at each point's half-maximum width and the
+/// level its weights start from, the `threshold` as a share of its peak. The background's
+/// share of the tail's light is left out: in a lit frame the two sides' backgrounds differ by
+/// the room's light as much as by the tail's (docs/DECISIONS.md).
+fn lead_windows_to_sheet_peak(points: &mut [Linked], model: &super::laser::WindowedOffsets, threshold: f64) {
+    for l in points.iter_mut().filter(|l| l.led_by_profile) {
+        l.window_offset = Some(model.offset_at(l.half_width, threshold / l.point.intensity));
+    }
 }
 
 /// Plateaus whose edges' distances differ by at most this (px), or 5 % where more, are taken
@@ -1373,8 +1467,8 @@ fn lean_to_the_lights_peak(
     for (i, l) in points.iter_mut().enumerate() {
         let shape = stripe_shape.of(&mut stripes, i);
         if let Some(lean) = l.lean {
-            let (lean, tail) = lean_to_sheet_peak(lean, l.half_width, shape, blur_variance, top_offsets);
-            (l.lean, l.tail_offset) = (Some(lean), tail);
+            let (lean, tail, by_profile) = lean_to_sheet_peak(lean, l.half_width, shape, blur_variance, top_offsets);
+            (l.lean, l.tail_offset, l.led_by_profile) = (Some(lean), tail, by_profile);
         }
         l.top_shape = None;
     }
@@ -1425,13 +1519,13 @@ fn lean_to_sheet_peak(
     shape: [f64; 2],
     blur_variance: f64,
     top_offsets: Option<&super::laser::TopOffsets>,
-) -> (f64, f64) {
+) -> (f64, f64, bool) {
     let blur_share = blur_variance / (half_width / FWHM_PER_SIGMA).powi(2);
     match top_offsets {
         Some(model) if shape == [0.0, 0.0] || blur_share > BLUR_DOMINATED_SHARE => {
-            (lean, model.centroid_at(half_width))
+            (lean, model.centroid_at(half_width), true)
         }
-        _ => (lean_to_peak(lean, half_width, shape, blur_variance), 0.0),
+        _ => (lean_to_peak(lean, half_width, shape, blur_variance), 0.0, false),
     }
 }
 

@@ -108,7 +108,10 @@ struct Args {
     /// the sampling, predicts at the stripe's width, wherever the stripe's own top shape cannot
     /// tell: pieces too short or too speckled for it, and stripes whose width is mostly the
     /// blur's (FWHM under about 1.4 × the blur's with the sampling: 3.7 px behind a 0.7 px
-    /// lens). Clipped points are led there from their plateau's centre, which lies towards the
+    /// lens). Where those stripes' profiles lean from their tops as the cross-section predicts,
+    /// within their noise (speckle makes the tops noisy), points are led instead straight from
+    /// the estimator's centre by the offset the cross-section predicts for it at the stripe's
+    /// width and the threshold (the windowed and hessian methods). Clipped points are led there from their plateau's centre, which lies towards the
     /// tail the more the brighter the stripe: the cross-section, at the width of the stripe's
     /// unclipped profiles within 48 px (dimmer parts of the surface), tells how far down the
     /// plateau's edges were read. The tail's side comes from the stripe. The red line laser of

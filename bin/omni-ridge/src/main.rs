@@ -108,11 +108,12 @@ struct Args {
     /// the sampling, predicts at the stripe's width, wherever the stripe's own top shape cannot
     /// tell: pieces too short or too speckled for it, and stripes whose width is mostly the
     /// blur's (FWHM under about 1.4 × the blur's with the sampling: 3.7 px behind a 0.7 px
-    /// lens). Where those stripes' profiles lean from their tops as the cross-section predicts,
-    /// within their noise (speckle makes the tops noisy), points are led instead straight from
-    /// the estimator's centre by the offset the cross-section predicts for it at the stripe's
-    /// width and the threshold (the windowed and hessian methods). Clipped points are led there from their plateau's centre, which lies towards the
-    /// tail the more the brighter the stripe: the cross-section, at the width of the stripe's
+    /// lens). There, with the windowed and hessian methods, the offset the cross-section
+    /// predicts for the estimator's centre itself (at the stripe's width and the threshold)
+    /// leads the points, and the profiles' leans from their tops only as far as they depart
+    /// from it beyond their noise (speckle makes the tops noisy). Clipped points are led to the
+    /// sheet's peak from their plateau's centre, which lies towards the tail the more the
+    /// brighter the stripe: the cross-section, at the width of the stripe's
     /// unclipped profiles within 48 px (dimmer parts of the surface), tells how far down the
     /// plateau's edges were read. The tail's side comes from the stripe. The red line laser of
     /// the hand-held photographs in ../shared/data/real-laser-handheld measures 0.17,4. Not

@@ -1037,11 +1037,11 @@ fn real_shaped_stripes_2_to_20_px_wide() {
 /// ideal optics with the lens's blur known, bench plane, 8 positions. Where the blur makes most
 /// of a stripe's width, the stripe's own top shape undoes the blur's shift of its lopsided peak
 /// to first order only (+0.030 px left at 2 px, the previous test); the known profile predicts
-/// where the top lies from the sheet's peak at the stripe's width instead. Measured (RMS /
-/// offset, px; without the profile in brackets): the measured real shape (17 % in a tail 4 σ
-/// long) 2 px 0.0143 / +0.0029 (0.0335 / +0.0303), 5 / 10 / 20 px unchanged (−0.0007 to
-/// +0.0022, their own top shapes lead them); a shorter, heavier tail on the other side (40 %,
-/// 1.5 σ) 2 px 0.0143 / +0.0044 (0.0668 / −0.0654). The Gaussian fit's centres alike (2 px:
+/// where the top, and the windowed centroid, lie from the sheet's peak at the stripe's width
+/// instead. Measured (RMS / offset, px; without the profile in brackets): the measured real
+/// shape (17 % in a tail 4 σ long) 2 px 0.0135 / +0.0025 (0.0335 / +0.0303), 5 / 10 / 20 px
+/// unchanged (−0.0007 to +0.0022, their own top shapes lead them); a shorter, heavier tail on
+/// the other side (40 %, 1.5 σ) 2 px 0.0138 / +0.0046 (0.0668 / −0.0654). The Gaussian fit's centres alike (2 px:
 /// 0.0136 / +0.0029 and 0.0131 / +0.0044): the tail's side comes from the windowed centroid
 /// whatever the estimator. Asserted at the ideal-optics targets: RMS ≤ 0.015 px,
 /// |offset| ≤ 0.005 px. A profile given wrong moves the offset by
@@ -1087,10 +1087,10 @@ fn a_known_laser_profile_leads_narrow_lopsided_stripes_to_the_sheets_peak() {
 /// lens's blur known, 8 positions): too speckled for their top shape's median to stand out from
 /// the noise, so without the laser's profile their centres stay at their tops' centroids, off
 /// towards the tail; with it, led on to the sheet's peak: from the windowed centroid itself by
-/// the profile's prediction where the stripe's leans agree with it, else from the tops'
-/// centroids. Measured along ±3 px, RMS / offset (px): without 0.096 / +0.034; with 0.084 /
-/// +0.010 (0.089 / +0.012 led from the tops' centroids alone). Asserted: the offset along ±3
-/// within 0.02 px with the profile and at least 0.015 px smaller than without, RMS ≤ 0.087 px;
+/// the profile's prediction, and by as much of the leans from the tops as stands out of their
+/// noise. Measured along ±3 px, RMS / offset (px): without 0.096 / +0.034; with 0.086 / +0.010
+/// (0.089 / +0.012 led from the tops' centroids alone). Asserted: the offset along ±3 within
+/// 0.02 px with the profile and at least 0.015 px smaller than without, RMS ≤ 0.088 px;
 /// the spread stays the speckle's (the 0.05 px is not met).
 #[test]
 fn a_known_laser_profile_takes_most_of_a_speckled_stripes_offset() {
@@ -1106,7 +1106,7 @@ fn a_known_laser_profile_takes_most_of_a_speckled_stripes_offset() {
     let (_, without) = tallies[0].rms_bias();
     let (rms, with) = tallies[1].rms_bias();
     assert!(with.abs() <= 0.02 && with.abs() <= without.abs() - 0.015, "offset {with:+.4} px, without {without:+.4}");
-    assert!(rms <= 0.087, "rms {rms:.4} px");
+    assert!(rms <= 0.088, "rms {rms:.4} px");
 }
 
 /// Real-shaped stripes (2 and 5 px, as above) through a colour camera, read by their laser colour

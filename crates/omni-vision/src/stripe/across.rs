@@ -32,9 +32,10 @@
 //!   top shape from there to the image's peak and back by the blur's shift of a lopsided peak,
 //!   −(s/2)·L‴/L″ for a blur of variance s and L the profile's logarithm
 //!   ([`Centre::top_shape`]; the lens's blur where known, else the pixel's and the kernel's);
-//!   with the laser's cross-section known, by what it predicts from the top's centroid where
-//!   the top shape cannot tell, or from the windowed centroid itself where the stripe's leans
-//!   agree with that prediction within their noise (`super::laser`);
+//!   with the laser's cross-section known, where the top shape cannot tell, by what it predicts
+//!   from the top's centroid, or, for the windowed centroid, by what it predicts for that
+//!   centroid itself and as much of the leans' departure from it as stands out of their noise
+//!   (`super::laser`);
 //! * fits the stripe along its length when asked ([`super::RidgeParams::along_stripe_px`]): over
 //!   ±3 px a line through the neighbours once a wider parabola's curvature is taken out, so that
 //!   a curved stripe keeps its centre, and over longer arcs a parabola, each taken only while it
@@ -208,9 +209,9 @@ pub(super) struct Linked {
     /// Whether the laser's profile, not the stripe's top shape, leads this point to the sheet's
     /// peak ([`lean_to_sheet_peak`]).
     led_by_profile: bool,
-    /// With the laser's profile known, how far (px) the sheet's peak lies from the windowed
-    /// centroid on the tail's side ([`super::laser::WindowedOffsets`]), where the profile
-    /// leads the point and the windowed centroid locates it; else `None`.
+    /// With the laser's profile known, how far (px) the windowed centroid lies from the sheet's
+    /// peak towards the tail ([`super::laser::WindowedOffsets`]), where the profile leads the
+    /// point and the windowed centroid locates it; else `None`.
     window_offset: Option<f64>,
     /// [`Centre::plateau_edges`].
     plateau_edges: Option<[f64; 2]>,
@@ -1067,10 +1068,11 @@ impl Centre {
 /// averages away each profile's noise, which at the top alone is 1.5–3 times the estimator's.
 /// Where the leans lead only to the tops' centroids ([`Linked::tail_offset`], a laser's profile
 /// known), the neighbours' mean tail offset is added on the tail's side ([`tail_sides`]); where
-/// the profile also predicts the leans themselves and they agree with it ([`WindowLeans`]), the
-/// point moves by the prediction alone, which has no top's noise. A saturated point has no lean: it moves by its own tail offset, its plateau centre's
-/// ([`lead_plateaus_to_sheet_peak`]). `sides`: the tails' sides where already known
-/// ([`tail_sides_of`]).
+/// the profile also predicts the windowed centroid's own offset, the point moves by that
+/// prediction, which has no top's noise, and by as much of the leans' departure from it as
+/// stands out of their noise ([`WindowLeans`]). A saturated point has no lean: it moves by its
+/// own tail offset, its plateau centre's ([`lead_plateaus_to_sheet_peak`]). `sides`: the tails'
+/// sides where already known ([`tail_sides_of`]).
 fn remove_steady_lean(points: &mut [Linked], sides: Option<Vec<f64>>) {
     let grid = Grid::from_placed(points.iter().map(Linked::placed), LEAN_HALF_ARC_PX);
     let sides = sides.unwrap_or_else(|| tail_sides(points));
@@ -1100,9 +1102,9 @@ fn remove_steady_lean(points: &mut [Linked], sides: Option<Vec<f64>>) {
                 return 0.0;
             }
             if l.window_offset.is_some()
-                && let Some(offset) = window.offset(count)
+                && let Some(shift) = window.shift(count, side)
             {
-                return side * offset;
+                return shift;
             }
             sum / count as f64 + side * offset_sum / count as f64
         })
@@ -1117,15 +1119,18 @@ fn remove_steady_lean(points: &mut [Linked], sides: Option<Vec<f64>>) {
 /// ([`Linked::window_offset`] less [`Linked::tail_offset`] on the tail's side), for
 /// [`remove_steady_lean`]. A lean measured on a profile's top is noisy under speckle; the
 /// profile's prediction has no noise but sees only the laser, where a lean also sees what else
-/// tilts the profile (the room's light, a checkerboard's squares). So the prediction is taken
-/// where the leans agree with it within their noise.
+/// tilts the profile (the room's light, a checkerboard's squares, a surface's slant). So the
+/// leans' mean departure from the prediction is kept in proportion to how surely it stands out
+/// of their noise.
 #[derive(Default)]
 struct WindowLeans {
-    /// Sum and sum of squares of the leans less their predictions, how many, and the sum of
-    /// the window offsets.
+    /// Sum of the leans less their predictions (px).
     residual: f64,
+    /// Sum of their squares (px²).
     squares: f64,
+    /// How many.
     count: usize,
+    /// Sum of the window offsets (px).
     offsets: f64,
 }
 
@@ -1140,25 +1145,25 @@ impl WindowLeans {
         }
     }
 
-    /// The neighbours' mean window offset (px, towards the tail), where every one of the
-    /// `leans` neighbours has one and their leans' mean lies within [`WINDOW_AGREEMENT`]
-    /// standard errors of the prediction's; the leans are correlated along the stripe, so the
-    /// standard error counts [`CORRELATED_NOISE`] times the independent one.
-    fn offset(&self, leans: usize) -> Option<f64> {
-        if self.count != leans || self.count < 2 {
+    /// The point's shift (px along its normal) where every one of its `leans` neighbours has a
+    /// prediction and the tail's `side` is known: the neighbours' mean window offset on that
+    /// side, plus their leans' mean departure r from the prediction shrunk by r²/(r² + se²),
+    /// se its standard error. A departure well beyond its noise is kept whole (the shift is
+    /// then the leans' own), one within it mostly dropped, with no step between the two. The
+    /// leans are correlated along the stripe, so se counts [`CORRELATED_NOISE`] times the
+    /// independent error.
+    fn shift(&self, leans: usize, side: f64) -> Option<f64> {
+        if self.count != leans || self.count == 0 || side == 0.0 {
             return None;
         }
         let n = self.count as f64;
         let mean = self.residual / n;
         let variance = (self.squares / n - mean * mean).max(0.0);
-        let standard_error = CORRELATED_NOISE * (variance / n).sqrt();
-        (mean.abs() <= WINDOW_AGREEMENT * standard_error).then_some(self.offsets / n)
+        let se2 = CORRELATED_NOISE * CORRELATED_NOISE * variance / n;
+        let kept = if mean == 0.0 { 0.0 } else { mean * mean * mean / (mean * mean + se2) };
+        Some(side * self.offsets / n + kept)
     }
 }
-
-/// Standard errors within which a stripe's leans must agree with the laser profile's
-/// prediction for the prediction to lead its points ([`WindowLeans::offset`]).
-const WINDOW_AGREEMENT: f64 = 2.0;
 
 /// With the laser's profile known (`model`, built when first needed), sets each saturated
 /// point's [`Linked::tail_offset`]: where its plateau centre lies from the sheet's peak
@@ -1259,7 +1264,7 @@ fn lead_plateaus_to_sheet_peak<'a>(
 /// the room's light as much as by the tail's (docs/DECISIONS.md).
 fn lead_windows_to_sheet_peak(points: &mut [Linked], model: &super::laser::WindowedOffsets, threshold: f64) {
     for l in points.iter_mut().filter(|l| l.led_by_profile) {
-        l.window_offset = Some(model.offset_at(l.half_width, threshold / l.point.intensity));
+        l.window_offset = model.offset_at(l.half_width, threshold / l.point.intensity);
     }
 }
 

@@ -11,8 +11,9 @@
 //! lead them to the peak (`across::lean_to_sheet_peak`): pieces too short or too speckled for
 //! its median, and stripes whose width is mostly the blur's, where the top shape undoes the
 //! blur only to first order. The same profile also gives the windowed centroid's own distance
-//! from the sheet's peak ([`WindowedOffsets`]), which needs no top at all; it is taken where
-//! the stripe's measured leans agree with it (`across::WindowLeans`).
+//! from the sheet's peak ([`WindowedOffsets`]), which needs no top at all; the stripe's
+//! measured leans then count only as far as they depart from it beyond their noise
+//! (`across::WindowLeans`).
 
 use super::SAMPLE_STEP_PX;
 use super::estimators::{self, Segment};
@@ -64,16 +65,21 @@ impl TopOffsets {
 /// it the last growing with x (a profile's shape scales with its width once the blur no longer
 /// matters).
 fn interpolate(xs: &[f64], values: &[f64], x: f64) -> f64 {
+    interpolate_by(xs, |k| values[k], x)
+}
+
+/// [`interpolate`] with the value at each of `xs` given by `value(index)`.
+fn interpolate_by(xs: &[f64], value: impl Fn(usize) -> f64, x: f64) -> f64 {
     let Some(&last) = xs.last() else { return 0.0 };
     if !(x > xs[0]) {
-        return values[0];
+        return value(0);
     }
     if x >= last {
-        return values[values.len() - 1] * x / last;
+        return value(xs.len() - 1) * x / last;
     }
     let i = xs.partition_point(|&v| v <= x);
     let f = (x - xs[i - 1]) / (xs[i] - xs[i - 1]);
-    values[i - 1] + f * (values[i] - values[i - 1])
+    value(i - 1) + f * (value(i) - value(i - 1))
 }
 
 /// Levels at which the windowed centroid is tabulated ([`WindowedOffsets`]): shares of the
@@ -84,8 +90,7 @@ const LEVEL_STEP: f64 = 0.025;
 
 /// Where a stripe's windowed centroid ([`estimators::windowed_centroid`]) lies from its sheet's
 /// peak (px, towards the tail), by the stripe's half-maximum width (px) and the level its
-/// weights start from (the threshold and the background's share of the tail's light, as a
-/// share of the light's peak), for one blur.
+/// weights start from (the threshold as a share of the profile's peak), for one blur.
 ///
 /// Rule: the windowed centroid weighs the light above a level, so a tail on one side pulls it
 /// by an amount the profile, its width and that level fix. Unlike the top's centroid, which
@@ -118,15 +123,19 @@ impl WindowedOffsets {
 
     /// The windowed centroid's distance from the sheet's peak (px, towards the tail) for a
     /// profile of half-maximum width `half_width` (px) weighed from `level` (a share of its
-    /// peak; clamped to the table's levels).
-    pub fn offset_at(&self, half_width: f64, level: f64) -> f64 {
-        let at_level = |offsets: &[f64; WINDOW_LEVELS]| {
-            let x = ((level - LOWEST_LEVEL) / LEVEL_STEP).clamp(0.0, (WINDOW_LEVELS - 1) as f64);
-            let i = (x as usize).min(WINDOW_LEVELS - 2);
+    /// peak); `None` for a level outside the table's (a threshold under 2.5 % of the peak
+    /// weighs a tail the table does not reach).
+    pub fn offset_at(&self, half_width: f64, level: f64) -> Option<f64> {
+        let x = (level - LOWEST_LEVEL) / LEVEL_STEP;
+        if !(0.0..=(WINDOW_LEVELS - 1) as f64).contains(&x) {
+            return None;
+        }
+        let i = (x as usize).min(WINDOW_LEVELS - 2);
+        let at_level = |k: usize| {
+            let offsets = &self.offsets[k];
             offsets[i] + (x - i as f64) * (offsets[i + 1] - offsets[i])
         };
-        let values: Vec<f64> = self.offsets.iter().map(at_level).collect();
-        interpolate(&self.half_widths, &values, half_width)
+        Some(interpolate_by(&self.half_widths, at_level, half_width))
     }
 }
 
@@ -137,8 +146,8 @@ fn sampled_windows(profile: &LaserProfile, core: f64, blur_variance: f64) -> Opt
     let s = (1.0 + blur_variance / (core * core)).sqrt();
     let spread = s * core;
     let peak = profile.mode() * core;
-    // Down to the lowest level on both sides: 4 σ of the core and the blur, and on the tail's
-    // side 4 τ (the tail's share of the peak times e⁻⁴ is under it).
+    // Down to the lowest level on both sides: 5 σ of the core and the blur, and on the tail's
+    // side 4 τ more (the tail's share of the peak times e⁻⁴ is under it).
     let tail = if profile.tail_weight() > 0.0 { 4.0 * profile.tail_length() * core } else { 0.0 };
     let (from, to) = (-5.0 * spread, 5.0 * spread + tail);
     let n = ((to - from) / SAMPLE_STEP_PX).ceil() as usize + 3;
@@ -544,16 +553,18 @@ mod clipped_tests {
 
     /// The windowed centroid's table against unclipped lopsided stripes read as the detector
     /// reads them (8-bit pixels, the sampling kernel, threshold 10 over a dark background, 8
-    /// places of the sheet within a pixel): 0.07–0.11 px towards the tail, led to within 0.005
-    /// px of the sheet's peak (2 / 4 / 8 px wide: −0.0004 / −0.0009 / −0.0047 px); a Gaussian
-    /// sheet's windowed centroid is its peak.
+    /// places of the sheet within a pixel): 0.07–0.11 px towards the tail, led back to the
+    /// sheet's peak (2 / 4 / 8 px wide: −0.0004 / −0.0009 / −0.0047 px; asserted within 0.006);
+    /// a Gaussian sheet's windowed centroid is its peak.
     #[test]
     fn the_windowed_table_finds_an_unclipped_lopsided_stripes_sheet_peak() {
         let lens = 0.7;
         let blur = lens * lens + 1.0 / 12.0 + SAMPLE_SIGMA_PX * SAMPLE_SIGMA_PX;
         let gauss = WindowedOffsets::new(&LaserProfile::gaussian(), blur);
+        assert_eq!(gauss.offset_at(3.0, 0.01), None, "a level below the table's");
         for (h, level) in [(2.0, 0.05), (5.0, 0.3), (20.0, 0.6)] {
-            assert!(gauss.offset_at(h, level).abs() < 2e-3, "{h} px at {level}: {}", gauss.offset_at(h, level));
+            let offset = gauss.offset_at(h, level).unwrap();
+            assert!(offset.abs() < 2e-3, "{h} px at {level}: {offset}");
         }
         let profile = LaserProfile::tailed(0.17, 4.0);
         let model = WindowedOffsets::new(&profile, blur);
@@ -569,7 +580,7 @@ mod clipped_tests {
                 let run = crate::stripe::segment_at(&q, seg.peak, t).unwrap();
                 let index = estimators::windowed_centroid(&q, &run, t).unwrap();
                 let (a, b) = estimators::crossings(&q, &run, 0.5 * q[run.peak]).unwrap();
-                let offset = model.offset_at((b - a) * SAMPLE_STEP_PX, (t / q[run.peak]) as f64);
+                let offset = model.offset_at((b - a) * SAMPLE_STEP_PX, (t / q[run.peak]) as f64).unwrap();
                 let centroid = 10.0 + index * SAMPLE_STEP_PX - centre;
                 raw += centroid / phases as f64;
                 led += (centroid - offset) / phases as f64;

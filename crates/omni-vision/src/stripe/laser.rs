@@ -41,17 +41,8 @@ impl TopOffsets {
     /// The table for `profile` under a Gaussian blur of variance `blur_variance` (px², the
     /// lens's, the pixel's area and the sampling kernel's).
     pub fn new(profile: &LaserProfile, blur_variance: f64) -> TopOffsets {
-        let mut t = TopOffsets { half_widths: Vec::new(), centroids: Vec::new() };
-        for k in 0..WIDTHS {
-            let fwhm = NARROWEST_PX * WIDTH_RATIO.powi(k as i32);
-            if let Some(top) = sampled_top(profile, fwhm / profile.fwhm(), blur_variance)
-                && t.half_widths.last().is_none_or(|&last| top.half_width > last)
-            {
-                t.half_widths.push(top.half_width);
-                t.centroids.push(top.centroid);
-            }
-        }
-        t
+        let (half_widths, centroids) = by_width(profile, |core| sampled_top(profile, core, blur_variance));
+        TopOffsets { half_widths, centroids: centroids.into_iter().map(|[c]| c).collect() }
     }
 
     /// The top centroid's distance from the sheet's peak (px, towards the tail) for a profile
@@ -59,6 +50,22 @@ impl TopOffsets {
     pub fn centroid_at(&self, half_width: f64) -> f64 {
         interpolate(&self.half_widths, &self.centroids, half_width)
     }
+}
+
+/// `sample(core σ)` of each tabulated sheet width ([`WIDTHS`]) whose half-maximum width (the
+/// first of the pair) grows: the widths and the values, in order.
+fn by_width<T>(profile: &LaserProfile, sample: impl Fn(f64) -> Option<(f64, T)>) -> (Vec<f64>, Vec<T>) {
+    let (mut widths, mut values) = (Vec::new(), Vec::new());
+    for k in 0..WIDTHS {
+        let fwhm = NARROWEST_PX * WIDTH_RATIO.powi(k as i32);
+        if let Some((half_width, value)) = sample(fwhm / profile.fwhm())
+            && widths.last().is_none_or(|&last| half_width > last)
+        {
+            widths.push(half_width);
+            values.push(value);
+        }
+    }
+    (widths, values)
 }
 
 /// `values` at `x` over increasing `xs`: interpolated; below the table the first value, above
@@ -108,17 +115,8 @@ impl WindowedOffsets {
     /// The table for `profile` under a Gaussian blur of variance `blur_variance` (px², the
     /// lens's, the pixel's area and the sampling kernel's).
     pub fn new(profile: &LaserProfile, blur_variance: f64) -> WindowedOffsets {
-        let mut t = WindowedOffsets { half_widths: Vec::new(), offsets: Vec::new() };
-        for k in 0..WIDTHS {
-            let fwhm = NARROWEST_PX * WIDTH_RATIO.powi(k as i32);
-            if let Some((half_width, offsets)) = sampled_windows(profile, fwhm / profile.fwhm(), blur_variance)
-                && t.half_widths.last().is_none_or(|&last| half_width > last)
-            {
-                t.half_widths.push(half_width);
-                t.offsets.push(offsets);
-            }
-        }
-        t
+        let (half_widths, offsets) = by_width(profile, |core| sampled_windows(profile, core, blur_variance));
+        WindowedOffsets { half_widths, offsets }
     }
 
     /// The windowed centroid's distance from the sheet's peak (px, towards the tail) for a
@@ -139,38 +137,20 @@ impl WindowedOffsets {
     }
 }
 
-/// A sheet of core σ `core` px blurred by variance `blur_variance` px², sampled
-/// [`SAMPLE_STEP_PX`] apart: its half-maximum width and its windowed centroid's place from the
-/// sheet's peak (px) at each tabulated level, averaged over [`PHASES`] sub-sample phases.
+/// A sheet of core σ `core` px blurred by variance `blur_variance` px², sampled as the
+/// detector samples it: its half-maximum width and its windowed centroid's place from the
+/// sheet's peak (px) at each tabulated level ([`sampled_phases`]). On the tail's side the
+/// samples reach 4 τ past 5 σ: the tail's share of the peak times e⁻⁴ is under the lowest level.
 fn sampled_windows(profile: &LaserProfile, core: f64, blur_variance: f64) -> Option<(f64, [f64; WINDOW_LEVELS])> {
-    let s = (1.0 + blur_variance / (core * core)).sqrt();
-    let spread = s * core;
-    let peak = profile.mode() * core;
-    // Down to the lowest level on both sides: 5 σ of the core and the blur, and on the tail's
-    // side 4 τ more (the tail's share of the peak times e⁻⁴ is under it).
-    let tail = if profile.tail_weight() > 0.0 { 4.0 * profile.tail_length() * core } else { 0.0 };
-    let (from, to) = (-5.0 * spread, 5.0 * spread + tail);
-    let n = ((to - from) / SAMPLE_STEP_PX).ceil() as usize + 3;
-    let mut half_width = 0.0;
-    let mut offsets = [0.0; WINDOW_LEVELS];
-    let mut q = vec![0.0f32; n];
-    for phase in 0..PHASES {
-        let first = from + SAMPLE_STEP_PX * (phase as f64 / PHASES as f64 - 1.0);
-        for (k, v) in q.iter_mut().enumerate() {
-            *v = profile.unit((first + k as f64 * SAMPLE_STEP_PX) / core, s) as f32;
-        }
-        let top = (0..n).max_by(|&a, &b| q[a].total_cmp(&q[b]))?;
-        let seg = Segment { start: 1, end: n - 1, peak: top };
-        let (a, b) = estimators::crossings(&q, &seg, 0.5 * q[top])?;
-        half_width += (b - a) * SAMPLE_STEP_PX / PHASES as f64;
+    sampled_phases(profile, core, blur_variance, 4.0, |q, top, place| {
+        let mut offsets = [0.0; WINDOW_LEVELS];
         for (i, offset) in offsets.iter_mut().enumerate() {
             let level = (LOWEST_LEVEL + i as f64 * LEVEL_STEP) as f32 * q[top];
-            let run = super::segment_at(&q, top, level)?;
-            let centre = estimators::windowed_centroid(&q, &run, level)?;
-            *offset += (first + centre * SAMPLE_STEP_PX - peak) / PHASES as f64;
+            let run = super::segment_at(q, top, level)?;
+            *offset = place(estimators::windowed_centroid(q, &run, level)?);
         }
-    }
-    Some((half_width, offsets))
+        Some(offsets)
+    })
 }
 
 /// Clip levels tabulated, as shares of the profile's peak: from the peak itself down by
@@ -428,26 +408,37 @@ fn sampled_crossings(
     Some((rising, falling))
 }
 
-/// A sampled profile's half-maximum width and its top centroid's place from the sheet's peak
-/// (px).
-struct SampledTop {
-    half_width: f64,
-    centroid: f64,
+/// A sheet of core σ `core` px blurred by variance `blur_variance` px², sampled as the
+/// detector samples it: its half-maximum width and its top centroid's place from the sheet's
+/// peak (px) ([`sampled_phases`]). On the tail's side the samples reach 2 τ past 5 σ, past
+/// the half maximum for any share up to 0.9 (an exponential halves in 0.7 τ).
+fn sampled_top(profile: &LaserProfile, core: f64, blur_variance: f64) -> Option<(f64, [f64; 1])> {
+    sampled_phases(profile, core, blur_variance, 2.0, |q, top, place| {
+        let seg = Segment { start: 1, end: q.len() - 1, peak: top };
+        let (centre, _) = estimators::top_centroid(q, &seg, super::across::TOP_LEVEL * q[top])?;
+        Some([place(centre)])
+    })
 }
 
 /// A sheet of core σ `core` px blurred by variance `blur_variance` px², sampled
-/// [`SAMPLE_STEP_PX`] apart and measured as the detector measures a profile, averaged over
-/// [`PHASES`] sub-sample phases.
-fn sampled_top(profile: &LaserProfile, core: f64, blur_variance: f64) -> Option<SampledTop> {
+/// [`SAMPLE_STEP_PX`] apart from 5 σ of the core and the blur before its peak to 5 σ and
+/// `tails` tail lengths after it, at each of [`PHASES`] sub-sample phases: the half-maximum
+/// width and what `measure(samples, highest sample's index, place)` gives, averaged over the
+/// phases; `place(index)` is where a fractional sample index lies from the sheet's peak (px).
+fn sampled_phases<const N: usize>(
+    profile: &LaserProfile,
+    core: f64,
+    blur_variance: f64,
+    tails: f64,
+    measure: impl Fn(&[f32], usize, &dyn Fn(f64) -> f64) -> Option<[f64; N]>,
+) -> Option<(f64, [f64; N])> {
     let s = (1.0 + blur_variance / (core * core)).sqrt();
     let spread = s * core;
     let peak = profile.mode() * core;
-    // Past the half maximum on both sides: on the tail's, within 2 τ for any share up to 0.9
-    // (an exponential halves in 0.7 τ).
-    let tail = if profile.tail_weight() > 0.0 { 2.0 * profile.tail_length() * core } else { 0.0 };
+    let tail = if profile.tail_weight() > 0.0 { tails * profile.tail_length() * core } else { 0.0 };
     let (from, to) = (-5.0 * spread, 5.0 * spread + tail);
     let n = ((to - from) / SAMPLE_STEP_PX).ceil() as usize + 3;
-    let mut sum = SampledTop { half_width: 0.0, centroid: 0.0 };
+    let (mut half_width, mut sum) = (0.0, [0.0; N]);
     let mut q = vec![0.0f32; n];
     for phase in 0..PHASES {
         let first = from + SAMPLE_STEP_PX * (phase as f64 / PHASES as f64 - 1.0);
@@ -457,13 +448,14 @@ fn sampled_top(profile: &LaserProfile, core: f64, blur_variance: f64) -> Option<
         let top = (0..n).max_by(|&a, &b| q[a].total_cmp(&q[b]))?;
         let seg = Segment { start: 1, end: n - 1, peak: top };
         let (a, b) = estimators::crossings(&q, &seg, 0.5 * q[top])?;
-        let half_width = (b - a) * SAMPLE_STEP_PX;
-        let (centre, _) = estimators::top_centroid(&q, &seg, super::across::TOP_LEVEL * q[top])?;
-        sum.half_width += half_width;
-        sum.centroid += first + centre * SAMPLE_STEP_PX - peak;
+        half_width += (b - a) * SAMPLE_STEP_PX;
+        let place = |index: f64| first + index * SAMPLE_STEP_PX - peak;
+        for (total, value) in sum.iter_mut().zip(measure(&q, top, &place)?) {
+            *total += value;
+        }
     }
-    let n = PHASES as f64;
-    Some(SampledTop { half_width: sum.half_width / n, centroid: sum.centroid / n })
+    let phases = PHASES as f64;
+    Some((half_width / phases, sum.map(|v| v / phases)))
 }
 
 #[cfg(test)]
@@ -506,7 +498,7 @@ mod tests {
             (a + w, b + w * x)
         });
         let continuous = swx / sw - p.mode() * core;
-        let sampled = sampled_top(&p, core, blur).unwrap().centroid;
+        let [sampled] = sampled_top(&p, core, blur).unwrap().1;
         assert!((sampled - continuous).abs() < 0.01, "sampled {sampled}, continuous {continuous}");
     }
 }

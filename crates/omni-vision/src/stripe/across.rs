@@ -1517,7 +1517,8 @@ fn lean_to_peak(lean: f64, half_width: f64, [top_offset, skew]: [f64; 2], blur_v
 /// Otherwise, with the profile known, the lean leads to the top's centroid and the profile's
 /// offset of that centroid from the sheet's peak remains: it needs no stretch of stripe for a
 /// median, only the profile's width, but it sees only the profile, where a wide stripe's own
-/// top shape sees whatever else shapes it in the image (docs/DECISIONS.md).
+/// top shape sees whatever else shapes it in the image (docs/DECISIONS.md). The third value
+/// tells whether the profile led it ([`Linked::led_by_profile`]).
 fn lean_to_sheet_peak(
     lean: f64,
     half_width: f64,

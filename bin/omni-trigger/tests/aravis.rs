@@ -70,8 +70,11 @@ mod gige_camera {
     /// a frame comes 0–40 ms after its trigger, and it stamps the frame when its thread gets to
     /// it: on a machine loaded by parallel builds one frame was stamped more than a trigger
     /// period (166 ms at 6 Hz) late and so named the next trigger (a real camera stamps the
-    /// exposure, within microseconds of the trigger). 4 Hz leaves 250 ms.
-    const EMULATOR: [&str; 4] = ["--camera-mode", "blank", "--max-rate-hz", "4"];
+    /// exposure, within microseconds of the trigger). 4 Hz leaves 250 ms. The emulator's own
+    /// virtual camera writes the truth these tests pair against, one record per frame it takes:
+    /// buffered, it takes every trigger (unbuffered, a machine busy with the other test lane
+    /// once kept it writing past the next trigger, and that trigger had no truth).
+    const EMULATOR: [&str; 5] = ["--camera-mode", "blank", "--max-rate-hz", "4", "--buffered-camera"];
 
     /// Camera flags: a small ROI (fast), the exposure and gain that leave the ramp unscaled;
     /// `changes` replace flags' values.

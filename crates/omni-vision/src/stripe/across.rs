@@ -1095,7 +1095,9 @@ fn remove_steady_lean(points: &mut [Linked], sides: Option<Vec<f64>>) {
                     sum += lean;
                     offset_sum += points[j].tail_offset;
                     count += 1;
-                    window.add(lean, side, points[j].tail_offset, points[j].window_offset);
+                    if l.window_offset.is_some() {
+                        window.add(lean, side, points[j].tail_offset, points[j].window_offset);
+                    }
                 }
             });
             if count < LEAN_MIN_PROFILES {

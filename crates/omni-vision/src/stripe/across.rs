@@ -1884,14 +1884,16 @@ impl LineSums {
 /// of the points' noise; `None` where the fit has too few points. Over the shortest arc (±3 px
 /// or less): the line through the neighbours' offsets once the bend c (d = c·t²) of a parabola
 /// over ±max([`SHAPE_HALF_ARC_PX`], 2·`arc`) is taken out, a bend better determined than over
-/// the arc itself. Over longer arcs: the parabola through the arc itself, and only where the
-/// stripe reaches both of its ends (to within [`ARC_END_PX`]): there a bend from twice the arc,
-/// or a window the stripe's end cuts short, moves the offset wherever the stripe's curvature
-/// changes along it (an ellipse's flanks, near a silhouette).
+/// the arc itself; where a gap leaves fewer than two points on one side within the arc (a
+/// profile refused on a dark speckle grain), the line reaches on towards the bend's arc until
+/// it holds two. Over longer arcs: the parabola through the arc itself, and only where the
+/// stripe goes on to both of the arc's ends (to within [`ARC_END_PX`]), gaps within it
+/// allowed: there a bend from twice the arc, or a window the stripe's end cuts short, moves
+/// the offset wherever the stripe's curvature changes along it (an ellipse's flanks, near a
+/// silhouette).
 fn arc_offset(neighbours: &[Neighbour], arc: f64) -> Option<(f64, f64)> {
     if arc > SHAPE_HALF_ARC_PX {
-        let within = neighbours.iter().filter(|n| n.0.abs() <= arc);
-        let (first, last) = within.fold((0.0f64, 0.0f64), |(lo, hi), n| (lo.min(n.0), hi.max(n.0)));
+        let (first, last) = neighbours.iter().fold((0.0f64, 0.0f64), |(lo, hi), n| (lo.min(n.0), hi.max(n.0)));
         if last < arc - ARC_END_PX || -first < arc - ARC_END_PX {
             return None;
         }
@@ -1902,11 +1904,20 @@ fn arc_offset(neighbours: &[Neighbour], arc: f64) -> Option<(f64, f64)> {
         let [spread2, _, _] = factors.solve::<3>(&[1.0, 0.0, 0.0, 0.0])?;
         return Some((offset, spread2.max(0.0).sqrt()));
     }
-    let sums = ShapeSums::new(neighbours, SHAPE_HALF_ARC_PX.max(2.0 * arc));
+    let bend_arc = SHAPE_HALF_ARC_PX.max(2.0 * arc);
+    let sums = ShapeSums::new(neighbours, bend_arc);
     let [_, _, bend] = sums.parabola(&sums.factors())?;
-    let line = bent_line(neighbours, bend, arc);
-    let (offset, _) = line.fit()?;
-    Some((offset, line.intercept_spread()))
+    let mut reach = arc;
+    loop {
+        let line = bent_line(neighbours, bend, reach);
+        if let Some((offset, _)) = line.fit() {
+            return Some((offset, line.intercept_spread()));
+        }
+        if reach >= bend_arc {
+            return None;
+        }
+        reach = (reach * ARC_GROWTH).min(bend_arc);
+    }
 }
 
 fn bent_line(neighbours: &[Neighbour], bend: f64, arc: f64) -> LineSums {
@@ -1915,8 +1926,8 @@ fn bent_line(neighbours: &[Neighbour], bend: f64, arc: f64) -> LineSums {
     line
 }
 
-/// How far short of a longer arc's ends (px) the stripe may stop for that arc to be fitted
-/// ([`arc_offset`]): about one point's spacing along the stripe, with a gap.
+/// How far short of a longer arc's ends (px) the stripe's farthest points may stop for that
+/// arc to be fitted ([`arc_offset`]): about one point's spacing along the stripe, with a gap.
 const ARC_END_PX: f64 = 1.5;
 /// How far the along-stripe fit's arcs grow from one to the next ([`AlongFits::offsets`]).
 const ARC_GROWTH: f64 = 1.5;
@@ -1974,12 +1985,13 @@ impl AlongFits {
     }
 
     /// Each point's along-stripe offset (px) at t = 0, over the longest arc up to ±`along` px
-    /// that its stripe's shape allows; 0 where even the shortest arc has too few points. The
-    /// arcs grow from ±[`SHAPE_HALF_ARC_PX`] (or ±`along` if shorter) by [`ARC_GROWTH`]
-    /// ([`arc_offset`] on each). A longer arc is taken while its offset lies within
-    /// [`ARC_AGREEMENT`] standard errors of every shorter arc's (Lepski's rule) and the stripe
-    /// reaches both of its ends: where the stripe bends faster than a parabola follows over the
-    /// arc (a tight curve, a step), the longer fit moves by more than its noise allows.
+    /// that its stripe's shape allows; 0 where no arc has enough points. The arcs grow from
+    /// ±[`SHAPE_HALF_ARC_PX`] (or ±`along` if shorter) by [`ARC_GROWTH`] ([`arc_offset`] on
+    /// each; one too sparse to fit, a gap near the point, is passed over). A longer arc is taken
+    /// while its offset lies within [`ARC_AGREEMENT`] standard errors of every shorter arc's
+    /// (Lepski's rule) and the stripe reaches both of its ends: where the stripe bends faster
+    /// than a parabola follows over the arc (a tight curve, a step), the longer fit moves by
+    /// more than its noise allows.
     fn offsets(&self, along: f64) -> Vec<(f64, f64)> {
         let mut arcs = vec![along.min(SHAPE_HALF_ARC_PX)];
         while let Some(&last) = arcs.last().filter(|&&a| a < along) {
@@ -1992,7 +2004,7 @@ impl AlongFits {
                 let mut shorter: Vec<(f64, f64)> = Vec::with_capacity(arcs.len());
                 let mut taken = (0.0, arcs[0]);
                 for &arc in &arcs {
-                    let Some((offset, spread)) = arc_offset(self.of(k), arc) else { break };
+                    let Some((offset, spread)) = arc_offset(self.of(k), arc) else { continue };
                     if shorter.iter().any(|&(o, se)| (offset - o).abs() > ARC_AGREEMENT * se) {
                         break;
                     }
@@ -2040,6 +2052,36 @@ fn short_arc_scatter(neighbours: &[Neighbour]) -> Option<f64> {
 #[cfg(test)]
 mod pull_tests {
     use super::*;
+
+    /// Neighbours 1 px apart along a straight stripe 0.1 px off the point itself (at t = 0), with
+    /// a deterministic scatter of 0.04 px, from `-reach` to `reach` px, none within `gap` (px of
+    /// arc).
+    fn straight(reach: i32, gap: std::ops::Range<f64>) -> Vec<Neighbour> {
+        (-reach..=reach)
+            .map(f64::from)
+            .filter(|t| *t == 0.0 || !gap.contains(t))
+            .map(|t| (t, if t == 0.0 { 0.0 } else { 0.1 + 0.04 * (1.7 * t + 0.3).sin() }, 2.0, 0.0, 100.0))
+            .collect()
+    }
+
+    /// A gap in a stripe (a profile refused on a dark speckle grain) neither leaves a point
+    /// without its fit nor stops the fit's arcs from growing past it; the stripe's end does.
+    /// The point itself is one point of its fit, so the fit lands short of its neighbours' line.
+    #[test]
+    fn the_along_stripe_fit_reaches_across_a_gap_but_not_past_the_stripes_end() {
+        let (offset, _) = arc_offset(&straight(8, 1.5..3.5), 3.0).expect("a line across the gap");
+        assert!((0.05..0.13).contains(&offset), "{offset}");
+        let (offset, _) = arc_offset(&straight(20, 9.5..12.5), 10.0).expect("a parabola across the gap");
+        assert!((0.05..0.13).contains(&offset), "{offset}");
+        assert!(arc_offset(&straight(7, 0.0..0.0), 10.0).is_none(), "the stripe ends 7 px away");
+        // The frame's noise comes from its points' short arcs: two more points without a gap.
+        let mut fits = AlongFits::default();
+        for (owner, gap) in [(0, 1.5..4.0), (1, 0.0..0.0), (2, 0.0..0.0)] {
+            fits.push(owner, &straight(20, gap), &[]);
+        }
+        let (offset, arc) = fits.offsets(16.0)[0];
+        assert!((0.05..0.13).contains(&offset) && arc == 16.0, "{offset} over ±{arc}");
+    }
 
     /// The closed form of the pull is the mean of d(t) under the contrast e^{αt} times the
     /// Gaussian along the stripe, integrated numerically, for shapes and gradients of either sign;

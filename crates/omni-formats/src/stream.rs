@@ -144,8 +144,10 @@ impl From<Point> for [f64; 6] {
     }
 }
 
-/// One frame of the scan, growing along the pipe.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// One frame of the scan, growing along the pipe. Read by [`FrameVisitor`]: a derived reader
+/// with `extra` flattened would first copy every field, the stripe's and points' arrays too,
+/// into an untyped buffer.
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Frame {
     /// Frame sequence number (0-based, increasing; gaps mean lost frames).
     pub seq: u64,
@@ -183,6 +185,75 @@ pub struct Frame {
 
 fn all_lasers() -> Vec<u32> {
     vec![0, 1]
+}
+
+impl<'de> Deserialize<'de> for Frame {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> std::result::Result<Self, D::Error> {
+        deserializer.deserialize_map(FrameVisitor)
+    }
+}
+
+/// Reads a frame's fields straight into their types, the others into [`Frame::extra`]; the same
+/// defaults and refusals (a missing or repeated field) as a derived reader.
+struct FrameVisitor;
+
+impl<'de> serde::de::Visitor<'de> for FrameVisitor {
+    type Value = Frame;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a frame record")
+    }
+
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> std::result::Result<Frame, A::Error> {
+        use serde::de::Error as _;
+        let (mut seq, mut path, mut alpha_deg, mut facet, mut revolution) = (None, None, None, None, None);
+        let (mut encoder, mut timestamp_us, mut lasers, mut ambient_path) = (None, None, None, None);
+        let (mut stripe, mut points, mut extra) = (None, None, serde_json::Map::new());
+        /// Reads the field's value into its slot, refusing a second one.
+        fn once<'de, A: serde::de::MapAccess<'de>, T: Deserialize<'de>>(
+            map: &mut A,
+            slot: &mut Option<T>,
+            name: &'static str,
+        ) -> std::result::Result<(), A::Error> {
+            if slot.is_some() {
+                return Err(A::Error::duplicate_field(name));
+            }
+            *slot = Some(map.next_value()?);
+            Ok(())
+        }
+        while let Some(key) = map.next_key::<std::borrow::Cow<'de, str>>()? {
+            match key.as_ref() {
+                "seq" => once(&mut map, &mut seq, "seq")?,
+                "path" => once(&mut map, &mut path, "path")?,
+                "alpha_deg" => once(&mut map, &mut alpha_deg, "alpha_deg")?,
+                "facet" => once(&mut map, &mut facet, "facet")?,
+                "revolution" => once(&mut map, &mut revolution, "revolution")?,
+                "encoder" => once(&mut map, &mut encoder, "encoder")?,
+                "timestamp_us" => once(&mut map, &mut timestamp_us, "timestamp_us")?,
+                "lasers" => once(&mut map, &mut lasers, "lasers")?,
+                "ambient_path" => once(&mut map, &mut ambient_path, "ambient_path")?,
+                "stripe" => once(&mut map, &mut stripe, "stripe")?,
+                "points" => once(&mut map, &mut points, "points")?,
+                _ => {
+                    extra.insert(key.into_owned(), map.next_value()?);
+                }
+            }
+        }
+        Ok(Frame {
+            seq: seq.ok_or_else(|| A::Error::missing_field("seq"))?,
+            path: path.ok_or_else(|| A::Error::missing_field("path"))?,
+            alpha_deg: alpha_deg.ok_or_else(|| A::Error::missing_field("alpha_deg"))?,
+            facet: facet.ok_or_else(|| A::Error::missing_field("facet"))?,
+            revolution: revolution.unwrap_or_default(),
+            encoder: encoder.flatten(),
+            timestamp_us: timestamp_us.flatten(),
+            lasers: lasers.unwrap_or_else(all_lasers),
+            ambient_path: ambient_path.flatten(),
+            stripe: stripe.flatten(),
+            points: points.flatten(),
+            extra,
+        })
+    }
 }
 
 /// An image path of a frame record: relative paths are relative to the header's `frames_dir`.
@@ -454,17 +525,18 @@ impl<R: BufRead> StreamReader<R> {
                 return Ok(None);
             }
             self.line_no += 1;
-            let line = self.buf.trim();
-            if line.is_empty() {
+            if self.buf.trim().is_empty() {
                 continue;
             }
             self.saw_line = true;
             let loc = format!("line {}", self.line_no);
             // Straight into the record: the common case, without a JSON tree in between.
-            let mut record = match serde_json::from_str::<Record>(line) {
-                Ok(Record::Header(_)) | Err(_) => Self::parse_checked(line, &self.name, &loc)
+            let parsed = self.frame_tagged_first().map(|f| Record::Frame(Box::new(f)));
+            let line = self.buf.trim();
+            let mut record = match parsed.or_else(|| serde_json::from_str::<Record>(line).ok()) {
+                Some(Record::Header(_)) | None => Self::parse_checked(line, &self.name, &loc)
                     .map_err(|e| if self.saw_header { e } else { not_a_stream(e, line) })?,
-                Ok(record) => record,
+                Some(record) => record,
             };
             self.check_order(&record).map_err(|m| Error::new(&self.name, &loc, m))?;
             match &mut record {
@@ -488,6 +560,28 @@ impl<R: BufRead> StreamReader<R> {
 }
 
 impl<R: BufRead> StreamReader<R> {
+    /// The frame on the buffer's line if the line starts with its tag, as every omniscan tool
+    /// writes it: read as a [`Frame`] with the tag blanked out, since a tagged enum's reader
+    /// first copies every field, the arrays too, into an untyped buffer to find its tag. `None`
+    /// (the line as it was) for any other line, or a frame that does not read.
+    fn frame_tagged_first(&mut self) -> Option<Frame> {
+        const TAG: &str = r#"{"type":"frame","#;
+        const UNTAGGED: &str = "               {";
+        const _: () = assert!(TAG.len() == UNTAGGED.len());
+        let start = self.buf.len() - self.buf.trim_start().len();
+        if !self.buf[start..].starts_with(TAG) {
+            return None;
+        }
+        // `{"type":"frame",` becomes 15 spaces and `{`, which is the same record without its tag.
+        self.buf.replace_range(start..start + TAG.len(), UNTAGGED);
+        // A second `type` would land in `extra`: the general reader refuses it.
+        let frame = serde_json::from_str::<Frame>(self.buf.trim()).ok().filter(|f| !f.extra.contains_key("type"));
+        if frame.is_none() {
+            self.buf.replace_range(start..start + TAG.len(), TAG);
+        }
+        frame
+    }
+
     /// Checks that `record` may come next: the header first and once, nothing after the status.
     fn check_order(&mut self, record: &Record) -> std::result::Result<(), String> {
         let kind = match record {
@@ -717,6 +811,34 @@ mod tests {
         assert!(text.contains("\"exposure_us\":500"));
         let back: Vec<Record> = StreamReader::new(text.as_bytes(), "mem").map(|r| r.unwrap()).collect();
         assert_eq!(back, recs);
+    }
+
+    /// A frame line with its tag first (as omniscan writes it) and the same frame with its tag
+    /// elsewhere read alike, defaults, nulls and unknown fields included; a second tag or a
+    /// field of the wrong type is refused.
+    #[test]
+    fn frames_read_alike_wherever_their_tag_stands() {
+        let header = "{\"type\":\"header\",\"format\":\"omniscan.stream\",\"version\":1}\n";
+        let fields = r#""seq":7,"path":"a.png","alpha_deg":1.5,"facet":2,"encoder":null,"stripe":[[1,2,3,4,1]],"gain":[1,{"x":null}]"#;
+        let read = |line: String| {
+            let text = format!("{header}{line}\n");
+            StreamReader::new(text.as_bytes(), "s").nth(1).unwrap()
+        };
+        let first = read(format!(r#"  {{"type":"frame",{fields}}}"#)).unwrap();
+        let later = read(format!(r#"{{{fields},"type":"frame"}}"#)).unwrap();
+        assert_eq!(first, later);
+        let Record::Frame(f) = first else { panic!("{first:?}") };
+        assert_eq!((f.seq, f.revolution, f.encoder, f.lasers.as_slice()), (7, 0, None, [0, 1].as_slice()));
+        assert_eq!(f.stripe.unwrap()[0].quality, 1);
+        assert_eq!(f.extra["gain"], serde_json::json!([1, {"x": null}]));
+        for bad in [
+            r#"{"type":"frame","type":"status","seq":1,"path":"a.png","alpha_deg":1,"facet":0}"#,
+            r#"{"type":"frame","seq":1,"path":"a.png","alpha_deg":1,"facet":0,"stripe":[[1,2,3,4,0.5]]}"#,
+            r#"{"type":"frame","seq":-1,"path":"a.png","alpha_deg":1,"facet":0}"#,
+        ] {
+            let e = read(bad.into()).unwrap_err().to_string();
+            assert!(e.contains("s: line 2"), "{bad}: {e}");
+        }
     }
 
     #[test]

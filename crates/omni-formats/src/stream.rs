@@ -256,6 +256,42 @@ impl<'de> serde::de::Visitor<'de> for FrameVisitor {
     }
 }
 
+/// A frame record whose tag comes first, as every omniscan tool writes it: read on from the tag
+/// by [`FrameVisitor`], where the tagged [`Record`]'s reader would first copy every field, the
+/// arrays too, into an untyped buffer to find its tag. Any other record is refused, for
+/// [`Record`]'s reader to take.
+struct FrameTaggedFirst(Frame);
+
+impl<'de> Deserialize<'de> for FrameTaggedFirst {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> std::result::Result<Self, D::Error> {
+        deserializer.deserialize_map(TaggedFirstVisitor)
+    }
+}
+
+struct TaggedFirstVisitor;
+
+impl<'de> serde::de::Visitor<'de> for TaggedFirstVisitor {
+    type Value = FrameTaggedFirst;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a frame record, its tag first")
+    }
+
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> std::result::Result<FrameTaggedFirst, A::Error> {
+        use serde::de::Error as _;
+        let tagged = map.next_key::<std::borrow::Cow<'de, str>>()?.is_some_and(|k| k == "type")
+            && map.next_value::<std::borrow::Cow<'de, str>>()? == "frame";
+        if !tagged {
+            return Err(A::Error::custom("not a frame tagged first"));
+        }
+        let frame = FrameVisitor.visit_map(map)?;
+        if frame.extra.contains_key("type") {
+            return Err(A::Error::duplicate_field("type"));
+        }
+        Ok(FrameTaggedFirst(frame))
+    }
+}
+
 /// An image path of a frame record: relative paths are relative to the header's `frames_dir`.
 pub fn resolve_frame_path(frames_dir: Option<&str>, path: &str) -> std::path::PathBuf {
     let p = std::path::Path::new(path);
@@ -525,15 +561,15 @@ impl<R: BufRead> StreamReader<R> {
                 return Ok(None);
             }
             self.line_no += 1;
-            if self.buf.trim().is_empty() {
+            let line = self.buf.trim();
+            if line.is_empty() {
                 continue;
             }
             self.saw_line = true;
             let loc = format!("line {}", self.line_no);
             // Straight into the record: the common case, without a JSON tree in between.
-            let parsed = self.frame_tagged_first().map(|f| Record::Frame(Box::new(f)));
-            let line = self.buf.trim();
-            let mut record = match parsed.or_else(|| serde_json::from_str::<Record>(line).ok()) {
+            let parsed = serde_json::from_str::<FrameTaggedFirst>(line).map(|f| Record::Frame(Box::new(f.0)));
+            let mut record = match parsed.or_else(|_| serde_json::from_str::<Record>(line)).ok() {
                 Some(Record::Header(_)) | None => Self::parse_checked(line, &self.name, &loc)
                     .map_err(|e| if self.saw_header { e } else { not_a_stream(e, line) })?,
                 Some(record) => record,
@@ -560,28 +596,6 @@ impl<R: BufRead> StreamReader<R> {
 }
 
 impl<R: BufRead> StreamReader<R> {
-    /// The frame on the buffer's line if the line starts with its tag, as every omniscan tool
-    /// writes it: read as a [`Frame`] with the tag blanked out, since a tagged enum's reader
-    /// first copies every field, the arrays too, into an untyped buffer to find its tag. `None`
-    /// (the line as it was) for any other line, or a frame that does not read.
-    fn frame_tagged_first(&mut self) -> Option<Frame> {
-        const TAG: &str = r#"{"type":"frame","#;
-        const UNTAGGED: &str = "               {";
-        const _: () = assert!(TAG.len() == UNTAGGED.len());
-        let start = self.buf.len() - self.buf.trim_start().len();
-        if !self.buf[start..].starts_with(TAG) {
-            return None;
-        }
-        // `{"type":"frame",` becomes 15 spaces and `{`, which is the same record without its tag.
-        self.buf.replace_range(start..start + TAG.len(), UNTAGGED);
-        // A second `type` would land in `extra`: the general reader refuses it.
-        let frame = serde_json::from_str::<Frame>(self.buf.trim()).ok().filter(|f| !f.extra.contains_key("type"));
-        if frame.is_none() {
-            self.buf.replace_range(start..start + TAG.len(), TAG);
-        }
-        frame
-    }
-
     /// Checks that `record` may come next: the header first and once, nothing after the status.
     fn check_order(&mut self, record: &Record) -> std::result::Result<(), String> {
         let kind = match record {

@@ -1156,6 +1156,12 @@ fn a_fit_that_knows_the_profile_does_no_better_on_speckled_real_stripes() {
         add(&mut t, &det.detect(&image), &f.truth, centre);
         detector.add_frame(&t.errors);
         let mut fits = Vec::new();
+        let image = omni_simulator::Frame16 {
+            width: image.width,
+            height: image.height,
+            bit_depth: image.bit_depth,
+            data: image.data,
+        };
         for line in truth_polylines(&f.truth) {
             let n = line.len();
             for k in (n / 6..n - n / 6).step_by(2) {
@@ -1224,17 +1230,8 @@ impl ProfileFit {
     }
 
     /// The sheet's peak along `normal` (px from `q`, towards the tail), searched over ±1.5 px.
-    fn place(&self, image: &GrayImage, q: [f64; 2], normal: (f64, f64)) -> f64 {
-        let w = image.width as usize;
-        let pixel = |x: usize, y: usize| image.data[y * w + x] as f64;
-        let light = |d: f64| {
-            let (u, v) = (q[0] + d * normal.0, q[1] + d * normal.1);
-            let (x, y) = (u.floor(), v.floor());
-            let (fx, fy) = (u - x, v - y);
-            let (x, y) = (x as usize, y as usize);
-            (1.0 - fy) * ((1.0 - fx) * pixel(x, y) + fx * pixel(x + 1, y))
-                + fy * ((1.0 - fx) * pixel(x, y + 1) + fx * pixel(x + 1, y + 1))
-        };
+    fn place(&self, image: &omni_simulator::Frame16, q: [f64; 2], normal: (f64, f64)) -> f64 {
+        let light = |d: f64| image.bilinear(q[0] + d * normal.0, q[1] + d * normal.1).expect("inside the frame");
         let reach = 1.5 + self.before.max(self.after);
         let samples: Vec<(f64, f64)> =
             (-(4.0 * reach) as i32..=(4.0 * reach) as i32).map(|j| (0.25 * j as f64, light(0.25 * j as f64))).collect();

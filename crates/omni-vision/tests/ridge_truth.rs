@@ -1124,9 +1124,9 @@ fn a_known_laser_profile_takes_most_of_a_speckled_stripes_offset() {
 /// averages the fits within ±3 px of arc, and within ±8. For additive noise that fit is the
 /// best there is. Under speckle it scatters about its frame's mean by 0.056 px over ±3 px and
 /// 0.034 over ±8, where the detector along ±3 with the profile known scatters by 0.073 on the
-/// same stretches of stripe (1.3 × the reference). Asserted: the reference over ±3 px above the issue's
-/// 0.05 px (no arc that short reaches it), over ±8 below it, and the detector within 1.5 × the
-/// reference over ±3 (docs/DECISIONS.md).
+/// same stretches of stripe (1.3 × the reference). Asserted: the reference over ±3 px above
+/// the 0.05 px (no arc that short reaches it), over ±8 below it, and the detector
+/// within 1.5 × the reference over ±3 (docs/DECISIONS.md).
 #[test]
 fn a_fit_that_knows_the_profile_shows_what_three_px_of_speckled_stripe_allow() {
     let optics = omni_simulator::Optics { speckle_patterns: 16, ..omni_simulator::Optics::paper() };

@@ -79,10 +79,11 @@ struct Args {
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     hessian_sigma: f64,
     /// Fit each point along the stripe through the stripe's points within up to this many px of
-    /// arc on either side (0 = off). Across the normal: a line through the stripe's kept points
-    /// once a parabola's bend is taken out, over arcs growing from 3 px for as long as a longer
-    /// arc agrees with the shorter ones within their noise, so tight curves, steps and stripe
-    /// ends keep a short arc (with --sampling rays: a line over the whole arc). Averages speckle
+    /// arc on either side (0 = off). Across the normal: over 3 px a line through the stripe's
+    /// kept points once a wider parabola's bend is taken out, and over longer arcs (growing from
+    /// 3 px for as long as a longer arc agrees with the shorter ones within their noise, so
+    /// tight curves, steps and stripe ends keep a short arc) a parabola through the arc (with
+    /// --sampling rays: a line over the whole arc). Averages speckle
     /// and noise (the simulator's cylinder under speckle of contrast 0.25: 0.053 px RMS alone,
     /// 0.036 at 3, 0.031 at 10; without speckle 0.012 alone, 0.010 at 3) at the price of lateral
     /// resolution: a step along the stripe rises 10-90 % over about 5 px (2 px without the fit).

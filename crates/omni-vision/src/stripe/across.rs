@@ -85,6 +85,9 @@ pub const MAX_STEADY_ASYMMETRY: f64 = 0.5;
 /// laser's shape; with less the stripes are judged as if symmetric. A coarser scale's points
 /// each stand for as many px as its binning, down to [`STEADY_MIN_POINTS`].
 const STEADY_MIN_PX: usize = 64;
+/// Fewest bends (the point's and its neighbours' within ±[`SHAPE_HALF_ARC_PX`]) whose mean
+/// the blur's pull may take ([`smooth_pull_bends`]).
+const PULL_MIN_BENDS: usize = 5;
 /// Fewest points of a stripe whose median lopsidedness can count as the laser's shape, at any
 /// scale.
 pub(super) const STEADY_MIN_POINTS: usize = 16;
@@ -767,18 +770,31 @@ impl RidgeDetector {
         // Each kept point's neighbours, for the along-stripe fit once the points kept (and the
         // frame's noise) are known.
         let mut along_fits = AlongFits::default();
+        // Each kept point's neighbours within the shape's arc, for the pull's bends, where that
+        // arc is the shortest ([`smooth_pull_bends`]).
+        let smooth_bends = 2.0 * along <= SHAPE_HALF_ARC_PX;
+        let mut shape_neighbours: Vec<usize> = Vec::new();
         for i in 0..centres.len() {
             if !neighbours_on_the_stripe(&grid, centres, i, reach, &mut stripes, &mut neighbours, &mut indices) {
                 continue;
             }
-            let Some(point) = self.on_its_stripe(i, &centres[i], &neighbours, widest) else { continue };
+            let Some(mut point) = self.on_its_stripe(i, &centres[i], &neighbours, widest) else { continue };
             if along > 0.0 {
                 along_fits.push(i, &neighbours, &indices);
+            }
+            if smooth_bends {
+                let start = shape_neighbours.len();
+                let near = neighbours.iter().zip(&indices).filter(|&(n, &j)| j != i && n.0.abs() <= SHAPE_HALF_ARC_PX);
+                shape_neighbours.extend(near.map(|(_, &j)| j));
+                point.shape_neighbours = start..shape_neighbours.len();
             }
             kept.push(point);
         }
         let saturated = |i: usize| centres[i].point.quality & quality::SATURATED != 0;
         keep_steadily_lopsided(&mut kept, &mut stripes, scale, saturated);
+        if smooth_bends {
+            smooth_pull_bends(&mut kept, &shape_neighbours, centres.len());
+        }
         if along > 0.0 {
             let along_fits = along_fits.of_kept(&kept, centres.len());
             fit_along_kept(&mut kept, along_fits, along);
@@ -840,7 +856,8 @@ impl RidgeDetector {
             return None;
         }
         let factors = sums.factors();
-        let curvature = sums.parabola(&factors).map(|f| f[2]);
+        let parabola = sums.parabola(&factors);
+        let curvature = parabola.map(|f| f[2]);
         // Too few neighbours on one side for the stripe's shape are too few to outvote a
         // profile's own lopsidedness either: it is judged alone too, at twice the limit. The
         // neighbours that count are those within ±SHAPE_HALF_ARC_PX, as for the mean, even where
@@ -849,8 +866,16 @@ impl RidgeDetector {
         let shape_near = count >= 5 && before >= 2 && after >= 2;
         let own = (curvature.is_none() || !shape_near).then_some(c.asymmetry);
         let lopsided = Lopsided { mean: asymmetry_sum / count as f64, own };
+        let local = sums.local_stripe(&factors);
+        // What judges the bend against its neighbours' ([`smooth_pull_bends`]).
+        let bend_noise = if local.is_some() && 2.0 * along <= SHAPE_HALF_ARC_PX {
+            let spread = factors.solve::<4>(&[0.0, 0.0, 1.0, 0.0]).map(|x| x[2].max(0.0).sqrt());
+            spread.zip(parabola.and_then(|p| sums.scatter(p)))
+        } else {
+            None
+        };
         // The along-stripe fit's offset waits for the points kept ([`fit_along_kept`]).
-        Some(OnStripe { index: i, curvature, offset: 0.0, local: sums.local_stripe(&factors), lopsided })
+        Some(OnStripe { index: i, curvature, offset: 0.0, local, lopsided, bend_noise, shape_neighbours: 0..0 })
     }
 
     /// The stripe's points as measured, moved by the along-stripe fit's offset less the blur's
@@ -910,6 +935,45 @@ struct OnStripe {
     offset: f64,
     local: Option<LocalStripe>,
     lopsided: Lopsided,
+    /// The standard error of `local`'s bend per unit of the points' noise, and the scatter of
+    /// the neighbours within ±[`SHAPE_HALF_ARC_PX`] about their parabola (px).
+    bend_noise: Option<(f64, f64)>,
+    /// Where the indices of its neighbours within ±[`SHAPE_HALF_ARC_PX`] lie in the list that
+    /// [`smooth_pull_bends`] is given.
+    shape_neighbours: std::ops::Range<usize>,
+}
+
+/// Gives each of `kept` the mean of its own and its neighbours' bends (`neighbours`, centre
+/// indices, at each point's `shape_neighbours`) for its blur's pull, where that mean lies within
+/// [`ARC_AGREEMENT`] standard errors of its own bend, the noise being the frame's (the median
+/// scatter about the points' parabolas, times [`CORRELATED_NOISE`]), as the along-stripe fit
+/// takes its longer arcs (Lepski's rule). A speckle grain moves a point and its nearest
+/// neighbours together, which a parabola over ±3 px reads as a bend, and the pull would move
+/// the point further the way the grain did; the neighbours' own parabolas see the grain
+/// elsewhere along them, and their mean bend, over about ±6 px of stripe, hardly depends on
+/// the point's own error. A stripe that bends faster than that keeps the point's own bend.
+fn smooth_pull_bends(kept: &mut [OnStripe], neighbours: &[usize], centres: usize) {
+    let mut scatter: Vec<f64> = kept.iter().filter_map(|k| Some(k.bend_noise?.1)).collect();
+    if scatter.is_empty() {
+        return;
+    }
+    let middle = scatter.len() / 2;
+    let noise = CORRELATED_NOISE * *scatter.select_nth_unstable_by(middle, f64::total_cmp).1;
+    let mut kept_at = vec![usize::MAX; centres];
+    for (k, point) in kept.iter().enumerate() {
+        kept_at[point.index] = k;
+    }
+    let bends: Vec<Option<f64>> = kept.iter().map(|k| k.local.map(|l| l.c)).collect();
+    for (k, point) in kept.iter_mut().enumerate() {
+        let (Some(local), Some((spread, _))) = (point.local.as_mut(), point.bend_noise) else { continue };
+        let kept_bend = |j: usize| kept_at.get(j).and_then(|&at| bends.get(at).copied().flatten());
+        let theirs = neighbours[point.shape_neighbours.clone()].iter().filter_map(|&j| kept_bend(j));
+        let (sum, count) = theirs.chain(bends[k]).fold((0.0, 0usize), |(s, n), c| (s + c, n + 1));
+        let mean = sum / count as f64;
+        if count >= PULL_MIN_BENDS && (mean - local.c).abs() <= ARC_AGREEMENT * noise * spread {
+            local.c = mean;
+        }
+    }
 }
 
 /// Fills `out` with centre `i`'s neighbours on its stripe within `reach` px (`indices` with
@@ -1691,6 +1755,8 @@ fn half_width_quantile(centres: &[Centre], percent: usize) -> Option<f64> {
 struct ShapeSums {
     t: [f64; 7],
     d: [f64; 4],
+    /// Σd².
+    d2: f64,
     contrast: [f64; 2],
     before: usize,
     after: usize,
@@ -1705,6 +1771,7 @@ impl ShapeSums {
     }
 
     fn add(&mut self, &(t, d, _, _, contrast): &Neighbour) {
+        self.d2 += d * d;
         let mut power = 1.0;
         for k in 0..7 {
             self.t[k] += power;
@@ -1728,6 +1795,17 @@ impl ShapeSums {
         }
         let x = factors.solve::<3>(&self.d)?;
         Some([x[0], x[1], x[2]])
+    }
+
+    /// The RMS residual (px) of the points about their least-squares `parabola`, over its
+    /// degrees of freedom (as [`short_arc_scatter`]); `None` with fewer than six points.
+    fn scatter(&self, [a, b, c]: [f64; 3]) -> Option<f64> {
+        let count = self.t[0];
+        if count < 6.0 {
+            return None;
+        }
+        let squares = self.d2 - a * self.d[0] - b * self.d[1] - c * self.d[2];
+        Some((squares.max(0.0) / (count - 3.0)).sqrt())
     }
 
     /// The stripe's cubic shape and contrast slope ([`LocalStripe`]); `None` unless at least

@@ -772,7 +772,7 @@ impl RidgeDetector {
         let mut along_fits = AlongFits::default();
         // Each kept point's neighbours within the shape's arc, for the pull's bends, where that
         // arc is the shortest ([`smooth_pull_bends`]).
-        let smooth_bends = 2.0 * along <= SHAPE_HALF_ARC_PX;
+        let smooth_bends = self.smooths_pull_bends();
         let mut shape_neighbours: Vec<usize> = Vec::new();
         for i in 0..centres.len() {
             if !neighbours_on_the_stripe(&grid, centres, i, reach, &mut stripes, &mut neighbours, &mut indices) {
@@ -800,6 +800,12 @@ impl RidgeDetector {
             fit_along_kept(&mut kept, along_fits, along);
         }
         self.corrected(centres, kept, &mut stripes, scale)
+    }
+
+    /// Whether the blur's pull may take its neighbours' mean bend ([`smooth_pull_bends`]): where
+    /// the along-stripe fit sets no shape arc longer than ±[`SHAPE_HALF_ARC_PX`].
+    fn smooths_pull_bends(&self) -> bool {
+        2.0 * self.params.along_stripe_px <= SHAPE_HALF_ARC_PX
     }
 
     /// The stripe's point at `centre` (index `i`) with its `neighbours` on the stripe, if it
@@ -868,7 +874,7 @@ impl RidgeDetector {
         let lopsided = Lopsided { mean: asymmetry_sum / count as f64, own };
         let local = sums.local_stripe(&factors);
         // What judges the bend against its neighbours' ([`smooth_pull_bends`]).
-        let bend_noise = if local.is_some() && 2.0 * along <= SHAPE_HALF_ARC_PX {
+        let bend_noise = if local.is_some() && self.smooths_pull_bends() {
             let spread = factors.solve::<4>(&[0.0, 0.0, 1.0, 0.0]).map(|x| x[2].max(0.0).sqrt());
             spread.zip(parabola.and_then(|p| sums.scatter(p)))
         } else {
@@ -1798,7 +1804,7 @@ impl ShapeSums {
     }
 
     /// The RMS residual (px) of the points about their least-squares `parabola`, over its
-    /// degrees of freedom (as [`short_arc_scatter`]); `None` with fewer than six points.
+    /// degrees of freedom; `None` with fewer than six points.
     fn scatter(&self, [a, b, c]: [f64; 3]) -> Option<f64> {
         let count = self.t[0];
         if count < 6.0 {
@@ -2117,14 +2123,7 @@ const CORRELATED_NOISE: f64 = 2.0;
 /// parabola, over its degrees of freedom; `None` with fewer than six of them.
 fn short_arc_scatter(neighbours: &[Neighbour]) -> Option<f64> {
     let sums = ShapeSums::new(neighbours, SHAPE_HALF_ARC_PX);
-    let count = sums.t[0];
-    if count < 6.0 {
-        return None;
-    }
-    let [a, b, c] = sums.parabola(&sums.factors())?;
-    let near = neighbours.iter().filter(|n| n.0.abs() <= SHAPE_HALF_ARC_PX);
-    let squares: f64 = near.map(|n| (n.1 - a - b * n.0 - c * n.0 * n.0).powi(2)).sum();
-    Some((squares / (count - 3.0)).sqrt())
+    sums.scatter(sums.parabola(&sums.factors())?)
 }
 
 #[cfg(test)]

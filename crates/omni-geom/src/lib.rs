@@ -1,6 +1,6 @@
 //! Pure geometry for omniscan: rays, planes, ray–plane triangulation and least-squares fits
-//! (plane, sphere, cylinder, cone) plus a small Levenberg–Marquardt solver and the project's
-//! deterministic random generator ([`rng::SplitMix64`]).
+//! (plane, sphere, cylinder, cone), a small Levenberg–Marquardt solver, the roots of real
+//! polynomials and the project's deterministic random generator ([`rng::SplitMix64`]).
 //!
 //! No I/O lives here. Lengths are millimetres, angles radians.
 //!
@@ -15,6 +15,7 @@
 pub mod fit;
 pub mod lm;
 mod plane;
+pub mod poly;
 mod ray;
 pub mod rng;
 pub mod robust_plane;

@@ -17,7 +17,6 @@
 //! exact inverse of the projection.
 
 use crate::camera::{CentralCamera, CentralParams};
-use crate::pinhole::first_non_positive;
 use omni_geom::{Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -105,8 +104,10 @@ fn theta_d_slope(p: &[f64], t: f64) -> f64 {
 /// The model's domain: the largest θ (rad) up to which θ_d(θ) increases, at most π.
 /// `v` in [`FisheyeParams::to_vector`] order.
 pub fn kb_max_theta(v: &[f64]) -> f64 {
-    let pi2 = std::f64::consts::PI * std::f64::consts::PI;
-    first_non_positive(|s| theta_d_slope(v, s.sqrt()), pi2).sqrt()
+    let (k1, k2, k3, k4) = (v[4], v[5], v[6], v[7]);
+    let slope = [1.0, 0.0, 3.0 * k1, 0.0, 5.0 * k2, 0.0, 7.0 * k3, 0.0, 9.0 * k4];
+    let pi = std::f64::consts::PI;
+    omni_geom::poly::first_non_positive(&slope, 0.0, pi).unwrap_or(pi)
 }
 
 /// The intrinsics with the domain appended ([`FisheyeParams::to_vector`], then

@@ -179,10 +179,7 @@ fn least_squares_poly(samples: &[(f64, f64)], degree: usize) -> Option<Vec<f64>>
     coeffs.iter().all(|c| c.is_finite()).then_some(coeffs)
 }
 
-/// Evaluates Σ c_k·x^k.
-pub fn poly_eval(c: &[f64], x: f64) -> f64 {
-    c.iter().rev().fold(0.0, |acc, &k| acc * x + k)
-}
+pub use omni_geom::poly::eval as poly_eval;
 
 fn poly_derivative(c: &[f64], x: f64) -> f64 {
     c.iter().enumerate().skip(1).rev().fold(0.0, |acc, (k, &v)| acc * x + k as f64 * v)

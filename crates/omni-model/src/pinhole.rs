@@ -9,14 +9,15 @@
 //! b' = b·(1 + k1·r² + k2·r⁴ + k3·r⁶) + p1·(r² + 2b²) + 2·p2·a·b,
 //! u = fx·a' + cx, v = fy·b' + cy: the same numbers as OpenCV's.
 //!
-//! The model's domain: the radial map r ↦ r·(1 + k1·r² + k2·r⁴ + k3·r⁶) is increasing from r = 0
-//! up to its first turning point; beyond it (where a fitted polynomial folds back into the
-//! image) neither projection nor unprojection is defined ([`radtan_max_radius`]). Unprojection
+//! The model's domain: a disc about the axis inside which the distortion is one-to-one, ending
+//! before the radial map r ↦ r·(1 + k1·r² + k2·r⁴ + k3·r⁶) turns back (where a fitted
+//! polynomial folds back into the image) and before the tangential terms can fold it; beyond it
+//! neither projection nor unprojection is defined ([`radtan_max_radius`]). Unprojection
 //! inverts the distortion by damped Newton iterations on the 2 × 2 map, started from the
 //! distorted point, and accepts only a solution inside the domain that reproduces the pixel.
 
 use crate::camera::{CentralCamera, CentralParams};
-use omni_geom::{Point3, Vector2, Vector3};
+use omni_geom::{Point3, Vector2, Vector3, poly};
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the radial-tangential pinhole model (what `camera.json` stores for kind
@@ -100,38 +101,19 @@ impl PinholeParams {
 /// Largest undistorted radius r = √(a² + b²) considered (r = 100 is 89.4° off the axis).
 const MAX_RADIUS: f64 = 100.0;
 
-/// The first s > 0 (up to `s_max`) where `f(s)` ≤ 0, by a geometric scan and bisection; `s_max`
-/// if there is none. `f(0)` must be positive.
-pub(crate) fn first_non_positive(f: impl Fn(f64) -> f64, s_max: f64) -> f64 {
-    const SCAN: usize = 200;
-    let s_min = 1e-6 * s_max;
-    let mut lo = 0.0;
-    for k in 0..=SCAN {
-        let s = s_min * (s_max / s_min).powf(k as f64 / SCAN as f64);
-        if f(s) <= 0.0 {
-            let mut hi = s;
-            for _ in 0..60 {
-                let mid = 0.5 * (lo + hi);
-                if f(mid) > 0.0 {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-            return lo;
-        }
-        lo = s;
-    }
-    s_max
-}
-
-/// The model's domain: the largest undistorted radius r up to which r·(1 + k1·r² + k2·r⁴ + k3·r⁶)
-/// increases (its derivative 1 + 3k1·r² + 5k2·r⁴ + 7k3·r⁶ stays positive), at most 100.
+/// The model's domain: the largest undistorted radius r (at most 100) inside which the
+/// distortion is one-to-one, the least of the radial map's two local scales ρ = 1 + k1·r² +
+/// k2·r⁴ + k3·r⁶ (across the radius) and ρ + 2r²·dρ/d(r²) = 1 + 3k1·r² + 5k2·r⁴ + 7k3·r⁶ (along
+/// it) staying above 6·√(p1² + p2²)·r. Both Jacobians are symmetric: the radial one has those
+/// two eigenvalues, the tangential one eigenvalues of at most 6·√(p1² + p2²)·r in magnitude, so
+/// inside that disc (F(x) − F(y))·(x − y) > 0 for any two points and no pixel has two rays.
 /// `v` in [`PinholeParams::to_vector`] order.
 pub fn radtan_max_radius(v: &[f64]) -> f64 {
-    let (k1, k2, k3) = (v[4], v[5], v[8]);
-    let slope = |s: f64| 1.0 + s * (3.0 * k1 + s * (5.0 * k2 + s * 7.0 * k3));
-    first_non_positive(slope, MAX_RADIUS * MAX_RADIUS).sqrt()
+    let (k1, k2, p1, p2, k3) = (v[4], v[5], v[6], v[7], v[8]);
+    let tangential = 6.0 * p1.hypot(p2);
+    let across = [1.0, -tangential, k1, 0.0, k2, 0.0, k3];
+    let along = [1.0, -tangential, 3.0 * k1, 0.0, 5.0 * k2, 0.0, 7.0 * k3];
+    [across, along].iter().filter_map(|c| poly::first_non_positive(c, 0.0, MAX_RADIUS)).fold(MAX_RADIUS, f64::min)
 }
 
 /// The intrinsics with the domain appended ([`PinholeParams::to_vector`], then
@@ -332,15 +314,24 @@ mod tests {
 
     #[test]
     fn the_domain_ends_where_the_distortion_turns_back() {
-        let v = sample().to_vector();
-        let r = radtan_max_radius(&v);
-        let g = |r: f64| r * (1.0 + v[4] * r * r + v[5] * r.powi(4) + v[8] * r.powi(6));
+        // Radial distortion alone: where r·ρ(r) turns back.
+        let mut radial = sample().to_vector();
+        (radial[6], radial[7]) = (0.0, 0.0);
+        let r = radtan_max_radius(&radial);
+        let g = |r: f64| r * (1.0 + radial[4] * r * r + radial[5] * r.powi(4) + radial[8] * r.powi(6));
         assert!(g(r - 1e-6) < g(r) && g(r + 1e-3) < g(r), "r_max {r}");
+        // With tangential terms a little earlier: where the scale along the radius meets
+        // 6·√(p1² + p2²)·r.
+        let v = sample().to_vector();
+        let rt = radtan_max_radius(&v);
+        let along = |r: f64| 1.0 + 3.0 * v[4] * r * r + 5.0 * v[5] * r.powi(4) + 7.0 * v[8] * r.powi(6);
+        assert!(rt < r && rt > 0.98 * r, "{rt} vs {r}");
+        assert!((along(rt) - 6.0 * v[6].hypot(v[7]) * rt).abs() < 1e-12, "r_max {rt}");
         let p = radtan_intrinsics(&v);
-        assert!(radtan_project(&p, &Vector3::new(r * 1.01, 0.0, -1.0)).is_none());
-        assert!(radtan_project(&p, &Vector3::new(r * 0.99, 0.0, -1.0)).is_some());
+        assert!(radtan_project(&p, &Vector3::new(rt * 1.01, 0.0, -1.0)).is_none());
+        assert!(radtan_project(&p, &Vector3::new(rt * 0.99, 0.0, -1.0)).is_some());
         // A pixel beyond the image of the domain's edge has no ray.
-        let edge = radtan_project(&p, &Vector3::new(r * 0.999, 0.0, -1.0)).unwrap();
+        let edge = radtan_project(&p, &Vector3::new(rt * 0.999, 0.0, -1.0)).unwrap();
         assert!(radtan_unproject(&p, &Vector2::new(edge.x + 50.0, edge.y)).is_none());
         // No turning point: the whole half-space up to r = 100.
         let mut open = v;
@@ -348,6 +339,25 @@ mod tests {
         open[5] = 0.0;
         open[8] = 0.0;
         assert_eq!(radtan_max_radius(&open), MAX_RADIUS);
+    }
+
+    /// A lens whose radial map never turns back, though its slope dips to 0.0006 at r = 1.33:
+    /// there p2 folds the image, and two directions 0.14 apart in r met at one pixel (a draw of
+    /// `project_unproject_round_trips` that once unprojected the pixel to the other one).
+    #[test]
+    fn no_pixel_has_two_rays_where_the_tangential_terms_fold_the_image() {
+        let (k1, k2, k3, p2) = (-0.40933955980705117, 0.0862398733074494, -0.004552920036781069, 0.0018382984981100664);
+        let v = [300.0, 294.0, 500.0, 300.0, k1, k2, 0.0, p2, k3];
+        let p = radtan_intrinsics(&v);
+        let near = (-0.6226380285678131, -1.1459081436256384);
+        let far = (-0.393188389406403 / 0.5692226554572428, -0.7220723363695661 / 0.5692226554572428);
+        let (dn, df) = (distort(&p, near.0, near.1), distort(&p, far.0, far.1));
+        assert!((dn.0 - df.0).hypot(dn.1 - df.1) < 1e-9, "{dn:?} vs {df:?}");
+        let r_max = radtan_max_radius(&v);
+        assert!(r_max < near.0.hypot(near.1) && r_max > 1.2, "r_max {r_max}");
+        for (a, b) in [near, far] {
+            assert!(radtan_project(&p, &Vector3::new(a, b, -1.0)).is_none());
+        }
     }
 
     proptest! {

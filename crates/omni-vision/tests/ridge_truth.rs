@@ -1089,11 +1089,12 @@ fn a_known_laser_profile_leads_narrow_lopsided_stripes_to_the_sheets_peak() {
 /// the noise, so without the laser's profile their centres stay at their tops' centroids, off
 /// towards the tail; with it, led on to the sheet's peak: from the windowed centroid itself by
 /// the profile's prediction, and by as much of the leans from the tops as stands out of their
-/// noise. Measured along ±3 px, RMS / offset (px): without 0.095 / +0.034; with 0.084 / +0.010
+/// noise (a stripe's own top shape, where its median stands out, is too noisy to lead them).
+/// Measured along ±3 px, RMS / offset (px): without 0.095 / +0.034; with 0.082 / +0.014
 /// (0.089 / +0.012 led from the tops' centroids alone); with it along ±16, where the fit's
-/// arcs reach across the stripe's gaps, 0.068 / +0.011. Asserted: the offset along ±3 within
-/// 0.02 px with the profile and at least 0.015 px smaller than without, RMS ≤ 0.086 px, along
-/// ±16 ≤ 0.072 px; the spread stays the speckle's (the 0.05 px is not met: the next
+/// arcs reach across the stripe's gaps, 0.066 / +0.015. Asserted: the offset along ±3 within
+/// 0.02 px with the profile and at least 0.015 px smaller than without, RMS ≤ 0.085 px, along
+/// ±16 ≤ 0.069 px; the spread stays the speckle's (the 0.05 px is not met: the next
 /// test).
 #[test]
 fn a_known_laser_profile_takes_most_of_a_speckled_stripes_offset() {
@@ -1111,9 +1112,9 @@ fn a_known_laser_profile_takes_most_of_a_speckled_stripes_offset() {
     let (_, without) = tallies[0].rms_bias();
     let (rms, with) = tallies[1].rms_bias();
     assert!(with.abs() <= 0.02 && with.abs() <= without.abs() - 0.015, "offset {with:+.4} px, without {without:+.4}");
-    assert!(rms <= 0.086, "rms {rms:.4} px");
+    assert!(rms <= 0.085, "rms {rms:.4} px");
     let (rms, _) = tallies[2].rms_bias();
-    assert!(rms <= 0.072, "along ±16: rms {rms:.4} px");
+    assert!(rms <= 0.069, "along ±16: rms {rms:.4} px");
 }
 
 /// What ±3 px of a speckled real-shaped stripe allow, on the frames of the test above (C 0.25,

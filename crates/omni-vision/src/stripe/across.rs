@@ -148,6 +148,13 @@ const MAX_MOVE_PX: f64 = 0.5;
 const BLUR_DOMINATED_SHARE: f64 = 0.5;
 /// FWHM / σ of a Gaussian.
 const FWHM_PER_SIGMA: f64 = 2.354_820_045;
+/// The most the noise of a stripe's median top shape may move its points, in the profile's σ,
+/// for the shape rather than a known laser profile to lead them to the sheet's peak
+/// ([`lean_to_sheet_peak`]): about what the profile's prediction misses where it describes a
+/// real laser's shape only nearly (0.0033 σ at 5 px wide, 0.004 σ at 20 px), so the one that
+/// errs less leads. Were the shape's median itself judged instead, a speckled stripe's shape
+/// would lead only where its noise had inflated it.
+const MAX_SHAPE_NOISE_SIGMAS: f64 = 0.004;
 
 /// Which way a seed's run ran.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -915,7 +922,7 @@ impl RidgeDetector {
             let mut p = c.point;
             p.u += shift * c.normal.0;
             p.v += shift * c.normal.1;
-            let shape = stripe_shape.of(stripes, i);
+            let shape = (stripe_shape.of(stripes, i), stripe_shape.errors_of(stripes, i));
             let lean = c.lean.filter(|_| c.flatness <= LEAN_MAX_FLATNESS);
             let (lean, tail_offset, led_by_profile) = match lean {
                 Some(lean) => {
@@ -1542,7 +1549,7 @@ fn lean_to_the_lights_peak(
     let stripe_shape =
         stripe_shapes(&mut stripes, &shapes, mosaic, |i| (points[i].point.u, points[i].point.v, points[i].normal));
     for (i, l) in points.iter_mut().enumerate() {
-        let shape = stripe_shape.of(&mut stripes, i);
+        let shape = (stripe_shape.of(&mut stripes, i), stripe_shape.errors_of(&mut stripes, i));
         if let Some(lean) = l.lean {
             let (lean, tail, by_profile) = lean_to_sheet_peak(lean, l.half_width, shape, blur_variance, top_offsets);
             (l.lean, l.tail_offset, l.led_by_profile) = (Some(lean), tail, by_profile);
@@ -1581,30 +1588,45 @@ fn lean_to_peak(lean: f64, half_width: f64, [top_offset, skew]: [f64; 2], blur_v
     lean + top_offset * sigma - 0.5 * blur_variance * skew / sigma
 }
 
-/// A lean ([`lean_to_peak`]'s arguments) carried towards the sheet's peak, and how far beyond
-/// it the peak still lies on the tail's side (px), left to [`remove_steady_lean`], which knows
-/// that side ([`tail_sides`]). A stripe with a top shape of its own is led to the peak by it
-/// ([`lean_to_peak`]), unless the laser's profile is known (`top_offsets`) and the blur makes
-/// most of the profile's width: the shape's undoing of the blur holds to first order only.
-/// Otherwise, with the profile known, the lean leads to the top's centroid and the profile's
-/// offset of that centroid from the sheet's peak remains: it needs no stretch of stripe for a
-/// median, only the profile's width, but it sees only the profile, where a wide stripe's own
-/// top shape sees whatever else shapes it in the image (docs/DECISIONS.md). The third value
-/// tells whether the profile led it ([`Linked::led_by_profile`]).
+/// A lean ([`lean_to_peak`]'s arguments; the stripe's top shape with its medians' standard
+/// errors) carried towards the sheet's peak, and how far beyond it the peak still lies on the
+/// tail's side (px), left to [`remove_steady_lean`], which knows that side ([`tail_sides`]). A
+/// stripe with a top shape of its own is led to the peak by it ([`lean_to_peak`]), unless the
+/// laser's profile is known (`top_offsets`) and either the blur makes most of the profile's
+/// width (the shape's undoing of the blur holds to first order only) or the shape's noise
+/// would move the point by more than [`MAX_SHAPE_NOISE_SIGMAS`]. Otherwise, with the profile
+/// known, the lean leads to the top's centroid and the profile's offset of that centroid from
+/// the sheet's peak remains: it needs no stretch of stripe for a median, only the profile's
+/// width, but it sees only the profile, where a wide stripe's own top shape sees whatever else
+/// shapes it in the image (docs/DECISIONS.md). The third value tells whether the profile led
+/// it ([`Linked::led_by_profile`]).
 fn lean_to_sheet_peak(
     lean: f64,
     half_width: f64,
-    shape: [f64; 2],
+    (shape, shape_error): ([f64; 2], [f64; 2]),
     blur_variance: f64,
     top_offsets: Option<&super::laser::TopOffsets>,
 ) -> (f64, f64, bool) {
-    let blur_share = blur_variance / (half_width / FWHM_PER_SIGMA).powi(2);
+    let sigma = half_width / FWHM_PER_SIGMA;
+    let blur_share = blur_variance / (sigma * sigma);
     match top_offsets {
-        Some(model) if shape == [0.0, 0.0] || blur_share > BLUR_DOMINATED_SHARE => {
+        Some(model)
+            if shape == [0.0, 0.0]
+                || blur_share > BLUR_DOMINATED_SHARE
+                || top_shape_noise(shape_error, sigma, blur_variance) > MAX_SHAPE_NOISE_SIGMAS * sigma =>
+        {
             (lean, model.centroid_at(half_width), true)
         }
         _ => (lean_to_peak(lean, half_width, shape, blur_variance), 0.0, false),
     }
+}
+
+/// How far (px) the noise of a stripe's median top shape (`error`, the medians' standard
+/// errors as if independent) moves [`lean_to_peak`]'s result on a profile of σ `sigma` px under
+/// a blur of variance `blur_variance` px²: neighbouring profiles share speckle grains and
+/// pixels, so the errors count [`CORRELATED_NOISE`] times.
+fn top_shape_noise([top_offset, skew]: [f64; 2], sigma: f64, blur_variance: f64) -> f64 {
+    CORRELATED_NOISE * (top_offset * sigma).hypot(0.5 * blur_variance * skew / sigma)
 }
 
 /// The top of a profile (`q` above its background, half-maximum width `half_width` px; `top`
@@ -2129,6 +2151,27 @@ fn short_arc_scatter(neighbours: &[Neighbour]) -> Option<f64> {
 #[cfg(test)]
 mod pull_tests {
     use super::*;
+
+    #[test]
+    fn a_known_profile_leads_where_the_stripes_own_top_shape_is_too_noisy() {
+        let profile = omni_model::LaserProfile::tailed(0.17, 4.0);
+        let (blur, half_width) = (0.9, 4.6);
+        let model = super::super::laser::TopOffsets::new(&profile, blur);
+        let shape = [-0.005, 0.12];
+        let lead = |error: [f64; 2]| lean_to_sheet_peak(0.1, half_width, (shape, error), blur, Some(&model));
+        // A shape measured to a few thousandths leads by itself, whatever the profile says.
+        let (lean, tail, by_profile) = lead([0.0006, 0.006]);
+        assert!(!by_profile && tail == 0.0);
+        assert!((lean - lean_to_peak(0.1, half_width, shape, blur)).abs() < 1e-15);
+        // The same shape from speckled profiles (errors as a 0.25 contrast leaves them) moves
+        // the point by more than the profile misses: the profile leads, from the top's centroid.
+        let (lean, tail, by_profile) = lead([0.0025, 0.045]);
+        assert!(by_profile && lean == 0.1);
+        assert!((tail - model.centroid_at(half_width)).abs() < 1e-15);
+        // No shape of its own: the profile leads; without a profile the shape does, noisy or not.
+        assert!(lean_to_sheet_peak(0.1, half_width, ([0.0; 2], [f64::INFINITY; 2]), blur, Some(&model)).2);
+        assert!(!lean_to_sheet_peak(0.1, half_width, (shape, [0.0025, 0.045]), blur, None).2);
+    }
 
     /// Neighbours 1 px apart along a straight stripe 0.1 px off the point itself (at t = 0), with
     /// a deterministic scatter of 0.04 px, from `-reach` to `reach` px, none within `gap` (px of

@@ -73,15 +73,16 @@ impl Stripes {
     ) -> StripeMedians<N> {
         let grouped = self.grouped(points, |values| values.map(|v| -v));
         let mut by_root = vec![[0.0; N]; self.parent.len()];
+        let mut errors = vec![[f64::INFINITY; N]; self.parent.len()];
         let mut values = Vec::new();
         for (root, run) in grouped.runs().filter(|(_, run)| run.len() >= min_points) {
-            for (k, median) in by_root[root].iter_mut().enumerate() {
+            for k in 0..N {
                 values.clear();
                 values.extend(run.iter().map(|v| v[k]));
-                *median = significant_median(&mut values);
+                (by_root[root][k], errors[root][k]) = significant_median(&mut values);
             }
         }
-        StripeMedians { by_root }
+        StripeMedians { by_root, errors }
     }
 
     /// Each stripe's steady lopsidedness, from its points' `(index, asymmetry)` (along each
@@ -188,6 +189,9 @@ impl<T: Copy> ByRoot<T> {
 /// Per-stripe values ([`Stripes::medians`]), indexed by the stripe's root.
 pub(super) struct StripeMedians<const N: usize> {
     by_root: Vec<[f64; N]>,
+    /// Each median's standard error, as if its profiles scattered independently (infinite
+    /// where a stripe has too few points for a median).
+    errors: Vec<[f64; N]>,
 }
 
 impl<const N: usize> StripeMedians<N> {
@@ -232,12 +236,17 @@ impl<const N: usize> StripeMedians<N> {
         let values = self.by_root[root];
         if flip { values.map(|v| -v) } else { values }
     }
+
+    /// The standard errors of centre `i`'s stripe's medians (as [`StripeMedians::errors`]).
+    pub(super) fn errors_of(&self, stripes: &mut Stripes, i: usize) -> [f64; N] {
+        self.errors[stripes.find(i).0]
+    }
 }
 
 /// The median of `values` (reordered) if it exceeds [`SIGNIFICANT_ERRORS`] of its standard
-/// error, else 0. The error is 1.2533 σ/√n, σ = 1.4826 × the median absolute deviation (normal
-/// scatter).
-fn significant_median(values: &mut [f64]) -> f64 {
+/// error, else 0; and that error, 1.2533 σ/√n, σ = 1.4826 × the median absolute deviation
+/// (normal scatter).
+fn significant_median(values: &mut [f64]) -> (f64, f64) {
     let mid = values.len() / 2;
     let median = *values.select_nth_unstable_by(mid, f64::total_cmp).1;
     for v in values.iter_mut() {
@@ -245,7 +254,7 @@ fn significant_median(values: &mut [f64]) -> f64 {
     }
     let mad = *values.select_nth_unstable_by(mid, f64::total_cmp).1;
     let error = 1.2533 * 1.4826 * mad / (values.len() as f64).sqrt();
-    if median.abs() > SIGNIFICANT_ERRORS * error { median } else { 0.0 }
+    (if median.abs() > SIGNIFICANT_ERRORS * error { median } else { 0.0 }, error)
 }
 
 #[cfg(test)]

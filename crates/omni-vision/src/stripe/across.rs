@@ -151,9 +151,9 @@ const FWHM_PER_SIGMA: f64 = 2.354_820_045;
 /// The most the noise of a stripe's median top shape may move its points, in the profile's σ,
 /// for the shape rather than a known laser profile to lead them to the sheet's peak
 /// ([`lean_to_sheet_peak`]): about what the profile's prediction misses where it describes a
-/// real laser's shape only nearly (0.0033 σ at 5 px wide, 0.004 σ at 20 px), so the one that
-/// errs less leads. Were the shape's median itself judged instead, a speckled stripe's shape
-/// would lead only where its noise had inflated it.
+/// real laser's shape only nearly (0.0033 σ at 5 px wide, 0.004 σ or more at 20), so the one
+/// that errs less leads. Were the shape's median itself judged instead, a speckled stripe's
+/// shape would lead only where its noise had inflated it.
 const MAX_SHAPE_NOISE_SIGMAS: f64 = 0.004;
 
 /// Which way a seed's run ran.

@@ -84,7 +84,7 @@ struct Args {
     /// 3 px for as long as a longer arc agrees with the shorter ones within their noise, so
     /// tight curves, steps and stripe ends keep a short arc) a parabola through the arc (with
     /// --sampling rays: a line over the whole arc). Averages speckle
-    /// and noise (the simulator's cylinder under speckle of contrast 0.25: 0.053 px RMS alone,
+    /// and noise (the simulator's cylinder under speckle of contrast 0.25: 0.051 px RMS alone,
     /// 0.036 at 3, 0.031 at 10; without speckle 0.012 alone, 0.010 at 3) at the price of lateral
     /// resolution: a step along the stripe rises 10-90 % over about 5 px (2 px without the fit).
     /// Stripes shorter than the shortest arc's window (2 × PX end to end, at most 6 px; 2 × PX

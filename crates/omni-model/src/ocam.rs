@@ -16,6 +16,8 @@
 //! valid radii only ([`OcamParams::valid_rho_range`]).
 
 use crate::camera::{CentralCamera, CentralParams};
+/// Evaluates Σ c_k·x^k (the polynomials' coefficients, lowest degree first).
+pub use omni_geom::poly::eval as poly_eval;
 use omni_geom::{Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -178,8 +180,6 @@ fn least_squares_poly(samples: &[(f64, f64)], degree: usize) -> Option<Vec<f64>>
     let coeffs: Vec<f64> = x.iter().enumerate().map(|(k, c)| c / scale.powi(k as i32)).collect();
     coeffs.iter().all(|c| c.is_finite()).then_some(coeffs)
 }
-
-pub use omni_geom::poly::eval as poly_eval;
 
 fn poly_derivative(c: &[f64], x: f64) -> f64 {
     c.iter().enumerate().skip(1).rev().fold(0.0, |acc, (k, &v)| acc * x + k as f64 * v)

@@ -96,18 +96,20 @@ fn theta_d(p: &[f64], t: f64) -> f64 {
     t * (1.0 + t2 * (p[4] + t2 * (p[5] + t2 * (p[6] + t2 * p[7]))))
 }
 
+/// dθ_d/dθ's coefficients in θ, lowest degree first.
+fn theta_d_slope_coefficients(p: &[f64]) -> [f64; 9] {
+    [1.0, 0.0, 3.0 * p[4], 0.0, 5.0 * p[5], 0.0, 7.0 * p[6], 0.0, 9.0 * p[7]]
+}
+
 fn theta_d_slope(p: &[f64], t: f64) -> f64 {
-    let t2 = t * t;
-    1.0 + t2 * (3.0 * p[4] + t2 * (5.0 * p[5] + t2 * (7.0 * p[6] + t2 * 9.0 * p[7])))
+    omni_geom::poly::eval(&theta_d_slope_coefficients(p), t)
 }
 
 /// The model's domain: the largest θ (rad) up to which θ_d(θ) increases, at most π.
 /// `v` in [`FisheyeParams::to_vector`] order.
 pub fn kb_max_theta(v: &[f64]) -> f64 {
-    let (k1, k2, k3, k4) = (v[4], v[5], v[6], v[7]);
-    let slope = [1.0, 0.0, 3.0 * k1, 0.0, 5.0 * k2, 0.0, 7.0 * k3, 0.0, 9.0 * k4];
     let pi = std::f64::consts::PI;
-    omni_geom::poly::first_non_positive(&slope, 0.0, pi).unwrap_or(pi)
+    omni_geom::poly::first_non_positive(&theta_d_slope_coefficients(v), 0.0, pi).unwrap_or(pi)
 }
 
 /// The intrinsics with the domain appended ([`FisheyeParams::to_vector`], then

@@ -109,11 +109,17 @@ const MAX_RADIUS: f64 = 100.0;
 /// inside that disc (F(x) − F(y))·(x − y) > 0 for any two points and no pixel has two rays.
 /// `v` in [`PinholeParams::to_vector`] order.
 pub fn radtan_max_radius(v: &[f64]) -> f64 {
-    let (k1, k2, p1, p2, k3) = (v[4], v[5], v[6], v[7], v[8]);
-    let tangential = 6.0 * p1.hypot(p2);
-    let across = [1.0, -tangential, k1, 0.0, k2, 0.0, k3];
-    let along = [1.0, -tangential, 3.0 * k1, 0.0, 5.0 * k2, 0.0, 7.0 * k3];
+    let tangential = 6.0 * v[6].hypot(v[7]);
+    let mut across = [1.0, 0.0, v[4], 0.0, v[5], 0.0, v[8]];
+    let mut along = radial_slope_coefficients(v);
+    (across[1], along[1]) = (-tangential, -tangential);
     [across, along].iter().filter_map(|c| poly::first_non_positive(c, 0.0, MAX_RADIUS)).fold(MAX_RADIUS, f64::min)
+}
+
+/// The radial map's slope d(r·ρ)/dr = 1 + 3k1·r² + 5k2·r⁴ + 7k3·r⁶: its coefficients in r,
+/// lowest degree first (`v` in [`PinholeParams::to_vector`] order).
+fn radial_slope_coefficients(v: &[f64]) -> [f64; 7] {
+    [1.0, 0.0, 3.0 * v[4], 0.0, 5.0 * v[5], 0.0, 7.0 * v[8]]
 }
 
 /// The intrinsics with the domain appended ([`PinholeParams::to_vector`], then
@@ -219,10 +225,8 @@ fn radial_inverse(p: &[f64], rd: f64) -> f64 {
         let s = r * r;
         r * (1.0 + s * (p[4] + s * (p[5] + s * p[8])))
     };
-    let dg = |r: f64| {
-        let s = r * r;
-        1.0 + s * (3.0 * p[4] + s * (5.0 * p[5] + s * 7.0 * p[8]))
-    };
+    let slope = radial_slope_coefficients(p);
+    let dg = |r: f64| poly::eval(&slope, r);
     let (mut lo, mut hi) = (0.0, p[9]);
     if g(hi) <= rd {
         return hi;

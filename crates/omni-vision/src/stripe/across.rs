@@ -922,7 +922,7 @@ impl RidgeDetector {
             let mut p = c.point;
             p.u += shift * c.normal.0;
             p.v += shift * c.normal.1;
-            let shape = (stripe_shape.of(stripes, i), stripe_shape.errors_of(stripes, i));
+            let shape = stripe_shape.with_errors_of(stripes, i);
             let lean = c.lean.filter(|_| c.flatness <= LEAN_MAX_FLATNESS);
             let (lean, tail_offset, led_by_profile) = match lean {
                 Some(lean) => {
@@ -966,12 +966,7 @@ struct OnStripe {
 /// elsewhere along them, and their mean bend, over about ±6 px of stripe, hardly depends on
 /// the point's own error. A stripe that bends faster than that keeps the point's own bend.
 fn smooth_pull_bends(kept: &mut [OnStripe], neighbours: &[usize], centres: usize) {
-    let mut scatter: Vec<f64> = kept.iter().filter_map(|k| Some(k.bend_noise?.1)).collect();
-    if scatter.is_empty() {
-        return;
-    }
-    let middle = scatter.len() / 2;
-    let noise = CORRELATED_NOISE * *scatter.select_nth_unstable_by(middle, f64::total_cmp).1;
+    let noise = frame_noise(kept.iter().filter_map(|k| Some(k.bend_noise?.1)).collect());
     let mut kept_at = vec![usize::MAX; centres];
     for (k, point) in kept.iter().enumerate() {
         kept_at[point.index] = k;
@@ -1549,7 +1544,7 @@ fn lean_to_the_lights_peak(
     let stripe_shape =
         stripe_shapes(&mut stripes, &shapes, mosaic, |i| (points[i].point.u, points[i].point.v, points[i].normal));
     for (i, l) in points.iter_mut().enumerate() {
-        let shape = (stripe_shape.of(&mut stripes, i), stripe_shape.errors_of(&mut stripes, i));
+        let shape = stripe_shape.with_errors_of(&mut stripes, i);
         if let Some(lean) = l.lean {
             let (lean, tail, by_profile) = lean_to_sheet_peak(lean, l.half_width, shape, blur_variance, top_offsets);
             (l.lean, l.tail_offset, l.led_by_profile) = (Some(lean), tail, by_profile);
@@ -2126,13 +2121,19 @@ impl AlongFits {
     /// stripe: the median over the frame of the points' scatter about their stripes' parabolas
     /// over ±[`SHAPE_HALF_ARC_PX`], times [`CORRELATED_NOISE`].
     fn noise(&self) -> f64 {
-        let mut scatter: Vec<f64> = (0..self.ends.len()).filter_map(|k| short_arc_scatter(self.of(k))).collect();
-        if scatter.is_empty() {
-            return 0.0;
-        }
-        let middle = scatter.len() / 2;
-        CORRELATED_NOISE * *scatter.select_nth_unstable_by(middle, f64::total_cmp).1
+        frame_noise((0..self.ends.len()).filter_map(|k| short_arc_scatter(self.of(k))).collect())
     }
+}
+
+/// The noise of one point's offset across its stripe (px) as it counts in a fit along the
+/// stripe, from the points' `scatter` about their parabolas over ±[`SHAPE_HALF_ARC_PX`]: the
+/// median times [`CORRELATED_NOISE`]; 0 without any.
+fn frame_noise(mut scatter: Vec<f64>) -> f64 {
+    if scatter.is_empty() {
+        return 0.0;
+    }
+    let middle = scatter.len() / 2;
+    CORRELATED_NOISE * *scatter.select_nth_unstable_by(middle, f64::total_cmp).1
 }
 
 /// Neighbouring points' errors are correlated (the sampling kernel and the optics share

@@ -230,16 +230,12 @@ impl<const N: usize> StripeMedians<N> {
         }
     }
 
-    /// The values of centre `i`'s stripe, as seen along its own normal.
-    pub(super) fn of(&self, stripes: &mut Stripes, i: usize) -> [f64; N] {
+    /// The values of centre `i`'s stripe, as seen along its own normal, with their medians'
+    /// standard errors ([`StripeMedians::errors`]).
+    pub(super) fn with_errors_of(&self, stripes: &mut Stripes, i: usize) -> ([f64; N], [f64; N]) {
         let (root, flip) = stripes.find(i);
         let values = self.by_root[root];
-        if flip { values.map(|v| -v) } else { values }
-    }
-
-    /// The standard errors of centre `i`'s stripe's medians (as [`StripeMedians::errors`]).
-    pub(super) fn errors_of(&self, stripes: &mut Stripes, i: usize) -> [f64; N] {
-        self.errors[stripes.find(i).0]
+        (if flip { values.map(|v| -v) } else { values }, self.errors[root])
     }
 }
 
@@ -278,8 +274,8 @@ mod tests {
             (i, u, k, (1.0, 0.0))
         });
         medians.keep_where_the_mosaic_averages_out(&mut stripes, placed);
-        assert_eq!(medians.of(&mut stripes, 5), [0.0, 0.0]);
-        assert_eq!(medians.of(&mut stripes, 25), [0.1, 0.2]);
+        assert_eq!(medians.with_errors_of(&mut stripes, 5).0, [0.0, 0.0]);
+        assert_eq!(medians.with_errors_of(&mut stripes, 25).0, [0.1, 0.2]);
     }
 
     #[test]

@@ -305,8 +305,9 @@ fn main() -> ExitCode {
 fn run(input: &std::path::Path, output: &std::path::Path, config: pipeline::Config) -> CliResult {
     let stream = omni_formats::stream::StreamReader::open(input)?;
     if output == std::path::Path::new("-") {
-        let stdout = std::io::stdout();
-        return pipeline::run(stream, stdout.lock(), "stdout", config);
+        // Stdout's own buffer is a line's: a frame's record would reach the pipe in 1 KiB writes.
+        let stdout = std::io::BufWriter::with_capacity(1 << 16, std::io::stdout().lock());
+        return pipeline::run(stream, stdout, "stdout", config);
     }
     let out_name = output.display().to_string();
     let mut outcome: CliResult = Ok(());

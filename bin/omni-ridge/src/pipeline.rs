@@ -9,7 +9,7 @@ use omni_cli::{CliError, CliResult};
 use omni_formats::stream::{FrameError, Record, StreamReader, StreamWriter};
 use omni_model::CameraModel;
 use omni_vision::colour::ColourSpec;
-use omni_vision::image_io::{DecodedGray, GrayImage, load_frame_channel_decoded, write_rgb_png};
+use omni_vision::image_io::{DecodedGray, GrayImage, write_rgb_png};
 use omni_vision::stripe::{self, RidgeDetector, RidgeParams, SearchRegion};
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
@@ -69,7 +69,7 @@ struct Detectors {
     from_first_frame: OnceLock<Result<RidgeDetector, String>>,
     /// Laser-off frames, decoded once for all the frames that share them.
     laser_off: stripe::LaserOffCache,
-    static_ambient: Option<GrayImage>,
+    static_ambient: Option<DecodedGray>,
     along: AlongStripeTally,
     /// How frames are read, and whether the hint about colour read as luma was given.
     colour: ColourSpec,
@@ -162,7 +162,7 @@ pub fn run(input: Input, writer: impl Write, output_name: &str, config: Config) 
         colour: config.colour,
         sites: config.colour.site_origin().map(|origin| (origin, OnceLock::new())),
         luma_hint: std::sync::atomic::AtomicBool::new(false),
-        static_ambient: config.static_ambient,
+        static_ambient: config.static_ambient.map(DecodedGray::from_gray),
         along: AlongStripeTally::default(),
     });
     let threads = config.threads.max(1);
@@ -326,9 +326,9 @@ fn process_frame(
     Ok(())
 }
 
-/// The stripe points of a laser frame, and its image as read unless it was a plain 8-bit frame
-/// (grey, or colour read by a channel without a mosaic) with nothing to subtract and no overlay
-/// to draw: those are measured on their own bytes.
+/// The stripe points of a laser frame, less its laser-off frame or the static ambient, and its
+/// image as read unless it was an 8-bit frame (grey, or colour read by a channel without a
+/// mosaic) with no overlay to draw: those are measured on their own bytes.
 fn detect_points(
     frame: &omni_formats::stream::Frame,
     frames_dir: Option<&str>,
@@ -336,27 +336,17 @@ fn detect_points(
     detectors: &Detectors,
     keep_image: bool,
 ) -> Result<(Vec<stripe::StripePoint>, Option<GrayImage>), String> {
-    let plain = !keep_image
-        && detectors.colour.bayer.is_none()
-        && frame.ambient_path.is_none()
-        && detectors.static_ambient.is_none();
-    let mut img = if plain {
-        match load_frame_channel_decoded(path, &detectors.colour).map_err(|e| e.to_string())? {
-            DecodedGray::Eight { width, height, data } => {
-                let (detector, what) = detectors.for_size(width, height)?;
-                stripe::check_frame_size(width, height, detector, what)
-                    .map_err(|m| format!("{}: {m}", path.display()))?;
-                let pixels = stripe::Frame { width, height, data: &data, max_value: 255.0 };
-                return Ok((detector.detect_frame(&pixels, &mut stripe::Scratch::default()), None));
-            }
-            DecodedGray::Wide(img) => img,
-        }
-    } else {
-        stripe::load_frame_image_cached(frame, frames_dir, &detectors.laser_off)?
-    };
+    let mut decoded = stripe::load_frame_decoded_cached(frame, frames_dir, &detectors.laser_off)?;
     if let (Some(ambient), None) = (&detectors.static_ambient, &frame.ambient_path) {
-        img.subtract_saturating(ambient).map_err(|m| format!("{}: static ambient's {m}", path.display()))?;
+        decoded.subtract_saturating(ambient).map_err(|m| format!("{}: static ambient's {m}", path.display()))?;
     }
+    if let (DecodedGray::Eight { width, height, data }, false, None) = (&decoded, keep_image, &detectors.sites) {
+        let (detector, what) = detectors.for_size(*width, *height)?;
+        stripe::check_frame_size(*width, *height, detector, what).map_err(|m| format!("{}: {m}", path.display()))?;
+        let pixels = stripe::Frame { width: *width, height: *height, data, max_value: 255.0 };
+        return Ok((detector.detect_frame(&pixels, &mut stripe::Scratch::default()), None));
+    }
+    let img = decoded.into_gray();
     let Some((origin, at_sites)) = &detectors.sites else {
         let (detector, what) = detectors.for_size(img.width, img.height)?;
         let points = stripe::frame_points(&img, detector, what).map_err(|m| format!("{}: {m}", path.display()))?;

@@ -119,12 +119,63 @@ pub fn decode_gray(bytes: &[u8], name: &str) -> Result<GrayImage, Error> {
 /// A grey frame as decoded: an 8-bit frame keeps its bytes, which the stripe detector reads
 /// directly (widening them to 16 bits costs a pass and makes the detection about a fifth
 /// slower); any other frame as a [`GrayImage`], as [`load_gray`] reads it.
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum DecodedGray {
     Eight { width: u32, height: u32, data: Vec<u8> },
     Wide(GrayImage),
 }
 
 impl DecodedGray {
+    /// An image as the detector reads it: an 8-bit one as its bytes.
+    pub fn from_gray(img: GrayImage) -> Self {
+        match img.bit_depth {
+            8 => DecodedGray::Eight {
+                width: img.width,
+                height: img.height,
+                data: img.data.iter().map(|&v| v.min(255) as u8).collect(),
+            },
+            _ => DecodedGray::Wide(img),
+        }
+    }
+
+    /// Width and height (px).
+    pub fn size(&self) -> (u32, u32) {
+        match self {
+            DecodedGray::Eight { width, height, .. } => (*width, *height),
+            DecodedGray::Wide(img) => (img.width, img.height),
+        }
+    }
+
+    /// 8 or 16.
+    pub fn bit_depth(&self) -> u8 {
+        match self {
+            DecodedGray::Eight { .. } => 8,
+            DecodedGray::Wide(img) => img.bit_depth,
+        }
+    }
+
+    /// Subtracts `other` (same size) sample by sample, clamping at 0, as
+    /// [`GrayImage::subtract_saturating`] does, in the frame's own sample type.
+    pub fn subtract_saturating(&mut self, other: &DecodedGray) -> Result<(), String> {
+        let ((w, h), (ow, oh)) = (self.size(), other.size());
+        if (w, h) != (ow, oh) {
+            return Err(format!("size {ow}x{oh} differs from the frame's {w}x{h}"));
+        }
+        match (self, other) {
+            (DecodedGray::Eight { data, .. }, DecodedGray::Eight { data: off, .. }) => {
+                data.iter_mut().zip(off).for_each(|(a, &b)| *a = a.saturating_sub(b));
+            }
+            (DecodedGray::Eight { data, .. }, DecodedGray::Wide(off)) => {
+                data.iter_mut().zip(&off.data).for_each(|(a, &b)| *a = u16::from(*a).saturating_sub(b) as u8);
+            }
+            (DecodedGray::Wide(img), DecodedGray::Eight { data: off, .. }) => {
+                img.data.iter_mut().zip(off).for_each(|(a, &b)| *a = a.saturating_sub(u16::from(b)));
+            }
+            (DecodedGray::Wide(img), DecodedGray::Wide(off)) => img.subtract_saturating(off)?,
+        }
+        Ok(())
+    }
+
     /// The frame as a [`GrayImage`] (an 8-bit frame's bytes widened).
     pub fn into_gray(self) -> GrayImage {
         match self {

@@ -66,7 +66,8 @@ pub use along::{ShortStripes, refuse_short_stripes};
 pub use estimators::Segment;
 pub use frames::{
     LaserOffCache, STATIC_AMBIENT_MAX_FRAMES, STATIC_AMBIENT_MIN_FRAMES, check_frame_size, check_size, frame_points,
-    load_frame_image, load_frame_image_cached, mosaic_site_points, static_ambient, static_ambient_frames,
+    load_frame_decoded_cached, load_frame_image, load_frame_image_cached, mosaic_site_points, static_ambient,
+    static_ambient_frames,
 };
 pub use omni_formats::stream::{StripePoint, quality};
 pub use overlay::draw_overlay;

@@ -2,7 +2,7 @@
 
 use super::{RidgeDetector, StripePoint};
 use crate::colour::ColourSpec;
-use crate::image_io::{GrayImage, load_frame_channel};
+use crate::image_io::{DecodedGray, GrayImage, load_frame_channel_decoded};
 use omni_formats::stream::Frame;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
@@ -12,12 +12,12 @@ use std::sync::{Arc, Mutex};
 /// read as `spec` says (the same reading as the laser frames they are subtracted from).
 #[derive(Debug, Default)]
 pub struct LaserOffCache {
-    entries: Mutex<Vec<(PathBuf, Arc<GrayImage>)>>,
+    entries: Mutex<Vec<(PathBuf, Arc<DecodedGray>)>>,
     spec: ColourSpec,
 }
 
 impl LaserOffCache {
-    /// Distinct laser-off frames kept (a 1024² 16-bit frame is 2 MB).
+    /// Distinct laser-off frames kept (a 1024² frame is 1 MB at 8 bits, 2 MB at 16).
     pub const CAPACITY: usize = 16;
 
     /// An empty cache whose frames are read as `spec` says.
@@ -25,17 +25,17 @@ impl LaserOffCache {
         LaserOffCache { entries: Mutex::default(), spec }
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<(PathBuf, Arc<GrayImage>)>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<(PathBuf, Arc<DecodedGray>)>> {
         self.entries.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// The decoded frame at `path`, decoded now if it is not held.
-    pub fn get(&self, path: &std::path::Path) -> Result<Arc<GrayImage>, String> {
+    pub fn get(&self, path: &std::path::Path) -> Result<Arc<DecodedGray>, String> {
         if let Some(hit) = self.lock().iter().find(|(p, _)| p == path).map(|(_, img)| img.clone()) {
             return Ok(hit);
         }
         // Decoded outside the lock; two threads may both decode a new frame once.
-        let img = Arc::new(load_frame_channel(path, &self.spec).map_err(|e| format!("laser-off frame {e}"))?);
+        let img = Arc::new(load_frame_channel_decoded(path, &self.spec).map_err(|e| format!("laser-off frame {e}"))?);
         let mut entries = self.lock();
         if entries.len() == Self::CAPACITY {
             entries.remove(0);
@@ -58,17 +58,27 @@ pub fn load_frame_image_cached(
     frames_dir: Option<&str>,
     cache: &LaserOffCache,
 ) -> Result<GrayImage, String> {
+    Ok(load_frame_decoded_cached(frame, frames_dir, cache)?.into_gray())
+}
+
+/// [`load_frame_image_cached`], an 8-bit frame kept in its bytes (the detector reads them as
+/// they are; widening costs a pass and slows the detection).
+pub fn load_frame_decoded_cached(
+    frame: &Frame,
+    frames_dir: Option<&str>,
+    cache: &LaserOffCache,
+) -> Result<DecodedGray, String> {
     let path = frame.resolve_path(frames_dir, &frame.path);
-    let mut img = load_frame_channel(&path, &cache.spec).map_err(|e| e.to_string())?;
+    let mut img = load_frame_channel_decoded(&path, &cache.spec).map_err(|e| e.to_string())?;
     if let Some(ambient) = &frame.ambient_path {
         let apath = frame.resolve_path(frames_dir, ambient);
         let off = cache.get(&apath)?;
-        if off.bit_depth != img.bit_depth {
+        if off.bit_depth() != img.bit_depth() {
             return Err(format!(
                 "laser-off frame {}: {}-bit, but the frame is {}-bit",
                 apath.display(),
-                off.bit_depth,
-                img.bit_depth
+                off.bit_depth(),
+                img.bit_depth()
             ));
         }
         img.subtract_saturating(off.as_ref()).map_err(|m| format!("laser-off frame {}: {m}", apath.display()))?;
@@ -192,9 +202,28 @@ mod tests {
         let cache = LaserOffCache::default();
         let (a, b) = (cache.get(&path).unwrap(), cache.get(&path).unwrap());
         assert!(Arc::ptr_eq(&a, &b), "decoded twice");
-        assert_eq!((a.width, a.height, a.data[0]), (8, 6, 7));
+        assert_eq!(*a, DecodedGray::Eight { width: 8, height: 6, data: vec![7; 48] }, "8-bit, as its bytes");
         let missing = dir.path().join("missing.png");
         let e = cache.get(&missing).unwrap_err();
         assert!(e.contains("laser-off frame") && e.contains("missing.png"), "{e}");
+    }
+
+    #[test]
+    fn a_laser_off_frame_is_subtracted_alike_from_8_and_16_bit_samples() {
+        let eight = |data: Vec<u8>| DecodedGray::Eight { width: 3, height: 1, data };
+        let wide = |data: Vec<u16>| DecodedGray::Wide(GrayImage { width: 3, height: 1, bit_depth: 8, data });
+        let off = [eight(vec![5, 9, 0]), wide(vec![5, 9, 0])];
+        for frame in [eight(vec![7, 3, 255]), wide(vec![7, 3, 255])] {
+            for off in &off {
+                let mut f = frame.clone();
+                f.subtract_saturating(off).unwrap();
+                assert_eq!(f.into_gray().data, vec![2, 0, 255]);
+            }
+        }
+        let mut f = eight(vec![1, 2, 3]);
+        let small = DecodedGray::Eight { width: 2, height: 1, data: vec![0, 0] };
+        assert_eq!(f.subtract_saturating(&small).unwrap_err(), "size 2x1 differs from the frame's 3x1");
+        let e = DecodedGray::from_gray(GrayImage { width: 3, height: 1, bit_depth: 8, data: vec![1, 2, 3] });
+        assert_eq!(e, eight(vec![1, 2, 3]));
     }
 }

@@ -105,6 +105,16 @@ fn a_malformed_record_is_named_by_its_line() {
 }
 
 #[test]
+fn a_stream_not_yet_triangulated_is_refused_naming_its_first_frame() {
+    let s = stream(1).replace(",\"points\":[[100,0,1,0,100,0]]", "");
+    let o = run(&[], &s);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("stdin: line 3 (frame 1): no `points` field (run omni-triangulate first)"), "{e}");
+    assert_eq!(e.lines().filter(|l| l.contains("error")).count(), 1, "{e}");
+}
+
+#[test]
 fn a_closed_stdout_is_a_clean_end() {
     let mut child = spawn(&["--frames-per-sweep", "1"]);
     drop(child.stdout.take());

@@ -181,8 +181,8 @@ struct Args {
     /// valid-pixel mask, e.g. a lens's vignetted corners or the sensor's own body left out.
     #[arg(long, value_name = "PNG")]
     mask: Option<PathBuf>,
-    /// Worker threads (0: one per core).
-    #[arg(long, default_value_t = 0)]
+    /// Worker threads (0: one per core; at most 1024).
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = omni_cli::parse_threads)]
     threads: usize,
 }
 

@@ -176,8 +176,8 @@ struct RenderArgs {
     /// Independent speckle patterns (2: a depolarising matte surface; 1: a polarisation-keeping one).
     #[arg(long, value_name = "N", allow_negative_numbers = true)]
     speckle_patterns: Option<u32>,
-    /// Worker threads (0: one per core).
-    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+    /// Worker threads (0: one per core; at most 1024).
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = omni_cli::parse_threads)]
     threads: usize,
     #[command(flatten)]
     stripe: StripeArgs,
@@ -731,6 +731,18 @@ fn check_facet_and_angles(sensor: &Sensor, facet: u32, angles: &[f64]) -> CliRes
     Ok(())
 }
 
+/// Whether two output paths name one file (`-` both stdout, or one path written two ways).
+fn same_output(a: &std::path::Path, b: &std::path::Path) -> bool {
+    let resolved = |p: &std::path::Path| match (p.parent(), p.file_name()) {
+        (Some(dir), Some(name)) => {
+            let dir = if dir.as_os_str().is_empty() { std::path::Path::new(".") } else { dir };
+            dir.canonicalize().ok().map(|d| d.join(name))
+        }
+        _ => None,
+    };
+    a == b || resolved(a).is_some_and(|ra| resolved(b).is_some_and(|rb| ra == rb))
+}
+
 fn scan(a: ScanArgs) -> CliResult {
     let (sensor, optics) = Sensor::load_with_optics(&a.camera, &a.scanner)?;
     let colour = CameraFile::load(&a.camera)?.0.colour;
@@ -742,6 +754,12 @@ fn scan(a: ScanArgs) -> CliResult {
     check_lasers(&sensor, &a.lasers)?;
     let scene = Scene::load(&a.scene)?;
     check_boards_visible(&sensor, &scene).map_err(|e| CliError::new(format!("{}: {e}", a.scene.display())))?;
+    if a.truth.as_ref().is_some_and(|t| same_output(t, &a.output)) {
+        return Err(CliError::usage(format!(
+            "--truth and -o both name {}: the manifest and the ground truth need a file each",
+            a.output.display()
+        )));
+    }
     for output in std::iter::once(&a.output).chain(&a.truth) {
         omni_formats::io::check_output_dir(output)?;
     }

@@ -654,6 +654,8 @@ fn impossible_outputs_and_options_without_effect_are_refused_before_rendering() 
         (scan("f1", "nodir/s.jsonl", ""), 1, "nodir/s.jsonl: directory nodir"),
         (scan("f2", "s.jsonl", "nodir/t.jsonl"), 1, "nodir/t.jsonl: directory nodir"),
         (scan("a_file", "s.jsonl", ""), 1, "a_file: is a file, not a directory (--frames)"),
+        (scan("f3", "-", "-"), 2, "--truth and -o both name -"),
+        (scan("f4", "s.jsonl", "./s.jsonl"), 2, "need a file each"),
         (boards(&["--laser-gain", "60"]), 2, "act on the laser's light"),
         (boards(&["--no-speckle"]), 2, "act on the laser's light"),
     ];
@@ -662,7 +664,7 @@ fn impossible_outputs_and_options_without_effect_are_refused_before_rendering() 
         assert_eq!(out.status.code(), Some(code), "{err}");
         assert!(err.contains(says) && err.lines().count() == 1, "{says}: {err}");
     }
-    for never in ["-", "f1", "f2", "s.jsonl", "b"] {
+    for never in ["-", "f1", "f2", "f3", "f4", "s.jsonl", "b"] {
         assert!(!d.join(never).exists(), "{never} was made");
     }
 }

@@ -77,6 +77,19 @@ pub fn positive(option: &str, value: f64) -> CliResult<f64> {
     }
 }
 
+/// Most worker threads a tool starts (`--threads`): far more than any machine's cores, and few
+/// enough that a mistyped count cannot tie the machine up in threads.
+pub const MAX_THREADS: usize = 1024;
+
+/// `--threads` parsed for clap: 0 (one per core) up to [`MAX_THREADS`].
+pub fn parse_threads(text: &str) -> Result<usize, String> {
+    let n: usize = text.parse().map_err(|_| format!("expected a whole number of threads, got {text:?}"))?;
+    match n <= MAX_THREADS {
+        true => Ok(n),
+        false => Err(format!("at most {MAX_THREADS} threads, got {n}")),
+    }
+}
+
 /// A failed write to stdout (a full disk behind `>`, a closed pipe), naming it.
 pub fn stdout_error(e: std::io::Error) -> CliError {
     CliError::new(format!("stdout: {e}"))
@@ -277,6 +290,14 @@ pub fn warn(tool: &str, message: &str) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn thread_counts_are_whole_numbers_up_to_the_limit() {
+        assert_eq!(parse_threads("0"), Ok(0));
+        assert_eq!(parse_threads("1024"), Ok(MAX_THREADS));
+        assert_eq!(parse_threads("100000").unwrap_err(), "at most 1024 threads, got 100000");
+        assert!(parse_threads("-1").unwrap_err().contains("whole number"));
+    }
 
     #[test]
     fn broken_pipe_is_recognised() {

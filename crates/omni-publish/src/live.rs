@@ -254,6 +254,13 @@ pub fn frames_per_sweep_of(h: &omni_formats::stream::Header) -> Option<u32> {
 fn read_records<R: BufRead>(mut input: StreamReader<R>, tx: std::sync::mpsc::SyncSender<Result<Record, String>>) {
     loop {
         let item = match input.next_record() {
+            // Points are what is published: a stream not yet triangulated has none to give.
+            Ok(Some(Record::Frame(f))) if f.points.is_none() => Err(format!(
+                "{}: line {} (frame {}): no `points` field (run omni-triangulate first)",
+                input.name(),
+                input.line(),
+                f.seq
+            )),
             Ok(Some(r)) => Ok(r),
             Ok(None) => return,
             Err(e) => Err(e.to_string()),

@@ -352,6 +352,21 @@ fn query_answers_pixels_and_points_both_ways() {
     assert!(err.contains("stdin: line 2: expected 2 numbers (pixel u v) or 3"), "{err}");
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(!file.exists(), "no half-written answers");
+
+    // Unreadable questions are the input's fault, named with their line.
+    let bad = dir.path().join("bad.txt");
+    std::fs::write(&bad, b"577.1 239.7\n\xff\xfe\n").unwrap();
+    let out = q(&["-i", bad.to_str().unwrap()], "");
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("bad.txt: line 2: stream did not contain valid UTF-8"), "{err}");
+    // A point far beyond where its coordinates' squares overflow: its direction's pixel.
+    let along = |far: f64| format!("[{}, {}, {}]\n", far * v[5], far * v[6], far * v[7]);
+    let out = q(&["--json"], &(along(1e90) + &along(1e300)));
+    let text = String::from_utf8(out.stdout).unwrap();
+    let pixels: Vec<serde_json::Value> =
+        text.lines().map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["px"].clone()).collect();
+    assert!(pixels[0].is_array() && pixels[0] == pixels[1], "{text}");
 }
 
 /// `export` writes Kalibr (with `rostopic`, `cam_overlaps` and the frame), OpenCV and refuses a

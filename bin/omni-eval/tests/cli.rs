@@ -333,3 +333,22 @@ fn a_full_stdout_is_an_error_naming_it() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(err.contains("stdout: No space left on device"), "{err}");
 }
+
+/// An angle the polygon's facet cannot reach is a usage error, not a table.
+#[test]
+fn budget_refuses_an_angle_far_outside_the_facet() {
+    let dir = tempfile::tempdir().unwrap();
+    let camera =
+        omni_formats::CameraFile::new(omni_formats::CameraSpec::Hyperbolic(omni_model::HyperbolicParams::paper()));
+    omni_formats::write_doc(&dir.path().join("camera.json"), &camera).unwrap();
+    let scanner = omni_formats::ScannerFile::new(omni_model::TransmitterParams::paper());
+    omni_formats::write_doc(&dir.path().join("scanner.json"), &scanner).unwrap();
+    for alpha in ["200", "1e9", "-20"] {
+        let args = ["budget", "--camera", "camera.json", "--scanner", "scanner.json", "--alpha-deg", alpha];
+        let out = run(dir.path(), &args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{alpha}: {err}");
+        assert!(err.contains("is far outside the facet's range [0, 30°)") && err.lines().count() == 1, "{err}");
+        assert!(out.stdout.is_empty(), "{alpha}: a table was printed");
+    }
+}

@@ -725,7 +725,7 @@ fn check_facet_and_angles(sensor: &Sensor, facet: u32, angles: &[f64]) -> CliRes
         )));
     }
     if let Some(a) = angles.iter().find(|a| sensor.transmitter.check_frame(a.to_radians(), facet).is_err()) {
-        let span = sensor.transmitter.facet_angle().to_degrees();
+        let span = sensor.transmitter.facet_angle_deg();
         return Err(CliError::usage(format!("--angles: {a}° is far outside the facet's range [0, {span}°)")));
     }
     Ok(())

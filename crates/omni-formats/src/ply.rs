@@ -327,6 +327,23 @@ pub struct VertexLayout {
     pub properties: Vec<(String, ScalarType)>,
     /// Millimetres per coordinate unit: 1000 when the file says `comment units m`, else 1.
     pub mm_per_unit: f64,
+    /// The elements declared after the vertices (faces, edges): not read, but checked whole.
+    pub after: Vec<ElementShape>,
+}
+
+/// A property as declared: a scalar, or a list (its count's type and its items').
+#[derive(Debug, Clone, PartialEq)]
+pub enum DeclaredProperty {
+    Scalar(String, ScalarType),
+    List(ScalarType, ScalarType),
+}
+
+/// An element as declared: name, count and properties.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ElementShape {
+    pub name: String,
+    pub count: usize,
+    pub properties: Vec<DeclaredProperty>,
 }
 
 impl VertexLayout {
@@ -335,9 +352,6 @@ impl VertexLayout {
         self.properties.iter().filter(|(n, _)| !["x", "y", "z"].contains(&n.as_str())).cloned().collect()
     }
 }
-
-/// An element as declared: name, count, properties (`None` for list properties).
-type Element = (String, usize, Vec<Option<(String, ScalarType)>>);
 
 /// Reads a PLY header up to and including `end_header`. Returns the header's bytes (to hand on
 /// to the general reader) and the vertex layout when the direct path applies (`None`: the file
@@ -364,7 +378,7 @@ pub fn read_header(r: &mut dyn BufRead, name: &str) -> Result<(Vec<u8>, Option<V
     }
     let mut format = None;
     let mut mm_per_unit = 1.0;
-    let mut elements: Vec<Element> = Vec::new();
+    let mut elements: Vec<ElementShape> = Vec::new();
     loop {
         let l = next(&mut raw)?;
         let t: Vec<&str> = l.split_whitespace().collect();
@@ -383,12 +397,17 @@ pub fn read_header(r: &mut dyn BufRead, name: &str) -> Result<(Vec<u8>, Option<V
             }
             ["element", e, n] => {
                 let n = n.parse().map_err(|_| bad(format!("bad element count {n:?}")))?;
-                elements.push((e.to_string(), n, Vec::new()));
+                elements.push(ElementShape { name: e.to_string(), count: n, properties: Vec::new() });
             }
-            ["property", "list", ..] => elements.last_mut().ok_or(bad("property before element".into()))?.2.push(None),
+            ["property", "list", count, item, _] => {
+                let kind = |ty: &str| ScalarType::parse(ty).ok_or(bad(format!("unknown property type {ty}")));
+                let list = DeclaredProperty::List(kind(count)?, kind(item)?);
+                elements.last_mut().ok_or(bad("property before element".into()))?.properties.push(list);
+            }
             ["property", ty, p] => {
                 let kind = ScalarType::parse(ty).ok_or(bad(format!("unknown property type {ty}")))?;
-                elements.last_mut().ok_or(bad("property before element".into()))?.2.push(Some((p.to_string(), kind)));
+                let scalar = DeclaredProperty::Scalar(p.to_string(), kind);
+                elements.last_mut().ok_or(bad("property before element".into()))?.properties.push(scalar);
             }
             ["comment", "units", "m"] => mm_per_unit = 1000.0,
             ["comment", "units", "mm"] => mm_per_unit = 1.0,
@@ -397,20 +416,30 @@ pub fn read_header(r: &mut dyn BufRead, name: &str) -> Result<(Vec<u8>, Option<V
         }
     }
     let format = format.ok_or(bad("no format line".into()))?;
-    let Some(vertex) = elements.iter().find(|e| e.0 == "vertex") else {
+    let Some(vertex) = elements.iter().find(|e| e.name == "vertex") else {
         return Err(bad("no `vertex` element".into()));
     };
+    let scalars = |e: &ElementShape| -> Vec<(String, ScalarType)> {
+        e.properties
+            .iter()
+            .filter_map(|p| match p {
+                DeclaredProperty::Scalar(n, k) => Some((n.clone(), *k)),
+                DeclaredProperty::List(..) => None,
+            })
+            .collect()
+    };
     for axis in ["x", "y", "z"] {
-        if !vertex.2.iter().flatten().any(|(n, _)| n == axis) {
+        if !scalars(vertex).iter().any(|(n, _)| n == axis) {
             return Err(bad(format!("vertex element has no `{axis}` property")));
         }
     }
-    let (first, count, props) = &elements[0];
-    if first != "vertex" || props.iter().any(|p| p.is_none()) {
+    let first = &elements[0];
+    if first.name != "vertex" || first.properties.iter().any(|p| matches!(p, DeclaredProperty::List(..))) {
         return Ok((raw, None));
     }
-    let properties = props.iter().flatten().cloned().collect();
-    Ok((raw, Some(VertexLayout { format, count: *count, properties, mm_per_unit })))
+    let (properties, count) = (scalars(first), first.count);
+    let after = elements.split_off(1);
+    Ok((raw, Some(VertexLayout { format, count, properties, mm_per_unit, after })))
 }
 
 /// The per-vertex visitor of [`visit_vertices`]: xyz (mm) and the scalars.
@@ -495,7 +524,65 @@ pub fn visit_vertices<E>(
             }
         }
     }
+    check_whole(r, layout.format, &layout.after).map_err(|(loc, m)| fail(loc, m))
+}
+
+/// Reads past `elements` (those after the vertices), checking that each holds as many records
+/// as its header declares; a file cut short in them is truncated like one cut in its vertices.
+fn check_whole(
+    r: &mut dyn BufRead,
+    format: PlyFormat,
+    elements: &[ElementShape],
+) -> std::result::Result<(), (String, String)> {
+    let truncated =
+        |e: &ElementShape, i: usize| ("data".to_string(), format!("truncated: {i} of {} {}", e.count, e.name));
+    let mut line = String::new();
+    for e in elements {
+        for i in 0..e.count {
+            let whole = match format {
+                PlyFormat::Ascii => {
+                    line.clear();
+                    let read = r.read_line(&mut line).map_err(|err| (String::new(), err.to_string()))?;
+                    read > 0 && !line.trim().is_empty()
+                }
+                PlyFormat::BinaryLittleEndian | PlyFormat::BinaryBigEndian => {
+                    skip_binary_record(r, &e.properties, format == PlyFormat::BinaryLittleEndian)
+                }
+            };
+            if !whole {
+                return Err(truncated(e, i));
+            }
+        }
+    }
     Ok(())
+}
+
+/// Reads past one binary record of `properties`; false where the file ends first.
+fn skip_binary_record(r: &mut dyn BufRead, properties: &[DeclaredProperty], little: bool) -> bool {
+    let skip = |r: &mut dyn BufRead, bytes: usize| {
+        std::io::copy(&mut r.take(bytes as u64), &mut std::io::sink()).ok() == Some(bytes as u64)
+    };
+    let mut count = [0u8; 8];
+    for p in properties {
+        let whole = match p {
+            DeclaredProperty::Scalar(_, k) => skip(&mut *r, k.size()),
+            DeclaredProperty::List(n, item) => {
+                let bytes = &mut count[..n.size()];
+                if read_full(&mut *r, bytes).is_err() {
+                    return false;
+                }
+                let items = n.decode(bytes, little);
+                if !(items >= 0.0 && items.fract() == 0.0) {
+                    return false;
+                }
+                skip(&mut *r, items as usize * item.size())
+            }
+        };
+        if !whole {
+            return false;
+        }
+    }
+    true
 }
 
 /// Fills `buf` completely or returns how many bytes were read.
@@ -777,6 +864,38 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("`y`"), "{e}");
+    }
+
+    #[test]
+    fn elements_after_the_vertices_are_checked_whole() {
+        let header = |format: &str, faces: usize| {
+            format!(
+                "ply\nformat {format} 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n\
+                 element face {faces}\nproperty list uchar int vertex_indices\nproperty uchar flag\nend_header\n"
+            )
+        };
+        let ascii = |faces: usize, body: &str| header("ascii", faces) + "1 2 3\n4 5 6\n" + body;
+        assert_eq!(read_ply_from(&mut ascii(2, "3 0 1 1 7\n2 0 1 7\n").as_bytes(), "a.ply").unwrap().len(), 2);
+        let e = read_ply_from(&mut ascii(1000, "3 0 1 1 7\n").as_bytes(), "a.ply").unwrap_err().to_string();
+        assert_eq!(e, "a.ply: data: truncated: 1 of 1000 face");
+        let binary = |faces: usize, cut: usize| {
+            let mut bytes = header("binary_little_endian", faces).into_bytes();
+            for v in [1f32, 2.0, 3.0, 4.0, 5.0, 6.0] {
+                bytes.extend(v.to_le_bytes());
+            }
+            for _ in 0..2 {
+                bytes.push(3);
+                [0i32, 1, 1].iter().for_each(|i| bytes.extend(i.to_le_bytes()));
+                bytes.push(7);
+            }
+            bytes.truncate(bytes.len() - cut);
+            bytes
+        };
+        assert_eq!(read_ply_from(&mut binary(2, 0).as_slice(), "b.ply").unwrap().len(), 2);
+        for (faces, cut, whole) in [(2, 1, 1), (2, 5, 1), (3, 0, 2)] {
+            let e = read_ply_from(&mut binary(faces, cut).as_slice(), "b.ply").unwrap_err().to_string();
+            assert_eq!(e, format!("b.ply: data: truncated: {whole} of {faces} face"));
+        }
     }
 
     #[test]

@@ -246,6 +246,11 @@ impl Transmitter {
         2.0 * self.theta
     }
 
+    /// [`Self::facet_angle`] in degrees as a person reads it (to 1e-9°: 30, not 29.999999999999996).
+    pub fn facet_angle_deg(&self) -> f64 {
+        (self.facet_angle().to_degrees() * 1e9).round() / 1e9
+    }
+
     /// Checks a stream frame's `facet` and `alpha_deg` (as radians) against the polygon: the
     /// facet must exist (no wrapping modulo n), and α must lie within the facet's range
     /// [0, 2θ) give or take half of it (encoder offsets, rounding). The message names the field.
@@ -259,7 +264,7 @@ impl Transmitter {
             return Err(format!(
                 "field alpha_deg: {}° is far outside the facet's range [0, {}°)",
                 alpha.to_degrees(),
-                span.to_degrees()
+                self.facet_angle_deg()
             ));
         }
         Ok(())

@@ -409,6 +409,9 @@ fn decode_checked(bytes: &[u8], name: &str) -> Result<image::DynamicImage, Error
     if w > max || h > max {
         return Err(Error::new(name, "", format!("image size {w}x{h} exceeds the limit of {max} px per side")));
     }
+    if w == 0 || h == 0 {
+        return Err(Error::new(name, "", format!("image size {w}x{h}: no pixels")));
+    }
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(max);
     limits.max_image_height = Some(max);
@@ -647,6 +650,12 @@ mod tests {
         let empty = dir.path().join("empty.png");
         std::fs::write(&empty, "").unwrap();
         assert!(load_gray(&empty).unwrap_err().to_string().contains("empty.png"));
+        for (w, h) in [(0, 0), (0, 4), (4, 0)] {
+            let pgm = dir.path().join("none.pgm");
+            std::fs::write(&pgm, format!("P5\n{w} {h}\n255\n")).unwrap();
+            let e = load_gray_decoded(&pgm).unwrap_err().to_string();
+            assert!(e.contains("none.pgm") && e.contains(&format!("image size {w}x{h}: no pixels")), "{e}");
+        }
     }
 
     /// A grey 8-bit PNG claiming the given size, with almost no pixel data.

@@ -66,7 +66,7 @@ pub fn light_plane_table(
         Some(l) => vec![l],
         None => (0..tx.num_lasers()).collect(),
     };
-    let span = tx.facet_angle().to_degrees();
+    let span = tx.facet_angle_deg();
     let mut rows = vec![];
     for &a in alphas_deg {
         if !(a >= -1e-9 && a <= span + 1e-9) {

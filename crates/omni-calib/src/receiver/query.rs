@@ -64,6 +64,19 @@ pub fn parse_query(line: &str) -> Result<Option<Query>, String> {
 }
 
 /// The answer to `q` as one line (without the newline), text or JSON.
+/// A point beyond 2^332 mm (about 1e100) scaled by a power of two to within it: the models
+/// square its coordinates, which overflow beyond 1e154. The scaling is exact, so a central
+/// model's pixel is unchanged; a non-central one's moves by its rays' offsets (mm) over the
+/// distance, under 1e-96 px.
+fn within_range_of_squares(p: [f64; 3]) -> Point3<f64> {
+    let largest = p.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+    let scale = match largest > 2f64.powi(332) && largest.is_finite() {
+        true => 2f64.powi(332 - largest.log2().ceil() as i32),
+        false => 1.0,
+    };
+    Point3::new(p[0] * scale, p[1] * scale, p[2] * scale)
+}
+
 pub fn answer(cam: &dyn CameraModel, q: Query, as_json: bool) -> String {
     match q {
         Query::Pixel(px) => {
@@ -84,7 +97,7 @@ pub fn answer(cam: &dyn CameraModel, q: Query, as_json: bool) -> String {
             }
         }
         Query::Point(p) => {
-            let px = cam.point_to_pixel(&Point3::new(p[0], p[1], p[2]));
+            let px = cam.point_to_pixel(&within_range_of_squares(p));
             if as_json {
                 let px = px.map_or(Value::Null, |q| json!([q.x, q.y]));
                 return json!({"point_mm": p, "px": px}).to_string();
@@ -101,6 +114,23 @@ pub fn answer(cam: &dyn CameraModel, q: Query, as_json: bool) -> String {
 mod tests {
     use super::*;
     use omni_model::{HyperbolicCamera, HyperbolicParams};
+
+    #[test]
+    fn points_far_beyond_the_squares_range_give_the_pixel_of_their_direction() {
+        let cam = HyperbolicCamera::new(HyperbolicParams::paper()).unwrap();
+        let pixel = |p: [f64; 3]| {
+            let answer: Value = serde_json::from_str(&answer(&cam, Query::Point(p), true)).unwrap();
+            json_numbers(&answer["px"]).unwrap_or_else(|| panic!("{p:?}: {answer}"))
+        };
+        let far = pixel([1e90, 0.0, -0.3e90]);
+        for farther in [1e155, 1e300, f64::MAX / 2.0] {
+            let got = pixel([farther, 0.0, -0.3 * farther]);
+            assert!((got[0] - far[0]).abs() < 1e-9 && (got[1] - far[1]).abs() < 1e-9, "{farther}: {got:?} vs {far:?}");
+        }
+        assert_eq!(within_range_of_squares([3.0, -4.0, 5.0]), Point3::new(3.0, -4.0, 5.0));
+        let scaled = within_range_of_squares([2f64.powi(400), 0.0, -2f64.powi(399)]);
+        assert_eq!(scaled, Point3::new(2f64.powi(332), 0.0, -2f64.powi(331)));
+    }
 
     #[test]
     fn parses_text_and_json_questions_and_names_the_problem() {

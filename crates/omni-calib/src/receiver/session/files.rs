@@ -190,7 +190,13 @@ pub fn query(opts: &QueryOptions) -> Result<(), Error> {
     let mut failure: Option<String> = None;
     omni_formats::io::write_atomic(&opts.output, |w| {
         for (n, line) in reader.lines().enumerate() {
-            let line = line?;
+            let line = match line {
+                Ok(line) => line,
+                Err(e) => {
+                    failure = Some(format!("{name}: line {}: {e}", n + 1));
+                    return Err(std::io::Error::other("unreadable input"));
+                }
+            };
             match questions::parse_query(&line) {
                 Ok(None) => {}
                 Ok(Some(q)) => {

@@ -216,16 +216,22 @@ fn parse_ranges(s: &str) -> Result<Vec<f64>, CliError> {
     let v: Vec<f64> = if s.contains(':') {
         let p: Vec<f64> = s.split(':').map(|t| t.trim().parse::<f64>().map_err(|_| bad())).collect::<Result<_, _>>()?;
         let [a, b, step] = p[..] else { return Err(bad()) };
-        if !(step > 0.0) || !(b >= a) || (b - a) / step > 10_000.0 {
+        if !(step > 0.0) || !(b >= a) {
             return Err(bad());
+        }
+        if (b - a) / step > 10_000.0 {
+            return Err(CliError::usage(format!("--range {s}: more than 10000 ranges; take a longer step")));
         }
         let n = ((b - a) / step + 1e-9).floor() as usize;
         (0..=n).map(|i| a + step * i as f64).collect()
     } else {
         s.split(',').map(|t| t.trim().parse::<f64>().map_err(|_| bad())).collect::<Result<_, _>>()?
     };
-    if v.is_empty() || !v.iter().all(|x| x.is_finite() && *x > 0.0) {
+    if v.is_empty() {
         return Err(bad());
+    }
+    if let Some(x) = v.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+        return Err(CliError::usage(format!("--range {s}: ranges are positive distances (mm), got {x}")));
     }
     Ok(v)
 }

@@ -334,9 +334,10 @@ fn a_full_stdout_is_an_error_naming_it() {
     assert!(err.contains("stdout: No space left on device"), "{err}");
 }
 
-/// An angle the polygon's facet cannot reach is a usage error, not a table.
+/// An angle the polygon's facet cannot reach, a range at 0 mm and 10 000 of them are usage
+/// errors that say which, not a table.
 #[test]
-fn budget_refuses_an_angle_far_outside_the_facet() {
+fn budget_refuses_angles_outside_the_facet_and_ranges_it_cannot_take() {
     let dir = tempfile::tempdir().unwrap();
     let camera =
         omni_formats::CameraFile::new(omni_formats::CameraSpec::Hyperbolic(omni_model::HyperbolicParams::paper()));
@@ -350,5 +351,16 @@ fn budget_refuses_an_angle_far_outside_the_facet() {
         assert_eq!(out.status.code(), Some(2), "{alpha}: {err}");
         assert!(err.contains("is far outside the facet's range [0, 30°)") && err.lines().count() == 1, "{err}");
         assert!(out.stdout.is_empty(), "{alpha}: a table was printed");
+    }
+    for (range, says) in [
+        ("0:10:1", "ranges are positive distances (mm), got 0"),
+        ("300:2000:0.0001", "more than 10000 ranges"),
+        ("300:x:10", "expected start:stop:step or a,b,c (mm)"),
+    ] {
+        let out =
+            run(dir.path(), &["budget", "--camera", "camera.json", "--scanner", "scanner.json", "--range", range]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{range}: {err}");
+        assert!(err.contains(says) && err.lines().count() == 1, "{range}: {err}");
     }
 }

@@ -187,7 +187,10 @@ fn ros2_sink(a: &Args, calibration: Option<String>, tf: Option<nalgebra::Isometr
         },
     };
     if domain > u32::from(MAX_DOMAIN_ID) {
-        return Err(CliError::new(format!("--domain-id {domain} is out of range 0..={MAX_DOMAIN_ID}")));
+        return Err(match a.domain_id {
+            Some(_) => CliError::usage(format!("--domain-id {domain} is out of range 0..={MAX_DOMAIN_ID}")),
+            None => CliError::new(format!("ROS_DOMAIN_ID={domain} is out of range 0..={MAX_DOMAIN_ID}")),
+        });
     }
     let publisher = DdsPublisher::new(&DdsOptions {
         domain_id: domain as u16,

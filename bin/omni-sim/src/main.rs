@@ -417,6 +417,11 @@ impl RenderArgs {
 
     /// Options on top of `d`.
     fn options_from(&self, d: RenderOptions, camera_optics: Option<Optics>) -> CliResult<RenderOptions> {
+        for (option, gain) in [("--laser-gain", self.laser_gain), ("--ambient-gain", self.ambient_gain)] {
+            if !(gain.is_finite() && gain >= 0.0) {
+                return Err(CliError::usage(format!("{option} must be a non-negative number, got {gain}")));
+            }
+        }
         let imaging = self.imaging(d.imaging, camera_optics)?;
         let opts = RenderOptions {
             bit_depth: self.bit_depth,
@@ -603,7 +608,7 @@ impl RenderArgs {
                 };
                 o.validate().map_err(usage)?;
                 if let Some(b) = self.blur_px {
-                    o = o.with_psf_sigma(b).map_err(|e| CliError::usage(format!("--blur-px: {e}")))?;
+                    o = o.with_psf_sigma(b).map_err(|e| CliError::usage(format!("--blur-px {b}: {e}")))?;
                 }
                 Ok(Imaging::Lens { optics: o, speckle: speckle && !self.no_speckle })
             }

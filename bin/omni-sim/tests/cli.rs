@@ -219,6 +219,8 @@ fn optics_out_of_range_name_the_field() {
         ("--wavelength-nm", "2500", "wavelength_nm"),
         ("--pixel-pitch-um", "0", "pixel_pitch_um"),
         ("--blur-px", "0.05", "diffraction limit"),
+        ("--laser-gain", "-1", "--laser-gain must be a non-negative number, got -1"),
+        ("--ambient-gain", "inf", "--ambient-gain must be a non-negative number, got inf"),
         ("--focus-mm", "-5", "focus_mm"),
         ("--focus-mm", "5", "beyond the 24 px"),
     ] {

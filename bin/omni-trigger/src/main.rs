@@ -327,15 +327,16 @@ fn open_output(path: &Path) -> CliResult<Box<dyn Write>> {
 
 fn scan(a: ScanArgs) -> CliResult {
     let cfg = scan_config(&a)?;
-    // The camera is opened and set up first: any refusal is reported before the controller
-    // is touched.
-    let mut source: Box<dyn FrameSource> = match a.camera.open(&a.frames)? {
+    // A camera is opened and set up first: any refusal is reported before the controller is
+    // touched. A directory a camera writes into is made (if missing) only once the port is open.
+    let camera = a.camera.open(&a.frames)?;
+    let mut client = open_client(&a.port)?;
+    let mut source: Box<dyn FrameSource> = match camera {
         Some(camera) => camera,
         None => {
             Box::new(DirFrameSource::new(&a.frames).map_err(|e| CliError::new(format!("{}: {e}", a.frames.display())))?)
         }
     };
-    let mut client = open_client(&a.port)?;
     let info = hello(&mut client, &a.port.port)?;
     let out_name = omni_formats::io::display_name(&a.output, "stdout");
     let mut writer = StreamWriter::new(open_output(&a.output)?, out_name);

@@ -251,6 +251,15 @@ fn bad_ports_and_arguments_fail_cleanly() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("start:stop:step"));
+    // A port that is not there: no frames directory is made for a scan that never starts.
+    let frames = dir.path().join("frames");
+    let out = Command::new(BIN)
+        .args(["scan", "--port", "/dev/omni-no-such-port", "--angles", "0:30:10", "--frames"])
+        .arg(&frames)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(!frames.exists(), "the frames directory was made");
     // An angle beyond the facet is refused after the handshake, with a status record.
     let emu = Emulator::start(&["--camera-mode", "blank"]);
     let out = emu.scan(&["--angles", "10,31"]);

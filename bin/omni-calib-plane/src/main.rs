@@ -253,7 +253,8 @@ struct FixedArgs {
 #[command(after_help = "Board poses come from exactly one of --pose-image (the rig boards are found in the ambient \
     pose image and posed with the camera), --board-corners (their corner pixels given) or --board-poses (known \
     poses).\n\
-    Frames belong to rig placement 0 unless their record has an integer field `placement`.")]
+    Frames belong to rig placement 0 unless their record has an integer field `placement`.\n\n\
+    Example:\n  omni-calib-plane fit --camera camera.json --rig rig.json --pose-image rig/pose.png --stripes stripes.jsonl -o scanner.json")]
 struct FitArgs {
     /// Calibrated receiver (camera.json).
     #[arg(long)]
@@ -303,6 +304,7 @@ struct FitArgs {
 }
 
 #[derive(Args)]
+#[command(after_help = "Example:\n  omni-calib-plane table --scanner scanner.json --alpha 0:30:0.5 --laser 0 --json")]
 struct TableArgs {
     /// Calibrated scanner.json.
     #[arg(long)]

@@ -149,6 +149,7 @@ enum Command {
     /// Find the mirror annulus (outer rim and, if visible, blind centre) in an image of a lit
     /// scene, or in the per-pixel range of several images (e.g. the board images), and print it
     /// as CX,CY,R_IN,R_OUT (px) for --annulus. Exit 1 with the reason if no rim circle is found.
+    #[command(after_help = "Example:\n  omni-calib-receiver find-annulus lit_room.png")]
     FindAnnulus {
         /// One lit image, or several images / directories of one camera.
         #[arg(required = true)]
@@ -157,6 +158,7 @@ enum Command {
     /// Convert an OCamCalib calib_results.txt into camera.json (kind ocam). The centre's pixel
     /// origin is read from its header: OCamCalib v3 ("starting from 0 (C convention)") as
     /// written, older files (Matlab, 1-based) minus one.
+    #[command(after_help = "Example:\n  omni-calib-receiver import-ocam calib_results.txt -o camera.json")]
     ImportOcam {
         /// OCamCalib's calib_results.txt (`-` = stdin).
         input: PathBuf,
@@ -188,6 +190,7 @@ enum Command {
     /// (OCamCalib calib_results.txt, from kind ocam), kalibr (camchain.yaml) or opencv
     /// (FileStorage YAML: omnidir, calibrateCamera or fisheye), both from kind mei, pinhole or
     /// fisheye (Kalibr: a pinhole with k3 = 0).
+    #[command(after_help = "Example:\n  omni-calib-receiver export camera.json --to opencv -o omnidir.yaml")]
     Export {
         /// The calibration (camera.json).
         camera: PathBuf,
@@ -204,6 +207,7 @@ enum Command {
     /// Convert a calibration into another model without a re-fit to boards: the target model is
     /// fitted to the source's rays over its mirror annulus. Prints the largest ray (deg) and
     /// pixel (px) difference and refuses (exit 1, no output) beyond the tolerances.
+    #[command(after_help = "Example:\n  omni-calib-receiver convert camera.json --to ocam -o ocam.json")]
     Convert {
         /// The calibration (camera.json).
         camera: PathBuf,
@@ -227,6 +231,7 @@ enum Command {
     /// Convert one camera of a Kalibr camchain.yaml into camera.json: omni + radtan (kind mei),
     /// pinhole + radtan (kind pinhole), pinhole + equidistant (kind fisheye). Kalibr's sphere or
     /// camera frame (x, y, z) is (x, y, −z) of the omniscan world; the numbers are the same.
+    #[command(after_help = "Example:\n  omni-calib-receiver import-kalibr camchain.yaml -o camera.json")]
     ImportKalibr {
         /// Kalibr's camchain.yaml (`-` = stdin).
         input: PathBuf,
@@ -245,6 +250,7 @@ enum Command {
     /// mei), calibrateCamera (camera_matrix or K, distortion_coefficients or D = k1 k2 p1 p2 [k3];
     /// kind pinhole) or cv::fisheye (K, D = k1..k4; kind fisheye), with image_width and
     /// image_height. OpenCV's sphere or camera frame (x, y, z) is (x, y, −z) of the omniscan world.
+    #[command(after_help = "Example:\n  omni-calib-receiver import-opencv calib.yaml -o camera.json")]
     ImportOpencv {
         /// The OpenCV FileStorage YAML file (`-` = stdin).
         input: PathBuf,

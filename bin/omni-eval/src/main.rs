@@ -38,6 +38,7 @@ struct Args {
 enum Command {
     /// Fit a primitive (RANSAC, least squares on its inliers, then on the points within 3.5 robust
     /// σ of that shape) and report the residuals.
+    #[command(after_help = "Example:\n  omni-eval fit --shape sphere --radius 50 --centre 500,0,0 sphere.ply")]
     Fit {
         /// plane, sphere, cylinder or cone.
         #[arg(long)]
@@ -73,6 +74,7 @@ enum Command {
         cloud: PathBuf,
     },
     /// Signed distances to the true surfaces of a scene.json, per object.
+    #[command(after_help = "Example:\n  omni-eval compare --scene scene.json cloud.ply")]
     Compare {
         /// The scene the cloud was measured in.
         #[arg(long)]
@@ -95,6 +97,9 @@ enum Command {
     /// Register a calibrated sensor's frame to a reference frame through the calibration rig:
     /// the rig boards as posed during light-plane calibration (scanner.json's report) against
     /// their known poses; writes transform.json (calibrated → reference).
+    #[command(
+        after_help = "Example:\n  omni-eval align --scanner scanner.json --reference-poses reference_poses.json --rig rig.json -o transform.json"
+    )]
     Align {
         /// scanner.json written by omni-calib-plane (its report lists the board poses it used).
         #[arg(long)]
@@ -154,6 +159,7 @@ Example:
         json: bool,
     },
     /// Draw a cloud as a PNG picture (a view from above-front, coloured by height).
+    #[command(after_help = "Example:\n  omni-eval render --color range cloud.ply -o cloud.png")]
     Render {
         /// The cloud (PLY; `-` = stdin).
         cloud: PathBuf,

@@ -110,6 +110,7 @@ enum Bench {
 }
 
 #[derive(clap::Args, Debug)]
+#[command(after_help = "Example:\n  omni-sim scene --bench sphere -o sphere.json")]
 struct SceneArgs {
     /// Which paper-bench scene.
     #[arg(long, value_enum)]
@@ -481,7 +482,8 @@ struct ScanArgs {
 
 #[derive(clap::Args, Debug)]
 #[command(after_help = "Writes DIR/board_NNN.png and DIR/boards_truth.json (board, poses board→world, true corner\n\
-pixels row-major, null where a corner is not visible).")]
+pixels row-major, null where a corner is not visible).\n\n\
+Example:\n  omni-sim boards --camera sensor/camera.json --board board.json --count 20 --seed 1 --out boards/")]
 struct BoardsArgs {
     /// camera.json (from `omni-sim sensor`): the camera model, its image size and optics.
     #[arg(long)]

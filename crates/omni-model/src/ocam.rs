@@ -55,8 +55,10 @@ pub struct OcamParams {
 impl OcamParams {
     /// Checks that the parameters are finite and meaningful; names the field at fault.
     pub fn validate(&self) -> Result<(), String> {
-        if self.poly.is_empty() || !(self.poly[0] < 0.0) {
-            return Err(format!("poly[0] (a0) must be negative, got {:?}", self.poly.first()));
+        match self.poly.first() {
+            None => return Err("poly: no coefficients (a0 first, negative)".to_string()),
+            Some(&a0) if !(a0 < 0.0) => return Err(format!("poly[0] (a0) must be negative, got {a0}")),
+            Some(_) => {}
         }
         for (k, v) in self.poly.iter().enumerate() {
             if !v.is_finite() {

@@ -166,7 +166,11 @@ pub fn parse_ocam_calib_results(text: &str) -> Result<(OcamParams, CentreOrigin)
     };
     let counted = |k: usize, what: &str| -> Result<Vec<f64>, String> {
         let v = numbers(k, what)?;
-        let n = *v.first().ok_or(format!("{what}: empty line"))? as usize;
+        let count = *v.first().ok_or(format!("{what}: empty line"))?;
+        if !(count >= 0.0 && count.fract() == 0.0) {
+            return Err(format!("{what}: the count of coefficients is {count}, not a whole number ≥ 0"));
+        }
+        let n = count as usize;
         if v.len() != n + 1 {
             return Err(format!("{what}: says {n} coefficients but has {}", v.len() - 1));
         }
@@ -668,6 +672,13 @@ mod tests {
         assert!((q.cy_px - 240.019976).abs() < 1e-9 && (q.cx_px - 384.783141).abs() < 1e-9);
         let unknown = genuine_layout().replace("#center: \"row\" and \"column\", starting from 0 (C convention)", "");
         assert!(parse_ocam_calib_results(&unknown).unwrap_err().contains("its pixel origin is unknown"));
+        let direct = "5 -1.953000e+02 0.000000e+00";
+        let positive_a0 = genuine_layout().replace(direct, "5 0 0.000000e+00");
+        let e = parse_ocam_calib_results(&positive_a0).unwrap_err();
+        assert!(e.contains("poly[0] (a0) must be negative, got 0") && !e.contains("Some"), "{e}");
+        let negative_count = genuine_layout().replace(direct, "-5 -1.953000e+02 0.000000e+00");
+        let e = parse_ocam_calib_results(&negative_count).unwrap_err();
+        assert!(e.contains("the count of coefficients is -5, not a whole number"), "{e}");
     }
 
     #[test]

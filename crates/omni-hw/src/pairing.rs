@@ -81,6 +81,12 @@ pub trait FrameSource {
 /// never pair) unless they are rewritten (camera software that restarts its numbering). Hidden files (`.name`, the usual temporary names) and non-image extensions are
 /// ignored; a file is reported once its size is non-zero and unchanged between two polls, so a
 /// frame still being written is not read half-done. Its timestamp is the modification time.
+///
+/// A poll lists the directory only when its modification time changed (a file added, removed
+/// or renamed) or a file seen is still to settle, and at least every
+/// [`DirFrameSource::FULL_LISTING_EVERY`]; only those full listings look at the stale files
+/// again, which a camera may rewrite in place without changing the directory. So thousands of
+/// stale frames cost a listing twice a second, not a stat of each every poll.
 pub struct DirFrameSource {
     dir: PathBuf,
     /// Files present at the start, with (size, modification time): ignored while unchanged.
@@ -89,6 +95,11 @@ pub struct DirFrameSource {
     reported: HashSet<OsString>,
     /// Files seen but not yet reported, with the size they had.
     sizes: HashMap<OsString, u64>,
+    /// The directory's modification time when it was last listed.
+    listed_mtime: Option<std::time::SystemTime>,
+    /// When the stale files were last looked at (a full listing).
+    full_listing_at: Option<std::time::Instant>,
+    full_listing_every: std::time::Duration,
 }
 
 const IMAGE_EXTENSIONS: [&str; 7] = ["png", "jpg", "jpeg", "tif", "tiff", "pgm", "bmp"];
@@ -102,6 +113,9 @@ impl DirFrameSource {
             stale: HashMap::new(),
             reported: HashSet::new(),
             sizes: HashMap::new(),
+            listed_mtime: None,
+            full_listing_at: None,
+            full_listing_every: Self::FULL_LISTING_EVERY,
         };
         for entry in std::fs::read_dir(dir)? {
             let entry = entry?;
@@ -109,6 +123,15 @@ impl DirFrameSource {
             src.stale.insert(entry.file_name(), stamp);
         }
         Ok(src)
+    }
+
+    /// How often the directory is listed whole, stale files included, whether or not it changed.
+    pub const FULL_LISTING_EVERY: std::time::Duration = std::time::Duration::from_millis(500);
+
+    /// [`Self::FULL_LISTING_EVERY`] set otherwise (zero: every poll lists and looks at every file).
+    pub fn with_full_listing_every(mut self, every: std::time::Duration) -> Self {
+        self.full_listing_every = every;
+        self
     }
 
     fn is_image(name: &OsString) -> bool {
@@ -123,10 +146,24 @@ impl DirFrameSource {
 impl FrameSource for DirFrameSource {
     fn poll(&mut self) -> std::io::Result<Vec<CapturedFrame>> {
         let mut out = Vec::new();
+        // Read before the listing: a file added during it changes the time again.
+        let mtime = std::fs::metadata(&self.dir)?.modified().ok();
+        let full = self.full_listing_at.is_none_or(|t| t.elapsed() >= self.full_listing_every);
+        if !full && mtime.is_some() && mtime == self.listed_mtime && self.sizes.is_empty() {
+            return Ok(out);
+        }
+        self.listed_mtime = mtime;
+        if full {
+            self.full_listing_at = Some(std::time::Instant::now());
+        }
         for entry in std::fs::read_dir(&self.dir)? {
             let entry = entry?;
             let name = entry.file_name();
-            if self.reported.contains(&name) || !Self::is_image(&name) {
+            let settling = self.sizes.contains_key(&name);
+            if self.reported.contains(&name)
+                || !Self::is_image(&name)
+                || (!full && !settling && self.stale.contains_key(&name))
+            {
                 continue;
             }
             // The file may vanish or change between listing and stat: just look again next time.
@@ -596,7 +633,7 @@ mod tests {
     fn directory_source_reports_only_new_complete_image_files_with_their_mtime() {
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("stale.png"), b"old run").unwrap();
-        let mut src = DirFrameSource::new(dir.path()).unwrap();
+        let mut src = DirFrameSource::new(dir.path()).unwrap().with_full_listing_every(std::time::Duration::ZERO);
         std::fs::write(dir.path().join(".tmp.png"), b"being written").unwrap();
         std::fs::write(dir.path().join("notes.txt"), b"not an image").unwrap();
         std::fs::write(dir.path().join("empty.png"), b"").unwrap();
@@ -619,6 +656,30 @@ mod tests {
         assert!(src.poll().unwrap().is_empty());
         let got = src.poll().unwrap();
         assert_eq!(got.iter().map(|f| f.name.as_str()).collect::<Vec<_>>(), vec!["stale.png"]);
+    }
+
+    #[test]
+    fn stale_files_are_looked_at_only_on_full_listings_new_ones_at_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let stale = dir.path().join("stale.png");
+        std::fs::write(&stale, b"old run").unwrap();
+        let every = std::time::Duration::from_millis(1000);
+        let mut src = DirFrameSource::new(dir.path()).unwrap().with_full_listing_every(every);
+        assert!(src.poll().unwrap().is_empty(), "the first poll lists whole");
+        // Rewritten in place: the directory does not change, so only a full listing sees it.
+        let started = std::time::Instant::now();
+        std::fs::write(&stale, b"a new frame").unwrap();
+        std::fs::write(dir.path().join("new.png"), b"new").unwrap();
+        let mut seen: Vec<(String, std::time::Duration)> = Vec::new();
+        while seen.len() < 2 && started.elapsed() < 10 * every {
+            let got = src.poll().unwrap();
+            seen.extend(got.into_iter().map(|f| (f.name, started.elapsed())));
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        let names: Vec<&str> = seen.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["new.png", "stale.png"], "{seen:?}");
+        assert!(seen[0].1 < every / 2, "the new file waited for a full listing: {seen:?}");
+        assert!(seen[1].1 >= every / 2, "the stale file was looked at every poll: {seen:?}");
     }
 
     #[test]

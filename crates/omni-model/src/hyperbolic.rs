@@ -144,11 +144,7 @@ impl HyperbolicCamera {
     }
 
     fn radius_ok(&self, m: &Point3<f64>) -> bool {
-        self.radius_within(m.x.hypot(m.y))
-    }
-
-    /// Whether a mirror point at radius `r` (mm) lies on the used sheet.
-    fn radius_within(&self, r: f64) -> bool {
+        let r = m.x.hypot(m.y);
         r <= self.params.rim_radius_mm && r >= self.params.inner_radius_mm
     }
 
@@ -379,8 +375,7 @@ impl CameraModel for HyperbolicCamera {
         let p = &self.params;
         let u = (px.x - p.cx_px) / p.fx_px;
         let v = (px.y - p.cy_px) / p.fy_px;
-        // u, v are bounded by the image: no overflow for hypot to guard against.
-        let l = (u * u + v * v).sqrt();
+        let l = u.hypot(v);
         let cos_b = 1.0 / (1.0 + l * l).sqrt();
         let sin_b = l * cos_b;
         let denom = self.c * cos_b - self.a;
@@ -388,15 +383,14 @@ impl CameraModel for HyperbolicCamera {
             return None;
         }
         let om = self.b2 / denom;
-        // The mirror point's radius is om·sin β.
-        if !self.radius_within(om * sin_b) {
-            return None;
-        }
         let m = if l > 0.0 {
             Point3::new(om * sin_b * u / l, om * sin_b * v / l, om * cos_b)
         } else {
             Point3::new(0.0, 0.0, om)
         };
+        if !self.radius_ok(&m) {
+            return None;
+        }
         let f = self.viewpoint();
         Some(Ray::new(f, m - f))
     }

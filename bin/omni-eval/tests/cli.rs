@@ -312,15 +312,21 @@ fn budget_refuses_a_fixed_plane_scanner_naming_the_kind() {
     );
 }
 
-/// A table that cannot be written (a full disk behind `>`) fails naming stdout.
-#[test]
-fn a_full_stdout_is_an_error_naming_it() {
+/// A directory holding the paper sensor's camera.json and scanner.json.
+fn paper_sensor_files() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     let camera =
         omni_formats::CameraFile::new(omni_formats::CameraSpec::Hyperbolic(omni_model::HyperbolicParams::paper()));
     omni_formats::write_doc(&dir.path().join("camera.json"), &camera).unwrap();
     let scanner = omni_formats::ScannerFile::new(omni_model::TransmitterParams::paper());
     omni_formats::write_doc(&dir.path().join("scanner.json"), &scanner).unwrap();
+    dir
+}
+
+/// A table that cannot be written (a full disk behind `>`) fails naming stdout.
+#[test]
+fn a_full_stdout_is_an_error_naming_it() {
+    let dir = paper_sensor_files();
     let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
     let out = Command::new(BIN)
         .current_dir(dir.path())
@@ -338,12 +344,7 @@ fn a_full_stdout_is_an_error_naming_it() {
 /// errors that say which, not a table.
 #[test]
 fn budget_refuses_angles_outside_the_facet_and_ranges_it_cannot_take() {
-    let dir = tempfile::tempdir().unwrap();
-    let camera =
-        omni_formats::CameraFile::new(omni_formats::CameraSpec::Hyperbolic(omni_model::HyperbolicParams::paper()));
-    omni_formats::write_doc(&dir.path().join("camera.json"), &camera).unwrap();
-    let scanner = omni_formats::ScannerFile::new(omni_model::TransmitterParams::paper());
-    omni_formats::write_doc(&dir.path().join("scanner.json"), &scanner).unwrap();
+    let dir = paper_sensor_files();
     for alpha in ["200", "1e9", "-20"] {
         let args = ["budget", "--camera", "camera.json", "--scanner", "scanner.json", "--alpha-deg", alpha];
         let out = run(dir.path(), &args);

@@ -63,7 +63,6 @@ pub fn parse_query(line: &str) -> Result<Option<Query>, String> {
     from_numbers(&numbers).map(Some)
 }
 
-/// The answer to `q` as one line (without the newline), text or JSON.
 /// A point beyond 2^332 mm (about 1e100) scaled by a power of two to within it: the models
 /// square its coordinates, which overflow beyond 1e154. The scaling is exact, so a central
 /// model's pixel is unchanged; a non-central one's moves by its rays' offsets (mm) over the
@@ -77,6 +76,7 @@ fn within_range_of_squares(p: [f64; 3]) -> Point3<f64> {
     Point3::new(p[0] * scale, p[1] * scale, p[2] * scale)
 }
 
+/// The answer to `q` as one line (without the newline), text or JSON.
 pub fn answer(cam: &dyn CameraModel, q: Query, as_json: bool) -> String {
     match q {
         Query::Pixel(px) => {

@@ -405,12 +405,9 @@ fn main() -> std::process::ExitCode {
             let opts = omni_simulator::RenderOptions::default().with_optics(optics);
             let calibration =
                 omni_simulator::calibration_from_reports(camera_file.report.as_ref(), scanner_file.report.as_ref());
-            if transmitter.check_frame(alpha_deg.to_radians(), 0).is_err() {
-                let span = transmitter.facet_angle_deg();
-                return Err(CliError::usage(format!(
-                    "--alpha-deg: {alpha_deg}° is far outside the facet's range [0, {span}°)"
-                )));
-            }
+            transmitter
+                .check_alpha(alpha_deg.to_radians())
+                .map_err(|e| CliError::usage(format!("--alpha-deg: {alpha_deg}° is {e}")))?;
             let sensor = omni_simulator::Sensor { camera: camera_model, transmitter };
             opts.check_sensor(&sensor).map_err(|e| CliError::new(format!("{}: {e}", camera.display())))?;
             let lines = omni_simulator::error_budget(

@@ -731,9 +731,11 @@ fn check_facet_and_angles(sensor: &Sensor, facet: u32, angles: &[f64]) -> CliRes
             n - 1
         )));
     }
-    if let Some(a) = angles.iter().find(|a| sensor.transmitter.check_frame(a.to_radians(), facet).is_err()) {
-        let span = sensor.transmitter.facet_angle_deg();
-        return Err(CliError::usage(format!("--angles: {a}° is far outside the facet's range [0, {span}°)")));
+    for a in angles {
+        sensor
+            .transmitter
+            .check_alpha(a.to_radians())
+            .map_err(|e| CliError::usage(format!("--angles: {a}° is {e}")))?;
     }
     Ok(())
 }

@@ -346,6 +346,19 @@ pub struct ElementShape {
     pub properties: Vec<DeclaredProperty>,
 }
 
+impl ElementShape {
+    /// The scalar properties with their types, in file order (lists left out).
+    pub fn scalars(&self) -> Vec<(String, ScalarType)> {
+        self.properties
+            .iter()
+            .filter_map(|p| match p {
+                DeclaredProperty::Scalar(n, k) => Some((n.clone(), *k)),
+                DeclaredProperty::List(..) => None,
+            })
+            .collect()
+    }
+}
+
 impl VertexLayout {
     /// The scalar properties other than x y z, in file order.
     pub fn scalar_fields(&self) -> Vec<(String, ScalarType)> {
@@ -419,17 +432,9 @@ pub fn read_header(r: &mut dyn BufRead, name: &str) -> Result<(Vec<u8>, Option<V
     let Some(vertex) = elements.iter().find(|e| e.name == "vertex") else {
         return Err(bad("no `vertex` element".into()));
     };
-    let scalars = |e: &ElementShape| -> Vec<(String, ScalarType)> {
-        e.properties
-            .iter()
-            .filter_map(|p| match p {
-                DeclaredProperty::Scalar(n, k) => Some((n.clone(), *k)),
-                DeclaredProperty::List(..) => None,
-            })
-            .collect()
-    };
+    let vertex_scalars = vertex.scalars();
     for axis in ["x", "y", "z"] {
-        if !scalars(vertex).iter().any(|(n, _)| n == axis) {
+        if !vertex_scalars.iter().any(|(n, _)| n == axis) {
             return Err(bad(format!("vertex element has no `{axis}` property")));
         }
     }
@@ -437,7 +442,7 @@ pub fn read_header(r: &mut dyn BufRead, name: &str) -> Result<(Vec<u8>, Option<V
     if first.name != "vertex" || first.properties.iter().any(|p| matches!(p, DeclaredProperty::List(..))) {
         return Ok((raw, None));
     }
-    let (properties, count) = (scalars(first), first.count);
+    let (properties, count) = (first.scalars(), first.count);
     let after = elements.split_off(1);
     Ok((raw, Some(VertexLayout { format, count, properties, mm_per_unit, after })))
 }

@@ -259,15 +259,18 @@ impl Transmitter {
         if facet >= n {
             return Err(format!("field facet: facet {facet} is not on the polygon ({n} facets, 0 to {})", n - 1));
         }
+        self.check_alpha(alpha).map_err(|e| format!("field alpha_deg: {}° is {e}", alpha.to_degrees()))
+    }
+
+    /// Checks a mirror angle α (radians) against one facet's range [0, 2θ), give or take half
+    /// of it (encoder offsets, rounding); the message, to follow the angle as its caller names
+    /// it, says where the range is.
+    pub fn check_alpha(&self, alpha: f64) -> Result<(), String> {
         let span = self.facet_angle();
-        if !(alpha.is_finite() && alpha >= -0.5 * span && alpha <= 1.5 * span) {
-            return Err(format!(
-                "field alpha_deg: {}° is far outside the facet's range [0, {}°)",
-                alpha.to_degrees(),
-                self.facet_angle_deg()
-            ));
+        match alpha.is_finite() && alpha >= -0.5 * span && alpha <= 1.5 * span {
+            true => Ok(()),
+            false => Err(format!("far outside the facet's range [0, {}°)", self.facet_angle_deg())),
         }
-        Ok(())
     }
 
     /// Facet `k`'s plane (outward normal) when the polygon has turned by `phi` (radians).

@@ -84,6 +84,9 @@ const MAX_RESIDUAL_RATIO: f64 = 0.85;
 /// them the fit trades share against length along a valley and tells neither.
 const MAX_WEIGHT_SIGMA: f64 = 0.1;
 const MAX_LENGTH_SIGMA: f64 = 0.5;
+/// A tail's share must stand this many of its own σ above zero: a smaller one is the noise of a
+/// profile with no tail, fitted as one.
+const MIN_WEIGHT_SIGNIFICANCE: f64 = 3.0;
 
 /// The level (share of full scale) above which the laser colour's contrast weighs the other two
 /// channels less (`omni_vision::colour`).
@@ -181,7 +184,7 @@ pub fn measure_frame(
 }
 
 /// Whether `best` measures a tail: it fits clearly better than a Gaussian (residual `gaussian`),
-/// stays off its bounds and tells share from length.
+/// stays off its bounds, stands out of its noise and tells share from length.
 fn accept(best: &TailFit, gaussian: f64) -> Result<(), String> {
     if !(best.rms <= MAX_RESIDUAL_RATIO * gaussian) {
         return Err(format!(
@@ -193,6 +196,12 @@ fn accept(best: &TailFit, gaussian: f64) -> Result<(), String> {
         return Err(format!(
             "the fit ends at its bounds (share {:.2}, length {:.2} core σ): a core of another shape, not a tail",
             best.weight, best.length
+        ));
+    }
+    if !(best.weight >= MIN_WEIGHT_SIGNIFICANCE * best.weight_sigma) {
+        return Err(format!(
+            "no tail stands out of the noise (share {:.3} ± {:.3}, length {:.1} core σ)",
+            best.weight, best.weight_sigma, best.length
         ));
     }
     if !(best.weight_sigma <= MAX_WEIGHT_SIGMA && best.length_sigma <= MAX_LENGTH_SIGMA * best.length) {

@@ -41,7 +41,7 @@ def measure(out, obj, cloud, transform):
     compare = eval_json("compare", "--scene", scene, *extra, cloud)
     rows = []
     for o in compare["objects"]:
-        fit_sigma, radius_err = None, None
+        fit_sigma, radius_err, radius_se = None, None, None
         kind = SHAPE.get(obj if len(compare["objects"]) == 1 else "", None)
         if kind:
             shape, radius = kind
@@ -49,8 +49,9 @@ def measure(out, obj, cloud, transform):
             fit = eval_json(*fit_args, cloud)
             fit_sigma = fit["errors"]["std_dev"]
             radius_err = fit.get("radius_error_mm")
+            radius_se = fit.get("radius_error_se_mm")
         e = o["errors"]
-        rows.append((o["name"], e["count"], e["mean"], e["std_dev"], fit_sigma, radius_err))
+        rows.append((o["name"], e["count"], e["mean"], e["std_dev"], fit_sigma, radius_err, radius_se))
     return rows
 
 
@@ -203,12 +204,13 @@ def main():
             ("calibrated", os.path.join(out, obj, "cloud.ply"), transform),
             ("true files", os.path.join(out, obj, "cloud_true_sensor.ply"), None),
         ):
-            for name, n, mean, sd, fit_sd, rad in measure(out, obj, cloud, t):
+            for name, n, mean, sd, fit_sd, rad, rad_se in measure(out, obj, cloud, t):
                 tag = obj if name == obj else f"{obj}/{name}"
                 print(f"{tag:<21} {label:<11} {n:>7} {fmt(mean, signed=True)} {fmt(sd)} {fmt(fit_sd)} "
                       f"{fmt(b['total_mm'])} {fmt(rad, signed=True)}")
                 results.setdefault(tag, {})[label] = {
                     "points": n, "mean_mm": mean, "sigma_truth_mm": sd, "sigma_fit_mm": fit_sd, "radius_error_mm": rad,
+                    "radius_error_se_mm": rad_se,
                 }
     results["budget_500mm"] = b
     targets(out, results, b)

@@ -16,6 +16,13 @@ impl SplitMix64 {
         SplitMix64(mix(seed ^ mix(key.wrapping_add(0x9E37_79B9_7F4A_7C15))))
     }
 
+    /// A generator for the pixel at column `x`, row `y` of an image drawn under `seed`. Each
+    /// pixel draws from its own stream, so that a draw taking more or fewer values (a Poisson
+    /// count, a rejection) changes no other pixel's noise.
+    pub fn pixel(seed: u64, x: usize, y: usize) -> Self {
+        Self::stream(seed, ((y as u64) << 32) | x as u64)
+    }
+
     pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         mix(self.0)

@@ -197,8 +197,7 @@ pub(crate) fn capture(
 fn expose(mut e: Vec<f64>, w: usize, h: usize, opts: &RenderOptions, seed: u64) -> Vec<f64> {
     if opts.noise {
         e.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            let mut rng = SplitMix64::stream(seed, y as u64);
-            row.iter_mut().for_each(|v| *v = rng.poisson(*v));
+            row.iter_mut().enumerate().for_each(|(x, v)| *v = SplitMix64::pixel(seed, x, y).poisson(*v));
         });
     }
     if let Some(bloom) = &opts.bloom {
@@ -206,9 +205,9 @@ fn expose(mut e: Vec<f64>, w: usize, h: usize, opts: &RenderOptions, seed: u64) 
     }
     let read_seed = mix(seed ^ 0x4EAD);
     e.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        let mut rng = SplitMix64::stream(read_seed, y as u64);
-        for v in row.iter_mut() {
-            let noisy = if opts.noise { *v + opts.read_noise_e * rng.normal() } else { *v };
+        for (x, v) in row.iter_mut().enumerate() {
+            let noisy =
+                if opts.noise { *v + opts.read_noise_e * SplitMix64::pixel(read_seed, x, y).normal() } else { *v };
             *v = (noisy / opts.full_well_e).clamp(0.0, 1.0);
         }
     });

@@ -267,9 +267,10 @@ impl Transmitter {
     /// it, says where the range is.
     pub fn check_alpha(&self, alpha: f64) -> Result<(), String> {
         let span = self.facet_angle();
-        match alpha.is_finite() && alpha >= -0.5 * span && alpha <= 1.5 * span {
-            true => Ok(()),
-            false => Err(format!("far outside the facet's range [0, {}°)", self.facet_angle_deg())),
+        if alpha.is_finite() && alpha >= -0.5 * span && alpha <= 1.5 * span {
+            Ok(())
+        } else {
+            Err(format!("far outside the facet's range [0, {}°)", self.facet_angle_deg()))
         }
     }
 

@@ -139,15 +139,17 @@ fn image_of(w: usize, h: usize, bit_depth: u8, data: Vec<u16>, what: &str) -> Py
 /// optics, else measured on the frame's stripes, as omni-ridge). `laser_tail` = (share,
 /// length) is the laser's cross-section if known, a core with a one-sided tail holding that
 /// share of the light, that many core σ long (omni-ridge --laser-tail; give the lens's blur
-/// too). Settings left as None keep
-/// omni-ridge's defaults (method windowed, sampling normal, threshold 4 % of full scale; widths
-/// in px; `threshold` in the image's units). Returns an (n, 5) float64 array of
+/// too). `one_stripe_per` ("column" or "row"), for an ordinary triangulation sensor whose laser
+/// lights one point per image column (row): dimmer stripes sharing a column with a twice
+/// brighter one are dropped as its reflections (omni-ridge --one-stripe-per). Settings left as
+/// None keep omni-ridge's defaults (method windowed, sampling normal, threshold 4 % of full
+/// scale; widths in px; `threshold` in the image's units). Returns an (n, 5) float64 array of
 /// (u, v, intensity, width, quality) rows: u, v in px, quality a bit set (1 saturated, 2 weak,
 /// 4 width marginal).
 #[pyfunction]
 #[pyo3(signature = (image, camera = None, *, ambient = None, method = None, sampling = None, threshold = None,
     min_width = None, max_width = None, hessian_sigma = None, along_stripe_px = None, optics_blur_px = None,
-    channel = None, laser = None, bayer = None, bayer_sites = false, max_scale = None, laser_tail = None))]
+    channel = None, laser = None, bayer = None, bayer_sites = false, max_scale = None, laser_tail = None, one_stripe_per = None))]
 pub fn detect_stripe<'py>(
     py: Python<'py>,
     image: &Bound<'py, PyAny>,
@@ -167,6 +169,7 @@ pub fn detect_stripe<'py>(
     bayer_sites: bool,
     max_scale: Option<u32>,
     laser_tail: Option<Vec<f64>>,
+    one_stripe_per: Option<&str>,
 ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let mut params = RidgeParams::default();
     if let Some(m) = method {
@@ -197,6 +200,9 @@ pub fn detect_stripe<'py>(
             )));
         }
     };
+    if let Some(lines) = one_stripe_per {
+        params.one_stripe_per = Some(lines.parse().map_err(|e| crate::value_error(format!("one_stripe_per: {e}")))?);
+    }
     params.validate().map_err(crate::value_error)?;
     let spec = colour_spec(channel, laser, bayer, bayer_sites)?;
     // As omni-ridge does after the detector: points on stripes shorter than the fit's window go.

@@ -249,3 +249,21 @@ def test_a_laser_tail_is_measured_from_an_independently_drawn_stripe():
         omniscan.measure_laser_tail(img, stripe[:, :2])
     with pytest.raises(ValueError, match="min_profiles"):
         omniscan.measure_laser_tail(img, stripe, min_profiles=2)
+
+
+def test_one_stripe_per_column_drops_a_dim_copy_of_the_stripe():
+    """A reflection of the stripe (a tenth as bright, 40 px below it over the same columns) is
+    kept by default, dropped with one_stripe_per="column", and kept when rows are the scan lines
+    (it shares none of them)."""
+    y = np.arange(120.0)[:, None]
+    stripe = 200.0 * np.exp(-0.5 * ((y - 40.3) / 1.5) ** 2)
+    reflection = 20.0 * np.exp(-0.5 * ((y - 80.6) / 2.0) ** 2)
+    image = np.broadcast_to(stripe + reflection, (120, 160)).astype(np.uint8)
+    near = lambda pts, v: int((np.abs(pts[:, 1] - v) < 2.0).sum())  # noqa: E731
+    every = omniscan.detect_stripe(image)
+    assert near(every, 40.3) > 100 and near(every, 80.6) > 100
+    one = omniscan.detect_stripe(image, one_stripe_per="column")
+    assert near(one, 40.3) == near(every, 40.3) and near(one, 80.6) == 0
+    np.testing.assert_array_equal(omniscan.detect_stripe(image, one_stripe_per="row"), every)
+    with pytest.raises(ValueError, match="one_stripe_per: unknown scan line"):
+        omniscan.detect_stripe(image, one_stripe_per="radial")

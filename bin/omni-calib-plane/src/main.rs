@@ -213,6 +213,11 @@ struct FixedArgs {
     /// its unclipped profiles on the black ones.
     #[arg(long, value_name = "SHARE,LENGTH")]
     laser_tail: Option<omni_model::LaserProfile>,
+    /// Stripe detector: the laser lights one point per image column (or row), as in an
+    /// ordinary triangulation sensor; dimmer stripes sharing a column with a brighter one are
+    /// dropped as its reflections (as omni-ridge).
+    #[arg(long, value_name = "LINE", value_parser = parse_scan_lines)]
+    one_stripe_per: Option<omni_vision::stripe::ScanLines>,
     /// Keep stripe points up to this far outside the printed pattern (mm; negative: inside).
     /// Default: the board file's margin_mm, its white border, where a flat board carries the
     /// stripe as well as on its squares.
@@ -537,6 +542,10 @@ fn read_stripe_stream(path: &Path) -> CliResult<(Vec<PathBuf>, Stripes)> {
 }
 
 /// The frames given: files as they are, directories' images in name order.
+fn parse_scan_lines(s: &str) -> Result<omni_vision::stripe::ScanLines, String> {
+    s.parse()
+}
+
 fn expand_frames(paths: &[PathBuf]) -> CliResult<Vec<PathBuf>> {
     let mut out = Vec::new();
     for p in paths {
@@ -568,6 +577,7 @@ fn fixed(a: &FixedArgs) -> CliResult {
         max_scale: a.max_scale,
         optics_blur_px: a.optics_blur,
         laser_profile: a.laser_tail,
+        one_stripe_per: a.one_stripe_per,
         ..Default::default()
     };
     ridge.validate().map_err(CliError::usage)?;

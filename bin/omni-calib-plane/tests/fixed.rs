@@ -303,3 +303,22 @@ fn a_border_wider_than_the_boards_is_warned_of() {
     let out = run_with(dir.path(), &board(9, 6), &[3, 4, 8], &["--margin-mm", "7.5"]);
     assert!(out.status.success() && !text(&out.stderr).contains("border off the plane"), "{}", text(&out.stderr));
 }
+
+#[test]
+fn one_stripe_per_column_drops_the_reflections_on_the_border() {
+    let dir = tempfile::tempdir().unwrap();
+    let border_outliers = |extra: &[&str]| -> Vec<u64> {
+        let out = run_with(dir.path(), &board(9, 6), &[10, 12], extra);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("report.json")).unwrap()).unwrap();
+        let frames = report["report"]["frames"].as_array().unwrap().clone();
+        frames.iter().map(|f| f["border_outliers"].as_u64().unwrap()).collect()
+    };
+    // A dim reflection of the stripe crosses the border of both frames, 3.5-7.4 mm off the
+    // board's plane; the stripe itself is ten times as bright in the same columns.
+    let every = border_outliers(&["--margin-mm", "7.5"]);
+    assert!(every.iter().all(|&n| n >= 30), "{every:?}");
+    let one = border_outliers(&["--margin-mm", "7.5", "--one-stripe-per", "column"]);
+    assert_eq!(one, vec![0, 0]);
+}

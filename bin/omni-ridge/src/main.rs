@@ -5,7 +5,7 @@ mod pipeline;
 use clap::Parser;
 use omni_cli::{CliError, CliResult};
 use omni_vision::colour::{Channel, ColourSpec};
-use omni_vision::stripe::{Method, RidgeParams, Sampling, SearchRegion};
+use omni_vision::stripe::{Method, RidgeParams, Sampling, ScanLines, SearchRegion};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -41,6 +41,7 @@ Examples:
   omni-sim scan --scene room.json | omni-ridge --camera camera.json | omni-triangulate ...
   omni-ridge photos.jsonl --laser red -o ridges.jsonl       # colour photos of a red line laser
   omni-ridge raw.jsonl --bayer rggb --laser red --roi 0,100,1280,520
+  omni-ridge photos.jsonl --laser red --one-stripe-per column   # reflections dropped
   omni-ridge scan.jsonl -o ridges.jsonl --camera camera.json --method gauss --threshold 40
   omni-ridge scan.jsonl -o ridges.jsonl --overlay check/ --keep-going
   omni-ridge scan.jsonl -o ridges.jsonl --camera camera.json --static-ambient";
@@ -181,6 +182,15 @@ struct Args {
     /// valid-pixel mask, e.g. a lens's vignetted corners or the sensor's own body left out.
     #[arg(long, value_name = "PNG")]
     mask: Option<PathBuf>,
+    /// For an ordinary laser-triangulation sensor (the camera beside the laser, the stripe
+    /// moving along the image's columns with depth, or its rows): its laser lights one point of
+    /// each column (row), so keep the brightest stripe on each and drop dimmer ones crossing
+    /// the same column (or the one beside it) as reflections of the stripe (glossy paper, a
+    /// shiny edge). Stripes are compared by their connected pieces' median intensity and must
+    /// differ twofold; a piece at least half of whose points are outshone goes whole. Not for
+    /// the catadioptric sensor, where one image line can cross the stripe on two walls.
+    #[arg(long, value_name = "LINE", value_parser = parse_scan_lines)]
+    one_stripe_per: Option<ScanLines>,
     /// Worker threads (0: one per core; at most 1024).
     #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = omni_cli::parse_threads)]
     threads: usize,
@@ -191,6 +201,10 @@ fn parse_method(s: &str) -> Result<Method, String> {
 }
 
 fn parse_sampling(s: &str) -> Result<Sampling, String> {
+    s.parse()
+}
+
+fn parse_scan_lines(s: &str) -> Result<ScanLines, String> {
     s.parse()
 }
 
@@ -246,6 +260,7 @@ fn main() -> ExitCode {
             max_scale: args.max_scale,
             mosaic: args.bayer.is_some(),
             laser_profile: args.laser_tail,
+            one_stripe_per: args.one_stripe_per,
         };
         params.validate().map_err(CliError::usage)?;
         let (camera, params) = match &args.camera {

@@ -61,6 +61,26 @@ def test_false_points_apart_from_reflections_stay_under_one_percent(laser_red):
     assert total.false_share - total.ghost_share <= 0.01, real_laser.table(cam, results)
 
 
+@pytest.fixture(scope="module")
+def one_per_column():
+    return real_laser.evaluate(BINARY, ["--laser", "red", "--one-stripe-per", "column"])
+
+
+def test_one_stripe_per_column_drops_the_reflections_and_keeps_the_stripe(laser_red, one_per_column):
+    """The hand-held sensor's laser lights one point per column: with --one-stripe-per column
+    the false points, reflections included, stay under 1 %, and the stripe is covered as before."""
+    cam, results = one_per_column
+    report = real_laser.table(cam, results)
+    total = real_laser.totals(results, "ridge")
+    # Measured: 0.5 % off the line in all (5.0 % without), of which 0.4 % reflections crossing
+    # columns where the stripe itself is dim print (im14) or missing (im11).
+    assert total.false_share <= 0.01, report
+    for before, after in zip(laser_red[1], results):
+        if before.board and before.length_px > 0:
+            # Measured: the same on every frame within 0.1 % (the line is refitted to the points).
+            assert after.ridge.coverage >= before.ridge.coverage - 0.005, f"{after.name}\n{report}"
+
+
 def test_rms_about_the_line_is_no_worse_than_the_references(laser_red):
     cam, results = laser_red
     report = real_laser.table(cam, results)

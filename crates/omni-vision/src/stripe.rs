@@ -56,6 +56,7 @@ mod frames;
 mod laser;
 mod normal;
 mod overlay;
+mod reflections;
 mod rowscan;
 mod sampling;
 mod scales;
@@ -71,6 +72,7 @@ pub use frames::{
 };
 pub use omni_formats::stream::{StripePoint, quality};
 pub use overlay::draw_overlay;
+pub use reflections::{PIECE_LINK_PX, REFLECTION_RATIO, ScanLines, drop_reflections};
 
 use crate::image_io::GrayImage;
 use omni_model::MirrorCircle;
@@ -199,6 +201,10 @@ pub struct RidgeParams {
     /// predicts at the profile's width (`laser`), on the side their stripe's profiles give the
     /// tail. Across the normal only ([`Sampling::Normal`]).
     pub laser_profile: Option<omni_model::LaserProfile>,
+    /// For a laser-triangulation sensor whose laser lights one point per image column (or
+    /// row): keep the brightest stripe on each such line, and drop dimmer ones sharing it as
+    /// reflections (`reflections`). `None` (the default) keeps every stripe.
+    pub one_stripe_per: Option<ScanLines>,
 }
 
 impl Default for RidgeParams {
@@ -215,6 +221,7 @@ impl Default for RidgeParams {
             max_scale: 8,
             mosaic: false,
             laser_profile: None,
+            one_stripe_per: None,
         }
     }
 }
@@ -789,7 +796,10 @@ impl RidgeDetector {
         if let Some(region) = &self.region {
             points.retain(|p| region.contains(p.u, p.v, self.width));
         }
-        points
+        match self.params.one_stripe_per {
+            Some(lines) => drop_reflections(points, lines).0,
+            None => points,
+        }
     }
 
     fn detect_in_annulus<P: Pixel>(&self, frame: &Frame<'_, P>, scratch: &mut Scratch) -> Vec<StripePoint> {

@@ -72,7 +72,7 @@ pub use frames::{
 };
 pub use omni_formats::stream::{StripePoint, quality};
 pub use overlay::draw_overlay;
-pub use reflections::{PIECE_LINK_PX, REFLECTION_RATIO, ScanLines, drop_reflections};
+pub use reflections::{REFLECTION_RATIO, ScanLines, drop_reflections};
 
 use crate::image_io::GrayImage;
 use omni_model::MirrorCircle;

@@ -129,7 +129,7 @@ pub fn refuse_short_stripes(points: Vec<StripePoint>, window_px: f64) -> ShortSt
 
 /// The stripe (connected chain, 0-based) of every point: union-find over a grid of cells
 /// [`STRIPE_LINK_PX`] wide.
-fn stripe_labels(points: &[StripePoint]) -> Vec<usize> {
+pub(super) fn stripe_labels(points: &[StripePoint]) -> Vec<usize> {
     let cell = |p: &StripePoint| ((p.u / STRIPE_LINK_PX).floor() as i64, (p.v / STRIPE_LINK_PX).floor() as i64);
     let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = std::collections::HashMap::new();
     for (i, p) in points.iter().enumerate() {

@@ -54,10 +54,6 @@ impl std::str::FromStr for ScanLines {
     }
 }
 
-/// Points this close (px) belong to one piece of stripe: the detector gives about one per px of
-/// a stripe's length, and a gap wider than this starts a new piece.
-pub const PIECE_LINK_PX: f64 = 2.5;
-
 /// A piece is a reflection on a line where a piece at least this many times brighter (median
 /// intensity) crosses the same line or one beside it. Between pieces alike in brightness the
 /// stripe cannot be told from its reflection, and both are kept.
@@ -65,10 +61,11 @@ pub const REFLECTION_RATIO: f64 = 2.0;
 
 /// Drops the points of `points` that [`ScanLines`] shows to be reflections: those on a line
 /// (or a line beside it) crossed by a piece of stripe [`REFLECTION_RATIO`] times brighter, and
-/// the whole of a piece at least half of whose points are. Returns the kept points, in their
-/// order, and how many were dropped.
+/// the whole of a piece at least half of whose points are. A piece is a connected stretch of
+/// stripe: points linked by gaps of at most 2.5 px, as the along-stripe fit links them. Returns
+/// the kept points, in their order, and how many were dropped.
 pub fn drop_reflections(points: Vec<StripePoint>, lines: ScanLines) -> (Vec<StripePoint>, usize) {
-    let piece = pieces(&points);
+    let piece = super::along::stripe_labels(&points);
     let brightness = median_intensity_per_piece(&points, &piece);
     // The brightest piece crossing each line.
     let mut brightest: HashMap<i64, f64> = HashMap::new();
@@ -98,47 +95,6 @@ pub fn drop_reflections(points: Vec<StripePoint>, lines: ScanLines) -> (Vec<Stri
     (kept, dropped)
 }
 
-/// Each point's piece (0..pieces), pieces being the points joined by links of at most
-/// [`PIECE_LINK_PX`].
-fn pieces(points: &[StripePoint]) -> Vec<usize> {
-    let cell = |x: f64| (x / PIECE_LINK_PX).floor() as i64;
-    let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
-    for (i, p) in points.iter().enumerate() {
-        grid.entry((cell(p.u), cell(p.v))).or_default().push(i);
-    }
-    let mut parent: Vec<usize> = (0..points.len()).collect();
-    fn root(parent: &mut [usize], mut i: usize) -> usize {
-        while parent[i] != i {
-            parent[i] = parent[parent[i]];
-            i = parent[i];
-        }
-        i
-    }
-    for (i, p) in points.iter().enumerate() {
-        let (cx, cy) = (cell(p.u), cell(p.v));
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for &j in grid.get(&(cx + dx, cy + dy)).map_or(&[][..], Vec::as_slice) {
-                    let q = &points[j];
-                    if j > i && (p.u - q.u).hypot(p.v - q.v) <= PIECE_LINK_PX {
-                        let (a, b) = (root(&mut parent, i), root(&mut parent, j));
-                        parent[a] = b;
-                    }
-                }
-            }
-        }
-    }
-    // Roots numbered in order of first appearance.
-    let mut number: HashMap<usize, usize> = HashMap::new();
-    (0..points.len())
-        .map(|i| {
-            let r = root(&mut parent, i);
-            let next = number.len();
-            *number.entry(r).or_insert(next)
-        })
-        .collect()
-}
-
 /// The median intensity of each piece's points.
 fn median_intensity_per_piece(points: &[StripePoint], piece: &[usize]) -> Vec<f64> {
     let n = piece.iter().max().map_or(0, |&k| k + 1);
@@ -146,14 +102,7 @@ fn median_intensity_per_piece(points: &[StripePoint], piece: &[usize]) -> Vec<f6
     for (p, &k) in points.iter().zip(piece) {
         values[k].push(p.intensity);
     }
-    values
-        .into_iter()
-        .map(|mut v| {
-            v.sort_by(f64::total_cmp);
-            let m = v.len() / 2;
-            if v.len() % 2 == 1 { v[m] } else { 0.5 * (v[m - 1] + v[m]) }
-        })
-        .collect()
+    values.iter().map(|v| omni_geom::stats::median(v).unwrap_or(0.0)).collect()
 }
 
 #[cfg(test)]

@@ -541,11 +541,11 @@ fn read_stripe_stream(path: &Path) -> CliResult<(Vec<PathBuf>, Stripes)> {
     Ok((paths, stripes))
 }
 
-/// The frames given: files as they are, directories' images in name order.
 fn parse_scan_lines(s: &str) -> Result<omni_vision::stripe::ScanLines, String> {
     s.parse()
 }
 
+/// The frames given: files as they are, directories' images in name order.
 fn expand_frames(paths: &[PathBuf]) -> CliResult<Vec<PathBuf>> {
     let mut out = Vec::new();
     for p in paths {

@@ -121,12 +121,12 @@ mod tests {
     #[test]
     fn a_dim_copy_sharing_the_columns_is_dropped_whole_a_step_beside_them_is_kept() {
         // The stripe (200, crossing dark print at 40 over u 30-50), a reflection 80 px below
-        // (20, a little longer than its overlap), and the stripe stepping to another depth
-        // beyond u 100 (its own columns: kept however dim).
+        // (20, running on 10 px beyond the stripe's columns: those go with the rest), and the
+        // stripe stepping to another depth beyond u 102 (its own columns: kept however dim).
         let mut points = run(0, 29, 100.0, 200.0);
         points.extend(run(30, 50, 100.0, 40.0));
         points.extend(run(51, 100, 100.0, 200.0));
-        let reflection = run(20, 75, 180.0, 20.0);
+        let reflection = run(20, 110, 180.0, 20.0);
         points.extend(reflection.iter().copied());
         points.extend(run(103, 160, 130.0, 15.0));
         let (kept, dropped) = drop_reflections(points.clone(), ScanLines::Columns);

@@ -214,8 +214,8 @@ struct FixedArgs {
     #[arg(long, value_name = "SHARE,LENGTH")]
     laser_tail: Option<omni_model::LaserProfile>,
     /// Stripe detector: the laser lights one point per image column (or row), as in an
-    /// ordinary triangulation sensor; dimmer stripes sharing a column with a brighter one are
-    /// dropped as its reflections (as omni-ridge).
+    /// ordinary triangulation sensor; stripes sharing a column with one at least twice as
+    /// bright are dropped as its reflections (as omni-ridge).
     #[arg(long, value_name = "LINE", value_parser = parse_scan_lines)]
     one_stripe_per: Option<omni_vision::stripe::ScanLines>,
     /// Keep stripe points up to this far outside the printed pattern (mm; negative: inside).

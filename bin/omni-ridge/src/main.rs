@@ -184,11 +184,12 @@ struct Args {
     mask: Option<PathBuf>,
     /// For an ordinary laser-triangulation sensor (the camera beside the laser, the stripe
     /// moving along the image's columns with depth, or its rows): its laser lights one point of
-    /// each column (row), so keep the brightest stripe on each and drop dimmer ones crossing
-    /// the same column (or the one beside it) as reflections of the stripe (glossy paper, a
-    /// shiny edge). Stripes are compared by their connected pieces' median intensity and must
-    /// differ twofold; a piece at least half of whose points are outshone goes whole. Not for
-    /// the catadioptric sensor, where one image line can cross the stripe on two walls.
+    /// each column (row), so a stripe crossing the same column (or the one beside it) as one at
+    /// least twice as bright is dropped as its reflection (glossy paper, a shiny edge). Stripes
+    /// are compared by their connected pieces' median intensity, so pieces alike in brightness
+    /// are both kept; a piece at least half of whose points are outshone goes whole, one less
+    /// outshone keeps the rest. With --bayer-sites a line is one site (2 px). Not for the
+    /// catadioptric sensor, where one image line can cross the stripe on two walls.
     #[arg(long, value_name = "LINE", value_parser = parse_scan_lines)]
     one_stripe_per: Option<ScanLines>,
     /// Worker threads (0: one per core; at most 1024).

@@ -202,8 +202,8 @@ pub struct RidgeParams {
     /// tail. Across the normal only ([`Sampling::Normal`]).
     pub laser_profile: Option<omni_model::LaserProfile>,
     /// For a laser-triangulation sensor whose laser lights one point per image column (or
-    /// row): keep the brightest stripe on each such line, and drop dimmer ones sharing it as
-    /// reflections (`reflections`). `None` (the default) keeps every stripe.
+    /// row): drop the stripes that share such a line with one at least twice as bright, as its
+    /// reflections ([`drop_reflections`]). `None` (the default) keeps every stripe.
     pub one_stripe_per: Option<ScanLines>,
 }
 
@@ -717,6 +717,9 @@ impl RidgeDetector {
             optics_blur_px: p.optics_blur_px.map(|s| s / 2.0),
             max_scale: (p.max_scale / 2).max(1),
             mosaic: false,
+            // Reflections are judged once the frame's search region has kept its points
+            // ([`Self::points_from_mosaic_sites`]).
+            one_stripe_per: None,
             ..p
         };
         self.halved((origin.0 as f64, origin.1 as f64), params)
@@ -748,17 +751,20 @@ impl RidgeDetector {
     }
 
     /// Points that [`Self::for_mosaic_sites`]`(origin)`'s detector found, in this detector's frame
-    /// pixels (positions and widths), those outside its search region dropped.
-    pub fn points_from_mosaic_sites(&self, points: Vec<StripePoint>, origin: (u32, u32)) -> Vec<StripePoint> {
+    /// pixels (positions and widths), those outside its search region dropped, then the
+    /// reflections ([`RidgeParams::one_stripe_per`], judged on the sites: a line is one site).
+    pub fn points_from_mosaic_sites(&self, mut points: Vec<StripePoint>, origin: (u32, u32)) -> Vec<StripePoint> {
         let (ox, oy) = (origin.0 as f64, origin.1 as f64);
-        let mut points: Vec<StripePoint> = points
-            .into_iter()
-            .map(|p| StripePoint { u: ox + 2.0 * p.u, v: oy + 2.0 * p.v, width: 2.0 * p.width, ..p })
-            .collect();
         if let Some(region) = &self.region {
-            points.retain(|p| region.contains(p.u, p.v, self.width));
+            points.retain(|p| region.contains(ox + 2.0 * p.u, oy + 2.0 * p.v, self.width));
+        }
+        if let Some(lines) = self.params.one_stripe_per {
+            points = drop_reflections(points, lines).0;
         }
         points
+            .into_iter()
+            .map(|p| StripePoint { u: ox + 2.0 * p.u, v: oy + 2.0 * p.v, width: 2.0 * p.width, ..p })
+            .collect()
     }
 
     /// A detector sampling from the image centre, over the largest circle inside the image.

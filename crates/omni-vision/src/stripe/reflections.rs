@@ -70,12 +70,15 @@ pub fn drop_reflections(points: Vec<StripePoint>, lines: ScanLines) -> (Vec<Stri
     // The brightest piece crossing each line.
     let mut brightest: HashMap<i64, f64> = HashMap::new();
     for (p, &k) in points.iter().zip(&piece) {
-        let b = brightest.entry(lines.line_of(p)).or_insert(0.0);
+        let b = brightest.entry(lines.line_of(p)).or_insert(f64::NEG_INFINITY);
         *b = b.max(brightness[k]);
     }
+    // (A piece never outshines itself, whatever its brightness: 0 or NaN included.)
     let outshone = |p: &StripePoint, k: usize| {
         let line = lines.line_of(p);
-        (line - 1..=line + 1).any(|l| brightest.get(&l).is_some_and(|&b| b >= REFLECTION_RATIO * brightness[k]))
+        let own = brightness[k];
+        (line.saturating_sub(1)..=line.saturating_add(1))
+            .any(|l| brightest.get(&l).is_some_and(|&b| b > own && b >= REFLECTION_RATIO * own))
     };
     let reflected: Vec<bool> = points.iter().zip(&piece).map(|(p, &k)| outshone(p, k)).collect();
     let mut share = vec![(0usize, 0usize); brightness.len()];
@@ -120,13 +123,14 @@ mod tests {
 
     #[test]
     fn a_dim_copy_sharing_the_columns_is_dropped_whole_a_step_beside_them_is_kept() {
-        // The stripe (200, crossing dark print at 40 over u 30-50), a reflection 80 px below
-        // (20, running on 10 px beyond the stripe's columns: those go with the rest), and the
-        // stripe stepping to another depth beyond u 102 (its own columns: kept however dim).
+        // The stripe (200, crossing dark print at 40 over u 30-50: less than twice the
+        // reflection's there, but its piece is 200), a reflection 80 px below (25, running on
+        // 10 px beyond the stripe's columns: those go with the rest), and the stripe stepping to
+        // another depth beyond u 102 (its own columns: kept however dim).
         let mut points = run(0, 29, 100.0, 200.0);
         points.extend(run(30, 50, 100.0, 40.0));
         points.extend(run(51, 100, 100.0, 200.0));
-        let reflection = run(20, 110, 180.0, 20.0);
+        let reflection = run(20, 110, 180.0, 25.0);
         points.extend(reflection.iter().copied());
         points.extend(run(103, 160, 130.0, 15.0));
         let (kept, dropped) = drop_reflections(points.clone(), ScanLines::Columns);
@@ -138,10 +142,23 @@ mod tests {
     }
 
     #[test]
-    fn pieces_alike_in_brightness_are_both_kept() {
-        let mut points = run(0, 60, 100.0, 100.0);
-        points.extend(run(0, 60, 140.0, 60.0));
-        assert_eq!(drop_reflections(points, ScanLines::Columns).1, 0);
+    fn pieces_go_from_twice_as_bright_and_alike_ones_are_both_kept() {
+        let pair = |dim: f64| {
+            let mut points = run(0, 60, 100.0, 100.0);
+            points.extend(run(0, 60, 140.0, dim));
+            drop_reflections(points, ScanLines::Columns).1
+        };
+        assert_eq!(pair(60.0), 0);
+        assert_eq!(pair(51.0), 0);
+        assert_eq!(pair(50.0), 61);
+        assert_eq!(pair(40.0), 61);
+    }
+
+    #[test]
+    fn a_lone_piece_is_kept_whatever_its_intensity() {
+        for intensity in [0.0, -1.0, f64::NAN] {
+            assert_eq!(drop_reflections(run(0, 10, 5.0, intensity), ScanLines::Columns).1, 0, "{intensity}");
+        }
     }
 
     #[test]

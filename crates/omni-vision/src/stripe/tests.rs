@@ -561,3 +561,29 @@ fn a_stripe_clipped_in_parts_keeps_its_clipped_points() {
         assert!(clipped >= 180, "max width {max_width} px: {clipped} clipped points kept");
     }
 }
+
+/// Read at a mosaic's sites, reflections are judged among the points the search region keeps,
+/// as in a frame read whole: a brighter stripe outside the region does not take a dimmer one
+/// inside it.
+#[test]
+fn reflections_at_mosaic_sites_are_judged_after_the_search_region() {
+    // Sites: 96 × 96, a bright stripe along site row 20 and a dim one along row 60 (frame
+    // rows 40.5 and 120.5 of the 192 × 192 frame, the region keeping frame rows 100-150).
+    let mut sites = GrayImage::new(96, 96, 8);
+    for y in 0..96 {
+        let level = gaussian_line(y as f64 - 20.0, 1.5, 200.0) + gaussian_line(y as f64 - 60.0, 1.5, 70.0);
+        for x in 0..96 {
+            sites.data[y * 96 + x] = level.round() as u16;
+        }
+    }
+    let region = SearchRegion::Rect { x0: 0, y0: 100, x1: 192, y1: 150 };
+    let found = |one_stripe_per| {
+        let params = RidgeParams { one_stripe_per, ..Default::default() };
+        let frame = RidgeDetector::for_image_centre(192, 192, params).with_region(region.clone()).unwrap();
+        let at_sites = frame.for_mosaic_sites((0, 0));
+        frame.points_from_mosaic_sites(at_sites.detect(&sites), (0, 0))
+    };
+    let every = found(None);
+    assert!(every.len() > 40 && every.iter().all(|p| (p.v - 120.0).abs() < 1.0), "{} points", every.len());
+    assert_eq!(found(Some(ScanLines::Columns)), every);
+}

@@ -992,19 +992,19 @@ fn the_room_scene_is_covered_as_captured_and_with_laser_off_frames() {
 /// their reach ends), their lopsidedness kept as the laser's shape, the walks across the coarse
 /// stripes' gaps stopped short of the stripes' cut ends: 10 px covered 97.9 %, no false point,
 /// offset +0.009 px (blur known −0.011…−0.001 over six noise draws), spread 0.030 px; 20 px covered
-/// 93.8 %, no false point, offset +0.008 px (+0.002), spread 0.039 px (on five later noise draws
-/// 89.1-89.7 % and 0.050-0.063 px, a few points off by 0.15-0.2 px). Asserted: ≥ 90 % (20 px: 85
-/// %), none false, offset ≤ 0.025 px (20 px: 0.05; with the blur known 0.015, 20 px 0.02: the
-/// issue's ideal-optics 0.005 holds only at 2 px, see docs/DECISIONS.md), spread ≤ 0.05 px (20 px:
-/// 0.09).
+/// 93.8 %, no false point, offset +0.003 px (blur known −0.010…+0.011 over eight draws), spread
+/// 0.040 px (0.036-0.043), the frame's own scale's reads of a stripe's top alone yielding to the
+/// stripe re-measured. Asserted: ≥ 90 %, none false, offset ≤ 0.025 px (20 px: 0.05; with the blur
+/// known 0.015, 20 px 0.02: the ideal-optics 0.005 holds only at 2 px, see
+/// docs/DECISIONS.md), spread ≤ 0.05 px (20 px: 0.06).
 ///
 /// The spread against what the frames allow ([`one_pixel_bound`], the Cramér–Rao bound of one pixel
 /// of stripe under the camera's noise): 0.013 / 0.021 / 0.030 / 0.041 px at 2 / 5 / 10 / 20 px, and
 /// with the blur known the detector's 0.014 / 0.019 / 0.030 / 0.039 px. So each point is as precise
-/// as one pixel of the stripe allows (asserted within 1.15 × the bound; 20 px within 1.6 ×, where
-/// the along-stripe fit may gain nothing on those draws); a spread of 0.015 px on wide stripes
-/// needs several pixels of stripe per point, which the along-stripe fit averages: ±3 px takes 10 /
-/// 20 px from 0.030 / 0.039 to 0.026 / 0.031 px (asserted ≤ 0.9 × the spread without it).
+/// as one pixel of the stripe allows (asserted within 1.15 × the bound); a spread of 0.015 px on
+/// wide stripes needs several pixels of stripe per point, which the along-stripe fit averages: ±3
+/// px takes 10 / 20 px from 0.030 / 0.040 to 0.026 / 0.031 px (asserted ≤ 0.9 × the spread without
+/// it).
 #[test]
 fn real_shaped_stripes_2_to_20_px_wide() {
     use omni_simulator::SheetProfile;
@@ -1026,11 +1026,9 @@ fn real_shaped_stripes_2_to_20_px_wide() {
         eprintln!(
             "real {fwhm} px: one pixel of stripe allows a spread of {bound:.4} px; blur known {alone:.4}, along ±3 {fitted:.4}"
         );
-        // 20 px: a few points off by 0.15-0.2 px (p99) on some noise draws; see the doc above.
-        let (over_bound, fit_gain) = if fwhm >= 20.0 { (1.6, 1.05) } else { (1.15, 0.9) };
-        assert!(alone <= over_bound * bound, "{fwhm} px: spread {alone:.4} px, one pixel's bound {bound:.4}");
+        assert!(alone <= 1.15 * bound, "{fwhm} px: spread {alone:.4} px, one pixel's bound {bound:.4}");
         if fwhm >= 10.0 {
-            assert!(fitted <= fit_gain * alone, "{fwhm} px: spread along ±3 {fitted:.4} px, alone {alone:.4}");
+            assert!(fitted <= 0.9 * alone, "{fwhm} px: spread along ±3 {fitted:.4} px, alone {alone:.4}");
         }
         for (t, name) in tallies.iter().zip(["windowed", "gauss", "blur known"]) {
             eprintln!("{}", t.line(&format!("real {fwhm} px {name}")));
@@ -1043,11 +1041,10 @@ fn real_shaped_stripes_2_to_20_px_wide() {
                 w if w <= 5.0 => (0.04, 0.1, 0.0),
                 w if w <= 10.0 && name == "blur known" => (0.05, 0.015, 0.0),
                 w if w <= 10.0 => (0.05, 0.025, 0.0),
-                _ if name == "blur known" => (0.09, 0.02, 0.0),
-                _ => (0.09, 0.05, 0.0),
+                _ if name == "blur known" => (0.06, 0.02, 0.0),
+                _ => (0.06, 0.05, 0.0),
             };
-            let least = if fwhm >= 20.0 { 0.85 } else { 0.9 };
-            assert!(t.coverage(8).unwrap() >= least, "{fwhm} px {name}: coverage {:?}", t.coverage(8));
+            assert!(t.coverage(8).unwrap() >= 0.9, "{fwhm} px {name}: coverage {:?}", t.coverage(8));
             let false_share = t.false_points as f64 / (t.false_points + t.errors.len()) as f64;
             assert!(false_share <= max_false, "{fwhm} px {name}: false points {}", t.false_points);
             assert!(spread <= max_spread, "{fwhm} px {name}: spread {spread:.4} px");

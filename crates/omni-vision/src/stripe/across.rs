@@ -293,6 +293,7 @@ impl RidgeDetector {
         let wide = measured_wide + buffers.too_wide;
         if let Some(coarse) = self.coarser_stripes(frame, threshold, scale, wide, kept.len()) {
             let mut refined = self.refine_coarse(frame, threshold, &coarse, &kept, &mut buffers);
+            yield_tops_to_coarse(&mut kept, &refined, self.image_size());
             drop_tapering(&mut refined);
             lean_to_the_lights_peak(
                 &mut refined,
@@ -322,7 +323,17 @@ impl RidgeDetector {
         kept: &[Linked],
         buffers: &mut Buffers,
     ) -> Vec<Linked> {
-        let mut taken = super::scales::Occupancy::new(kept.iter().map(|l| (l.point.u, l.point.v)), self.image_size());
+        // This scale's points block the re-measurement of the coarse stripes they lie on, but
+        // one that may be a wider stripe's top alone ([`may_be_a_top`]) blocks only a stripe
+        // less than [`TOP_RATIO`] times its width, and the stripe re-measured beside it must be
+        // as many times as bright; it then yields ([`yield_tops_to_coarse`]).
+        let (tops, whole): (Vec<&Linked>, Vec<&Linked>) = kept.iter().partition(|l| may_be_a_top(l));
+        let mut taken =
+            super::scales::Occupancy::new(whole.iter().map(|l| (l.point.u, l.point.v, ())), self.image_size());
+        let tops = super::scales::Occupancy::new(
+            tops.iter().map(|l| (l.point.u, l.point.v, (l.point.width, l.point.intensity))),
+            self.image_size(),
+        );
         let mut out = Vec::with_capacity(2 * coarse.len());
         for c in coarse {
             if c.half_width < super::scales::WIDE_HALF_WIDTH_PX {
@@ -330,20 +341,32 @@ impl RidgeDetector {
             }
             let (u, v) = (2.0 * c.point.u + 0.5, 2.0 * c.point.v + 0.5);
             let half_width = 2.0 * c.half_width;
-            if taken.near(u, v, (0.5 * half_width).max(2.0)) {
+            let near = (0.5 * half_width).max(2.0);
+            // (c's width in this scale's pixels is 2 × its own.)
+            if taken.near(u, v, near)
+                || tops.within(u, v, near).any(|(width, _)| TOP_RATIO * width >= 2.0 * c.point.width)
+            {
                 continue;
             }
+            let brightest_top =
+                tops.within(u, v, near).map(|(_, intensity)| intensity).fold(f64::NEG_INFINITY, f64::max);
             let (nx, ny) = c.normal;
             let reach = Reach { max_width: 3.0 * c.point.width + 4.0, far_px: (0.3 * half_width).max(1.5) };
             for side in [-0.5, 0.5] {
                 let start = (u - side * ny, v + side * nx);
-                if let Some(m) = self.measure_profile(frame, start, c.normal, threshold, reach, buffers) {
+                if let Some(m) = self.measure_profile(frame, start, c.normal, threshold, reach, buffers)
+                    && m.point.intensity >= TOP_RATIO * brightest_top
+                {
                     out.push((m.linked(), reach));
                 }
             }
         }
+        // The walks across the gaps stop at every point this scale measured, tops included.
         for (l, _) in &out {
-            taken.insert(l.point.u, l.point.v);
+            taken.insert(l.point.u, l.point.v, ());
+        }
+        for l in kept.iter().filter(|l| may_be_a_top(l)) {
+            taken.insert(l.point.u, l.point.v, ());
         }
         let tracked = self.track_gaps(frame, threshold, &out, &mut taken, buffers);
         out.into_iter().map(|(l, _)| l).chain(tracked).collect()
@@ -379,7 +402,7 @@ impl RidgeDetector {
                     let Some(m) = self.measure_profile(frame, next, first.normal, threshold, step, buffers) else {
                         break;
                     };
-                    taken.insert(m.point.u, m.point.v);
+                    taken.insert(m.point.u, m.point.v, ());
                     at = m.point;
                     walk.push(m.linked());
                 }
@@ -2649,6 +2672,35 @@ mod direction_tests {
         assert!(rms3 <= 0.75 * rms0, "along fit: rms {rms3:.4} against {rms0:.4}");
         assert!(bias3.abs() <= 0.01, "along fit moved a curved stripe by {bias3:+.4} px");
     }
+}
+
+/// Whether a point of this scale may be the top alone of a stripe too wide for it: wider than
+/// this scale measures ([`super::scales::NARROW_HALF_WIDTH_PX`]) and not clipped (a clipped core
+/// is the sheet's peak, whatever glow spreads around it).
+fn may_be_a_top(l: &Linked) -> bool {
+    l.half_width > super::scales::NARROW_HALF_WIDTH_PX && l.point.quality & quality::SATURATED == 0
+}
+
+/// How much wider and brighter (above its background) a coarse stripe re-measured around a point
+/// that [`may_be_a_top`] must be for the point to be its top alone: read against the stripe's own
+/// flanks, a top keeps a fraction of the stripe's width and contrast, where a narrow core on a
+/// wide glow keeps most of the contrast.
+const TOP_RATIO: f64 = 2.0;
+
+/// Drops this scale's points that [`may_be_a_top`] where the coarse scale's stripe, re-measured
+/// here, is [`TOP_RATIO`] times as wide and as bright: their reach held the stripe's top alone,
+/// so their centres follow the flanks' noise.
+fn yield_tops_to_coarse(kept: &mut Vec<Linked>, refined: &[Linked], size: (u32, u32)) {
+    let coarse = super::scales::Occupancy::new(
+        refined.iter().map(|l| (l.point.u, l.point.v, (l.point.width, l.point.intensity))),
+        size,
+    );
+    kept.retain(|l| {
+        !may_be_a_top(l)
+            || !coarse.within(l.point.u, l.point.v, (0.5 * l.half_width).max(2.0)).any(|(width, intensity)| {
+                width >= TOP_RATIO * l.point.width && intensity >= TOP_RATIO * l.point.intensity
+            })
+    });
 }
 
 #[cfg(test)]

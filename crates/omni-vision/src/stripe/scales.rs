@@ -11,7 +11,9 @@
 //! finer frame, two profiles along its normal, down to the original pixels, and the re-measured
 //! stripe is followed across the gaps the coarse scale left ([`TRACK_PX`]). A finer scale's own
 //! points win where both have one, and coarse points that are narrow at their scale
-//! ([`WIDE_HALF_WIDTH_PX`]) are left to the finer scale, which measured (or refused) them.
+//! ([`WIDE_HALF_WIDTH_PX`]) are left to the finer scale, which measured (or refused) them; but a
+//! finer point itself too wide for its scale, on a coarse stripe at least twice as wide and bright,
+//! is that stripe's top read against its flanks, and yields to the stripe re-measured.
 
 use super::across::Linked;
 use super::{Frame, Pixel, RidgeDetector};
@@ -115,34 +117,32 @@ impl Binned {
     }
 }
 
-/// Which cells of a frame hold a point: answers "is there a point within r px" for r up to a
-/// few cells, by scanning the cells around.
-pub(super) struct Occupancy {
+/// Which cells of a frame hold a point (with something `T` about it): answers "which points lie
+/// within r px" for r up to a few cells, by scanning the cells around.
+pub(super) struct Occupancy<T = ()> {
     cell: f64,
     columns: usize,
     rows: usize,
-    points: Vec<Vec<(f64, f64)>>,
+    points: Vec<Vec<(f64, f64, T)>>,
 }
 
-impl Occupancy {
+impl<T: Copy> Occupancy<T> {
     const CELL_PX: f64 = 4.0;
 
-    pub(super) fn new(points: impl Iterator<Item = (f64, f64)>, (width, height): (u32, u32)) -> Occupancy {
+    pub(super) fn new(points: impl Iterator<Item = (f64, f64, T)>, (width, height): (u32, u32)) -> Occupancy<T> {
         let cell = Self::CELL_PX;
         let columns = (width as f64 / cell).ceil() as usize + 1;
         let rows = (height as f64 / cell).ceil() as usize + 1;
         let mut grid = Occupancy { cell, columns, rows, points: vec![Vec::new(); columns * rows] };
-        for (u, v) in points {
-            if let Some(k) = grid.index(u, v) {
-                grid.points[k].push((u, v));
-            }
+        for (u, v, t) in points {
+            grid.insert(u, v, t);
         }
         grid
     }
 
-    pub(super) fn insert(&mut self, u: f64, v: f64) {
+    pub(super) fn insert(&mut self, u: f64, v: f64, t: T) {
         if let Some(k) = self.index(u, v) {
-            self.points[k].push((u, v));
+            self.points[k].push((u, v, t));
         }
     }
 
@@ -154,19 +154,19 @@ impl Occupancy {
 
     /// Whether a point lies within `radius` px of (u, v).
     pub(super) fn near(&self, u: f64, v: f64, radius: f64) -> bool {
+        self.within(u, v, radius).next().is_some()
+    }
+
+    /// What is known of the points within `radius` px of (u, v).
+    pub(super) fn within(&self, u: f64, v: f64, radius: f64) -> impl Iterator<Item = T> + '_ {
         let span = (radius / self.cell).ceil() as i64;
         let (c0, r0) = ((u / self.cell).floor() as i64, (v / self.cell).floor() as i64);
-        for r in r0 - span..=r0 + span {
-            for c in c0 - span..=c0 + span {
-                if r < 0 || c < 0 || r as usize >= self.rows || c as usize >= self.columns {
-                    continue;
-                }
-                let cell = &self.points[r as usize * self.columns + c as usize];
-                if cell.iter().any(|&(pu, pv)| (pu - u).powi(2) + (pv - v).powi(2) <= radius * radius) {
-                    return true;
-                }
-            }
-        }
-        false
+        let (columns, rows) = (self.columns as i64, self.rows as i64);
+        (r0 - span..=r0 + span)
+            .flat_map(move |r| (c0 - span..=c0 + span).map(move |c| (r, c)))
+            .filter(move |&(r, c)| r >= 0 && c >= 0 && r < rows && c < columns)
+            .flat_map(move |(r, c)| &self.points[(r * columns + c) as usize])
+            .filter(move |p| (p.0 - u).powi(2) + (p.1 - v).powi(2) <= radius * radius)
+            .map(|p| p.2)
     }
 }

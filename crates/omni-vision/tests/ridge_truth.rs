@@ -1000,7 +1000,7 @@ fn the_room_scene_is_covered_as_captured_and_with_laser_off_frames() {
 ///
 /// The spread against what the frames allow ([`one_pixel_bound`], the Cramér–Rao bound of one pixel
 /// of stripe under the camera's noise): 0.013 / 0.021 / 0.030 / 0.041 px at 2 / 5 / 10 / 20 px, and
-/// with the blur known the detector's 0.014 / 0.019 / 0.030 / 0.039 px. So each point is as precise
+/// with the blur known the detector's 0.014 / 0.019 / 0.030 / 0.040 px. So each point is as precise
 /// as one pixel of the stripe allows (asserted within 1.15 × the bound); a spread of 0.015 px on
 /// wide stripes needs several pixels of stripe per point, which the along-stripe fit averages: ±3
 /// px takes 10 / 20 px from 0.030 / 0.040 to 0.026 / 0.031 px (asserted ≤ 0.9 × the spread without

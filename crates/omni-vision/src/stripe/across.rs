@@ -1104,10 +1104,9 @@ fn fit_longer_arcs(kept: &mut [OnStripe], along_fits: &AlongFits, along: f64) {
 /// profiles along it lopsided; speckle and noise lopsided at random, so the neighbours' mean
 /// tells the two apart. A laser's own shape leaves its whole stripe lopsided the same way: a
 /// cut is a departure from the stripe's steady lopsidedness. Clipped profiles (`saturated`)
-/// and unclipped ones are each judged against their own kind's steadiness where it has one: a
-/// clipped profile's flanks are read relative to the plateau, lower down the light than an
-/// unclipped profile's, where a lopsided laser is more lopsided, and a clipped core hides the
-/// tail that an unclipped stretch of the same stripe shows (a real stripe over dark print).
+/// are judged against their stripe's clipped ones where those have a steadiness: their flanks
+/// are read relative to the plateau, lower down the light than an unclipped profile's, where a
+/// lopsided laser is more lopsided.
 fn keep_steadily_lopsided(
     kept: &mut Vec<OnStripe>,
     stripes: &mut Stripes,
@@ -1115,27 +1114,17 @@ fn keep_steadily_lopsided(
     saturated: impl Fn(usize) -> bool,
 ) {
     let min_points = (STEADY_MIN_PX / scale as usize).max(STEADY_MIN_POINTS);
-    // The steadiness of the points alike in clipping (`Some(true)`: clipped only, `Some(false)`:
-    // unclipped only) or of all (`None`).
-    let mut steady_of = |clipping: Option<bool>| {
-        let means: Vec<(usize, f64)> = kept
-            .iter()
-            .filter(|k| clipping.is_none_or(|c| saturated(k.index) == c))
-            .map(|k| (k.index, k.lopsided.mean))
-            .collect();
+    let mut steady_of = |only_clipped: bool| {
+        let means: Vec<(usize, f64)> =
+            kept.iter().filter(|k| !only_clipped || saturated(k.index)).map(|k| (k.index, k.lopsided.mean)).collect();
         stripes.steady(&means, min_points)
     };
-    let all = steady_of(None);
-    // Without clipped points, the unclipped ones are all of them.
-    let (clipped, unclipped) = if kept.iter().any(|k| saturated(k.index)) {
-        (steady_of(Some(true)), steady_of(Some(false)))
-    } else {
-        (Vec::new(), Vec::new())
-    };
+    let all = steady_of(false);
+    let clipped = if kept.iter().any(|k| saturated(k.index)) { steady_of(true) } else { Vec::new() };
     kept.retain(|k| {
-        // Points without a steadiness of their own kind (too few on their stripe, or none that
-        // holds) take the whole stripe's.
-        let own = if saturated(k.index) { clipped[k.index] } else { unclipped.get(k.index).copied().flatten() };
+        // Clipped points without a steadiness of their own (too few on their stripe, or none
+        // that holds) take the whole stripe's.
+        let own = if saturated(k.index) { clipped[k.index] } else { None };
         let [lo, hi] = own.or(all[k.index]).unwrap_or([0.0, 0.0]);
         let departure = |a: f64| (lo - a).max(a - hi).max(0.0);
         departure(k.lopsided.mean) <= MAX_ASYMMETRY

@@ -327,11 +327,11 @@ impl RidgeDetector {
         // one that may be a wider stripe's top alone ([`may_be_a_top`]) blocks only a stripe
         // less than [`TOP_RATIO`] times its width, and the stripe re-measured beside it must be
         // as many times as bright; it then yields ([`yield_tops_to_coarse`]).
-        let (tops, whole): (Vec<&Linked>, Vec<&Linked>) = kept.iter().partition(|l| may_be_a_top(l));
+        let (top_points, whole): (Vec<&Linked>, Vec<&Linked>) = kept.iter().partition(|l| may_be_a_top(l));
         let mut taken =
             super::scales::Occupancy::new(whole.iter().map(|l| (l.point.u, l.point.v, ())), self.image_size());
         let tops = super::scales::Occupancy::new(
-            tops.iter().map(|l| (l.point.u, l.point.v, (l.point.width, l.point.intensity))),
+            top_points.iter().map(|l| (l.point.u, l.point.v, (l.point.width, l.point.intensity))),
             self.image_size(),
         );
         let mut out = Vec::with_capacity(2 * coarse.len());
@@ -365,7 +365,7 @@ impl RidgeDetector {
         for (l, _) in &out {
             taken.insert(l.point.u, l.point.v, ());
         }
-        for l in kept.iter().filter(|l| may_be_a_top(l)) {
+        for l in &top_points {
             taken.insert(l.point.u, l.point.v, ());
         }
         let tracked = self.track_gaps(frame, threshold, &out, &mut taken, buffers);
